@@ -1,0 +1,43 @@
+# dvrk_dart: every target creates the virtual environment itself when missing.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    ?= out
+RUNS   ?= $(OUT)/runs
+REPORT ?= report
+JOBS   ?= 2
+
+.PHONY: validate test bench report check-report view clean setup
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+## The main job: the whole validation campaign, then the report.
+validate: $(STAMP)
+	$(BIN)/dvrk-dart validate --out $(OUT) --report $(REPORT) --jobs $(JOBS)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/python -m dvrk_dart.bench --out $(OUT)/bench.json
+
+report: $(STAMP)
+	$(BIN)/dvrk-dart report --runs $(RUNS) --out $(REPORT)
+
+check-report: $(STAMP)
+	$(BIN)/python -m pytest -q tests/test_report_browser.py
+
+## make view RUN=out/runs/<run-name>
+view: $(STAMP)
+	$(BIN)/rerun $(RUN)/run.rrd
+
+clean:
+	rm -rf $(OUT) $(REPORT) .pytest_cache
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,251 @@
+"""The identified dynamic model (Wang et al. 2019) evaluated with Pinocchio.
+
+The identification model is a tree of links whose joint variables are linear
+functions of the seven coordinates q: theta_tree = G q + c. Pinocchio holds the
+tree (one joint per moving link, in the link's DH frame), and the coupled
+coordinates are handled by projection:
+    tau = G^T tau_tree(G q + c, G dq, G ddq),   M = G^T M_tree G.
+Non-inertial terms follow the upstream package exactly (see
+../shared/docs/psm-identified-model.md): friction of a link acts on the rate of
+its own joint variable and is projected by its chain rule; the J4 spring gives
++K q4; a motor inertia Im adds Im times its variable's acceleration to the one
+coordinate that variable depends on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import DvrkDartError
+from .joints import N_JOINTS
+from .model import DHFrame, Link, PsmModel, dh_transform
+from .parameters import IdentifiedParameters
+
+INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
+NON_INERTIAL_TERMS = ("friction", "offset", "spring", "motor_inertia")
+TERMS = INERTIAL_TERMS + NON_INERTIAL_TERMS
+TERM_GROUPS = {
+    "all": TERMS,
+    "inertial": INERTIAL_TERMS,
+    "rigid": INERTIAL_TERMS,
+}
+TOOL_TIP_FRAME = "tool_tip"
+
+
+def parse_terms(spec: str) -> tuple[str, ...]:
+    """'all', 'inertial', 'inertial,friction', 'gravity' ... -> term names."""
+    names: list[str] = []
+    for part in (p.strip() for p in spec.split(",")):
+        expanded = TERM_GROUPS.get(part, (part,))
+        for name in expanded:
+            if name not in TERMS:
+                raise DvrkDartError(f"--terms: unknown term '{part}' (known: {', '.join(list(TERM_GROUPS) + list(TERMS))})")
+            if name not in names:
+                names.append(name)
+    return tuple(names)
+
+
+def _se3(T: np.ndarray) -> pin.SE3:
+    return pin.SE3(T[:3, :3].copy(), T[:3, 3].copy())
+
+
+def _placement(link: DHFrame) -> np.ndarray:
+    """Constant part of a link's DH transform; the joint supplies the variable."""
+    zero = np.zeros(N_JOINTS)
+    a, alpha = float(link.a(zero)), float(link.alpha(zero))
+    if link.joint_type == "revolute":  # Rz(theta) Tz(d) = Tz(d) Rz(theta): d is constant
+        return dh_transform(a, alpha, float(link.d(zero)), 0.0)
+    if link.joint_type == "prismatic":  # Rz(theta) Tz(d): the joint's Tz comes last
+        return dh_transform(a, alpha, 0.0, float(link.theta(zero)))
+    return link.transform(zero)
+
+
+@dataclass
+class ModelEfforts:
+    """Efforts of the identified model, term by term, each (N, 7)."""
+
+    terms: dict[str, np.ndarray]
+
+    def total(self, names: tuple[str, ...] | str = "all") -> np.ndarray:
+        names = parse_terms(names) if isinstance(names, str) else names
+        out = np.zeros_like(next(iter(self.terms.values())))
+        for name in names:
+            out = out + self.terms[name]
+        return out
+
+
+class IdentifiedModel:
+    """M(q), C(q, dq) dq, g(q), friction, spring and motor-inertia terms."""
+
+    def __init__(self, model: PsmModel, params: IdentifiedParameters):
+        self.model = model
+        self.params = params
+        self.pin_model, self.tree_links = self._build_tree()
+        self.data = self.pin_model.createData()
+        self.G = np.array([link.variable.coeffs for link in self.tree_links])  # (n_tree, 7)
+        self.c = np.array([link.variable.const for link in self.tree_links])
+        self.tip_frame_id = self.pin_model.getFrameId(TOOL_TIP_FRAME)
+        self._friction_links = [l for l in model.links.values() if l.friction]
+        self._motor_links = [l for l in model.links.values() if l.motor_inertia]
+        self._spring_links = [l for l in model.links.values() if l.spring]
+        for link in self._motor_links:
+            if np.count_nonzero(link.variable.coeffs) != 1:
+                raise DvrkDartError(f"link {link.key}: motor inertia on a variable of several coordinates is not defined")
+
+    # ---------------------------------------------------------------- building
+    def _build_tree(self) -> tuple[pin.Model, list[Link]]:
+        pm = pin.Model()
+        pm.name = "psm_identified"
+        pm.gravity = pin.Motion(np.r_[self.model.gravity, np.zeros(3)])
+        # For each link key: (pinocchio joint id, transform from that joint frame to the link frame)
+        anchor: dict[int, tuple[int, np.ndarray]] = {0: (0, np.eye(4))}
+        tree_links: list[Link] = []
+        for link in self.model.links.values():
+            if not link.body:
+                continue
+            parent_joint, parent_offset = anchor[link.parent]
+            placement = parent_offset @ _placement(link)
+            if link.joint_type == "fixed":
+                anchor[link.key] = (parent_joint, placement)
+                p = self.params[link.key]
+                if p.mass > 0.0:
+                    raise DvrkDartError(f"link {link.key}: a fixed link with mass is not supported")
+                continue
+            joint = pin.JointModelRZ() if link.joint_type == "revolute" else pin.JointModelPZ()
+            jid = pm.addJoint(parent_joint, joint, _se3(placement), f"link{link.key}_{link.name}")
+            p = self.params[link.key]
+            pm.appendBodyToJoint(jid, pin.Inertia(p.mass, p.com.copy(), p.inertia_com.copy()), pin.SE3.Identity())
+            pm.addJointFrame(jid, -1)
+            anchor[link.key] = (jid, np.eye(4))
+            tree_links.append(link)
+        # The tool tip turns with the wrist yaw (its own theta): a massless joint of the tree.
+        tip = self.model.tool_tip
+        parent_joint, parent_offset = anchor[tip.parent]
+        jid = pm.addJoint(parent_joint, pin.JointModelRZ(), _se3(parent_offset @ _placement(tip)), TOOL_TIP_FRAME)
+        pm.addJointFrame(jid, -1)
+        tree_links.append(tip)
+        return pm, tree_links
+
+    # ------------------------------------------------------------ coordinates
+    def tree_q(self, q: np.ndarray) -> np.ndarray:
+        return np.asarray(q) @ self.G.T + self.c
+
+    def tree_v(self, dq: np.ndarray) -> np.ndarray:
+        return np.asarray(dq) @ self.G.T
+
+    # -------------------------------------------------------- single queries
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """Rigid-body M(q) (7x7), without motor inertia."""
+        Mt = pin.crba(self.pin_model, self.data, self.tree_q(q))
+        Mt = np.triu(Mt) + np.triu(Mt, 1).T
+        return self.G.T @ Mt @ self.G
+
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        return self.G.T @ pin.computeGeneralizedGravity(self.pin_model, self.data, self.tree_q(q))
+
+    def coriolis(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """C(q, dq) dq."""
+        qt, vt = self.tree_q(q), self.tree_v(dq)
+        return self.G.T @ (pin.rnea(self.pin_model, self.data, qt, vt, np.zeros_like(vt)) - pin.computeGeneralizedGravity(self.pin_model, self.data, qt))
+
+    def coriolis_matrix(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """C(q, dq) with dM/dt - 2C skew-symmetric (Pinocchio's factorisation)."""
+        Ct = pin.computeCoriolisMatrix(self.pin_model, self.data, self.tree_q(q), self.tree_v(dq))
+        return self.G.T @ Ct @ self.G
+
+    def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """M, C dq and g in one query (what a torque controller needs)."""
+        qt, vt = self.tree_q(q), self.tree_v(dq)
+        Mt = pin.crba(self.pin_model, self.data, qt)
+        nle = pin.nonLinearEffects(self.pin_model, self.data, qt, vt)
+        gt = pin.computeGeneralizedGravity(self.pin_model, self.data, qt)
+        Mt = np.triu(Mt) + np.triu(Mt, 1).T
+        return self.G.T @ Mt @ self.G, self.G.T @ (nle - gt), self.G.T @ gt
+
+    def motor_inertia_matrix(self) -> np.ndarray:
+        """Diagonal 7x7 of the identified motor inertias (the armature)."""
+        diag = np.zeros(N_JOINTS)
+        for link in self._motor_links:
+            j = int(np.flatnonzero(link.variable.coeffs)[0])
+            diag[j] += self.params[link.key].motor_inertia * link.variable.coeffs[j]
+        return np.diag(diag)
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return float(pin.computePotentialEnergy(self.pin_model, self.data, self.tree_q(q)))
+
+    def kinetic_energy(self, q: np.ndarray, dq: np.ndarray) -> float:
+        return float(pin.computeKineticEnergy(self.pin_model, self.data, self.tree_q(q), self.tree_v(dq)))
+
+    # ---------------------------------------------------------- kinematics
+    def tool_tip_pose(self, q: np.ndarray) -> np.ndarray:
+        """4x4 base-frame pose of the tool tip."""
+        pin.framesForwardKinematics(self.pin_model, self.data, self.tree_q(q))
+        return self.data.oMf[self.tip_frame_id].homogeneous.copy()
+
+    def tool_tip_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """6x7 Jacobian (linear; angular) of the tool tip, base-frame axes, w.r.t. q."""
+        qt = self.tree_q(q)
+        pin.computeJointJacobians(self.pin_model, self.data, qt)
+        pin.updateFramePlacements(self.pin_model, self.data)
+        J_tree = pin.getFrameJacobian(self.pin_model, self.data, self.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
+        return J_tree @ self.G
+
+    # ------------------------------------------------------------ batch terms
+    def efforts(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, terms: tuple[str, ...] = TERMS) -> ModelEfforts:
+        """Every requested term over a trajectory (N, 7) arrays -> ModelEfforts."""
+        q, dq, ddq = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, dq, ddq))
+        out: dict[str, np.ndarray] = {}
+        if any(t in INERTIAL_TERMS for t in terms):
+            out.update(self._rigid_body_terms(q, dq, ddq, terms))
+        if "friction" in terms or "offset" in terms:
+            fric, offs = np.zeros_like(q), np.zeros_like(q)
+            for link in self._friction_links:
+                p = self.params[link.key]
+                coeffs = link.variable.coeffs
+                rate = dq @ coeffs
+                fric += np.outer(p.coulomb * np.sign(rate) + p.viscous * rate, coeffs)
+                offs += np.outer(np.full(len(q), p.offset), coeffs)
+            if "friction" in terms:
+                out["friction"] = fric
+            if "offset" in terms:
+                out["offset"] = offs
+        if "spring" in terms:
+            spring = np.zeros_like(q)
+            for link in self._spring_links:
+                var = link.variable
+                deflection = q @ var.coeffs  # from the rest position q = 0
+                spring += np.outer(self.params[link.key].spring * deflection, var.coeffs)
+            out["spring"] = spring
+        if "motor_inertia" in terms:
+            out["motor_inertia"] = ddq @ self.motor_inertia_matrix().T
+        return ModelEfforts({t: out[t] for t in terms})
+
+    def _rigid_body_terms(self, q, dq, ddq, terms) -> dict[str, np.ndarray]:
+        qt, vt, at = self.tree_q(q), self.tree_v(dq), self.tree_v(ddq)
+        n = len(qt)
+        zeros = np.zeros(self.pin_model.nv)
+        grav = np.empty_like(qt)
+        nle = np.empty_like(qt)
+        total = np.empty_like(qt)
+        model, data = self.pin_model, self.data
+        rnea, gravity = pin.rnea, pin.computeGeneralizedGravity
+        for k in range(n):
+            grav[k] = gravity(model, data, qt[k])
+            nle[k] = rnea(model, data, qt[k], vt[k], zeros)
+            total[k] = rnea(model, data, qt[k], vt[k], at[k])
+        G = self.G
+        result = {"gravity": grav @ G, "coriolis": (nle - grav) @ G, "inertia": (total - nle) @ G}
+        return {t: result[t] for t in INERTIAL_TERMS if t in terms}
+
+    def predict(self, q, dq, ddq, terms: tuple[str, ...] | str = "all") -> np.ndarray:
+        terms = parse_terms(terms) if isinstance(terms, str) else terms
+        return self.efforts(q, dq, ddq, terms).total(terms)
+
+    @cached_property
+    def has_tool_inertia(self) -> bool:
+        return any(self.params[l.key].mass > 0 for l in self.model.links.values() if l.group == "tool")
+

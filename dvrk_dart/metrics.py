@@ -1,0 +1,17 @@
+"""The one RMS and relative-error definitions used everywhere."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rms(error: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Root mean square along `axis` (per joint for an (N, 7) array)."""
+    error = np.asarray(error, dtype=float)
+    return np.sqrt(np.mean(error**2, axis=axis))
+
+
+def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> np.ndarray:
+    """||actual - reference|| / ||reference|| per joint (the upstream metric)."""
+    actual, reference = np.asarray(actual, dtype=float), np.asarray(reference, dtype=float)
+    return np.linalg.norm(actual - reference, axis=axis) / np.linalg.norm(reference, axis=axis)

@@ -1,0 +1,181 @@
+"""Reference data: the manifest of upstream files, the resolver, and the one
+loader of measured runs (upstream CSV: no header, q1..q7, dq1..dq7, tau1..tau7
+sampled at 200 Hz)."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import tomllib
+import urllib.request
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import DvrkDartError
+from .joints import N_JOINTS, column_names
+
+PROJECT_DIR = Path(__file__).resolve().parent.parent
+MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
+SHARED_DIR = PROJECT_DIR.parent / "shared" / "reference_data" / "wpi"
+ENV_DATA_DIR = "DVRK_REFERENCE_DATA"
+ENV_CACHE_DIR = "DVRK_DART_CACHE"
+ENV_URL_TEMPLATE = "DVRK_REFERENCE_URL"  # override of the download URL (tests, mirrors)
+
+#: the shorthand names of the reference runs
+RUNS = {
+    "one": "one_results.csv",
+    "two": "two_results.csv",
+    "one-no-weight": "one_no_weight_results.csv",
+    "one-105g": "one_105_grams_parallel_results.csv",
+}
+CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
+#: fewer rows than this cannot be filtered and trimmed like the upstream processing
+MIN_ROWS = 64
+
+
+@cache
+def manifest() -> dict:
+    return tomllib.loads(MANIFEST_FILE.read_text())
+
+
+def sample_rate_hz() -> float:
+    return float(manifest()["sample_rate_hz"])
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _checked(path: Path, name: str) -> Path:
+    expected = manifest()["files"][name]["sha256"]
+    actual = sha256_of(path)
+    if actual != expected:
+        raise DvrkDartError(f"{path}: sha256 {actual[:12]}... does not match the manifest ({expected[:12]}...)")
+    return path
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get(ENV_CACHE_DIR, Path.home() / ".cache" / "dvrk_dart")) / manifest()["commit"][:12]
+
+
+def _download(name: str) -> Path:
+    m = manifest()
+    entry = m["files"][name]
+    template = os.environ.get(ENV_URL_TEMPLATE, m["url_template"])
+    url = template.format(repository=m["repository"], commit=m["commit"], path=entry["path"])
+    target = cache_dir() / name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{name}.")
+    os.close(fd)
+    try:
+        with urllib.request.urlopen(url, timeout=60) as response, open(tmp, "wb") as f:
+            f.write(response.read())
+        _checked(Path(tmp), name)
+        os.replace(tmp, target)
+    except DvrkDartError:
+        raise DvrkDartError(f"{url}: downloaded file fails its sha256 check") from None
+    except OSError as exc:
+        raise DvrkDartError(f"{name}: not found locally and download from {url} failed ({exc})") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
+
+
+def resolve(name: str, explicit: Path | str | None = None) -> Path:
+    """Locate a reference file by manifest name (explicit path wins, unchecked)."""
+    if explicit is not None:
+        path = Path(explicit)
+        if not path.is_file():
+            raise DvrkDartError(f"{path}: file not found")
+        return path
+    if name not in manifest()["files"]:
+        raise DvrkDartError(f"unknown reference file '{name}' (known: {', '.join(manifest()['files'])})")
+    candidates = []
+    if os.environ.get(ENV_DATA_DIR):
+        candidates.append(Path(os.environ[ENV_DATA_DIR]))
+    candidates += [SHARED_DIR, cache_dir()]
+    for folder in candidates:
+        if (folder / name).is_file():
+            return _checked(folder / name, name)
+    return _download(name)
+
+
+def resolve_run(name_or_path: str | Path) -> Path:
+    """A measured run by shorthand ('two'), manifest name or path."""
+    text = str(name_or_path)
+    if text in RUNS:
+        return resolve(RUNS[text])
+    if text in manifest()["files"]:
+        return resolve(text)
+    return resolve(text, explicit=text)
+
+
+@dataclass(frozen=True)
+class MeasuredRun:
+    """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7."""
+
+    path: Path
+    data: pd.DataFrame
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.data["t"].to_numpy()
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.data[column_names("q")].to_numpy()
+
+    @property
+    def dq(self) -> np.ndarray:
+        return self.data[column_names("dq")].to_numpy()
+
+    @property
+    def tau(self) -> np.ndarray:
+        return self.data[column_names("tau")].to_numpy()
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+
+def load_run(path: Path | str) -> MeasuredRun:
+    """Load a measured run in the upstream CSV format, with one-line errors."""
+    path = Path(path)
+    if not path.is_file():
+        raise DvrkDartError(f"{path}: file not found")
+    try:
+        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True)
+    except pd.errors.EmptyDataError:
+        raise DvrkDartError(f"{path}: file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]})") from None
+    if raw.shape[1] != len(CSV_COLUMNS):
+        raise DvrkDartError(f"{path}: {raw.shape[1]} columns, expected {len(CSV_COLUMNS)} (q1..q7, dq1..dq7, tau1..tau7)")
+    numeric = raw.apply(pd.to_numeric, errors="coerce")
+    bad = numeric.isna() & raw.notna()
+    if bad.to_numpy().any():
+        row, col = np.argwhere(bad.to_numpy())[0]
+        raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: '{raw.iat[row, col]}' is not a number")
+    values = numeric.to_numpy(dtype=float)
+    if not np.all(np.isfinite(values)):
+        row, col = np.argwhere(~np.isfinite(values))[0]
+        raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: missing, NaN or infinite value")
+    if len(values) < MIN_ROWS:
+        raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed")
+    data = pd.DataFrame(values, columns=CSV_COLUMNS)
+    data.insert(0, "t", np.arange(len(data)) / sample_rate_hz())
+    assert data.shape[1] == 1 + 3 * N_JOINTS
+    return MeasuredRun(path=path, data=data)

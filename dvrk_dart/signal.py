@@ -1,0 +1,78 @@
+"""Signal processing identical to the upstream identification (Wang et al. 2019,
+`identification/data_processing.py`), so that our numbers compare with theirs.
+
+- a 6th-order Butterworth low-pass with Wn = 2 pi 5.4 / 200 (a fraction of
+  Nyquist: the effective cut-off is about 17 Hz, not 5.4 Hz),
+- applied forward-backward with their odd extension of 3 * 7 = 21 samples,
+- to q, to the *measured* dq and to tau; ddq is the 5-point central difference
+  of the measured dq, then filtered the same way;
+- 200 samples are cut from each end.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from .reference_data import MeasuredRun, sample_rate_hz
+
+FILTER_ORDER = 6
+CUTOFF_PARAMETER_HZ = 5.4  # upstream's fc, used as Wn = 2 pi fc h (not a true cut-off)
+CUT_SAMPLES = 200
+#: the excitation's base period at 200 Hz: 1 / 0.18 Hz = 5.56 s
+FIRST_PERIOD_SAMPLES = 1111
+
+
+@dataclass(frozen=True)
+class ProcessedRun:
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    tau: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def head(self, n: int) -> "ProcessedRun":
+        return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)))
+
+
+def central_difference(x: np.ndarray, h: float) -> np.ndarray:
+    """Upstream's 5-point central difference along axis 0, lower order at the ends."""
+    d = np.empty_like(x)
+    d[2:-2] = (-x[4:] + 8 * x[3:-1] - 8 * x[1:-3] + x[:-4]) / (12 * h)
+    d[0] = (x[1] - x[0]) / h
+    d[1] = (x[2] - x[0]) / (2 * h)
+    d[-2] = (x[-1] - x[-3]) / (2 * h)
+    d[-1] = (x[-1] - x[-2]) / h
+    return d
+
+
+def zero_phase_lowpass(x: np.ndarray, h: float) -> np.ndarray:
+    """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0."""
+    b, a = scipy.signal.butter(FILTER_ORDER, CUTOFF_PARAMETER_HZ * 2 * math.pi * h)
+    edge = 3 * max(len(a), len(b))
+    zi = scipy.signal.lfilter_zi(b, a)[:, None]
+    s = np.concatenate([2 * x[0] - x[edge:1:-1], x, 2 * x[-1] - x[-1:-edge:-1]])
+    y, _ = scipy.signal.lfilter(b, a, s, axis=0, zi=zi * s[0])
+    y, _ = scipy.signal.lfilter(b, a, y[::-1], axis=0, zi=zi * y[-1])
+    return y[::-1][edge - 1 : -edge + 1]
+
+
+def process(run: MeasuredRun) -> ProcessedRun:
+    """Filtered q, dq, ddq, tau of a measured run, trimmed like upstream."""
+    h = 1.0 / sample_rate_hz()
+    if len(run) <= 2 * CUT_SAMPLES + 1:
+        from .errors import DvrkDartError
+
+        raise DvrkDartError(f"{run.path}: {len(run)} rows, more than {2 * CUT_SAMPLES + 1} needed for processing")
+    q = zero_phase_lowpass(run.q, h)
+    dq = zero_phase_lowpass(run.dq, h)
+    ddq = zero_phase_lowpass(central_difference(run.dq, h), h)
+    tau = zero_phase_lowpass(run.tau, h)
+    keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
+    return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep])
