@@ -1,0 +1,51 @@
+"""Options of one simulation: step, counterweight variant and the physical
+effects switched on in DART. Everything off by default, as in the paper: the
+bodies carry the identified inertial parameters only."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+COUNTERWEIGHT_VARIANTS = ("on", "off", "pid")
+MODES = ("kinematic", "velocity", "torque")
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A point mass rigidly attached to a link (DART: a body welded to it)."""
+
+    link: int  # key of the model link (models/psm/psm.toml)
+    mass_kg: float
+    position_m: tuple[float, float, float]  # in that link's frame
+
+
+@dataclass(frozen=True)
+class JointEffects:
+    """Per-coordinate physical effects (7 values each, joint order of joints.py),
+    added on top of the identified terms selected by the flags of SimConfig."""
+
+    coulomb: tuple[float, ...] = (0.0,) * 7  # N·m or N, opposing the joint velocity
+    viscous: tuple[float, ...] = (0.0,) * 7  # N·m s/rad or N s/m (DART joint damping)
+    offset: tuple[float, ...] = (0.0,) * 7  # constant effort the actuator must supply
+    stiffness: tuple[float, ...] = (0.0,) * 7  # N·m/rad (DART joint spring, rest at q = 0)
+    armature: tuple[float, ...] = (0.0,) * 7  # kg m^2 (DART joint armature; >= 0)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    dt_s: float = 1e-3
+    counterweight: str = "on"  # on: ideal bilateral tendon; off: removed; pid: the paper's PID mirror
+    # identified non-inertial terms as physics in DART (off, as in the paper)
+    friction: bool = False  # Coulomb + viscous of the identified model
+    offsets: bool = False  # constant friction offsets Fo
+    spring: bool = False  # J4 torsion spring
+    motor_inertia: bool = False  # armature (a negative identified Im is applied as a model-based effort)
+    # further effects (diagnosis, synthetic injections)
+    extra: JointEffects = field(default_factory=JointEffects)
+    payloads: tuple[Payload, ...] = ()
+    gravity_tilt_rad: tuple[float, float] = (0.0, 0.0)  # base mounting tilt about base x, then y
+    counterweight_pid: tuple[float, float, float] = (2000.0, 0.0, 60.0)  # Kp N/m, Ki N/(m s), Kd N s/m
+    closure_residual_limit_m: float = 1e-4  # beyond this the simulation is declared diverged
+
+    def to_dict(self) -> dict:
+        return asdict(self)
