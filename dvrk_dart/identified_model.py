@@ -64,6 +64,22 @@ def _placement(link: DHFrame) -> np.ndarray:
     return link.transform(zero)
 
 
+def _depth_first(model: PsmModel) -> list[DHFrame]:
+    """Body links and the tool-tip frame, parents first, each subtree contiguous."""
+    order: list[DHFrame] = []
+
+    def visit(key: int) -> None:
+        for child in model.children(key):
+            if child.body:
+                order.append(child)
+                visit(child.key)
+        if key == model.tool_tip.parent:
+            order.append(model.tool_tip)
+
+    visit(0)
+    return order
+
+
 @dataclass
 class ModelEfforts:
     """Efforts of the identified model, term by term, each (N, 7)."""
@@ -103,31 +119,29 @@ class IdentifiedModel:
         pm.gravity = pin.Motion(np.r_[self.model.gravity, np.zeros(3)])
         # For each link key: (pinocchio joint id, transform from that joint frame to the link frame)
         anchor: dict[int, tuple[int, np.ndarray]] = {0: (0, np.eye(4))}
-        tree_links: list[Link] = []
-        for link in self.model.links.values():
-            if not link.body:
-                continue
+        tree_links: list[DHFrame] = []
+        # Pinocchio's CRBA needs every subtree to be contiguous: add joints depth first.
+        for link in _depth_first(self.model):
             parent_joint, parent_offset = anchor[link.parent]
             placement = parent_offset @ _placement(link)
+            if link is self.model.tool_tip:
+                # the tool tip turns with the wrist yaw (its own theta): a massless joint
+                jid = pm.addJoint(parent_joint, pin.JointModelRZ(), _se3(placement), TOOL_TIP_FRAME)
+                pm.addJointFrame(jid, -1)
+                tree_links.append(link)
+                continue
+            p = self.params[link.key]
             if link.joint_type == "fixed":
-                anchor[link.key] = (parent_joint, placement)
-                p = self.params[link.key]
                 if p.mass > 0.0:
                     raise DvrkDartError(f"link {link.key}: a fixed link with mass is not supported")
+                anchor[link.key] = (parent_joint, placement)
                 continue
             joint = pin.JointModelRZ() if link.joint_type == "revolute" else pin.JointModelPZ()
             jid = pm.addJoint(parent_joint, joint, _se3(placement), f"link{link.key}_{link.name}")
-            p = self.params[link.key]
             pm.appendBodyToJoint(jid, pin.Inertia(p.mass, p.com.copy(), p.inertia_com.copy()), pin.SE3.Identity())
             pm.addJointFrame(jid, -1)
             anchor[link.key] = (jid, np.eye(4))
             tree_links.append(link)
-        # The tool tip turns with the wrist yaw (its own theta): a massless joint of the tree.
-        tip = self.model.tool_tip
-        parent_joint, parent_offset = anchor[tip.parent]
-        jid = pm.addJoint(parent_joint, pin.JointModelRZ(), _se3(parent_offset @ _placement(tip)), TOOL_TIP_FRAME)
-        pm.addJointFrame(jid, -1)
-        tree_links.append(tip)
         return pm, tree_links
 
     # ------------------------------------------------------------ coordinates

@@ -1,0 +1,29 @@
+"""Loading the model description, the identified parameters and the
+Pinocchio model together, once per process (every command needs them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+from .identified_model import IdentifiedModel
+from .model import DEFAULT_MODEL_FILE, PsmModel, load_model
+from .parameters import IdentifiedParameters, load_parameters
+from .reference_data import resolve
+
+
+@dataclass(frozen=True)
+class Arm:
+    model: PsmModel
+    params: IdentifiedParameters
+    identified: IdentifiedModel
+
+
+@cache
+def load_arm(model_file: str | Path = DEFAULT_MODEL_FILE, params_file: str | Path | None = None) -> Arm:
+    """The PSM description, its identified parameters (default: the manifest's
+    params.json, resolved at run time) and the Pinocchio evaluator."""
+    model = load_model(model_file)
+    params = load_parameters(resolve(model.default_parameters, explicit=params_file), model)
+    return Arm(model, params, IdentifiedModel(model, params))

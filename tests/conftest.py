@@ -1,0 +1,26 @@
+"""Shared fixtures: the arm (model, parameters, Pinocchio model) and the
+reference runs, loaded once per test session."""
+
+import numpy as np
+import pytest
+
+from dvrk_dart.context import load_arm
+from dvrk_dart.reference_data import RUNS, load_run, resolve_run
+from dvrk_dart.signal import process
+
+
+@pytest.fixture(scope="session")
+def arm():
+    return load_arm()
+
+
+@pytest.fixture(scope="session")
+def processed_two():
+    return process(load_run(resolve_run("two")))
+
+
+@pytest.fixture(scope="session")
+def data_ranges():
+    """(lower, upper) of the joint positions seen in all the measured runs."""
+    qs = np.vstack([load_run(resolve_run(name)).q for name in RUNS])
+    return qs.min(axis=0), qs.max(axis=0)

@@ -1,0 +1,98 @@
+"""The model as data: loading, linear relations, parameter checks."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model import GROUPS, load_model
+from dvrk_dart.parameters import load_parameters
+from dvrk_dart.reference_data import resolve
+
+
+def test_every_link_has_a_group_and_the_tree_is_ordered(arm):
+    seen = {0}
+    for key, link in arm.model.links.items():
+        assert link.group in GROUPS
+        assert link.parent in seen
+        seen.add(key)
+
+
+def test_parallelogram_links_keep_their_orientation_relations(arm):
+    """Pitch-front (4) translates; pitch-bottom (6) and pitch-top (7) stay parallel to pitch (2)."""
+    for q2 in (-0.6, 0.0, 0.5):
+        frames = arm.model.forward_kinematics(np.array([0.3, q2, 0.1, 0, 0, 0, 0]))
+        frames0 = arm.model.forward_kinematics(np.array([0.3, 0.0, 0.1, 0, 0, 0, 0]))
+        np.testing.assert_allclose(frames[4][:3, :3], frames0[4][:3, :3], atol=1e-12)
+        for k in (6, 7):
+            R_rel = frames[2][:3, :3].T @ frames[k][:3, :3]
+            R_rel0 = frames0[2][:3, :3].T @ frames0[k][:3, :3]
+            np.testing.assert_allclose(R_rel, R_rel0, atol=1e-12)
+
+
+def test_remote_centre_of_motion_is_fixed(arm):
+    """The tool axis passes through the same point whatever q1, q2, q3."""
+    rcm = None
+    for q in ([0, 0, 0.1, 0, 0, 0, 0], [0.4, -0.5, 0.15, 0, 0, 0, 0], [-0.7, 0.6, 0.05, 0, 0, 0, 0]):
+        T = arm.model.forward_kinematics(np.array(q, dtype=float))[8]
+        p, z = T[:3, 3], T[:3, 2]
+        # closest point of the tool axis to the yaw axis (base y through the origin)
+        if rcm is None:
+            t = -(p[2]) / z[2] if abs(z[2]) > 1e-9 else 0.0
+            rcm = p + t * z
+        else:
+            assert np.linalg.norm(np.cross(rcm - p, z)) < 1e-9
+
+
+def test_loop_closure_points_coincide_in_every_configuration(arm):
+    for q in ([0, 0, 0.1, 0, 0, 0, 0], [0.5, -0.6, 0.2, 0, 0, 0, 0], [-0.5, 0.7, 0.0, 0, 0, 0, 0]):
+        frames = arm.model.forward_kinematics(np.array(q, dtype=float))
+        for closure in arm.model.loop_closures:
+            on_link = frames[closure.link] @ np.r_[closure.point_in_link, 1.0]
+            reference = arm.model.forward_kinematics(np.zeros(7))
+            # the point is fixed in the other link's frame
+            on_link0 = reference[closure.link] @ np.r_[closure.point_in_link, 1.0]
+            in_other = np.linalg.solve(frames[closure.other], on_link)
+            in_other0 = np.linalg.solve(reference[closure.other], on_link0)
+            np.testing.assert_allclose(in_other, in_other0, atol=1e-12)
+
+
+def test_parameters_are_converted_to_link_frames(arm, tmp_path):
+    raw = json.loads(resolve("params.json").read_text())
+    for key in (2, 8, 9):
+        R0 = arm.model.rotations_at_zero[key]
+        np.testing.assert_allclose(R0 @ arm.params[key].com, raw[str(key)]["r"], atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda p: p["8"].__setitem__("m", -0.1), "negative mass"),
+        (lambda p: p["8"].__setitem__("r", [0.0, float("nan"), 0.0]), "not finite"),
+        (lambda p: p["8"].__setitem__("I", [1.0, 0, 0, 1.0, 0, 3.0]), "not physically consistent"),
+        (lambda p: p.pop("9"), r"link 9 \(counterweight\): missing"),
+        (lambda p: p["8"].__setitem__("I", [1.0, 0.0]), "list of 6 numbers"),
+    ],
+)
+def test_bad_parameters_give_a_clear_error(arm, tmp_path, mutate, message):
+    raw = json.loads(resolve("params.json").read_text())
+    mutate(raw)
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps(raw))
+    with pytest.raises(DvrkDartError, match=message) as info:
+        load_parameters(path, arm.model)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_oddities_are_reported(arm):
+    notes = "\n".join(arm.params.oddities(arm.model))
+    for fragment in ("link 2 (pitch): mass", "link 4 (pitch_front): inertia of 90.1", "negative motor inertia", "not quite physical"):
+        assert fragment in notes
+
+
+def test_malformed_model_file(tmp_path):
+    bad = tmp_path / "psm.toml"
+    bad.write_text("[constants]\nl = 1\n[[links]]\nkey = 1\nname='x'\nparent = 0\ngroup='yaw'\ntheta = { q9 = 1 }\n")
+    with pytest.raises(DvrkDartError, match="unknown name 'q9'"):
+        load_model(bad)
