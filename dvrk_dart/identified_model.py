@@ -104,6 +104,7 @@ class IdentifiedModel:
         self.data = self.pin_model.createData()
         self.G = np.array([link.variable.coeffs for link in self.tree_links])  # (n_tree, 7)
         self.c = np.array([link.variable.const for link in self.tree_links])
+        self._GT = np.ascontiguousarray(self.G.T)
         self.tip_frame_id = self.pin_model.getFrameId(TOOL_TIP_FRAME)
         self._friction_links = [l for l in model.links.values() if l.friction]
         self._motor_links = [l for l in model.links.values() if l.motor_inertia]
@@ -154,8 +155,7 @@ class IdentifiedModel:
     # -------------------------------------------------------- single queries
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Rigid-body M(q) (7x7), without motor inertia."""
-        Mt = pin.crba(self.pin_model, self.data, self.tree_q(q))
-        Mt = np.triu(Mt) + np.triu(Mt, 1).T
+        Mt = pin.crba(self.pin_model, self.data, self.tree_q(q))  # pin >= 3: the full symmetric matrix
         return self.G.T @ Mt @ self.G
 
     def gravity(self, q: np.ndarray) -> np.ndarray:
@@ -172,13 +172,14 @@ class IdentifiedModel:
         return self.G.T @ Ct @ self.G
 
     def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """M, C dq and g in one query (what a torque controller needs)."""
-        qt, vt = self.tree_q(q), self.tree_v(dq)
-        Mt = pin.crba(self.pin_model, self.data, qt)
-        nle = pin.nonLinearEffects(self.pin_model, self.data, qt, vt)
-        gt = pin.computeGeneralizedGravity(self.pin_model, self.data, qt)
-        Mt = np.triu(Mt) + np.triu(Mt, 1).T
-        return self.G.T @ Mt @ self.G, self.G.T @ (nle - gt), self.G.T @ gt
+        """M, C dq and g in one query (what a torque controller needs).
+
+        One Pinocchio call computes the three tree terms; one product projects them."""
+        G = self.G
+        pin.computeAllTerms(self.pin_model, self.data, G @ q + self.c, G @ dq)
+        X = self._GT @ np.column_stack((self.data.M @ G, self.data.nle, self.data.g))
+        n = G.shape[1]
+        return X[:, :n], X[:, n] - X[:, n + 1], X[:, n + 1]
 
     def motor_inertia_matrix(self) -> np.ndarray:
         """Diagonal 7x7 of the identified motor inertias (the armature)."""
@@ -207,6 +208,13 @@ class IdentifiedModel:
         pin.updateFramePlacements(self.pin_model, self.data)
         J_tree = pin.getFrameJacobian(self.pin_model, self.data, self.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
         return J_tree @ self.G
+
+    def tool_tip_bias_acceleration(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """dJ/dt dq (linear; angular) of the tool tip: its acceleration at ddq = 0."""
+        pin.forwardKinematics(self.pin_model, self.data, self.tree_q(q), self.tree_v(dq), np.zeros(self.pin_model.nv))
+        pin.updateFramePlacements(self.pin_model, self.data)
+        acc = pin.getFrameClassicalAcceleration(self.pin_model, self.data, self.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
+        return np.r_[acc.linear, acc.angular]
 
     # ------------------------------------------------------------ batch terms
     def efforts(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, terms: tuple[str, ...] = TERMS) -> ModelEfforts:

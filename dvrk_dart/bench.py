@@ -1,0 +1,99 @@
+"""`make bench`: performance figures against their targets, printed with ratios
+and written to out/bench.json. Targets live here, not in timed tests."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .context import load_arm
+from .io_utils import write_json_atomic
+from .reference_data import load_run, resolve_run, sample_rate_hz
+from .signal import central_difference
+
+#: (key, target, "lower" if smaller is better else "higher", unit, what the target stands for)
+TARGETS = {
+    "model_query_us": (6.0, "lower", "µs", "one query of M, C·dq and g (CoppeliaSim's C++ library: 6-7 µs)"),
+    "model_batch_ms": (50.0, "lower", "ms", "all model efforts of a 5999-sample run"),
+    "sim_realtime_factor": (20.0, "higher", "x", "simulated s per wall s, full closed-chain arm with counterweight at 1 ms"),
+    "campaign_s": (300.0, "lower", "s", "the whole validation campaign on this machine"),
+    "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
+}
+
+
+def best_time(fn, repeat: int, number: int) -> float:
+    """Best mean time of `number` calls over `repeat` rounds (s per call)."""
+    best = float("inf")
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - start) / number)
+    return best
+
+
+def bench_model() -> dict:
+    arm = load_arm()
+    q = np.array([0.1, 0.2, 0.1, 0.3, 0.2, -0.1, 0.4])
+    dq = np.full(7, 0.1)
+    query = best_time(lambda: arm.identified.mcg(q, dq), repeat=5, number=5000)
+    run = load_run(resolve_run("two"))
+    q_all, dq_all = run.q, run.dq
+    ddq_all = central_difference(dq_all, 1.0 / sample_rate_hz())
+    batch = best_time(lambda: arm.identified.predict(q_all, dq_all, ddq_all), repeat=3, number=1)
+    return {"model_query_us": query * 1e6, "model_batch_ms": batch * 1e3, "model_batch_samples": len(run)}
+
+
+def bench_simulation() -> dict:
+    try:
+        from .simulator import measure_realtime_factor
+    except ImportError as exc:  # the simulator is optional for the model figures
+        return {"sim_realtime_factor_error": str(exc)}
+    return {"sim_realtime_factor": measure_realtime_factor()}
+
+
+def bench_campaign(out_dir: Path) -> dict:
+    """The campaign time recorded by the last `make validate` (campaign.json)."""
+    summary = out_dir / "campaign.json"
+    if summary.is_file():
+        return {"campaign_s": json.loads(summary.read_text()).get("wall_time_s")}
+    return {}
+
+
+def bench_diagnosis() -> dict:
+    try:
+        from .diagnosis import benchmark_diagnosis
+    except ImportError:
+        return {}
+    return {"diagnose_s": benchmark_diagnosis()}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--out", default="out/bench.json")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    figures = {}
+    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis):
+        figures.update(part())
+    print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
+    for key, (target, sense, unit, meaning) in TARGETS.items():
+        value = figures.get(key)
+        if value is None:
+            print(f"{key:<22} {'-':>10} {target:>8g}  {'':>6}  {meaning} (not measured)")
+            continue
+        ratio = target / value if sense == "lower" else value / target
+        figures[f"{key}_target"] = target
+        verdict = "ok" if ratio >= 1 else "MISSED"
+        print(f"{key:<22} {value:10.3f} {target:>8g}  {ratio:6.2f}  {unit}: {meaning} [{verdict}]")
+    write_json_atomic(out, figures)
+    print(f"written {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

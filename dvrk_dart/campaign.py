@@ -1,0 +1,146 @@
+"""The batch pipeline: `pipelines/campaign.toml` -> one output folder per run,
+run in parallel worker processes, skipping runs whose inputs and code did not
+change, continuing past failures and listing them at the end.
+
+A run folder holds: config.json (resolved config, versions, git revision,
+input checksum), metrics.json, run.mcap, run.rrd. Every file is written
+atomically, and inputs.sha256 last: a folder without it is not complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+import tomllib
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import DvrkDartError
+from .io_utils import write_json_atomic, write_text_atomic
+from .reference_data import resolve_run, sha256_of
+from .scenarios import PIPELINES_DIR, load_scenario
+
+CAMPAIGN_FILE = PIPELINES_DIR / "campaign.toml"
+PACKAGE_DIR = Path(__file__).resolve().parent
+INPUTS_FILE = "inputs.sha256"
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    scenario: str
+    mode: str
+    counterweight: str
+    duration_s: float | None = None
+
+    @property
+    def name(self) -> str:
+        from .runner import run_name
+
+        return run_name(self.scenario, self.mode, self.counterweight)
+
+
+def load_campaign(path: Path = CAMPAIGN_FILE) -> list[RunSpec]:
+    try:
+        raw = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise DvrkDartError(f"{path}: campaign file not found") from None
+    specs = []
+    for entry in raw.get("runs", []):
+        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s"}
+        if unknown:
+            raise DvrkDartError(f"{path}: unknown key(s) {', '.join(sorted(unknown))} in a [[runs]] entry")
+        scenario = load_scenario(entry["scenario"])
+        for cw in entry.get("counterweights", ["on"]):
+            specs.append(RunSpec(scenario.name, entry["mode"], cw, entry.get("duration_s")))
+    return specs
+
+
+def code_fingerprint() -> str:
+    """Checksum of the code and model data a run depends on."""
+    digest = hashlib.sha256()
+    roots = [PACKAGE_DIR, PACKAGE_DIR.parent / "models"]
+    for root in roots:
+        for path in sorted(p for p in root.rglob("*") if p.is_file() and "__pycache__" not in p.parts):
+            digest.update(str(path.relative_to(root.parent)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def inputs_fingerprint(spec: RunSpec, code: str) -> str:
+    scenario = load_scenario(spec.scenario)
+    parts = [code, scenario.source.read_text(), json.dumps(spec.__dict__, sort_keys=True)]
+    if scenario.measured:
+        parts.append(sha256_of(resolve_run(scenario.measured)))
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> None:
+    """config.json, metrics.json, run.mcap, run.rrd; inputs.sha256 last."""
+    from .context import load_arm
+    from .log_mcap import software_versions, write_mcap
+    from .log_rerun import write_rrd
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / INPUTS_FILE).unlink(missing_ok=True)
+    write_json_atomic(out_dir / "config.json", {"run": record.name, **record.config, "versions": software_versions(), "inputs_sha256": fingerprint})
+    write_json_atomic(out_dir / "metrics.json", record.metrics)
+    write_mcap(record, out_dir / "run.mcap")
+    write_rrd(record, out_dir / "run.rrd", model=load_arm().model)
+    if fingerprint:
+        write_text_atomic(out_dir / INPUTS_FILE, fingerprint + "\n")
+
+
+def _execute(spec: RunSpec, out_dir: str, fingerprint: str) -> tuple[str, dict]:
+    """Worker: run one spec and write its folder. Returns (name, metrics)."""
+    from .context import load_arm
+    from .runner import run
+
+    arm = load_arm()
+    record = run(arm, load_scenario(spec.scenario), spec.mode, spec.counterweight, duration_s=spec.duration_s)
+    write_run_folder(record, Path(out_dir) / spec.name, fingerprint)
+    if "error" in record.metrics:
+        raise DvrkDartError(record.metrics["error"])
+    return spec.name, record.metrics
+
+
+def run_campaign(specs: list[RunSpec], runs_dir: Path, jobs: int = 2, force: bool = False) -> dict:
+    """Run every spec not already up to date; returns a summary with failures."""
+    from tqdm import tqdm
+
+    start = time.perf_counter()
+    code = code_fingerprint()
+    todo, skipped = [], []
+    for spec in specs:
+        fingerprint = inputs_fingerprint(spec, code)
+        marker = runs_dir / spec.name / INPUTS_FILE
+        if not force and marker.is_file() and marker.read_text().strip() == fingerprint:
+            skipped.append(spec.name)
+        else:
+            todo.append((spec, fingerprint))
+    failures: dict[str, str] = {}
+    done: list[str] = []
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+        futures = {pool.submit(_execute, spec, str(runs_dir), fp): spec for spec, fp in todo}
+        with tqdm(total=len(futures), desc="runs", unit="run") as bar:
+            for future in as_completed(futures):
+                spec = futures[future]
+                try:
+                    future.result()
+                    done.append(spec.name)
+                except Exception as exc:  # a failed run must not stop the campaign
+                    failures[spec.name] = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                bar.update()
+    summary = {
+        "runs": [s.name for s in specs],
+        "ran": sorted(done),
+        "skipped_up_to_date": sorted(skipped),
+        "failures": failures,
+        "wall_time_s": time.perf_counter() - start,
+        "jobs": jobs,
+    }
+    return summary
+
+
+
