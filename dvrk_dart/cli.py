@@ -6,11 +6,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from .errors import DvrkDartError
 from .joints import JOINT_NAMES, effort_unit
+from .sim_config import COUNTERWEIGHT_VARIANTS, MODES
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
@@ -61,6 +63,95 @@ def cmd_model_check(args: argparse.Namespace) -> int:
     return 0
 
 
+REPLAY_SHORTHANDS = {
+    "replay-one": "one",
+    "replay-two": "two",
+    "replay-one-no-weight": "one-no-weight",
+    "replay-one-105g": "one-105g",
+}
+
+
+def _sim_config(args: argparse.Namespace):
+    from .sim_config import SimConfig
+
+    config = SimConfig(dt_s=args.dt)
+    if not (0.0 < args.dt <= 0.01):
+        raise DvrkDartError(f"--dt: {args.dt} s is outside (0, 0.01] s")
+    return config
+
+
+def _write_and_summarise(record, out_dir: Path) -> int:
+    from .campaign import write_run_folder
+
+    write_run_folder(record, out_dir)
+    metrics = record.metrics
+    print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
+    for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position_m", "tracking_rms_orientation_rad"):
+        if key in metrics and metrics[key] is not None:
+            print(f"  {key}: {np.array2string(np.asarray(metrics[key]), precision=5)}")
+    if "error" in metrics:
+        print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """One scenario variant -> its output folder."""
+    from .context import load_arm
+    from .runner import run
+    from .scenarios import load_scenario
+
+    arm = load_arm(params_file=args.params)
+    scenario = load_scenario(args.scenario)
+    mode = args.mode or scenario.modes[0]
+    record = run(arm, scenario, mode, args.counterweight, _sim_config(args), duration_s=args.duration)
+    return _write_and_summarise(record, Path(args.out))
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Velocity-mode replay of a measured run (the paper's Sect. IV-B excitation test)."""
+    from dataclasses import replace
+
+    from .context import load_arm
+    from .replay import replay
+    from .runner import rcm_position, run_name
+
+    arm = load_arm(params_file=args.params)
+    measured = REPLAY_SHORTHANDS.get(args.command) or args.measured
+    if measured is None:
+        raise DvrkDartError("--measured: a measured run is required")
+    config = replace(_sim_config(args), counterweight=args.counterweight)
+    record = replay(measured, mode=args.mode, config=config, duration_s=args.duration)
+    scenario = args.command if args.command in REPLAY_SHORTHANDS else f"replay-{Path(str(measured)).stem}"
+    record.name = run_name(scenario, args.mode, args.counterweight)
+    record.config = {"scenario": {"name": scenario, "kind": "replay", "measured": str(measured)}, "mode": args.mode,
+                     "counterweight": args.counterweight, "sim": config.to_dict()}
+    record.markers.setdefault("rcm", rcm_position(arm))
+    out = Path(args.out) if args.out else Path("out") / "runs" / record.name
+    return _write_and_summarise(record, out)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """The main job: the campaign, its report and the sim-to-real diagnosis."""
+    from .pipeline import validate
+
+    return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from .report import build_report
+
+    index = build_report(Path(args.runs), Path(args.out))
+    print(f"report: {index}")
+    return 0
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    from .pipeline import diagnose_command
+
+    return diagnose_command(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dvrk-dart", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -76,6 +167,48 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("model-check", help="parameter oddities and model facts")
     _add_arm_options(p)
     p.set_defaults(func=cmd_model_check)
+
+    def sim_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
+        p.add_argument("--dt", type=float, default=1e-3, help="simulation step (s)")
+        p.add_argument("--duration", type=float, default=None, help="simulate only the first seconds")
+        _add_arm_options(p)
+
+    p = sub.add_parser("run", help="run one scenario variant")
+    p.add_argument("scenario", help="scenario name (pipelines/scenarios/) or .toml file")
+    p.add_argument("--mode", choices=MODES, help="default: the scenario's first mode")
+    p.add_argument("--out", required=True, help="output folder of the run")
+    sim_options(p)
+    p.set_defaults(func=cmd_run)
+
+    for name in ("replay", *REPLAY_SHORTHANDS):
+        p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
+        p.add_argument("--measured", required=name == "replay", help="measured run: path, or one|two|one-no-weight|one-105g")
+        p.add_argument("--mode", default="velocity", choices=("velocity", "kinematic"))
+        p.add_argument("--out", help="output folder (default out/runs/<run name>)")
+        sim_options(p)
+        p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
+    p.add_argument("--out", default="out", help="output folder (runs in OUT/runs)")
+    p.add_argument("--report", default="report", help="report folder")
+    p.add_argument("--jobs", type=int, default=2, help="parallel worker processes")
+    p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("report", help="build the validation report from a folder of runs")
+    p.add_argument("--runs", required=True)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
+    p.add_argument("--measured", required=True, help="measured run: path, or one|two|one-no-weight|one-105g")
+    p.add_argument("--baseline", help="same trajectory without the withheld effect (isolates a payload)")
+    p.add_argument("--train", nargs="*", default=[], help="training runs (default: the measured run)")
+    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
+    p.add_argument("--out", required=True)
+    _add_arm_options(p)
+    p.set_defaults(func=cmd_diagnose)
     return parser
 
 

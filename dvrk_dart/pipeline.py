@@ -1,0 +1,47 @@
+"""`make validate`: the campaign, the analysis and report, and the sim-to-real
+diagnosis with its withheld-effect validations, in one command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .campaign import load_campaign, run_campaign
+from .io_utils import write_json_atomic
+
+
+def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False) -> int:
+    runs_dir = out_dir / "runs"
+    specs = load_campaign()
+    print(f"campaign: {len(specs)} runs -> {runs_dir} ({jobs} workers)")
+    summary = run_campaign(specs, runs_dir, jobs=jobs, force=force)
+    write_json_atomic(out_dir / "campaign.json", summary)
+    print(f"campaign: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
+          f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
+
+    extra_sections = []
+    try:
+        from .diagnosis import validation_section
+    except ImportError:
+        validation_section = None
+    if validation_section is not None:
+        extra_sections.append(validation_section(out_dir / "diagnosis"))
+
+    from .report import build_report
+
+    index = build_report(runs_dir, report_dir, extra_sections=extra_sections)
+    verdicts_file = report_dir / "verdicts.json"
+    verdicts = json.loads(verdicts_file.read_text()) if verdicts_file.is_file() else []
+    for verdict in verdicts:
+        print(f"  [{'PASS' if verdict['passed'] else 'FAIL'}] {verdict['check']}: {verdict['value']}")
+    print(f"report: {index.resolve()}")
+    for name, error in summary["failures"].items():
+        print(f"  failed run {name}: {error}")
+    return 1 if summary["failures"] else 0
+
+
+def diagnose_command(args: argparse.Namespace) -> int:
+    from .diagnosis import run_diagnosis_cli
+
+    return run_diagnosis_cli(args)
