@@ -1,0 +1,490 @@
+"""A simulated run as an MCAP file: viewable in Foxglove, and the only input the
+analysis stage needs (it runs elsewhere, from the logs alone).
+
+`write_mcap` stores every array of a `RunRecord` as JSON messages, one message per
+sample and channel, stamped with the sample's simulation time (ns); config,
+metrics, markers and software versions go into MCAP metadata records.
+`read_mcap` rebuilds the RunRecord. JSON floats are written with `repr`, so the
+arrays come back bit-identical; non-finite values are written as `null` (valid
+JSON for Foxglove) and read back as NaN.
+
+Channels (all JSON, schema encoding jsonschema; `timestamp` = {sec, nsec}):
+
+- `/joint_states/sim`      foxglove.JointStates: {timestamp, t_s, joints: [{name,
+  position, velocity, acceleration, effort}]} from q, dq, ddq, effort_sim. `t_s` is
+  the exact float64 sample time (the stamp is rounded to 1 ns).
+- `/joint_states/measured` foxglove.JointStates with whichever of position (q_measured),
+  velocity (dq_measured), effort (effort_measured) the record has.
+- `/efforts/model/<term>`, `/efforts/model/total`, `/efforts/command`
+  dvrk_dart.JointEfforts: {timestamp, name: [q1..q7], effort: [7 floats]}
+  (sensor_msgs/JointState-like: plot `/efforts/model/total.effort[2]` in Foxglove).
+- `/tool_pose/actual`, `/tool_pose/reference` foxglove.PoseInFrame: {timestamp,
+  frame_id: "base", pose: {position: {x, y, z}, orientation: {x, y, z, w}}}.
+- `/closure_residual`      dvrk_dart.ClosureResidual: {timestamp, residual_m}.
+- `/bodies`                dvrk_dart.BodyPositions: {timestamp, frame_id: "base",
+  bodies: [{name, position: {x, y, z}}]} (link frame origins, for the 3D replay).
+
+Metadata records (values are JSON strings): "run" (name, joint names and units,
+format), "config" and "metrics" (one entry per top-level key), "markers" (name ->
+[x, y, z]), "versions" (python, libraries, dvrk_dart, git revision).
+Units: SI; efforts in N·m, N for the prismatic q3 (see joints.py; each joint
+channel also carries its units in the channel metadata).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.metadata
+import json
+import os
+import platform
+import subprocess
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import Writer
+
+from .errors import DvrkDartError
+from .joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
+from .run_record import RunRecord
+
+FORMAT = "dvrk_dart.run/1"
+
+TOPIC_SIM = "/joint_states/sim"
+TOPIC_MEASURED = "/joint_states/measured"
+TOPIC_MODEL_PREFIX = "/efforts/model/"
+MODEL_TOTAL = "total"  # reserved: /efforts/model/total is derived, not a term
+TOPIC_MODEL_TOTAL = TOPIC_MODEL_PREFIX + MODEL_TOTAL
+TOPIC_COMMAND = "/efforts/command"
+TOPIC_TOOL_POSE = "/tool_pose/actual"
+TOPIC_TOOL_POSE_REF = "/tool_pose/reference"
+TOPIC_CLOSURE_RESIDUAL = "/closure_residual"
+TOPIC_BODIES = "/bodies"
+
+METADATA_RUN = "run"
+METADATA_CONFIG = "config"
+METADATA_METRICS = "metrics"
+METADATA_MARKERS = "markers"
+METADATA_VERSIONS = "versions"
+
+FRAME_ID = "base"
+
+_NUMBER = {"type": ["number", "null"]}
+_TIME = {
+    "type": "object",
+    "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
+    "required": ["sec", "nsec"],
+}
+_XYZ = {"type": "object", "properties": {k: _NUMBER for k in "xyz"}}
+SCHEMAS: dict[str, dict] = {
+    "foxglove.JointStates": {
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "t_s": {"type": "number", "description": "exact sample time, s"},
+            "joints": {
+                "type": "array",
+                "items": {
+                    "type": "object",
+                    "properties": {
+                        "name": {"type": "string"},
+                        "position": _NUMBER,
+                        "velocity": _NUMBER,
+                        "acceleration": _NUMBER,
+                        "effort": _NUMBER,
+                    },
+                    "required": ["name"],
+                },
+            },
+        },
+    },
+    "dvrk_dart.JointEfforts": {
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "name": {"type": "array", "items": {"type": "string"}},
+            "effort": {"type": "array", "items": _NUMBER, "description": "N·m (N for q3)"},
+        },
+    },
+    "foxglove.PoseInFrame": {
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "frame_id": {"type": "string"},
+            "pose": {
+                "type": "object",
+                "properties": {
+                    "position": _XYZ,
+                    "orientation": {"type": "object", "properties": {k: _NUMBER for k in "xyzw"}},
+                },
+            },
+        },
+    },
+    "dvrk_dart.ClosureResidual": {
+        "type": "object",
+        "properties": {"timestamp": _TIME, "residual_m": _NUMBER},
+    },
+    "dvrk_dart.BodyPositions": {
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "frame_id": {"type": "string"},
+            "bodies": {
+                "type": "array",
+                "items": {"type": "object", "properties": {"name": {"type": "string"}, "position": _XYZ}},
+            },
+        },
+    },
+}
+
+_dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+_JOINT_NAMES = list(JOINT_NAMES)
+_JOINT_CHANNEL_METADATA = {
+    "joint_names": json.dumps(_JOINT_NAMES),
+    "position_units": json.dumps([position_unit(n) for n in JOINT_NAMES]),
+    "effort_units": json.dumps([effort_unit(n) for n in JOINT_NAMES]),
+}
+
+
+# ---------------------------------------------------------------- atomic output
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path next to `path`; move it onto `path` only on success.
+
+    A crash or an exception midway leaves the previous file (or none) in place,
+    never a truncated log that the analysis would later read as a complete run.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    # a fresh name rather than mkstemp: the writer creates the file, with the usual
+    # permissions (mkstemp's 0600 would follow the log to the shared runs folder)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+# ---------------------------------------------------------------- versions
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of what produced the run, so a log can be traced to its code."""
+    versions = {"python": platform.python_version()}
+    for label, dist in (
+        ("numpy", "numpy"),
+        ("dartpy", "dartpy"),
+        ("pinocchio", "pin"),
+        ("rerun-sdk", "rerun-sdk"),
+        ("mcap", "mcap"),
+        ("dvrk_dart", "dvrk-dart"),
+    ):
+        try:
+            versions[label] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[label] = "unknown"
+    versions["git_revision"], versions["git_dirty"] = _git_state()
+    return versions
+
+
+def _git_state() -> tuple[str, str]:
+    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's tree."""
+    here = Path(__file__).resolve().parent
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    revision = git("rev-parse", "HEAD")
+    if revision is None:
+        return "unknown", "unknown"
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return revision, "unknown" if status is None else str(bool(status)).lower()
+
+
+# ---------------------------------------------------------------- writing
+
+_SLOT = "\x00slot\x00"  # placeholder for a per-sample number in a message skeleton
+
+
+def _json_numbers(values: np.ndarray) -> list[str]:
+    """JSON text of each value: repr for floats (exact round trip), null if not finite."""
+    values = np.asarray(values)
+    if values.dtype.kind in "iu":
+        return list(map(str, values.tolist()))
+    values = values.astype(float, copy=False)
+    text = list(map(float.__repr__, values.tolist()))
+    for i in np.flatnonzero(~np.isfinite(values)):
+        text[i] = "null"  # NaN/Infinity are not JSON; Foxglove would reject the message
+    return text
+
+
+class _Messages:
+    """Messages of one channel: a skeleton laid out once, numbers filled per sample.
+
+    `slot(column)` stands for a per-sample number in the skeleton (an (N,) column);
+    `encode(skeleton)` dumps the skeleton once and fills its slots with one
+    %-format per sample, which is several times faster than json.dumps of N dicts.
+    Slots are filled in the order they were created, which is the order json.dumps
+    writes them, because both follow the order in which the skeleton is written.
+    """
+
+    def __init__(self, ns: np.ndarray):
+        self.columns: list[list[str]] = []
+        sec, nsec = np.divmod(ns, 1_000_000_000)
+        self.timestamp = {"sec": self.slot(sec), "nsec": self.slot(nsec)}
+
+    def slot(self, column: np.ndarray) -> str:
+        self.columns.append(_json_numbers(column))
+        return _SLOT
+
+    def encode(self, skeleton: dict) -> Iterator[bytes]:
+        template = _dumps(skeleton).replace("%", "%%").replace(_dumps(_SLOT), "%s")
+        for row in zip(*self.columns):
+            yield (template % row).encode()
+
+
+def _joint_states(ns: np.ndarray, fields: dict[str, np.ndarray], t_s: np.ndarray | None = None) -> Iterator[bytes]:
+    """foxglove.JointStates; `fields` maps a JointState field (position, ...) to (N, 7)."""
+    m = _Messages(ns)
+    head = {"timestamp": m.timestamp} | ({} if t_s is None else {"t_s": m.slot(t_s)})
+    joints = [{"name": name} | {k: m.slot(v[:, j]) for k, v in fields.items()} for j, name in enumerate(JOINT_NAMES)]
+    return m.encode(head | {"joints": joints})
+
+
+def _efforts(ns: np.ndarray, effort: np.ndarray) -> Iterator[bytes]:
+    m = _Messages(ns)
+    return m.encode({"timestamp": m.timestamp, "name": _JOINT_NAMES, "effort": [m.slot(e) for e in effort.T]})
+
+
+def _poses(ns: np.ndarray, pose: np.ndarray) -> Iterator[bytes]:
+    m = _Messages(ns)
+    position = {k: m.slot(pose[:, i]) for i, k in enumerate("xyz")}
+    orientation = {k: m.slot(pose[:, 3 + i]) for i, k in enumerate("xyzw")}
+    return m.encode({"timestamp": m.timestamp, "frame_id": FRAME_ID, "pose": {"position": position, "orientation": orientation}})
+
+
+def _residuals(ns: np.ndarray, residual: np.ndarray) -> Iterator[bytes]:
+    m = _Messages(ns)
+    return m.encode({"timestamp": m.timestamp, "residual_m": m.slot(residual)})
+
+
+def _bodies(ns: np.ndarray, bodies: dict[str, np.ndarray]) -> Iterator[bytes]:
+    m = _Messages(ns)
+    items = [{"name": name, "position": {k: m.slot(p[:, i]) for i, k in enumerate("xyz")}} for name, p in bodies.items()]
+    return m.encode({"timestamp": m.timestamp, "frame_id": FRAME_ID, "bodies": items})
+
+
+def _to_json(value: object) -> object:
+    """json.dumps default: numpy arrays and scalars as plain lists and numbers."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def _json_strings(mapping: dict) -> dict[str, str]:
+    return {str(k): json.dumps(v, default=_to_json) for k, v in mapping.items()}
+
+
+def _checked(name: str, array: np.ndarray | None, n: int, width: int | None) -> np.ndarray | None:
+    if array is None:
+        return None
+    array = np.asarray(array, dtype=float)
+    shape = (n,) if width is None else (n, width)
+    if array.shape != shape:
+        raise DvrkDartError(f"RunRecord.{name}: shape {array.shape}, expected {shape}")
+    return array
+
+
+def _channels(record: RunRecord, ns: np.ndarray) -> list[tuple[str, str, dict[str, str], Iterator[bytes]]]:
+    """(topic, schema name, channel metadata, message generator) for what the record holds."""
+    n = len(record)
+    jm = _JOINT_CHANNEL_METADATA
+    sim = {
+        "position": _checked("q", record.q, n, N_JOINTS),
+        "velocity": _checked("dq", record.dq, n, N_JOINTS),
+        "acceleration": _checked("ddq", record.ddq, n, N_JOINTS),
+        "effort": _checked("effort_sim", record.effort_sim, n, N_JOINTS),
+    }
+    channels = [(TOPIC_SIM, "foxglove.JointStates", jm, _joint_states(ns, sim, np.asarray(record.t, dtype=float)))]
+
+    measured = {
+        "position": _checked("q_measured", record.q_measured, n, N_JOINTS),
+        "velocity": _checked("dq_measured", record.dq_measured, n, N_JOINTS),
+        "effort": _checked("effort_measured", record.effort_measured, n, N_JOINTS),
+    }
+    measured = {k: v for k, v in measured.items() if v is not None}
+    if measured:
+        channels.append((TOPIC_MEASURED, "foxglove.JointStates", jm, _joint_states(ns, measured)))
+
+    for term, effort in record.effort_model.items():
+        if term == MODEL_TOTAL or not term or "/" in term:
+            raise DvrkDartError(f"RunRecord.effort_model: invalid term name '{term}'")
+        effort = _checked(f"effort_model[{term!r}]", effort, n, N_JOINTS)
+        channels.append((TOPIC_MODEL_PREFIX + term, "dvrk_dart.JointEfforts", jm, _efforts(ns, effort)))
+    if record.effort_model:
+        channels.append((TOPIC_MODEL_TOTAL, "dvrk_dart.JointEfforts", jm, _efforts(ns, record.model_total())))
+
+    command = _checked("effort_command", record.effort_command, n, N_JOINTS)
+    if command is not None:
+        channels.append((TOPIC_COMMAND, "dvrk_dart.JointEfforts", jm, _efforts(ns, command)))
+
+    pose_meta = {"units": "m, quaternion (x, y, z, w)"}
+    for topic, name, pose in ((TOPIC_TOOL_POSE, "tool_pose", record.tool_pose), (TOPIC_TOOL_POSE_REF, "tool_pose_ref", record.tool_pose_ref)):
+        pose = _checked(name, pose, n, 7)
+        if pose is not None:
+            channels.append((topic, "foxglove.PoseInFrame", pose_meta, _poses(ns, pose)))
+
+    residual = _checked("closure_residual_m", record.closure_residual_m, n, None)
+    if residual is not None:
+        channels.append((TOPIC_CLOSURE_RESIDUAL, "dvrk_dart.ClosureResidual", {"units": "m"}, _residuals(ns, residual)))
+
+    if record.body_positions:
+        bodies = {name: _checked(f"body_positions[{name!r}]", p, n, 3) for name, p in record.body_positions.items()}
+        channels.append((TOPIC_BODIES, "dvrk_dart.BodyPositions", {"units": "m"}, _bodies(ns, bodies)))
+    return channels
+
+
+def _stamps_ns(t: np.ndarray) -> np.ndarray:
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or len(t) == 0 or not np.isfinite(t).all() or (t < 0).any():
+        raise DvrkDartError("RunRecord.t: expected a non-empty 1-D array of finite, non-negative times (s)")
+    return np.round(t * 1e9).astype(np.int64)
+
+
+def write_mcap(record: RunRecord, path: str | os.PathLike) -> None:
+    """Write `record` to `path` (atomically: a failed write leaves no file there).
+
+    Messages are interleaved in time order (sample by sample) so chunks cover
+    short time ranges and Foxglove plays the file back without seeking.
+    """
+    ns = _stamps_ns(record.t)
+    channels = _channels(record, ns)
+    ns_list = ns.tolist()
+    versions = software_versions()
+    with atomic_output(path) as tmp, open(tmp, "wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="", library=f"dvrk_dart {versions['dvrk_dart']}")
+        schema_ids = {
+            name: writer.register_schema(name, SchemaEncoding.JSONSchema, json.dumps(schema).encode())
+            for name, schema in SCHEMAS.items()
+        }
+        ids = [
+            writer.register_channel(topic, MessageEncoding.JSON, schema_ids[schema], metadata)
+            for topic, schema, metadata, _ in channels
+        ]
+        add = writer.add_message
+        for i, (stamp, *payloads) in enumerate(zip(ns_list, *(messages for *_, messages in channels))):
+            for channel_id, data in zip(ids, payloads):
+                add(channel_id, stamp, data, stamp, i)
+
+        writer.add_metadata(METADATA_RUN, {
+            "name": record.name,
+            "format": FORMAT,
+            "joint_names": json.dumps(_JOINT_NAMES),
+            "frame_id": FRAME_ID,
+        })
+        writer.add_metadata(METADATA_CONFIG, _json_strings(record.config))
+        writer.add_metadata(METADATA_METRICS, _json_strings(record.metrics))
+        writer.add_metadata(METADATA_MARKERS, _json_strings(record.markers))
+        writer.add_metadata(METADATA_VERSIONS, versions)
+        writer.finish()
+
+
+# ---------------------------------------------------------------- reading
+
+
+def _json_values(strings: dict[str, str]) -> dict:
+    return {k: json.loads(v) for k, v in strings.items()}
+
+
+def _pose_row(message: dict) -> list:
+    p, o = message["pose"]["position"], message["pose"]["orientation"]
+    return [p["x"], p["y"], p["z"], o["x"], o["y"], o["z"], o["w"]]
+
+
+def _array(values: list) -> np.ndarray:
+    """JSON lists back to float64; null (a non-finite value) becomes NaN."""
+    return np.array(values, dtype=float)
+
+
+def read_mcap(path: str | os.PathLike) -> RunRecord:
+    """Rebuild the RunRecord that `write_mcap` wrote (config/metrics come back as JSON types)."""
+    path = Path(path)
+    messages: dict[str, list[dict]] = {}
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        # file order, not log-time order: keeps equal stamps in the order they were written
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            messages.setdefault(channel.topic, []).append(json.loads(message.data))
+
+    run = metadata.get(METADATA_RUN)
+    if run is None or run.get("format") != FORMAT or TOPIC_SIM not in messages:
+        raise DvrkDartError(f"{path}: not a dvrk_dart run log (no '{METADATA_RUN}' metadata or no {TOPIC_SIM})")
+    if json.loads(run["joint_names"]) != _JOINT_NAMES:
+        raise DvrkDartError(f"{path}: joint names {run['joint_names']} differ from {_JOINT_NAMES}")
+    n = len(messages[TOPIC_SIM])
+    for topic, items in messages.items():
+        if len(items) != n:
+            raise DvrkDartError(f"{path}: {topic} has {len(items)} messages, {TOPIC_SIM} has {n}")
+
+    def joint_field(topic: str, key: str) -> np.ndarray | None:
+        items = messages.get(topic)
+        if not items or key not in items[0]["joints"][0]:
+            return None
+        return _array([[joint[key] for joint in m["joints"]] for m in items])
+
+    def efforts(topic: str) -> np.ndarray | None:
+        items = messages.get(topic)
+        return None if items is None else _array([m["effort"] for m in items])
+
+    def poses(topic: str) -> np.ndarray | None:
+        items = messages.get(topic)
+        if items is None:
+            return None
+        return _array([_pose_row(m) for m in items])
+
+    body_positions: dict[str, np.ndarray] = {}
+    if TOPIC_BODIES in messages:
+        items = messages[TOPIC_BODIES]
+        names = [b["name"] for b in items[0]["bodies"]]
+        xyz = _array([[[b["position"]["x"], b["position"]["y"], b["position"]["z"]] for b in m["bodies"]] for m in items])
+        body_positions = {name: xyz[:, k, :].copy() for k, name in enumerate(names)}
+
+    terms = [topic[len(TOPIC_MODEL_PREFIX):] for topic in messages if topic.startswith(TOPIC_MODEL_PREFIX)]
+    residual = messages.get(TOPIC_CLOSURE_RESIDUAL)
+    return RunRecord(
+        name=run["name"],
+        config=_json_values(metadata.get(METADATA_CONFIG, {})),
+        t=_array([m["t_s"] for m in messages[TOPIC_SIM]]),
+        q=joint_field(TOPIC_SIM, "position"),
+        dq=joint_field(TOPIC_SIM, "velocity"),
+        ddq=joint_field(TOPIC_SIM, "acceleration"),
+        effort_sim=joint_field(TOPIC_SIM, "effort"),
+        effort_model={term: efforts(TOPIC_MODEL_PREFIX + term) for term in terms if term != MODEL_TOTAL},
+        q_measured=joint_field(TOPIC_MEASURED, "position"),
+        dq_measured=joint_field(TOPIC_MEASURED, "velocity"),
+        effort_measured=joint_field(TOPIC_MEASURED, "effort"),
+        effort_command=efforts(TOPIC_COMMAND),
+        tool_pose=poses(TOPIC_TOOL_POSE),
+        tool_pose_ref=poses(TOPIC_TOOL_POSE_REF),
+        closure_residual_m=None if residual is None else _array([m["residual_m"] for m in residual]),
+        body_positions=body_positions,
+        markers={k: np.asarray(v, dtype=float) for k, v in _json_values(metadata.get(METADATA_MARKERS, {})).items()},
+        metrics=_json_values(metadata.get(METADATA_METRICS, {})),
+    )
