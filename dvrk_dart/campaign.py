@@ -79,7 +79,8 @@ def inputs_fingerprint(spec: RunSpec, code: str) -> str:
 def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> None:
     """config.json, metrics.json, run.mcap, run.rrd; inputs.sha256 last."""
     from .context import load_arm
-    from .log_mcap import software_versions, write_mcap
+    from .log_mcap import write_mcap
+    from .provenance import software_versions
     from .log_rerun import write_rrd
 
     out_dir.mkdir(parents=True, exist_ok=True)

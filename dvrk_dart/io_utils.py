@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-import tempfile
-from contextlib import contextmanager
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,36 +22,30 @@ def _jsonable(value):
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path next to `path`; move it onto `path` only on success.
 
-
-_FILE_MODE = 0o666 & ~_umask()
-
-
-@contextmanager
-def atomic_path(target: Path | str):
-    """Yields a temporary path beside `target`; renamed onto it only on success."""
-    target = Path(target)
+    A crash or an exception midway leaves the previous file (or none) in place,
+    never a truncated output that a later stage would read as complete.
+    """
+    target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(fd)
-    os.chmod(tmp, _FILE_MODE)  # mkstemp makes 0600; outputs are ordinary files
+    # a fresh name rather than mkstemp: the writer creates the file with the
+    # usual permissions (mkstemp's are 0600)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
     try:
-        yield Path(tmp)
+        yield tmp
         os.replace(tmp, target)
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        tmp.unlink(missing_ok=True)
 
 
-def write_json_atomic(target: Path | str, data) -> None:
+def write_json_atomic(target: str | os.PathLike, data) -> None:
     with atomic_path(target) as tmp:
         tmp.write_text(json.dumps(data, indent=2, default=_jsonable) + "\n")
 
 
-def write_text_atomic(target: Path | str, text: str) -> None:
+def write_text_atomic(target: str | os.PathLike, text: str) -> None:
     with atomic_path(target) as tmp:
         tmp.write_text(text)

@@ -33,13 +33,8 @@ channel also carries its units in the channel metadata).
 
 from __future__ import annotations
 
-import contextlib
-import importlib.metadata
 import json
 import os
-import platform
-import subprocess
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -49,7 +44,9 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import Writer
 
 from .errors import DvrkDartError
+from .io_utils import atomic_path as atomic_output
 from .joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
+from .provenance import software_versions
 from .run_record import RunRecord
 
 FORMAT = "dvrk_dart.run/1"
@@ -148,68 +145,6 @@ _JOINT_CHANNEL_METADATA = {
     "position_units": json.dumps([position_unit(n) for n in JOINT_NAMES]),
     "effort_units": json.dumps([effort_unit(n) for n in JOINT_NAMES]),
 }
-
-
-# ---------------------------------------------------------------- atomic output
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to `path`; move it onto `path` only on success.
-
-    A crash or an exception midway leaves the previous file (or none) in place,
-    never a truncated log that the analysis would later read as a complete run.
-    """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    # a fresh name rather than mkstemp: the writer creates the file, with the usual
-    # permissions (mkstemp's 0600 would follow the log to the shared runs folder)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
-    try:
-        yield tmp
-        os.replace(tmp, target)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-# ---------------------------------------------------------------- versions
-
-
-def software_versions() -> dict[str, str]:
-    """Versions of what produced the run, so a log can be traced to its code."""
-    versions = {"python": platform.python_version()}
-    for label, dist in (
-        ("numpy", "numpy"),
-        ("dartpy", "dartpy"),
-        ("pinocchio", "pin"),
-        ("rerun-sdk", "rerun-sdk"),
-        ("mcap", "mcap"),
-        ("dvrk_dart", "dvrk-dart"),
-    ):
-        try:
-            versions[label] = importlib.metadata.version(dist)
-        except importlib.metadata.PackageNotFoundError:
-            versions[label] = "unknown"
-    versions["git_revision"], versions["git_dirty"] = _git_state()
-    return versions
-
-
-def _git_state() -> tuple[str, str]:
-    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's tree."""
-    here = Path(__file__).resolve().parent
-
-    def git(*args: str) -> str | None:
-        try:
-            done = subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return done.stdout.strip() if done.returncode == 0 else None
-
-    revision = git("rev-parse", "HEAD")
-    if revision is None:
-        return "unknown", "unknown"
-    status = git("status", "--porcelain", "--untracked-files=no")
-    return revision, "unknown" if status is None else str(bool(status)).lower()
 
 
 # ---------------------------------------------------------------- writing

@@ -33,7 +33,7 @@ import rerun.blueprint as rrb
 
 from .errors import DvrkDartError
 from .joints import JOINT_NAMES, effort_unit, position_unit
-from .log_mcap import atomic_output
+from .io_utils import atomic_path as atomic_output
 from .model import PsmModel
 from .run_record import RunRecord
 

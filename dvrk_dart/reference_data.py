@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 import tomllib
 import urllib.request
 from dataclasses import dataclass
@@ -17,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import DvrkDartError
+from .io_utils import atomic_path
 from .joints import N_JOINTS, column_names
 
 PROJECT_DIR = Path(__file__).resolve().parent.parent
@@ -73,21 +73,15 @@ def _download(name: str) -> Path:
     template = os.environ.get(ENV_URL_TEMPLATE, m["url_template"])
     url = template.format(repository=m["repository"], commit=m["commit"], path=entry["path"])
     target = cache_dir() / name
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{name}.")
-    os.close(fd)
     try:
-        with urllib.request.urlopen(url, timeout=60) as response, open(tmp, "wb") as f:
-            f.write(response.read())
-        _checked(Path(tmp), name)
-        os.replace(tmp, target)
+        with atomic_path(target) as tmp:
+            with urllib.request.urlopen(url, timeout=60) as response:
+                tmp.write_bytes(response.read())
+            _checked(tmp, name)
     except DvrkDartError:
         raise DvrkDartError(f"{url}: downloaded file fails its sha256 check") from None
     except OSError as exc:
         raise DvrkDartError(f"{name}: not found locally and download from {url} failed ({exc})") from None
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return target
 
 

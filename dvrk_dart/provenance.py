@@ -1,0 +1,45 @@
+"""What produced an output: software versions and the git revision."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import platform
+import subprocess
+from pathlib import Path
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of what produced the run, so a log can be traced to its code."""
+    versions = {"python": platform.python_version()}
+    for label, dist in (
+        ("numpy", "numpy"),
+        ("dartpy", "dartpy"),
+        ("pinocchio", "pin"),
+        ("rerun-sdk", "rerun-sdk"),
+        ("mcap", "mcap"),
+        ("dvrk_dart", "dvrk-dart"),
+    ):
+        try:
+            versions[label] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[label] = "unknown"
+    versions["git_revision"], versions["git_dirty"] = _git_state()
+    return versions
+
+
+def _git_state() -> tuple[str, str]:
+    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's tree."""
+    here = Path(__file__).resolve().parent
+
+    def git(*args: str) -> str | None:
+        try:
+            done = subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    revision = git("rev-parse", "HEAD")
+    if revision is None:
+        return "unknown", "unknown"
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return revision, "unknown" if status is None else str(bool(status)).lower()
