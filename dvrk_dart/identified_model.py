@@ -64,6 +64,60 @@ def _placement(link: DHFrame) -> np.ndarray:
     return link.transform(zero)
 
 
+class _ReducedDynamics:
+    """The rigid-body terms on a smaller Pinocchio model, for fast single queries:
+    massless subtrees pruned (they add nothing to M, C, g) and links that move
+    with a single coordinate turned into mimic joints of the first such link,
+    so Pinocchio works directly in the coordinates that carry mass."""
+
+    def __init__(self, model: pin.Model, coords: list[int], scale: np.ndarray, offset: np.ndarray, n: int):
+        self.model, self.data = model, model.createData()
+        self.coords, self.scale, self.offset = np.array(coords), scale, offset
+        self._block = np.ix_(self.coords, self.coords)
+        self._outer = np.outer(scale, scale)
+        self.n = n
+
+    @staticmethod
+    def build(tree: pin.Model, G: np.ndarray, c: np.ndarray) -> "_ReducedDynamics | None":
+        subtree_mass = [tree.inertias[i].mass for i in range(tree.njoints)]
+        for i in range(tree.njoints - 1, 0, -1):
+            subtree_mass[tree.parents[i]] += subtree_mass[i]
+        keep = [i for i in range(1, tree.njoints) if subtree_mass[i] > 0.0]
+        rows = [i - 1 for i in keep]  # tree joint i has row i - 1 of G
+        if any(np.count_nonzero(G[r]) != 1 for r in rows):
+            return None  # a massive link moved by several coordinates: use the projection
+        model = pin.Model()
+        model.gravity = tree.gravity
+        new_id = {0: 0}
+        for i in keep:
+            joint = pin.JointModelRZ() if tree.joints[i].shortname() == "JointModelRZ" else pin.JointModelPZ()
+            new_id[i] = model.addJoint(new_id[tree.parents[i]], joint, tree.jointPlacements[i], tree.names[i])
+            model.appendBodyToJoint(new_id[i], tree.inertias[i], pin.SE3.Identity())
+        primary: dict[int, tuple[int, int]] = {}  # coordinate -> (joint id, row of G)
+        for i, r in zip(keep, rows):
+            j = int(np.flatnonzero(G[r])[0])
+            if j not in primary:
+                primary[j] = (new_id[i], r)
+                continue
+            joint_id, pr = primary[j]
+            scaling = G[r, j] / G[pr, j]
+            model = pin.transformJointIntoMimic(model, joint_id, new_id[i], scaling, c[r] - scaling * c[pr])
+        coords = sorted(primary)
+        prow = [primary[j][1] for j in coords]
+        return _ReducedDynamics(model, coords, G[prow, coords], c[prow], G.shape[1])
+
+    def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x = self.scale * q[self.coords] + self.offset
+        v = self.scale * dq[self.coords]
+        M, b, g = np.zeros((self.n, self.n)), np.zeros(self.n), np.zeros(self.n)
+        # WORLD convention: pin 4.1's default (LOCAL) CRBA on mimic joints keeps
+        # state between calls (a second identical call differs by 1e-2)
+        M[self._block] = pin.crba(self.model, self.data, x, pin.Convention.WORLD) * self._outer
+        b[self.coords] = self.scale * (pin.nonLinearEffects(self.model, self.data, x, v) - pin.computeGeneralizedGravity(self.model, self.data, x))
+        g[self.coords] = self.scale * self.data.g
+        return M, b, g
+
+
 def _depth_first(model: PsmModel) -> list[DHFrame]:
     """Body links and the tool-tip frame, parents first, each subtree contiguous."""
     order: list[DHFrame] = []
@@ -105,6 +159,7 @@ class IdentifiedModel:
         self.G = np.array([link.variable.coeffs for link in self.tree_links])  # (n_tree, 7)
         self.c = np.array([link.variable.const for link in self.tree_links])
         self._GT = np.ascontiguousarray(self.G.T)
+        self._reduced = _ReducedDynamics.build(self.pin_model, self.G, self.c)
         self.tip_frame_id = self.pin_model.getFrameId(TOOL_TIP_FRAME)
         self._friction_links = [l for l in model.links.values() if l.friction]
         self._motor_links = [l for l in model.links.values() if l.motor_inertia]
@@ -172,9 +227,9 @@ class IdentifiedModel:
         return self.G.T @ Ct @ self.G
 
     def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """M, C dq and g in one query (what a torque controller needs).
-
-        One Pinocchio call computes the three tree terms; one product projects them."""
+        """M, C dq and g in one query (what a torque controller needs)."""
+        if self._reduced is not None:
+            return self._reduced.mcg(q, dq)
         G = self.G
         pin.computeAllTerms(self.pin_model, self.data, G @ q + self.c, G @ dq)
         X = self._GT @ np.column_stack((self.data.M @ G, self.data.nle, self.data.g))
