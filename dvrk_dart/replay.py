@@ -1,0 +1,213 @@
+"""Replay of a measured run in the simulator (the paper's Sect. IV-B test):
+the measured joint velocities, processed like upstream and interpolated onto the
+simulation grid, are the velocity servo's reference (with position feedback to
+the measured q), starting at the measured pose.  The result is a RunRecord with
+the simulated efforts, the identified model at the simulated state, the
+measured efforts at the logged times, and the metrics of metrics.json."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.spatial.transform import Rotation
+
+from .errors import DvrkDartError, SimulationDiverged
+from .identified_model import INERTIAL_TERMS, TERMS, IdentifiedModel
+from .metrics import rms
+from .model import PsmModel, load_model
+from .parameters import IdentifiedParameters, load_parameters
+from .reference_data import load_run, resolve, resolve_run
+from .run_record import RunRecord
+from .signal import process
+from .sim_config import MODES, SimConfig
+from .simulator import PsmSimulator
+
+#: torque-mode replay: bandwidth of the PD that stabilises the model feedforward
+#: (gains scaled by the model's joint-space inertia, critically damped)
+TORQUE_REPLAY_BANDWIDTH_HZ = 10.0
+
+
+def simulated_terms(config: SimConfig) -> tuple[str, ...]:
+    """The identified-model terms the simulation reproduces with this config."""
+    terms = list(INERTIAL_TERMS)
+    for flag, term in (("friction", "friction"), ("offsets", "offset"), ("spring", "spring"), ("motor_inertia", "motor_inertia")):
+        if getattr(config, flag):
+            terms.append(term)
+    return tuple(terms)
+
+
+def _scenario_name(measured: str | Path) -> str:
+    text = str(measured)
+    return text if "/" not in text and not text.endswith(".csv") else Path(text).stem
+
+
+def replay(
+    measured: str | Path,
+    mode: str = "velocity",
+    config: SimConfig = SimConfig(),
+    duration_s: float | None = None,
+    log_every: int = 5,
+    model: PsmModel | None = None,
+    params: IdentifiedParameters | None = None,
+) -> RunRecord:
+    """Replay a measured run ('two', a manifest name or a CSV path).
+
+    On divergence, raises SimulationDiverged whose `record` attribute holds the
+    RunRecord of what was logged so far (metrics["diverged"] = the message)."""
+    if mode not in MODES:
+        raise DvrkDartError(f"mode must be one of {', '.join(MODES)}, not '{mode}'")
+    if log_every < 1:
+        raise DvrkDartError("log_every must be >= 1")
+    model = model or load_model()
+    params = params or load_parameters(resolve(model.default_parameters), model)
+    identified = IdentifiedModel(model, params)
+    processed = process(load_run(resolve_run(measured)))
+    t_meas = processed.t - processed.t[0]
+    available = float(t_meas[-1])
+    duration = available if duration_s is None else float(duration_s)
+    if not 0.0 < duration <= available + 1e-12:
+        raise DvrkDartError(f"duration {duration} s outside (0, {available:.3f}] s of the measured run")
+
+    dt = config.dt_s
+    steps = int(round(duration / dt))
+    q_ref = CubicSpline(t_meas, processed.q)
+    dq_ref = CubicSpline(t_meas, processed.dq)
+    sim = PsmSimulator(model, params, config)
+    sim.reset(q_ref(0.0), dq_ref(0.0))
+    if mode == "torque":
+        t_grid = np.arange(steps) * dt
+        feedforward = identified.predict(q_ref(t_grid), dq_ref(t_grid), dq_ref(t_grid, 1), simulated_terms(config))
+        inertia = np.diag(identified.mass_matrix(q_ref(0.0)) + identified.motor_inertia_matrix() * config.motor_inertia)
+        omega = 2.0 * np.pi * TORQUE_REPLAY_BANDWIDTH_HZ
+        kp, kd = inertia * omega**2, 2.0 * inertia * omega
+
+    # references on the simulation grid, evaluated once (t_k = k dt, k = 0..steps)
+    grid = np.arange(steps + 1) * dt
+    q_grid, dq_grid = q_ref(grid), dq_ref(grid)
+    log: dict[str, list] = {k: [] for k in ("t", "q", "dq", "ddq", "effort", "tool", "closure", "passive", "cw")}
+    bodies: dict[str, list] = {}
+    wall_start = time.perf_counter()
+    diverged = None
+    steps_done = 0
+    try:
+        for k in range(steps):
+            logging = k % log_every == 0
+            if logging:  # the state at the start of the step: where the model is evaluated
+                q_k, dq_k = sim.q, sim.dq
+                log["t"].append(k * dt)
+                log["q"].append(q_k)
+                log["dq"].append(dq_k)
+                pose = sim.tool_tip_pose()
+                log["tool"].append(np.concatenate([pose[:3, 3], Rotation.from_matrix(pose[:3, :3]).as_quat()]))
+                log["closure"].append(sim.closure_residual_m())
+                log["passive"].append(max((abs(e) for n, e in sim.passive_joint_errors().items() if n != "counterweight"), default=0.0))
+                cw = sim.counterweight_error_m()
+                log["cw"].append(np.nan if cw is None else cw)
+                for name, xyz in sim.body_positions().items():
+                    bodies.setdefault(name, []).append(xyz)
+            if mode == "velocity":
+                sim.step_velocity(dq_grid[k + 1], q_grid[k + 1])
+            elif mode == "torque":
+                sim.step_torque(feedforward[k] + kp * (q_grid[k] - sim.q) + kd * (dq_grid[k] - sim.dq))
+            else:
+                dq_before = sim.dq
+                sim.set_kinematic(q_grid[k + 1], dq_grid[k + 1])
+                sim.last_ddq = (sim.dq - dq_before) / dt
+            steps_done = k + 1
+            if logging:
+                log["ddq"].append(sim.last_ddq.copy())
+                log["effort"].append(sim.last_effort.copy())
+    except SimulationDiverged as exc:
+        diverged = exc
+        if len(log["ddq"]) < len(log["t"]):  # the diverged step's start state has no result
+            for key in ("t", "q", "dq", "tool", "closure", "passive", "cw"):
+                log[key].pop()
+            for values in bodies.values():
+                values.pop()
+    wall = time.perf_counter() - wall_start
+
+    record = _record(measured, mode, config, log, bodies, identified, processed, t_meas, steps_done, duration, wall, diverged)
+    if diverged is not None:
+        diverged.record = record
+        raise diverged
+    return record
+
+
+def _record(measured, mode, config, log, bodies, identified, processed, t_meas, steps, duration, wall, diverged) -> RunRecord:
+    t = np.array(log["t"])
+    shape = (len(t), 7)
+    q, dq, ddq, effort = (np.array(log[k]).reshape(shape) for k in ("q", "dq", "ddq", "effort"))
+    model_terms = identified.efforts(q, dq, ddq, TERMS).terms if len(t) else {name: np.zeros(shape) for name in TERMS}
+    # measured values at the logged times (exact samples when logging at the data's 200 Hz)
+    tau_meas = np.column_stack([np.interp(t, t_meas, processed.tau[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
+    q_meas = np.column_stack([np.interp(t, t_meas, processed.q[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
+    dq_meas = np.column_stack([np.interp(t, t_meas, processed.dq[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
+    name = f"replay-{_scenario_name(measured)}_{mode}_cw-{config.counterweight}"
+    record = RunRecord(
+        name=name,
+        config={**config.to_dict(), "mode": mode, "measured": str(measured)},
+        t=t,
+        q=q,
+        dq=dq,
+        ddq=ddq,
+        effort_sim=effort,
+        effort_model=model_terms,
+        q_measured=q_meas,
+        dq_measured=dq_meas,
+        effort_measured=tau_meas,
+        tool_pose=np.array(log["tool"]).reshape(len(t), 7),
+        closure_residual_m=np.array(log["closure"]),
+        body_positions={k: np.array(v) for k, v in bodies.items()},
+    )
+    in_window = t_meas <= duration + 1e-9
+    full_model = identified.predict(processed.q[in_window], processed.dq[in_window], processed.ddq[in_window], TERMS)
+    sim_terms = simulated_terms(config)
+    metrics = {
+        "scenario": _scenario_name(measured),
+        "mode": mode,
+        "counterweight": config.counterweight,
+        "dt_s": config.dt_s,
+        "duration_s": steps * config.dt_s,
+        "steps": steps,
+        "wall_time_s": wall,
+        "realtime_factor": (steps * config.dt_s / wall) if wall > 0 else None,
+        "model_terms_compared": list(sim_terms),
+        "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if mode != "kinematic" else None,
+        "rms_sim_vs_measured": rms(effort - tau_meas).tolist() if mode != "kinematic" else None,
+        "rms_model_vs_measured": rms(full_model - processed.tau[in_window]).tolist(),
+        "rms_q_sim_vs_measured": rms(q - q_meas).tolist(),
+        "closure_residual_max_m": float(np.max(record.closure_residual_m, initial=0.0)),
+        "passive_joint_error_max_rad": float(np.max(log["passive"], initial=0.0)),
+        "counterweight_error_max_m": float(np.nanmax(np.abs(log["cw"]), initial=0.0)) if len(t) else 0.0,
+    }
+    if diverged is not None:
+        metrics["diverged"] = str(diverged)
+    record.metrics = metrics
+    return record
+
+
+def replay_metrics_json(record: RunRecord) -> str:
+    """metrics.json text of a replay (per-joint lists, SI units)."""
+    return json.dumps(record.metrics, indent=2, allow_nan=True) + "\n"
+
+
+def write_metrics(record: RunRecord, out_dir: str | Path) -> Path:
+    """Write out_dir/metrics.json atomically (temp file, then os.replace)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / "metrics.json"
+    fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=".metrics.", suffix=".json")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(replay_metrics_json(record))
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
