@@ -26,7 +26,7 @@ from .sim_config import SimConfig
 
 #: joints held by the velocity servo under torque control (the paper drives
 #: J1..J3 only; the identified tool links are massless)
-TOOL_JOINTS = slice(3, N_JOINTS)
+TOOL_JOINTS = tuple(range(3, N_JOINTS))
 #: the torque-mode verdict looks at the error after the initial transient
 TORQUE_TRANSIENT_S = 1.0
 
@@ -105,24 +105,32 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
                 dq = closed_loop_velocity(t, q_kin)
                 sim.set_kinematic(q_kin, dq)
                 log["q"][k], log["dq"][k] = q_kin, dq
-                q_kin = _rk4_step(closed_loop_velocity, t, q_kin, dt)
             else:
-                q, dq = sim.q, sim.dq
-                log["q"][k], log["dq"][k] = q, dq
-                if mode == "velocity":
-                    sim.step_velocity(kinematic.joint_velocity(q, T_d, twist_d))
-                else:
-                    u, _ = torque.efforts(q, dq, T_d[:3, 3], twist_d[:3], acc_d)
-                    command = np.zeros(N_JOINTS)
-                    command[:3] = u
-                    log["command"][k] = command
-                    sim.step_torque_holding(command, hold=TOOL_JOINTS)
-                log["ddq"][k], log["effort"][k] = sim.last_ddq, sim.last_effort
+                log["q"][k], log["dq"][k] = sim.q, sim.dq
+            # every logged quantity refers to the start of the step, time t
             tool_pose[k] = pose_vector(sim.tool_tip_pose())
             tool_ref[k] = pose_vector(T_d)
             residual[k] = sim.closure_residual_m()
             for name, xyz in sim.body_positions().items():
                 bodies.setdefault(name, np.full((steps, 3), np.nan))[k] = xyz
+            if mode == "kinematic":
+                q_kin = _rk4_step(closed_loop_velocity, t, q_kin, dt)
+            else:
+                q, dq = log["q"][k], log["dq"][k]
+                if mode == "velocity":
+                    sim.step_velocity(kinematic.joint_velocity(q, T_d, twist_d))
+                else:
+                    # semi-implicit Euler: q_k = q_(k-1) + dt dq_k, so the sampled velocity is the
+                    # mean over the previous step, centred at t - dt/2: compare it with the
+                    # reference velocity there (else a Kd a dt / 2Kp lag remains)
+                    _, v_half, _ = path.position_velocity_acceleration(t - dt / 2)
+                    u, _ = torque.efforts(q, dq, T_d[:3, 3], v_half, acc_d)
+                    command = np.zeros(N_JOINTS)
+                    command[:3] = u
+                    log["command"][k] = command
+                    sim.step_torque(command, hold=TOOL_JOINTS)
+                # the effort of the step and the acceleration it produced
+                log["ddq"][k], log["effort"][k] = sim.last_ddq, sim.last_effort
             completed = k + 1
     except SimulationDiverged as exc:
         error = exc

@@ -341,26 +341,41 @@ class PsmSimulator:
                 tau += Mz[:n, n] * ddf
                 tau[INSERTION] += ratio * lam
         else:
-            rhs = tau - explicit - bz[:n]
-            if not has_cw:
-                ddq = np.linalg.solve(Mz, rhs)
-            elif self._tendon_ideal:
-                # KKT of the bilateral row c . ddz = bias, c = (-ratio e3, 1), force c lam
+            tau = tau.copy()
+            rows, targets = [], []  # prescribed-acceleration rows c . ddz = d; their multipliers are forces c lam
+            if has_cw and self._tendon_ideal:
                 c = np.zeros(n + 1)
                 c[INSERTION], c[n] = -ratio, 1.0
-                kkt = np.zeros((n + 2, n + 2))
-                kkt[: n + 1, : n + 1] = Mz
-                kkt[: n + 1, n + 1] = -c
-                kkt[n + 1, : n + 1] = c
-                bias = self._counterweight_acceleration(self._zeros, q, dq, x, v)
-                sol = np.linalg.solve(kkt, np.concatenate([rhs, [-bz[n], bias]]))
-                ddq, ddf, lam = sol[:n], float(sol[n]), float(sol[n + 1])
-            else:
+                rows.append(c)
+                targets.append(self._counterweight_acceleration(self._zeros, q, dq, x, v))
+            for j in self._held:  # joints held by the velocity servo: reach zero velocity in this step
+                c = np.zeros(Mz.shape[0])
+                c[j] = 1.0
+                rows.append(c)
+                targets.append(-dq[j] / self.dt)
+                tau[j] = 0.0
+            rhs = tau - explicit - bz[:n]
+            if has_cw and not self._tendon_ideal:
                 lam = self._counterweight_pid(q, dq, x, v)
-                rhs = rhs.copy()
                 rhs[INSERTION] -= ratio * lam
-                sol = np.linalg.solve(Mz, np.append(rhs, lam - bz[n]))
-                ddq, ddf = sol[:n], float(sol[n])
+                rhs = np.append(rhs, lam - bz[n])
+            elif has_cw:
+                rhs = np.append(rhs, -bz[n])
+            m = len(rows)
+            kkt = np.zeros((len(rhs) + m, len(rhs) + m))
+            kkt[: len(rhs), : len(rhs)] = Mz
+            if m:
+                C = np.array(rows)
+                kkt[: len(rhs), len(rhs) :] = -C.T
+                kkt[len(rhs) :, : len(rhs)] = C
+            sol = np.linalg.solve(kkt, np.concatenate([rhs, targets]))
+            ddq = sol[:n]
+            ddf = float(sol[n]) if has_cw else 0.0
+            multipliers = sol[len(rhs) :]
+            if has_cw and self._tendon_ideal:
+                lam, multipliers = float(multipliers[0]), multipliers[1:]
+            for j, effort in zip(self._held, multipliers):
+                tau[j] = effort  # the servo's effort on a held joint
         # generalized forces on the dofs: actuators, environment terms, armature, tendon
         force_q = tau - explicit
         if self._has_armature:
@@ -402,9 +417,17 @@ class PsmSimulator:
         self._feedback_q = None if q_des is None else np.asarray(q_des, dtype=float)
         self._step(None, np.asarray(dq_des, dtype=float))
 
-    def step_torque(self, tau: np.ndarray) -> None:
-        """Torque mode: the 7 actuator efforts (N·m, N for q3) for this step."""
-        self._step(np.asarray(tau, dtype=float), None)
+    def step_torque(self, tau: np.ndarray, hold: tuple[int, ...] = ()) -> None:
+        """Torque mode: the 7 actuator efforts (N·m, N for q3) for this step.
+
+        Joints in `hold` are instead kept still by the velocity servo (the
+        paper torque-controls J1..J3 only); their entries of `last_effort` are
+        the efforts the servo needed."""
+        self._held = tuple(hold)
+        try:
+            self._step(np.asarray(tau, dtype=float), None)
+        finally:
+            self._held = ()
 
     # ---------------------------------------------------------- checks
     def closure_residuals_m(self) -> dict[str, float]:
