@@ -36,7 +36,7 @@ from .context import Arm
 from .errors import DvrkDartError
 from .joints import JOINT_NAMES, N_JOINTS, PRISMATIC_JOINTS, effort_unit
 from .model import PsmModel, dh_transform
-from .sim_config import JointEffects, Payload, SimConfig
+from .sim_config import JointEffects, Payload, SimConfig, simulated_terms
 
 #: a payload heavier than this is not a "forgotten" mass on a 1 m arm (kg)
 PAYLOAD_MAX_MASS_KG = 2.0
@@ -650,12 +650,8 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
     flags, JointEffects, payloads (exact point masses) and the tilt (exact, not
     linearised), for checking the DART replay and the effect mapping. Ideal
     counterweight only."""
-    from .identified_model import INERTIAL_TERMS
-
     im = arm.identified
-    terms = INERTIAL_TERMS + tuple(
-        t for t, on in (("friction", config.friction), ("offset", config.offsets), ("spring", config.spring), ("motor_inertia", config.motor_inertia)) if on
-    )
+    terms = simulated_terms(config)
     efforts = im.efforts(q, dq, ddq, terms)
     tilt = np.asarray(config.gravity_tilt_rad, dtype=float)
     features = TrajectoryFeatures(arm, q, dq, ddq, np.zeros_like(np.atleast_2d(q)), 1.0)

@@ -24,8 +24,8 @@ from .errors import DvrkDartError
 from .joints import N_JOINTS
 from .model import DHFrame, Link, PsmModel, dh_transform
 from .parameters import IdentifiedParameters
+from .sim_config import INERTIAL_TERMS
 
-INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
 NON_INERTIAL_TERMS = ("friction", "offset", "spring", "motor_inertia")
 TERMS = INERTIAL_TERMS + NON_INERTIAL_TERMS
 TERM_GROUPS = {

@@ -8,8 +8,6 @@ measured efforts at the logged times, and the metrics of metrics.json."""
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -18,28 +16,20 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from .errors import DvrkDartError, SimulationDiverged
-from .identified_model import INERTIAL_TERMS, TERMS, IdentifiedModel
+from .io_utils import write_text_atomic
+from .identified_model import TERMS, IdentifiedModel
 from .metrics import rms
 from .model import PsmModel, load_model
 from .parameters import IdentifiedParameters, load_parameters
 from .reference_data import load_run, resolve, resolve_run
 from .run_record import RunRecord
-from .signal import process
-from .sim_config import MODES, SimConfig
+from .signal import ProcessedRun, process
+from .sim_config import MODES, SimConfig, simulated_terms
 from .simulator import PsmSimulator
 
 #: torque-mode replay: bandwidth of the PD that stabilises the model feedforward
 #: (gains scaled by the model's joint-space inertia, critically damped)
 TORQUE_REPLAY_BANDWIDTH_HZ = 10.0
-
-
-def simulated_terms(config: SimConfig) -> tuple[str, ...]:
-    """The identified-model terms the simulation reproduces with this config."""
-    terms = list(INERTIAL_TERMS)
-    for flag, term in (("friction", "friction"), ("offsets", "offset"), ("spring", "spring"), ("motor_inertia", "motor_inertia")):
-        if getattr(config, flag):
-            terms.append(term)
-    return tuple(terms)
 
 
 def _scenario_name(measured: str | Path) -> str:
@@ -66,8 +56,26 @@ def replay(
         raise DvrkDartError("log_every must be >= 1")
     model = model or load_model()
     params = params or load_parameters(resolve(model.default_parameters), model)
-    identified = IdentifiedModel(model, params)
     processed = process(load_run(resolve_run(measured)))
+    return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
+
+
+def replay_processed(
+    processed: ProcessedRun,
+    measured: str | Path,
+    mode: str,
+    config: SimConfig,
+    duration_s: float | None,
+    log_every: int,
+    model: PsmModel,
+    params: IdentifiedParameters,
+    through_last_sample: bool = False,
+) -> RunRecord:
+    """The replay of an already processed run (`measured` names it).
+
+    through_last_sample: one more step so that the logged samples cover every
+    measured sample (the last step's reference is extrapolated by 1 step)."""
+    identified = IdentifiedModel(model, params)
     t_meas = processed.t - processed.t[0]
     available = float(t_meas[-1])
     duration = available if duration_s is None else float(duration_s)
@@ -75,7 +83,7 @@ def replay(
         raise DvrkDartError(f"duration {duration} s outside (0, {available:.3f}] s of the measured run")
 
     dt = config.dt_s
-    steps = int(round(duration / dt))
+    steps = int(round(duration / dt)) + (1 if through_last_sample else 0)
     q_ref = CubicSpline(t_meas, processed.q)
     dq_ref = CubicSpline(t_meas, processed.dq)
     sim = PsmSimulator(model, params, config)
@@ -198,16 +206,21 @@ def replay_metrics_json(record: RunRecord) -> str:
 
 
 def write_metrics(record: RunRecord, out_dir: str | Path) -> Path:
-    """Write out_dir/metrics.json atomically (temp file, then os.replace)."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    target = out_dir / "metrics.json"
-    fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=".metrics.", suffix=".json")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(replay_metrics_json(record))
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    """Write out_dir/metrics.json atomically."""
+    target = Path(out_dir) / "metrics.json"
+    write_text_atomic(target, replay_metrics_json(record))
     return target
+
+
+def simulate_efforts(arm, config: SimConfig, processed: ProcessedRun) -> np.ndarray:
+    """Simulated efforts at every sample of a processed run (velocity replay):
+    the `simulate` hook of the diagnosis. The run must be sampled at a multiple
+    of the simulation step."""
+    period = float(processed.t[1] - processed.t[0])
+    every = int(round(period / config.dt_s))
+    if every < 1 or abs(every * config.dt_s - period) > 1e-9:
+        raise DvrkDartError(f"sample period {period} s is not a multiple of the step {config.dt_s} s")
+    record = replay_processed(
+        processed, "diagnosis", "velocity", config, None, every, arm.model, arm.params, through_last_sample=True
+    )
+    return record.effort_sim[: len(processed)]

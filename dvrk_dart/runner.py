@@ -17,12 +17,12 @@ from scipy.spatial.transform import Rotation
 from .context import Arm
 from .controllers import CartesianTorqueController, KinematicController, orientation_error
 from .errors import DvrkDartError, SimulationDiverged
-from .identified_model import INERTIAL_TERMS, TERMS
+from .identified_model import TERMS
 from .joints import N_JOINTS
 from .metrics import rms
 from .run_record import RunRecord
 from .scenarios import Scenario
-from .sim_config import SimConfig
+from .sim_config import SimConfig, simulated_terms
 
 #: joints held by the velocity servo under torque control (the paper drives
 #: J1..J3 only; the identified tool links are massless)
@@ -33,20 +33,6 @@ TORQUE_TRANSIENT_S = 1.0
 
 def run_name(scenario: str, mode: str, counterweight: str) -> str:
     return f"{scenario}_{mode}_cw-{counterweight}"
-
-
-def simulated_terms(config: SimConfig) -> tuple[str, ...]:
-    """The identified-model terms the simulation includes, for sim-vs-model."""
-    terms = list(INERTIAL_TERMS)
-    if config.friction:
-        terms.append("friction")
-    if config.offsets:
-        terms.append("offset")
-    if config.spring:
-        terms.append("spring")
-    if config.motor_inertia:
-        terms.append("motor_inertia")
-    return tuple(terms)
 
 
 def pose_vector(T: np.ndarray) -> np.ndarray:

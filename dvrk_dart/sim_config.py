@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+#: the identified model's rigid-body terms, always simulated (names of identified_model.TERMS)
+INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
 COUNTERWEIGHT_VARIANTS = ("on", "off", "pid")
 MODES = ("kinematic", "velocity", "torque")
 
@@ -49,3 +51,10 @@ class SimConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def simulated_terms(config: SimConfig) -> tuple[str, ...]:
+    """The identified-model terms a simulation with this config includes:
+    what its efforts are compared with (sim vs model)."""
+    flags = {"friction": config.friction, "offset": config.offsets, "spring": config.spring, "motor_inertia": config.motor_inertia}
+    return INERTIAL_TERMS + tuple(term for term, on in flags.items() if on)

@@ -1,0 +1,535 @@
+"""The analysis stage: a folder of run logs -> tidy tables of errors, the
+validation verdicts (pipelines/checks.toml) and the comparison with the
+published numbers (pipelines/published.toml).
+
+It works from the logs alone (`<runs_dir>/<run>/run.mcap`, read with
+`log_mcap.read_mcap`, plus each folder's config.json and metrics.json), so a
+runs folder copied to another machine gives the same tables.
+
+The metrics table is long ("tidy"): one row per (run, joint or axis, quantity,
+motion regime), with the columns of `METRICS_COLUMNS`. Effort comparisons use
+the identified model as logged, i.e. evaluated at the *simulated* state; the one
+exception is `rms_model_full_vs_measured_at_measured_state`, taken from the
+run's metrics.json (the replay computes it on the measured, processed signals).
+The `source` column says which file each number comes from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tomllib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import DvrkDartError
+from .identified_model import INERTIAL_TERMS, TERMS
+from .io_utils import atomic_path, write_json_atomic, write_text_atomic
+from .joints import JOINT_NAMES, effort_unit, position_unit
+from .metrics import relative_error, rms
+from .scenarios import PIPELINES_DIR
+
+RUN_LOG = "run.mcap"
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.json"
+CHECKS_FILE = PIPELINES_DIR / "checks.toml"
+PUBLISHED_FILE = PIPELINES_DIR / "published.toml"
+#: files of a run folder whose checksums the report lists (provenance)
+CHECKSUMMED_FILES = (RUN_LOG, CONFIG_FILE, METRICS_FILE)
+
+METRICS_COLUMNS = ["run", "scenario", "mode", "counterweight", "joint", "quantity", "regime", "value", "unit", "source"]
+
+# ---------------------------------------------------------------- motion regimes
+# Regimes are defined per joint on the *simulated* state of the run (which follows
+# the measured one in a replay), so every comparison of a run uses the same samples.
+
+REGIME_ALL = "all"
+REGIME_NEAR_ZERO_VELOCITY = "near_zero_velocity"
+REGIME_HIGH_ACCELERATION = "high_acceleration"
+REGIME_FIRST_PERIOD = "first_period"
+#: |dq| below which a joint counts as (nearly) at rest: where Coulomb friction
+#: switches sign and stiction dominates, i.e. where a rigid-body simulation is
+#: expected to differ most from the real arm. About 0.6 deg/s, and 1 mm/s for q3.
+NEAR_ZERO_VELOCITY = {"rad": 0.01, "m": 0.001}  # rad/s, m/s by joint position unit
+#: |ddq| at or above this percentile of the joint's own |ddq| in the run counts as
+#: high acceleration (inertia-dominated samples, where mass errors show)
+HIGH_ACCELERATION_PERCENTILE = 90.0
+#: fewer samples than this in a regime: no RMS is reported (not meaningful)
+MIN_REGIME_SAMPLES = 20
+#: upstream's test window: the excitation's first base period on the measured data
+#: (signal.FIRST_PERIOD_SAMPLES at the data's sample rate); replays only
+
+
+def first_period_s() -> float:
+    from .reference_data import sample_rate_hz
+    from .signal import FIRST_PERIOD_SAMPLES
+
+    return FIRST_PERIOD_SAMPLES / sample_rate_hz()
+
+
+REGIME_DESCRIPTIONS = {
+    REGIME_ALL: "every logged sample",
+    REGIME_NEAR_ZERO_VELOCITY: "samples where the joint's simulated |dq| < {rad} rad/s ({m} m/s for q3)".format(**NEAR_ZERO_VELOCITY),
+    REGIME_HIGH_ACCELERATION: f"samples where the joint's simulated |ddq| is at or above its {HIGH_ACCELERATION_PERCENTILE:g}th percentile in the run",
+    REGIME_FIRST_PERIOD: "replays only: the first base period of the excitation (upstream's test window, 1111 samples at 200 Hz)",
+}
+
+# ---------------------------------------------------------------- quantities
+
+CARTESIAN_POSITION_AXES = ("x", "y", "z")
+CARTESIAN_ORIENTATION_AXES = ("rx", "ry", "rz")
+ALL_COMPONENTS = "all"  # the `joint` value of run-wide scalars
+
+#: effort comparisons: name -> (actual, reference, description); values and regimes per joint
+EFFORT_COMPARISONS = {
+    "sim_vs_model": ("sim", "model_sim_terms", "simulated efforts vs the identified model restricted to the terms the simulation includes (its config's flags), model at the simulated state"),
+    "sim_vs_measured": ("sim", "measured", "simulated efforts vs the measured efforts of the replayed run"),
+    "model_full_vs_measured": ("model_full", "measured", "the full identified model (all terms) at the simulated state vs the measured efforts"),
+    "model_inertial_vs_measured": ("model_inertial", "measured", "the inertial terms of the identified model (M ddq + C dq + g) at the simulated state vs the measured efforts"),
+}
+
+QUANTITY_DESCRIPTIONS = {
+    **{f"rms_{name}": f"RMS of the difference: {text}" for name, (_, _, text) in EFFORT_COMPARISONS.items()},
+    **{f"rel_{name}": f"relative error ||actual - reference|| / ||reference||: {text}" for name, (_, _, text) in EFFORT_COMPARISONS.items()},
+    "rms_model_full_vs_measured_at_measured_state": "RMS of the full identified model at the *measured* (processed) state minus the measured efforts, over the replayed window (from metrics.json)",
+    "rms_q_sim_vs_measured": "RMS of simulated minus measured joint positions (replays)",
+    "tracking_rms_position": "RMS of the tool-tip position error (reference - actual) per base axis",
+    "tracking_rms_orientation": "RMS of the tool orientation error (rotation vector of reference vs actual) per base axis",
+    "tracking_rms_position_after_1s": "torque mode: RMS of the tool-tip position error after the initial transient (t >= 1 s)",
+    "closure_residual_max": "maximum loop-closure residual over the run (parallelograms, counterweight)",
+    "samples": "number of samples the joint's values in that regime are computed on",
+}
+
+
+@dataclass
+class LoadedRun:
+    """One run folder, read back: the record and what the report needs besides."""
+
+    name: str
+    path: Path
+    record: object  # RunRecord (body positions dropped: the analysis does not use them)
+    config: dict  # config.json
+    metrics: dict  # metrics.json
+    versions: dict  # the MCAP "versions" metadata record
+    checksums: dict  # file name -> sha256
+    scenario: str
+    mode: str
+    counterweight: str
+    #: per-sample (position m, orientation rad) tracking errors of a Cartesian task,
+    #: computed once (runner.tracking_errors) for the tables and the figures
+    tracking: tuple[np.ndarray, np.ndarray] | None = None
+
+
+@dataclass
+class Analysis:
+    runs_dir: Path
+    runs: dict[str, LoadedRun]
+    metrics: pd.DataFrame
+    checks: pd.DataFrame
+    comparison: pd.DataFrame
+    failures: dict[str, str] = field(default_factory=dict)  # unreadable run folders -> error
+
+    def value(self, run: str, quantity: str, joint: str, regime: str = REGIME_ALL) -> float:
+        rows = self.metrics[
+            (self.metrics.run == run) & (self.metrics.quantity == quantity) & (self.metrics.joint == joint) & (self.metrics.regime == regime)
+        ]
+        return float(rows.value.iloc[0]) if len(rows) else math.nan
+
+
+# ---------------------------------------------------------------- reading
+
+
+def discover_runs(runs_dir: str | os.PathLike) -> list[Path]:
+    """The run folders of `runs_dir` (those holding a run.mcap), sorted by name."""
+    runs_dir = Path(runs_dir)
+    if not runs_dir.is_dir():
+        raise DvrkDartError(f"--runs: {runs_dir} is not a folder")
+    return sorted(p.parent for p in runs_dir.glob(f"*/{RUN_LOG}"))
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        return {}
+
+
+def _mcap_versions(path: Path) -> dict:
+    """The "versions" metadata record (read_mcap does not return it)."""
+    from mcap.reader import make_reader
+
+    from .log_mcap import METADATA_VERSIONS
+
+    with open(path, "rb") as stream:
+        for record in make_reader(stream).iter_metadata():
+            if record.name == METADATA_VERSIONS:
+                return dict(record.metadata)
+    return {}
+
+
+def _identity(name: str, config: dict) -> tuple[str, str, str]:
+    """(scenario, mode, counterweight) from the config, else from the run name."""
+    parts = name.rsplit("_", 2)
+    scenario = config.get("scenario")
+    scenario = scenario.get("name") if isinstance(scenario, dict) else scenario
+    scenario = scenario or (parts[0] if len(parts) == 3 else name)
+    mode = config.get("mode") or (parts[1] if len(parts) == 3 else "")
+    counterweight = config.get("counterweight") or (parts[2].removeprefix("cw-") if len(parts) == 3 else "")
+    return str(scenario), str(mode), str(counterweight)
+
+
+def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
+    from .log_mcap import read_mcap
+
+    run_dir = Path(run_dir)
+    record = read_mcap(run_dir / RUN_LOG)
+    record.body_positions = {}  # the largest arrays, unused here: keep the worker's reply small
+    config = _read_json(run_dir / CONFIG_FILE) or record.config
+    metrics = _read_json(run_dir / METRICS_FILE) or record.metrics
+    scenario, mode, counterweight = _identity(record.name or run_dir.name, config)
+    tracking = None
+    if record.tool_pose is not None and record.tool_pose_ref is not None:
+        from .runner import tracking_errors
+
+        tracking = tracking_errors(record)
+    return LoadedRun(
+        name=record.name or run_dir.name,
+        path=run_dir,
+        record=record,
+        config=config,
+        metrics=metrics,
+        versions=_mcap_versions(run_dir / RUN_LOG),
+        checksums={f: sha256_file(run_dir / f) for f in CHECKSUMMED_FILES if (run_dir / f).is_file()},
+        scenario=scenario,
+        mode=mode,
+        counterweight=counterweight,
+        tracking=tracking,
+    )
+
+
+def _load_and_measure(run_dir: str) -> tuple[LoadedRun | None, pd.DataFrame | None, str | None]:
+    """Worker: one run folder -> (loaded run, its metric rows) or an error message."""
+    try:
+        loaded = load_run_folder(run_dir)
+        return loaded, run_metrics(loaded), None
+    except Exception as exc:  # one unreadable log must not hide the others
+        return None, None, f"{type(exc).__name__}: {exc}".splitlines()[0]
+
+
+# ---------------------------------------------------------------- per-run metrics
+
+
+def simulated_terms_of(config: dict) -> tuple[str, ...]:
+    """The model terms the simulation includes, from the run's logged config["sim"] flags."""
+    from .sim_config import simulated_terms
+    from .sim_config import SimConfig
+
+    sim = config.get("sim") or {}
+    flags = {k: bool(sim.get(k, False)) for k in ("friction", "offsets", "spring", "motor_inertia")}
+    return simulated_terms(SimConfig(**flags))
+
+
+def _regime_masks(record, joint: int, finite: np.ndarray, replay: bool) -> dict[str, np.ndarray]:
+    """Sample masks of each regime for one joint (already restricted to finite rows)."""
+    masks = {REGIME_ALL: finite}
+    dq = np.abs(record.dq[:, joint])
+    ddq = np.abs(record.ddq[:, joint])
+    limit = NEAR_ZERO_VELOCITY[position_unit(JOINT_NAMES[joint])]
+    masks[REGIME_NEAR_ZERO_VELOCITY] = finite & (dq < limit)
+    usable = finite & np.isfinite(ddq)
+    if usable.any():
+        masks[REGIME_HIGH_ACCELERATION] = usable & (ddq >= np.percentile(ddq[usable], HIGH_ACCELERATION_PERCENTILE))
+    if replay:
+        masks[REGIME_FIRST_PERIOD] = finite & (record.t < first_period_s())
+    return masks
+
+
+def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
+    sources: dict[str, np.ndarray] = {}
+    if record.effort_sim is not None and np.isfinite(record.effort_sim).any():
+        sources["sim"] = record.effort_sim
+    if record.effort_measured is not None:
+        sources["measured"] = record.effort_measured
+    if record.effort_model:
+        present = tuple(t for t in TERMS if t in record.effort_model)
+        sources["model_full"] = record.model_total(present)
+        sources["model_inertial"] = record.model_total(tuple(t for t in INERTIAL_TERMS if t in record.effort_model))
+        sources["model_sim_terms"] = record.model_total(tuple(t for t in simulated_terms_of(config) if t in record.effort_model))
+    return sources
+
+
+def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
+    """The long table of one run (columns METRICS_COLUMNS)."""
+    from .runner import TORQUE_TRANSIENT_S
+
+    record = loaded.record
+    rows: list[tuple] = []
+
+    def add(joint: str, quantity: str, regime: str, value: float, unit: str, source: str = RUN_LOG) -> None:
+        rows.append((joint, quantity, regime, float(value), unit, source))
+
+    replay = record.effort_measured is not None
+    sources = _effort_sources(record, loaded.config)
+    counted: set[tuple[str, str]] = set()  # (joint, regime) whose sample count is in the table
+    for name, (actual_key, reference_key, _) in EFFORT_COMPARISONS.items():
+        if actual_key not in sources or reference_key not in sources:
+            continue
+        actual, reference = sources[actual_key], sources[reference_key]
+        for j, joint in enumerate(JOINT_NAMES):
+            finite = np.isfinite(actual[:, j]) & np.isfinite(reference[:, j])
+            for regime, mask in _regime_masks(record, j, finite, replay).items():
+                n = int(mask.sum())
+                if n < MIN_REGIME_SAMPLES:
+                    continue
+                a, b = actual[mask, j], reference[mask, j]
+                add(joint, f"rms_{name}", regime, rms(a - b), effort_unit(joint))
+                if np.any(b != 0.0):  # a relative error to an all-zero reference (the massless tool) is undefined
+                    add(joint, f"rel_{name}", regime, relative_error(a, b), "1")
+                if (joint, regime) not in counted:  # from the first comparison: the simulated samples
+                    counted.add((joint, regime))
+                    add(joint, "samples", regime, n, "1")
+
+    if record.q_measured is not None:
+        finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
+        if finite.sum() >= MIN_REGIME_SAMPLES:
+            for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
+                add(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, position_unit(JOINT_NAMES[j]))
+
+    at_measured = loaded.metrics.get("rms_model_vs_measured")
+    if at_measured is not None:
+        for joint, value in zip(JOINT_NAMES, at_measured):
+            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, math.nan if value is None else value, effort_unit(joint), METRICS_FILE)
+
+    if loaded.tracking is not None:
+        position, orientation = loaded.tracking
+        finite = np.all(np.isfinite(position), axis=1) & np.all(np.isfinite(orientation), axis=1)
+        for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[finite])):
+            add(axis, "tracking_rms_position", REGIME_ALL, value, "m")
+        for axis, value in zip(CARTESIAN_ORIENTATION_AXES, rms(orientation[finite])):
+            add(axis, "tracking_rms_orientation", REGIME_ALL, value, "rad")
+        if loaded.mode == "torque":
+            after = finite & (record.t >= TORQUE_TRANSIENT_S)
+            if after.any():
+                for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[after])):
+                    add(axis, "tracking_rms_position_after_1s", REGIME_ALL, value, "m")
+
+    if record.closure_residual_m is not None and np.isfinite(record.closure_residual_m).any():
+        add(ALL_COMPONENTS, "closure_residual_max", REGIME_ALL, np.nanmax(record.closure_residual_m), "m")
+
+    table = pd.DataFrame(rows, columns=["joint", "quantity", "regime", "value", "unit", "source"])
+    for column, value in (("counterweight", loaded.counterweight), ("mode", loaded.mode), ("scenario", loaded.scenario), ("run", loaded.name)):
+        table.insert(0, column, value)
+    return table[METRICS_COLUMNS]
+
+
+# ---------------------------------------------------------------- checks and published numbers
+
+
+def _load_toml(path: Path, what: str) -> dict:
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise DvrkDartError(f"{path}: {what} file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DvrkDartError(f"{path}: {exc}") from None
+
+
+def load_checks(path: str | os.PathLike = CHECKS_FILE) -> list[dict]:
+    checks = _load_toml(Path(path), "checks").get("checks", [])
+    required = {"id", "title", "quantity", "runs", "components", "operator", "threshold", "unit"}
+    for check in checks:
+        missing = required - set(check)
+        if missing:
+            raise DvrkDartError(f"{path}: check {check.get('id', '?')} lacks {', '.join(sorted(missing))}")
+        if check["operator"] not in OPERATORS:
+            raise DvrkDartError(f"{path}: check {check['id']}: operator must be one of {', '.join(OPERATORS)}")
+    return checks
+
+
+def load_published(path: str | os.PathLike = PUBLISHED_FILE) -> dict:
+    data = _load_toml(Path(path), "published numbers")
+    for entry in data.get("published", []):
+        if entry.get("source") not in data.get("sources", {}):
+            raise DvrkDartError(f"{path}: {entry.get('id')}: unknown source '{entry.get('source')}'")
+        if len(entry["values"]) != len(entry["components"]):
+            raise DvrkDartError(f"{path}: {entry['id']}: {len(entry['values'])} values for {len(entry['components'])} components")
+    return data
+
+
+#: operator -> (test of a value against the threshold, the worst of several values)
+OPERATORS = {"<=": (lambda v, limit: v <= limit, max), ">": (lambda v, limit: v > limit, min)}
+
+CHECK_COLUMNS = ["check", "title", "run", "component", "value", "operator", "threshold", "unit", "status"]
+STATUS_PASS, STATUS_FAIL, STATUS_MISSING = "pass", "fail", "missing"
+
+
+def evaluate_checks(metrics: pd.DataFrame, checks: list[dict]) -> pd.DataFrame:
+    """One row per (check, run): the worst listed component, its value and the verdict."""
+    rows = []
+    for check in checks:
+        passes, worst = OPERATORS[check["operator"]]
+        regime = check.get("regime", REGIME_ALL)
+        selected = metrics[(metrics.quantity == check["quantity"]) & (metrics.regime == regime)]
+        runs = sorted(selected.run.unique()) if check["runs"] == ["*"] else check["runs"]
+        for run in runs:
+            values = selected[(selected.run == run) & selected.joint.isin(check["components"])]
+            base = {"check": check["id"], "title": check["title"], "run": run, "operator": check["operator"], "threshold": float(check["threshold"]), "unit": check["unit"]}
+            if len(values) < len(check["components"]) or values.value.isna().any():
+                rows.append(base | {"component": ", ".join(check["components"]), "value": math.nan, "status": STATUS_MISSING})
+                continue
+            value = worst(values.value)
+            component = values.joint[values.value == value].iloc[0]
+            ok = all(passes(v, check["threshold"]) for v in values.value)
+            rows.append(base | {"component": component, "value": float(value), "status": STATUS_PASS if ok else STATUS_FAIL})
+    return pd.DataFrame(rows, columns=CHECK_COLUMNS)
+
+
+COMPARISON_COLUMNS = [
+    "published", "source", "where", "run", "quantity", "regime", "component",
+    "published_value", "our_value", "unit", "ratio_published_over_ours",
+]
+
+
+def _units(entry: dict) -> list[str]:
+    unit = entry["unit"]
+    return list(unit) if isinstance(unit, list) else [unit] * len(entry["components"])
+
+
+def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFrame:
+    """Each published number next to ours; ratio published / ours (> 1: we are better)."""
+    index = metrics.set_index(["run", "quantity", "joint", "regime"]).value
+    index = index[~index.index.duplicated()]
+    rows = []
+    for entry in published.get("published", []):
+        for target in entry.get("compare", []):
+            quantity = target.get("quantity", entry["quantity"])
+            regime = target.get("regime", REGIME_ALL)
+            for component, value, unit in zip(entry["components"], entry["values"], _units(entry)):
+                ours = float(index.get((target["run"], quantity, component, regime), math.nan))
+                ratio = value / ours if ours and math.isfinite(ours) else (math.inf if ours == 0 else math.nan)
+                rows.append({
+                    "published": entry["id"],
+                    "source": entry["source"],
+                    "where": entry["where"],
+                    "run": target["run"],
+                    "quantity": quantity,
+                    "regime": regime,
+                    "component": component,
+                    "published_value": float(value),
+                    "our_value": ours,
+                    "unit": unit,
+                    "ratio_published_over_ours": ratio,
+                })
+    return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+# ---------------------------------------------------------------- the whole folder
+
+
+def default_jobs() -> int:
+    return os.cpu_count() or 1
+
+
+def analyze(
+    runs_dir: str | os.PathLike,
+    jobs: int | None = None,
+    checks_file: str | os.PathLike = CHECKS_FILE,
+    published_file: str | os.PathLike = PUBLISHED_FILE,
+) -> Analysis:
+    """Read every run of `runs_dir` (in `jobs` processes) and compute all the tables."""
+    folders = discover_runs(runs_dir)
+    checks, published = load_checks(checks_file), load_published(published_file)  # fail early on bad data files
+    jobs = jobs or default_jobs()
+    if jobs > 1 and len(folders) > 1:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(folders))) as pool:
+            results = list(pool.map(_load_and_measure, map(str, folders)))
+    else:
+        results = [_load_and_measure(str(f)) for f in folders]
+    runs, tables, failures = {}, [], {}
+    for folder, (loaded, table, error) in zip(folders, results):
+        if error is not None:
+            failures[folder.name] = error
+            continue
+        runs[loaded.name] = loaded
+        tables.append(table)
+    metrics = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame(columns=METRICS_COLUMNS)
+    metrics["value"] = metrics["value"].astype(float)
+    return Analysis(
+        runs_dir=Path(runs_dir),
+        runs=runs,
+        metrics=metrics,
+        checks=evaluate_checks(metrics, checks),
+        comparison=compare_with_published(metrics, published),
+        failures=failures,
+    )
+
+
+def run_summary(loaded: LoadedRun) -> dict:
+    m = loaded.metrics
+    return {
+        "run": loaded.name,
+        "scenario": loaded.scenario,
+        "mode": loaded.mode,
+        "counterweight": loaded.counterweight,
+        "samples": len(loaded.record),
+        "duration_s": loaded.config.get("duration_s", m.get("duration_s")),
+        "error": m.get("error") or m.get("diverged"),
+        "checksums_sha256": loaded.checksums,
+        "inputs_sha256": loaded.config.get("inputs_sha256"),
+        "git_revision": loaded.versions.get("git_revision"),
+    }
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+def summary(analysis: Analysis) -> dict:
+    """summary.json: the runs, the verdicts and the comparison, JSON-clean (NaN -> null)."""
+    checks = analysis.checks
+    return {
+        "runs_dir": str(analysis.runs_dir),
+        "runs": [run_summary(r) for r in analysis.runs.values()],
+        "unreadable_runs": analysis.failures,
+        "checks_passed": int((checks.status == STATUS_PASS).sum()),
+        "checks_total": len(checks),
+        "checks": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in checks.to_dict("records")],
+        "comparison": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in analysis.comparison.to_dict("records")],
+        "regimes": REGIME_DESCRIPTIONS,
+        "quantities": QUANTITY_DESCRIPTIONS,
+    }
+
+
+def write_analysis(analysis: Analysis, out_dir: str | os.PathLike) -> dict[str, Path]:
+    """metrics.parquet/.csv, checks.csv, comparison.csv and summary.json in `out_dir` (atomically)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {
+        "metrics_parquet": out_dir / "metrics.parquet",
+        "metrics_csv": out_dir / "metrics.csv",
+        "checks_csv": out_dir / "checks.csv",
+        "comparison_csv": out_dir / "comparison.csv",
+        "summary_json": out_dir / "summary.json",
+    }
+    with atomic_path(files["metrics_parquet"]) as tmp:
+        analysis.metrics.to_parquet(tmp, index=False)
+    # repr-exact floats: the CSV reads back to the same numbers as the parquet
+    write_text_atomic(files["metrics_csv"], analysis.metrics.to_csv(index=False, float_format=None))
+    write_text_atomic(files["checks_csv"], analysis.checks.to_csv(index=False))
+    write_text_atomic(files["comparison_csv"], analysis.comparison.to_csv(index=False))
+    write_json_atomic(files["summary_json"], summary(analysis))
+    return files

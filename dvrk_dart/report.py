@@ -1,0 +1,461 @@
+"""The validation report: one self-contained folder (index.html, figures/*.png,
+analysis/*) generated from a folder of run logs.
+
+    build_report(runs_dir, out_dir, extra_sections=None) -> out_dir/index.html
+
+Contents: the verdicts of pipelines/checks.toml, our numbers next to the
+published ones (pipelines/published.toml), figures mirroring the seed paper's
+Figs. 2-8 plus the residual efforts, the per-run tables, the definitions of the
+quantities and regimes, and the provenance (versions, configs, checksums).
+
+Every number of a table cell is written with its exact value in `data-value`
+and what it is (`data-run`, `data-quantity`, `data-joint`, `data-regime`, or
+`data-check` / `data-published` / `data-field`), so a test, or a reader's
+script, can check it against analysis/metrics.csv.
+
+The folder is built beside `out_dir` and swapped in at the end: an interrupted
+build leaves the previous report in place.
+
+Extra sections (the diagnosis): `extra_sections` is a list of (title, html) or
+(title, html, [files]) -- the files are copied to figures/extra/ and the html
+refers to them as "figures/extra/<name>" -- or a folder, whose *.html fragments
+and images (png, svg, jpg) each become a section.
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import json
+import math
+import os
+import shutil
+import sys
+import time
+import uuid
+from collections.abc import Iterable, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pandas as pd
+
+from .analysis import (
+    ALL_COMPONENTS,
+    CARTESIAN_ORIENTATION_AXES,
+    CARTESIAN_POSITION_AXES,
+    CONFIG_FILE,
+    QUANTITY_DESCRIPTIONS,
+    REGIME_ALL,
+    REGIME_DESCRIPTIONS,
+    STATUS_FAIL,
+    STATUS_MISSING,
+    STATUS_PASS,
+    Analysis,
+    analyze,
+    default_jobs,
+    load_published,
+    write_analysis,
+)
+from .errors import DvrkDartError
+from .joints import JOINT_NAMES
+
+REPORT_FILE = "index.html"
+ANALYSIS_DIR = "analysis"
+EXTRA_DIR = "figures/extra"
+IMAGE_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg")
+#: significant digits shown in the tables (the exact value is in data-value)
+SHOWN_DIGITS = 4
+RATIO_DIGITS = 3
+
+#: per-run tables, whole run: quantity -> its columns
+WHOLE_RUN_TABLES = (
+    ("tracking_rms_position", CARTESIAN_POSITION_AXES),
+    ("tracking_rms_orientation", CARTESIAN_ORIENTATION_AXES),
+    ("tracking_rms_position_after_1s", CARTESIAN_POSITION_AXES),
+    ("rms_sim_vs_model", JOINT_NAMES),
+    ("rel_sim_vs_model", JOINT_NAMES),
+    ("rms_sim_vs_measured", JOINT_NAMES),
+    ("rel_sim_vs_measured", JOINT_NAMES),
+    ("rms_model_full_vs_measured", JOINT_NAMES),
+    ("rms_model_full_vs_measured_at_measured_state", JOINT_NAMES),
+    ("rms_model_inertial_vs_measured", JOINT_NAMES),
+    ("rms_q_sim_vs_measured", JOINT_NAMES),
+    ("closure_residual_max", (ALL_COMPONENTS,)),
+)
+#: per-regime tables: quantity (rows: run x regime, columns: joints)
+REGIME_TABLES = ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_full_vs_measured", "samples")
+
+STYLE = """
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1300px; padding: 0 1em; color: #222; }
+h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 2em; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.88em; }
+th, td { border: 1px solid #ddd; padding: 0.25em 0.55em; text-align: left; vertical-align: top; }
+th { background: #f4f4f4; } td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+tr.pass td.status { background: #dff5df; } tr.fail td.status { background: #fbdede; } tr.missing td.status { background: #fff1cc; }
+td.better { background: #eef8ee; } td.worse { background: #fdf0f0; }
+figure { margin: 1.5em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
+figcaption { font-size: 0.9em; color: #444; } .note { color: #555; font-size: 0.9em; }
+details { margin: 0.3em 0; } pre { background: #f8f8f8; padding: 0.6em; overflow-x: auto; font-size: 0.8em; }
+.summary { font-size: 1.15em; padding: 0.6em 1em; border-radius: 4px; display: inline-block; }
+.summary.ok { background: #dff5df; } .summary.ko { background: #fbdede; }
+"""
+
+
+# ---------------------------------------------------------------- small HTML helpers
+
+
+def fmt(value: float, digits: int = SHOWN_DIGITS) -> str:
+    """A number as shown in a table: `digits` significant digits; '—' when missing."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if math.isinf(value):
+        return "∞" if value > 0 else "-∞"
+    return f"{value:.{digits}g}"
+
+
+DIMENSIONLESS = "1"
+
+
+def unit_text(unit: str) -> str:
+    """A unit as shown: a ratio's unit "1" reads as a number in a table."""
+    return "dimensionless" if unit == DIMENSIONLESS else unit
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _attrs(attrs: dict) -> str:
+    return "".join(f' data-{k}="{_e(v)}"' for k, v in attrs.items())
+
+
+def num_cell(value: float, digits: int = SHOWN_DIGITS, css: str = "", **attrs) -> str:
+    exact = repr(float(value)) if value is not None else "nan"
+    classes = f"num {css}".strip()
+    return f'<td class="{classes}"{_attrs(attrs)} data-value="{exact}">{fmt(value, digits)}</td>'
+
+
+def text_cell(text: object, css: str = "") -> str:
+    return f'<td class="{css}">{_e(text)}</td>' if css else f"<td>{_e(text)}</td>"
+
+
+def code_cell(text: object, title: str = "") -> str:
+    title_attr = f' title="{_e(title)}"' if title else ""
+    return f"<td><code{title_attr}>{_e(text)}</code></td>"
+
+
+def table(header: Sequence[str], rows: Iterable[str], css: str = "data") -> str:
+    head = "".join(f"<th>{_e(h)}</th>" for h in header)
+    return f'<table class="{css}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+
+
+# ---------------------------------------------------------------- sections
+
+
+def verdict_section(analysis: Analysis) -> str:
+    checks = analysis.checks
+    passed = int((checks.status == STATUS_PASS).sum())
+    total = len(checks)
+    ok = passed == total and total > 0
+    rows = []
+    for row in checks.itertuples(index=False):
+        condition = f"{row.operator} {fmt(row.threshold)} {row.unit}"
+        rows.append(
+            f'<tr class="{row.status}">'
+            + text_cell(row.title)
+            + text_cell(row.run)
+            + text_cell(row.component)
+            + num_cell(row.value, check=row.check, run=row.run, field="value")
+            + text_cell(condition)
+            + f'<td class="status">{_e(row.status.upper())}</td></tr>'
+        )
+    failing = checks[checks.status != STATUS_PASS]
+    lines = [
+        "<h2 id='verdicts'>Verdicts</h2>",
+        f"<p class='summary {'ok' if ok else 'ko'}'><strong>{passed} of {total}</strong> checks passed"
+        + (f" ({int((failing.status == STATUS_FAIL).sum())} failed, {int((failing.status == STATUS_MISSING).sum())} missing runs)" if not ok else "")
+        + "</p>",
+        "<p class='note'>Thresholds: <code>pipelines/checks.toml</code>. The value is the worst listed component of the run. "
+        "A missing run (not in the runs folder, or without that quantity) counts as not passed.</p>",
+        table(["check", "run", "worst component", "value", "condition", "status"], rows),
+    ]
+    if analysis.failures:
+        lines.append("<p><strong>Unreadable run folders:</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in analysis.failures.items()) + "</ul>")
+    errors = {name: (r.metrics.get("error") or r.metrics.get("diverged")) for name, r in analysis.runs.items()}
+    errors = {k: v for k, v in errors.items() if v}
+    if errors:
+        lines.append("<p><strong>Runs that stopped early (diverged):</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in errors.items()) + "</ul>")
+    return "\n".join(lines)
+
+
+def comparison_section(analysis: Analysis, published: dict) -> str:
+    rows = []
+    for row in analysis.comparison.itertuples(index=False):
+        ratio = row.ratio_published_over_ours
+        css = "better" if ratio > 1 else ("worse" if ratio < 1 else "")
+        # what identifies the row in analysis/comparison.csv
+        key = {"published": row.published, "run": row.run, "component": row.component, "quantity": row.quantity, "regime": row.regime}
+        rows.append(
+            "<tr>"
+            + text_cell(f"{published['sources'][row.source]['title'].split(':')[0]}, {row.where}")
+            + text_cell(row.run)
+            + text_cell(row.quantity if row.regime == REGIME_ALL else f"{row.quantity} [{row.regime}]")
+            + text_cell(row.component)
+            + num_cell(row.published_value, **key, field="published_value")
+            + num_cell(row.our_value, **key, joint=row.component, field="our_value")
+            + text_cell(unit_text(row.unit))
+            + num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours")
+            + "</tr>"
+        )
+    sources = "".join(
+        f"<li><strong>{_e(key)}</strong>: {_e(s['title'])}"
+        + (f" ({_e(s['document'])})" if "document" in s else "")
+        + (f" ({_e(s['repository'])} @ {_e(s['commit'][:10])})" if "repository" in s else "")
+        + (f". {_e(s['note'])}" if "note" in s else "")
+        + "</li>"
+        for key, s in published.get("sources", {}).items()
+    )
+    return "\n".join([
+        "<h2 id='comparison'>Comparison with the published numbers</h2>",
+        "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red). "
+        "The paper's kinematic control with the dynamic engine on is our velocity mode; its nCW is our cw-off, its wCW (a PID mirror of q3) our cw-pid, "
+        "and our default cw-on is the ideal tendon. Published values: <code>pipelines/published.toml</code>; a dash means the run is not in the folder.</p>",
+        f"<ul class='note'>{sources}</ul>",
+        table(["published (source, where)", "our run", "our quantity [regime]", "component", "published", "ours", "unit", "published / ours"], rows),
+    ])
+
+
+def figures_section(figures) -> str:
+    if not figures:
+        return "<h2 id='figures'>Figures</h2><p>No run of the folder matches a figure.</p>"
+    items = [
+        f"<figure><img src='{_e(f.file)}' alt='{_e(f.title)}'><figcaption><strong>{_e(f.title)}.</strong> {_e(f.caption)} "
+        f"Runs: {_e(', '.join(f.runs))}.</figcaption></figure>"
+        for f in figures
+    ]
+    return "<h2 id='figures'>Figures</h2>\n" + "\n".join(items)
+
+
+def _units_of(metrics: pd.DataFrame, quantity: str, components: Sequence[str]) -> str:
+    """The unit of a table's values: one unit, or per component when they differ."""
+    units = metrics[metrics.quantity == quantity].groupby("joint").unit.first()
+    present = [c for c in components if c in units.index]
+    if len({units[c] for c in present}) == 1:
+        return unit_text(units[present[0]])
+    return ", ".join(f"{c}: {unit_text(units[c])}" for c in present)
+
+
+def per_run_section(analysis: Analysis) -> str:
+    metrics = analysis.metrics
+    parts = ["<h2 id='results'>Results per run</h2>",
+             "<p class='note'>Every number below is a row of <code>analysis/metrics.csv</code> (and .parquet). "
+             "Efforts of the identified model are at the simulated state unless the quantity says otherwise.</p>"]
+    for quantity, components in WHOLE_RUN_TABLES:
+        selected = metrics[(metrics.quantity == quantity) & (metrics.regime == REGIME_ALL)]
+        if selected.empty:
+            continue
+        values = selected.set_index(["run", "joint"]).value
+        rows = []
+        for run in sorted(selected.run.unique()):
+            cells = [
+                num_cell(values[(run, c)], run=run, quantity=quantity, joint=c, regime=REGIME_ALL) if (run, c) in values.index else "<td>—</td>"
+                for c in components
+            ]
+            rows.append("<tr>" + text_cell(run) + "".join(cells) + "</tr>")
+        parts.append(f"<h3>{_e(quantity)} ({_e(_units_of(metrics, quantity, components))})</h3><p class='note'>{_e(QUANTITY_DESCRIPTIONS.get(quantity, ''))}</p>")
+        parts.append(table(["run", *components], rows))
+    parts.append("<h3>By motion regime</h3><p class='note'>" + "; ".join(f"<em>{_e(k)}</em>: {_e(v)}" for k, v in REGIME_DESCRIPTIONS.items()) + ". Regimes with too few samples are left out.</p>")
+    for quantity in REGIME_TABLES:
+        selected = metrics[(metrics.quantity == quantity) & (metrics.regime != REGIME_ALL)]
+        if selected.empty:
+            continue
+        values = selected.set_index(["run", "regime", "joint"]).value
+        rows = []
+        for run, regime in sorted(set(zip(selected.run, selected.regime))):
+            cells = [
+                num_cell(values[(run, regime, j)], run=run, quantity=quantity, joint=j, regime=regime) if (run, regime, j) in values.index else "<td>—</td>"
+                for j in JOINT_NAMES
+            ]
+            rows.append("<tr>" + text_cell(run) + text_cell(regime) + "".join(cells) + "</tr>")
+        parts.append(f"<h4>{_e(quantity)} by regime ({_e(_units_of(metrics, quantity, JOINT_NAMES))})</h4>")
+        parts.append(table(["run", "regime", *JOINT_NAMES], rows))
+    return "\n".join(parts)
+
+
+def _effects(sim: dict) -> str:
+    """The physical effects a run's simulation had on, in words."""
+    on = [k for k in ("friction", "offsets", "spring", "motor_inertia") if sim.get(k)]
+    extra = sim.get("extra") or {}
+    on += [f"extra {k}" for k, v in extra.items() if any(v)]
+    if sim.get("payloads"):
+        on.append(f"{len(sim['payloads'])} payload(s)")
+    if any(sim.get("gravity_tilt_rad") or ()):
+        on.append("gravity tilt")
+    return ", ".join(on) or "inertial only"
+
+
+def provenance_section(analysis: Analysis) -> str:
+    rows, configs = [], []
+    for name, run in sorted(analysis.runs.items()):
+        sim = run.config.get("sim") or {}
+        revision = str(run.versions.get("git_revision", run.config.get("versions", {}).get("git_revision", "unknown")))
+        dirty = run.versions.get("git_dirty", "unknown")
+        mcap_sha = run.checksums.get("run.mcap", "")
+        rows.append(
+            "<tr>"
+            + text_cell(name)
+            + num_cell(len(run.record), run=name, field="samples")
+            + num_cell(float(run.config.get("duration_s", math.nan) or math.nan), run=name, field="duration_s")
+            + num_cell(float(sim.get("dt_s", math.nan)), run=name, field="dt_s")
+            + text_cell(_effects(sim))
+            + code_cell(revision[:10] + (" (dirty)" if dirty == "true" else ""), revision)
+            + code_cell(mcap_sha[:16], mcap_sha)
+            + code_cell((run.config.get("inputs_sha256") or "—")[:16], run.config.get("inputs_sha256") or "")
+            + "</tr>"
+        )
+        checksums = "\n".join(f"sha256 {v}  {k}" for k, v in run.checksums.items())
+        configs.append(
+            f"<details><summary>{_e(name)}: {CONFIG_FILE}, checksums, versions</summary>"
+            f"<pre>{_e(checksums)}</pre><pre>{_e(json.dumps(run.config, indent=1))}</pre>"
+            f"<pre>{_e(json.dumps(run.versions, indent=1))}</pre></details>"
+        )
+    versions: dict[str, set] = {}
+    for run in analysis.runs.values():
+        for key, value in run.versions.items():
+            versions.setdefault(key, set()).add(str(value))
+    version_rows = ["<tr>" + text_cell(k) + code_cell(", ".join(sorted(v))) + "</tr>" for k, v in sorted(versions.items())]
+    return "\n".join([
+        "<h2 id='provenance'>Provenance</h2>",
+        "<p class='note'>Versions are those recorded in each run's MCAP metadata; checksums are sha256 of the run folder's files as read for this report.</p>",
+        table(["software", "version(s) across the runs"], version_rows),
+        table(["run", "samples", "duration (s)", "step (s)", "simulated effects", "git revision", "run.mcap sha256", "inputs sha256"], rows),
+        *configs,
+    ])
+
+
+def glossary_section() -> str:
+    rows = ["<tr>" + text_cell(k) + text_cell(v) + "</tr>" for k, v in QUANTITY_DESCRIPTIONS.items()]
+    regimes = ["<tr>" + text_cell(k) + text_cell(v) + "</tr>" for k, v in REGIME_DESCRIPTIONS.items()]
+    return "\n".join([
+        "<h2 id='glossary'>Definitions</h2>",
+        "<p class='note'>RMS and relative error: <code>dvrk_dart/metrics.py</code>. Units: SI; efforts in N·m, N for the insertion joint q3.</p>",
+        table(["quantity", "definition"], rows, css="glossary"),
+        table(["regime", "samples"], regimes, css="glossary"),
+    ])
+
+
+def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
+    """Normalise the extra sections to (title, html), copying their files into the report."""
+    if extra_sections is None:
+        return []
+    items: list[tuple[str, str]] = []
+    extra_dir = out_dir / EXTRA_DIR
+    if isinstance(extra_sections, (str, os.PathLike)):
+        folder = Path(extra_sections)
+        if not folder.is_dir():
+            raise DvrkDartError(f"extra sections: {folder} is not a folder")
+        for path in sorted(folder.iterdir()):
+            if path.suffix.lower() == ".html":
+                items.append((path.stem.replace("_", " "), path.read_text()))
+            elif path.suffix.lower() in IMAGE_SUFFIXES:
+                extra_dir.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(path, extra_dir / path.name)
+                items.append((path.stem.replace("_", " "), f"<figure><img src='{EXTRA_DIR}/{_e(path.name)}' alt='{_e(path.stem)}'></figure>"))
+        return items
+    for entry in extra_sections:
+        title, body, *files = entry
+        for file in (files[0] if files else []):
+            extra_dir.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(file, extra_dir / Path(file).name)
+        items.append((str(title), str(body)))
+    return items
+
+
+def _page(sections: list[str], title: str) -> str:
+    return (
+        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+        f"<meta name='viewport' content='width=device-width, initial-scale=1'><title>{_e(title)}</title>"
+        f"<style>{STYLE}</style></head><body>\n" + "\n".join(sections) + "\n</body></html>\n"
+    )
+
+
+# ---------------------------------------------------------------- build
+
+
+def _swap_in(built: Path, out_dir: Path) -> None:
+    """Replace out_dir by the freshly built folder (the old one is removed after)."""
+    old = None
+    if out_dir.exists():
+        old = out_dir.with_name(f".{out_dir.name}.old-{uuid.uuid4().hex[:8]}")
+        os.replace(out_dir, old)
+    os.replace(built, out_dir)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None) -> Path:
+    """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html."""
+    from .report_figures import build_figures
+
+    start = time.perf_counter()
+    runs_dir, out_dir = Path(runs_dir), Path(out_dir)
+    jobs = jobs or default_jobs()
+    analysis = analyze(runs_dir, jobs=jobs)
+    if not analysis.runs and not analysis.failures:
+        raise DvrkDartError(f"--runs: no run folder (<run>/run.mcap) in {runs_dir}")
+    published = load_published()
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    building = out_dir.with_name(f".{out_dir.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    building.mkdir()
+    try:
+        write_analysis(analysis, building / ANALYSIS_DIR)
+        figures = build_figures(analysis.runs, building, jobs=jobs)
+        extras = _extra_items(extra_sections, building)
+        generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        navigation = ["verdicts", "comparison", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
+        header = (
+            "<h1>dvrk_dart validation report</h1>"
+            f"<p class='note'>DART simulator of the dVRK PSM vs the identified model (Wang et al. 2019) and the real robot. "
+            f"Generated {generated} from <code>{_e(runs_dir)}</code>: {len(analysis.runs)} run(s). "
+            f"Tables as data: <a href='{ANALYSIS_DIR}/metrics.csv'>metrics.csv</a>, <a href='{ANALYSIS_DIR}/metrics.parquet'>metrics.parquet</a>, "
+            f"<a href='{ANALYSIS_DIR}/checks.csv'>checks.csv</a>, <a href='{ANALYSIS_DIR}/comparison.csv'>comparison.csv</a>, "
+            f"<a href='{ANALYSIS_DIR}/summary.json'>summary.json</a>.</p>"
+            "<p class='note'>" + " · ".join(f"<a href='#{n}'>{n}</a>" for n in navigation) + "</p>"
+        )
+        sections = [
+            header,
+            verdict_section(analysis),
+            comparison_section(analysis, published),
+            figures_section(figures),
+            per_run_section(analysis),
+            *[f"<h2 id='extra-{i}'>{_e(title)}</h2>\n{body}" for i, (title, body) in enumerate(extras)],
+            glossary_section(),
+            provenance_section(analysis),
+            f"<p class='note'>Built in {time.perf_counter() - start:.1f} s.</p>",
+        ]
+        (building / REPORT_FILE).write_text(_page(sections, "dvrk_dart validation report"))
+        _swap_in(building, out_dir)
+    finally:
+        if building.exists():
+            shutil.rmtree(building, ignore_errors=True)
+    return out_dir / REPORT_FILE
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.report", description="Build the validation report from a folder of runs.")
+    parser.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap, config.json, metrics.json)")
+    parser.add_argument("--out", required=True, help="report folder to (re)create")
+    parser.add_argument("--extra", help="folder of extra sections (*.html fragments, images)")
+    parser.add_argument("--jobs", type=int, default=None, help="processes reading the logs (default: the CPU count)")
+    args = parser.parse_args(argv)
+    try:
+        path = build_report(args.runs, args.out, extra_sections=args.extra, jobs=args.jobs)
+    except DvrkDartError as exc:
+        print(f"dvrk-dart: {exc}", file=sys.stderr)
+        return exc.exit_code
+    print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,301 @@
+"""The analysis tables and the generated report, from a small runs folder:
+real short simulations plus synthetic runs with known answers."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dvrk_dart import analysis as an
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.report import RATIO_DIGITS, SHOWN_DIGITS, build_report
+from report_runs import (
+    SYNTHETIC_EFFORT_OFFSET,
+    SYNTHETIC_ERROR_AFTER_1S_M,
+    real_short_runs,
+    synthetic_torque_record,
+    synthetic_velocity_record,
+    write_run,
+)
+
+
+@pytest.fixture(scope="module")
+def runs_dir(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("runs")
+    real_short_runs(folder)
+    write_run(synthetic_torque_record(), folder)
+    write_run(synthetic_velocity_record(), folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def analysis(runs_dir) -> an.Analysis:
+    return an.analyze(runs_dir, jobs=2)
+
+
+@pytest.fixture(scope="module")
+def small_runs_dir(tmp_path_factory) -> Path:
+    """Synthetic runs only: for the tests that build several reports."""
+    folder = tmp_path_factory.mktemp("small_runs")
+    write_run(synthetic_torque_record(), folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def report(runs_dir, tmp_path_factory) -> Path:
+    return build_report(runs_dir, tmp_path_factory.mktemp("out") / "report")
+
+
+# ---------------------------------------------------------------- HTML reading
+
+
+class ReportParser(HTMLParser):
+    """Table cells (attributes, text, whether inside <code>) and referenced files."""
+
+    def __init__(self):
+        super().__init__()
+        self.cells: list[dict] = []
+        self.references: list[str] = []
+        self._cell: dict | None = None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag in ("td", "th"):
+            self._cell = {"tag": tag, "attrs": attrs, "text": "", "code": False}
+        elif tag == "code" and self._cell is not None:
+            self._cell["code"] = True
+        for key in ("src", "href"):
+            if tag in ("img", "a", "link", "script") and attrs.get(key):
+                self.references.append(attrs[key])
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._cell["text"] = self._cell["text"].strip()
+            self.cells.append(self._cell)
+            self._cell = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell["text"] += data
+
+
+def parse(report: Path) -> ReportParser:
+    parser = ReportParser()
+    parser.feed(report.read_text())
+    return parser
+
+
+SPECIAL_TEXT = {"—": math.nan, "∞": math.inf, "-∞": -math.inf}
+
+
+def shown(text: str) -> float:
+    """The number a cell shows."""
+    return SPECIAL_TEXT[text] if text in SPECIAL_TEXT else float(text)
+
+
+def looks_numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def same(a: float, b: float) -> bool:
+    return (math.isnan(a) and math.isnan(b)) or a == b
+
+
+# ---------------------------------------------------------------- the analysis
+
+
+def test_synthetic_velocity_run_known_errors(tmp_path):
+    write_run(synthetic_velocity_record(), tmp_path)
+    result = an.analyze(tmp_path, jobs=1)
+    m = result.metrics
+    rms = m[(m.quantity == "rms_sim_vs_model") & (m.regime == "all")]
+    assert len(rms) == 7
+    np.testing.assert_allclose(rms.value, SYNTHETIC_EFFORT_OFFSET, rtol=1e-12)
+    # the NaN rows of the run are left out, not propagated
+    samples = m[(m.quantity == "samples") & (m.regime == "all")]
+    assert set(samples.value) == {len(synthetic_velocity_record()) - 3}
+    # q1 is at rest for the first half: exactly those samples form its near-zero regime
+    near_zero = m[(m.quantity == "samples") & (m.regime == an.REGIME_NEAR_ZERO_VELOCITY)]
+    assert near_zero.set_index("joint").value.to_dict() == {"q1": len(synthetic_velocity_record()) // 2 - 3}
+    assert set(m.unit[m.quantity == "rms_sim_vs_model"]) == {"N·m", "N"}
+    assert (m.source[m.quantity == "rms_sim_vs_model"] == an.RUN_LOG).all()
+    assert not m.value[m.quantity.str.startswith("rel_")].isin([np.inf]).any()
+
+
+def test_simulated_terms_follow_the_logged_config(tmp_path):
+    """With friction simulated, sim - model must use the model including friction."""
+    write_run(synthetic_velocity_record(friction=True), tmp_path)
+    m = an.analyze(tmp_path, jobs=1).metrics
+    rms = m[(m.quantity == "rms_sim_vs_model") & (m.regime == "all")]
+    np.testing.assert_allclose(rms.value, SYNTHETIC_EFFORT_OFFSET, rtol=1e-12)
+    assert an.simulated_terms_of({"sim": {"friction": True}}) == ("inertia", "coriolis", "gravity", "friction")
+
+
+def test_torque_tracking_after_transient_matches_log_and_check(analysis):
+    result = analysis
+    assert result.value("rectilinear_torque_cw-on", "tracking_rms_position_after_1s", "x") == pytest.approx(SYNTHETIC_ERROR_AFTER_1S_M, rel=1e-9)
+    row = result.checks[(result.checks.check == "torque-tracking-after-transient") & (result.checks.run == "rectilinear_torque_cw-on")].iloc[0]
+    assert row.status == an.STATUS_PASS and row.value == pytest.approx(SYNTHETIC_ERROR_AFTER_1S_M, rel=1e-9)
+
+
+def test_real_runs_verdicts_and_metrics_json_agree(analysis):
+    result = analysis
+    assert not result.failures
+    checks = result.checks.set_index(["check", "run"]).status
+    assert checks[("kinematic-tracking-position", "rectilinear_kinematic_cw-on")] == an.STATUS_PASS
+    assert checks[("velocity-sim-vs-model-with-counterweight", "rectilinear_velocity_cw-on")] == an.STATUS_PASS
+    assert checks[("velocity-no-counterweight-shows-on-J3", "rectilinear_velocity_cw-off")] == an.STATUS_PASS
+    # runs of the check list absent from the folder are reported, not skipped
+    assert checks[("kinematic-tracking-position", "spiral_kinematic_cw-on")] == an.STATUS_MISSING
+    assert set(checks.loc["loop-closure"].index) == set(result.runs)
+    # the kinematic run has no efforts (NaN in the log): no effort rows, tracking rows present
+    kin = result.metrics[result.metrics.run == "rectilinear_kinematic_cw-on"]
+    assert not kin.quantity.str.contains("sim_vs").any() and "tracking_rms_position" in set(kin.quantity)
+    # the log and the runner's metrics.json agree on the numbers they share
+    for name in ("rectilinear_velocity_cw-on", "rectilinear_velocity_cw-off"):
+        logged = result.runs[name].metrics["rms_sim_vs_model"]
+        ours = [result.value(name, "rms_sim_vs_model", j) for j in ("q1", "q2", "q3", "q4", "q5", "q6", "q7")]
+        np.testing.assert_allclose(ours, logged, rtol=1e-9, atol=1e-300)
+    replay = result.runs["replay-two_velocity_cw-on"]
+    at_measured = result.metrics[(result.metrics.run == replay.name) & (result.metrics.quantity == "rms_model_full_vs_measured_at_measured_state")]
+    assert list(at_measured.value) == replay.metrics["rms_model_vs_measured"] and set(at_measured.source) == {an.METRICS_FILE}
+    assert (result.metrics[(result.metrics.run == replay.name)].regime == an.REGIME_FIRST_PERIOD).any()
+
+
+def test_analysis_from_a_copied_folder_is_identical(runs_dir, analysis, tmp_path):
+    copy = tmp_path / "elsewhere"
+    shutil.copytree(runs_dir, copy)
+    a, b = analysis, an.analyze(copy, jobs=2)
+    pd.testing.assert_frame_equal(a.metrics, b.metrics)
+    pd.testing.assert_frame_equal(a.checks, b.checks)
+
+
+def test_bad_data_files_fail_with_one_line(tmp_path):
+    bad = tmp_path / "checks.toml"
+    bad.write_text('[[checks]]\nid = "x"\n')
+    with pytest.raises(DvrkDartError, match="lacks"):
+        an.load_checks(bad)
+    with pytest.raises(DvrkDartError, match="not a folder"):
+        an.discover_runs(tmp_path / "absent")
+
+
+def test_published_numbers_are_data_with_sources():
+    published = an.load_published()
+    ids = {p["id"]: p for p in published["published"]}
+    assert ids["paper-rectilinear-sim-vs-model-wCW"]["values"] == [0.65, 0.1, 0.048]
+    assert ids["wang2019-relative-error-two"]["values"][0] == 0.0929
+    for entry in published["published"]:
+        assert entry["where"] and entry["source"] in published["sources"] and entry["compare"]
+
+
+# ---------------------------------------------------------------- the report
+
+
+def test_report_numbers_equal_the_analysis_tables(report):
+    folder = report.parent
+    metrics = pd.read_parquet(folder / "analysis" / "metrics.parquet")
+    pd.testing.assert_frame_equal(metrics, pd.read_csv(folder / "analysis" / "metrics.csv", keep_default_na=True), check_dtype=False)
+    by_key = metrics.set_index(["run", "quantity", "joint", "regime"]).value
+    checks = pd.read_csv(folder / "analysis" / "checks.csv").set_index(["check", "run"])
+    comparison = pd.read_csv(folder / "analysis" / "comparison.csv")
+    summary = json.loads((folder / "analysis" / "summary.json").read_text())
+    runs = {r["run"]: r for r in summary["runs"]}
+
+    cells = parse(report).cells
+    numeric = [c for c in cells if "data-value" in c["attrs"]]
+    assert len(numeric) > 100
+    for cell in numeric:
+        a, value = cell["attrs"], float(cell["attrs"]["data-value"])
+        # what is shown is the exact value rounded (4 significant digits, 3 for ratios)
+        digits = RATIO_DIGITS if a.get("data-field") == "ratio_published_over_ours" else SHOWN_DIGITS
+        text = shown(cell["text"])
+        assert same(text, value) or math.isclose(text, value, rel_tol=0.5 * 10 ** (1 - digits)), cell
+        if "data-check" in a:
+            assert same(value, checks.loc[(a["data-check"], a["data-run"]), "value"]), cell
+        elif "data-published" in a:
+            rows = comparison[
+                (comparison.published == a["data-published"]) & (comparison.run == a["data-run"]) & (comparison.component == a["data-component"])
+                & (comparison.quantity == a["data-quantity"]) & (comparison.regime == a["data-regime"])
+            ]
+            assert len(rows) == 1 and same(value, float(rows[a["data-field"]].iloc[0])), cell
+            if a["data-field"] == "our_value" and not math.isnan(value):
+                assert value == by_key[(a["data-run"], a["data-quantity"], a["data-joint"], a["data-regime"])], cell
+        elif "data-quantity" in a:
+            assert value == by_key[(a["data-run"], a["data-quantity"], a["data-joint"], a["data-regime"])], cell
+        else:
+            assert a["data-field"] in ("samples", "duration_s", "dt_s"), cell
+            if a["data-field"] == "samples":
+                assert value == runs[a["data-run"]]["samples"]
+    # no number in a table without its exact value and identity
+    for cell in cells:
+        if cell["tag"] == "td" and not cell["code"] and looks_numeric(cell["text"]):
+            assert "data-value" in cell["attrs"], cell
+    # every verdict and every published number is in the report
+    assert sum("data-check" in c["attrs"] for c in numeric) == len(checks)
+    assert sum(c["attrs"].get("data-field") == "published_value" for c in numeric) == len(comparison)
+    # every whole-run error of the analysis is shown
+    shown_keys = {(c["attrs"]["data-run"], c["attrs"]["data-quantity"], c["attrs"]["data-joint"], c["attrs"]["data-regime"]) for c in numeric if "data-quantity" in c["attrs"] and "data-published" not in c["attrs"]}
+    for quantity in ("rms_sim_vs_model", "rms_sim_vs_measured", "tracking_rms_position", "closure_residual_max"):
+        rows = metrics[(metrics.quantity == quantity) & (metrics.regime == "all")]
+        assert len(rows) and set(zip(rows.run, rows.quantity, rows.joint, rows.regime)) <= shown_keys
+
+
+def test_report_references_existing_files_and_has_the_figures(report):
+    folder = report.parent
+    references = [r for r in parse(report).references if not r.startswith("#")]
+    assert references
+    for reference in references:
+        assert "://" not in reference, f"the report must be self-contained: {reference}"
+        assert (folder / reference).is_file(), reference
+    figures = sorted(p.name for p in (folder / "figures").glob("*.png"))
+    for expected in (
+        "fig2_rectilinear_kinematic_tracking.png",
+        "fig4_rectilinear_velocity_efforts.png",
+        "fig6_replay-two_efforts.png",
+        "fig7_rectilinear_torque_control.png",
+        "residual_replay-two_velocity_cw-on.png",
+    ):
+        assert expected in figures
+    html = report.read_text()
+    assert "Verdicts" in html and "Comparison with the published numbers" in html and "Provenance" in html
+    assert not list(folder.parent.glob(".report.*")), "no temporary build folder left behind"
+
+
+def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
+    runs_dir = small_runs_dir
+    out = tmp_path / "report"
+    image = report.parent / "figures" / "fig2_rectilinear_kinematic_tracking.png"
+    diagnosis_figure = _copy(image, tmp_path / "diag.png")
+    section = ("Diagnosis", "<p id='diag'>found it</p><img src='figures/extra/diag.png' alt='d'>", [diagnosis_figure])
+    index = build_report(runs_dir, out, extra_sections=[section])
+    text = index.read_text()
+    assert "<p id='diag'>found it</p>" in text and (out / "figures" / "extra" / "diag.png").is_file()
+    before = text
+    # a failing build leaves the previous report untouched
+    with pytest.raises(DvrkDartError):
+        build_report(runs_dir, out, extra_sections=tmp_path / "no-such-folder")
+    assert index.read_text() == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".report.")]
+    # a folder of extra figures
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    _copy(image, extra / "gap_per_joint.png")
+    (extra / "notes.html").write_text("<p>notes of the diagnosis</p>")
+    text = build_report(runs_dir, out, extra_sections=extra).read_text()
+    assert "figures/extra/gap_per_joint.png" in text and "notes of the diagnosis" in text and "found it" not in text
+
+
+def _copy(source: Path, target: Path) -> Path:
+    shutil.copyfile(source, target)
+    return target
