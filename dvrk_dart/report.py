@@ -152,32 +152,45 @@ def table(header: Sequence[str], rows: Iterable[str], css: str = "data") -> str:
 # ---------------------------------------------------------------- sections
 
 
+def _verdict_row(row, label: str) -> str:
+    condition = f"{row.operator} {fmt(row.threshold)} {row.unit}"
+    return (
+        f'<tr class="{row.status}">'
+        + text_cell(label)
+        + text_cell(row.run)
+        + text_cell(row.component)
+        + num_cell(row.value, check=row.check, run=row.run, field="value")
+        + text_cell(condition)
+        + f'<td class="status">{_e(row.status.upper())}</td></tr>'
+    )
+
+
 def verdict_section(analysis: Analysis) -> str:
     checks = analysis.checks
     passed = int((checks.status == STATUS_PASS).sum())
     total = len(checks)
     ok = passed == total and total > 0
-    rows = []
-    for row in checks.itertuples(index=False):
-        condition = f"{row.operator} {fmt(row.threshold)} {row.unit}"
-        rows.append(
-            f'<tr class="{row.status}">'
-            + text_cell(row.title)
-            + text_cell(row.run)
-            + text_cell(row.component)
-            + num_cell(row.value, check=row.check, run=row.run, field="value")
-            + text_cell(condition)
-            + f'<td class="status">{_e(row.status.upper())}</td></tr>'
-        )
+    # one line per check: its worst run (a failing or missing one first)
+    severity = {STATUS_MISSING: 0, STATUS_FAIL: 1, STATUS_PASS: 2}
+    summary_rows = []
+    for check_id, rows in checks.groupby("check", sort=False):
+        ranked = sorted(rows.itertuples(index=False), key=lambda r: (severity[r.status], -_closeness(r)))
+        worst = ranked[0]
+        label = f"{worst.title} ({int((rows.status == STATUS_PASS).sum())} of {len(rows)} runs pass)"
+        summary_rows.append(_verdict_row(worst, label))
+    detail_rows = [_verdict_row(row, row.title) for row in checks.itertuples(index=False)]
     failing = checks[checks.status != STATUS_PASS]
     lines = [
         "<h2 id='verdicts'>Verdicts</h2>",
-        f"<p class='summary {'ok' if ok else 'ko'}'><strong>{passed} of {total}</strong> checks passed"
-        + (f" ({int((failing.status == STATUS_FAIL).sum())} failed, {int((failing.status == STATUS_MISSING).sum())} missing runs)" if not ok else "")
+        f"<p class='summary {'ok' if ok else 'ko'}'><strong>{passed} of {total}</strong> check runs passed"
+        + (f" ({int((failing.status == STATUS_FAIL).sum())} failed, {int((failing.status == STATUS_MISSING).sum())} missing)" if not ok else "")
         + "</p>",
-        "<p class='note'>Thresholds: <code>pipelines/checks.toml</code>. The value is the worst listed component of the run. "
-        "A missing run (not in the runs folder, or without that quantity) counts as not passed.</p>",
-        table(["check", "run", "worst component", "value", "condition", "status"], rows),
+        "<p class='note'>Thresholds: <code>pipelines/checks.toml</code>. The value is the worst listed component of the run; "
+        "each line below shows the check's worst run. A missing run (not in the runs folder, or without that quantity) counts as not passed.</p>",
+        table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
+        "<details><summary>Every run of every check</summary>"
+        + table(["check", "run", "worst component", "value", "condition", "status"], detail_rows)
+        + "</details>",
     ]
     if analysis.failures:
         lines.append("<p><strong>Unreadable run folders:</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in analysis.failures.items()) + "</ul>")
@@ -188,25 +201,21 @@ def verdict_section(analysis: Analysis) -> str:
     return "\n".join(lines)
 
 
+def _closeness(row) -> float:
+    """How close a passing value is to its threshold (larger: closer), to pick the worst run."""
+    if not math.isfinite(row.value) or row.threshold == 0:
+        return -math.inf
+    ratio = row.value / row.threshold
+    return ratio if row.operator == "<=" else -ratio
+
+
+def _component_header(entry: dict) -> list[str]:
+    units = entry["unit"] if isinstance(entry["unit"], list) else [entry["unit"]] * len(entry["components"])
+    return [f"{c} ({unit_text(u)})" for c, u in zip(entry["components"], units)]
+
+
 def comparison_section(analysis: Analysis, published: dict) -> str:
-    rows = []
-    for row in analysis.comparison.itertuples(index=False):
-        ratio = row.ratio_published_over_ours
-        css = "better" if ratio > 1 else ("worse" if ratio < 1 else "")
-        # what identifies the row in analysis/comparison.csv
-        key = {"published": row.published, "run": row.run, "component": row.component, "quantity": row.quantity, "regime": row.regime}
-        rows.append(
-            "<tr>"
-            + text_cell(f"{published['sources'][row.source]['title'].split(':')[0]}, {row.where}")
-            + text_cell(row.run)
-            + text_cell(row.quantity if row.regime == REGIME_ALL else f"{row.quantity} [{row.regime}]")
-            + text_cell(row.component)
-            + num_cell(row.published_value, **key, field="published_value")
-            + num_cell(row.our_value, **key, joint=row.component, field="our_value")
-            + text_cell(unit_text(row.unit))
-            + num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours")
-            + "</tr>"
-        )
+    comparison = analysis.comparison
     sources = "".join(
         f"<li><strong>{_e(key)}</strong>: {_e(s['title'])}"
         + (f" ({_e(s['document'])})" if "document" in s else "")
@@ -215,14 +224,44 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
         + "</li>"
         for key, s in published.get("sources", {}).items()
     )
-    return "\n".join([
+    parts = [
         "<h2 id='comparison'>Comparison with the published numbers</h2>",
         "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red). "
         "The paper's kinematic control with the dynamic engine on is our velocity mode; its nCW is our cw-off, its wCW (a PID mirror of q3) our cw-pid, "
         "and our default cw-on is the ideal tendon. Published values: <code>pipelines/published.toml</code>; a dash means the run is not in the folder.</p>",
         f"<ul class='note'>{sources}</ul>",
-        table(["published (source, where)", "our run", "our quantity [regime]", "component", "published", "ours", "unit", "published / ours"], rows),
-    ])
+    ]
+    for entry in published.get("published", []):
+        rows_of_entry = comparison[comparison.published == entry["id"]]
+        if rows_of_entry.empty:
+            continue
+        first = rows_of_entry.drop_duplicates("component").set_index("component")
+        rows = [
+            "<tr>" + text_cell(f"published ({entry['source']})")
+            + "".join(num_cell(first.loc[c, "published_value"], published=entry["id"], component=c, field="published_value") for c in entry["components"])
+            + "</tr>"
+        ]
+        better = total = 0
+        for (run, quantity, regime), group in rows_of_entry.groupby(["run", "quantity", "regime"], sort=False):
+            group = group.set_index("component")
+            label = f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
+            ours, ratios = [], []
+            for c in entry["components"]:
+                row = group.loc[c]
+                key = {"published": entry["id"], "run": run, "component": c, "quantity": quantity, "regime": regime}
+                ratio = row.ratio_published_over_ours
+                css = "better" if ratio > 1 else ("worse" if ratio < 1 else "")
+                ours.append(num_cell(row.our_value, **key, joint=c, field="our_value"))
+                ratios.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
+                better += int(ratio > 1)
+                total += int(math.isfinite(row.our_value))
+            rows.append("<tr>" + text_cell(label) + "".join(ours) + "</tr>")
+            rows.append("<tr>" + text_cell("published / ours") + "".join(ratios) + "</tr>")
+        parts.append(
+            f"<h4>{_e(entry['where'])}</h4><p class='note'>{_e(entry['quantity'])}; ours better on {better} of {total} compared values.</p>"
+            + table(["", *_component_header(entry)], rows)
+        )
+    return "\n".join(parts)
 
 
 def figures_section(figures) -> str:

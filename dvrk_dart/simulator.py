@@ -80,9 +80,11 @@ from .parameters import IdentifiedParameters
 from .sim_config import SimConfig
 
 #: position feedback of the velocity servo when a reference position is given:
-#: the target velocity is dq_des + (q_des - q) / tau_pos.  50 ms keeps the
-#: replayed pose on the measured one without shaping the accelerations.
-POSITION_FEEDBACK_TIME_CONSTANT_S = 0.05
+#: the target velocity is dq_des + (q_des - q) / tau_pos. The measured dq is not
+#: exactly d/dt of the measured q (0.013 rad/s RMS apart, drifting up to 9 mrad
+#: over a run): 1 s removes the drift without turning that mismatch into
+#: acceleration noise (at 50 ms it cost 0.05 N·m of replay noise).
+POSITION_FEEDBACK_TIME_CONSTANT_S = 1.0
 
 #: the loop-closure residual is checked for divergence every this many steps
 #: (10 ms at 1 ms); NaN and joint ranges are checked every step

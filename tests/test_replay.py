@@ -14,7 +14,8 @@ from dvrk_dart.model import load_model
 from dvrk_dart.parameters import IdentifiedParameters, load_parameters
 from dvrk_dart.reference_data import resolve
 from dvrk_dart.replay import replay, replay_metrics_json, write_metrics
-from dvrk_dart.sim_config import SimConfig
+from dvrk_dart.metrics import rms
+from dvrk_dart.sim_config import SimConfig, simulated_terms
 
 #: the shorter variants (off, pid) replay the first seconds only
 SHORT_S = 8.0
@@ -102,13 +103,20 @@ def test_pid_mirror_shows_the_transient_j3_discrepancy(with_cw):
     assert pid.metrics["counterweight_error_max_m"] > 1e-4
 
 
-def test_identified_friction_spring_and_motor_inertia_as_physics():
+def test_identified_friction_spring_and_motor_inertia_as_physics(params):
     config = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
-    record = replay("two", config=config, duration_s=3.0)
-    rms = np.array(record.metrics["rms_sim_vs_model"])
+    record = replay("two", config=config, duration_s=3.0, log_every=1)
     assert record.metrics["model_terms_compared"] == ["inertia", "coriolis", "gravity", "friction", "offset", "spring", "motor_inertia"]
-    # implicit viscous friction at the end-of-step velocity and Coulomb sign at reversals: <= Fv dt ddq + ...
-    assert np.all(rms <= 0.01), rms
+    error = record.effort_sim - record.model_total(simulated_terms(config))
+    # Coulomb friction is set-valued at zero velocity: in the step where a joint
+    # reverses, DART's friction row opposes the end-of-step velocity and the
+    # model uses the start-of-step one, a difference of at most 2 Fc there.
+    reversal = np.sign(record.dq) != np.sign(record.dq + config.dt_s * record.ddq)
+    steady = ~reversal.any(axis=1)
+    assert steady.mean() > 0.95  # reversals are isolated steps
+    assert np.all(rms(error[steady]) <= 0.01), rms(error[steady])
+    coulomb = np.array([params[1].coulomb, params[2].coulomb, params[8].coulomb])
+    assert np.all(np.abs(error[:, :3][reversal[:, :3]]) <= 2 * np.repeat(coulomb[None], len(error), 0)[reversal[:, :3]] + 0.01)
 
 
 def test_kinematic_replay_follows_the_measured_pose():
