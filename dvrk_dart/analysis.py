@@ -365,6 +365,8 @@ def load_published(path: str | os.PathLike = PUBLISHED_FILE) -> dict:
     for entry in data.get("published", []):
         if entry.get("source") not in data.get("sources", {}):
             raise DvrkDartError(f"{path}: {entry.get('id')}: unknown source '{entry.get('source')}'")
+        if entry.get("kind", KIND_ERROR) not in (KIND_ERROR, KIND_EFFECT):
+            raise DvrkDartError(f"{path}: {entry['id']}: kind must be '{KIND_ERROR}' or '{KIND_EFFECT}'")
         if len(entry["values"]) != len(entry["components"]):
             raise DvrkDartError(f"{path}: {entry['id']}: {len(entry['values'])} values for {len(entry['components'])} components")
     return data
@@ -398,8 +400,12 @@ def evaluate_checks(metrics: pd.DataFrame, checks: list[dict]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=CHECK_COLUMNS)
 
 
+#: published entries whose ratio says who is better (smaller is better); "effect"
+#: entries (e.g. the error without counterweight) are compared without a verdict
+KIND_ERROR, KIND_EFFECT = "error", "effect"
+
 COMPARISON_COLUMNS = [
-    "published", "source", "where", "run", "quantity", "regime", "component",
+    "published", "kind", "source", "where", "run", "quantity", "regime", "component",
     "published_value", "our_value", "unit", "ratio_published_over_ours",
 ]
 
@@ -423,6 +429,7 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
                 ratio = value / ours if ours and math.isfinite(ours) else (math.inf if ours == 0 else math.nan)
                 rows.append({
                     "published": entry["id"],
+                    "kind": entry.get("kind", KIND_ERROR),
                     "source": entry["source"],
                     "where": entry["where"],
                     "run": target["run"],

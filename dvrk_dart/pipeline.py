@@ -20,13 +20,9 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     print(f"campaign: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
 
-    extra_sections = []
-    try:
-        from .diagnosis import validation_section
-    except ImportError:
-        validation_section = None
-    if validation_section is not None:
-        extra_sections.append(validation_section(out_dir / "diagnosis"))
+    from .validation import validation_section
+
+    extra_sections = [validation_section(out_dir / "diagnosis")]
 
     from .report import build_report
 
@@ -42,6 +38,6 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
 
 
 def diagnose_command(args: argparse.Namespace) -> int:
-    from .diagnosis import run_diagnosis_cli
+    from .validation import run_diagnosis_cli
 
     return run_diagnosis_cli(args)

@@ -45,6 +45,7 @@ from .analysis import (
     CARTESIAN_POSITION_AXES,
     CONFIG_FILE,
     QUANTITY_DESCRIPTIONS,
+    KIND_ERROR,
     REGIME_ALL,
     REGIME_DESCRIPTIONS,
     STATUS_FAIL,
@@ -104,12 +105,18 @@ details { margin: 0.3em 0; } pre { background: #f8f8f8; padding: 0.6em; overflow
 # ---------------------------------------------------------------- small HTML helpers
 
 
+#: `digits` value of a count (samples): shown in full
+INTEGER = 0
+
+
 def fmt(value: float, digits: int = SHOWN_DIGITS) -> str:
-    """A number as shown in a table: `digits` significant digits; '—' when missing."""
+    """A number as shown in a table: `digits` significant digits (INTEGER: a count); '—' when missing."""
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "—"
     if math.isinf(value):
         return "∞" if value > 0 else "-∞"
+    if digits == INTEGER:
+        return str(int(round(value)))
     return f"{value:.{digits}g}"
 
 
@@ -211,7 +218,7 @@ def _closeness(row) -> float:
 
 def _component_header(entry: dict) -> list[str]:
     units = entry["unit"] if isinstance(entry["unit"], list) else [entry["unit"]] * len(entry["components"])
-    return [f"{c} ({unit_text(u)})" for c, u in zip(entry["components"], units)]
+    return [c if u == DIMENSIONLESS else f"{c} ({unit_text(u)})" for c, u in zip(entry["components"], units)]
 
 
 def comparison_section(analysis: Analysis, published: dict) -> str:
@@ -226,7 +233,8 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
     )
     parts = [
         "<h2 id='comparison'>Comparison with the published numbers</h2>",
-        "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red). "
+        "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red); "
+        "for the runs without counterweight (nCW) the error is the counterweight's physical effect, so the ratio only compares sizes. "
         "The paper's kinematic control with the dynamic engine on is our velocity mode; its nCW is our cw-off, its wCW (a PID mirror of q3) our cw-pid, "
         "and our default cw-on is the ideal tendon. Published values: <code>pipelines/published.toml</code>; a dash means the run is not in the folder.</p>",
         f"<ul class='note'>{sources}</ul>",
@@ -241,6 +249,7 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
             + "".join(num_cell(first.loc[c, "published_value"], published=entry["id"], component=c, field="published_value") for c in entry["components"])
             + "</tr>"
         ]
+        is_error = entry.get("kind", KIND_ERROR) == KIND_ERROR
         better = total = 0
         for (run, quantity, regime), group in rows_of_entry.groupby(["run", "quantity", "regime"], sort=False):
             group = group.set_index("component")
@@ -250,15 +259,19 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
                 row = group.loc[c]
                 key = {"published": entry["id"], "run": run, "component": c, "quantity": quantity, "regime": regime}
                 ratio = row.ratio_published_over_ours
-                css = "better" if ratio > 1 else ("worse" if ratio < 1 else "")
+                css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
                 ours.append(num_cell(row.our_value, **key, joint=c, field="our_value"))
                 ratios.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
                 better += int(ratio > 1)
                 total += int(math.isfinite(row.our_value))
             rows.append("<tr>" + text_cell(label) + "".join(ours) + "</tr>")
             rows.append("<tr>" + text_cell("published / ours") + "".join(ratios) + "</tr>")
+        verdict = (
+            f"ours better on {better} of {total} compared values" if is_error
+            else "an effect that must show, not an error: the ratio compares its size, neither side is better"
+        )
         parts.append(
-            f"<h4>{_e(entry['where'])}</h4><p class='note'>{_e(entry['quantity'])}; ours better on {better} of {total} compared values.</p>"
+            f"<h4>{_e(entry['where'])}</h4><p class='note'>{_e(entry['quantity'])}; {verdict}.</p>"
             + table(["", *_component_header(entry)], rows)
         )
     return "\n".join(parts)
@@ -311,8 +324,9 @@ def per_run_section(analysis: Analysis) -> str:
         values = selected.set_index(["run", "regime", "joint"]).value
         rows = []
         for run, regime in sorted(set(zip(selected.run, selected.regime))):
+            digits = INTEGER if quantity == "samples" else SHOWN_DIGITS
             cells = [
-                num_cell(values[(run, regime, j)], run=run, quantity=quantity, joint=j, regime=regime) if (run, regime, j) in values.index else "<td>—</td>"
+                num_cell(values[(run, regime, j)], digits, run=run, quantity=quantity, joint=j, regime=regime) if (run, regime, j) in values.index else "<td>—</td>"
                 for j in JOINT_NAMES
             ]
             rows.append("<tr>" + text_cell(run) + text_cell(regime) + "".join(cells) + "</tr>")
@@ -343,7 +357,7 @@ def provenance_section(analysis: Analysis) -> str:
         rows.append(
             "<tr>"
             + text_cell(name)
-            + num_cell(len(run.record), run=name, field="samples")
+            + num_cell(len(run.record), INTEGER, run=name, field="samples")
             + num_cell(float(run.config.get("duration_s", math.nan) or math.nan), run=name, field="duration_s")
             + num_cell(float(sim.get("dt_s", math.nan)), run=name, field="dt_s")
             + text_cell(_effects(sim))
