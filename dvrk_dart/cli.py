@@ -141,7 +141,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from .report import build_report
 
-    index = build_report(Path(args.runs), Path(args.out))
+    extra = Path(args.extra) if args.extra else None
+    index = build_report(Path(args.runs), Path(args.out), extra_sections=extra, jobs=args.jobs)
     print(f"report: {index}")
     return 0
 
@@ -197,8 +198,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
-    p.add_argument("--runs", required=True)
-    p.add_argument("--out", required=True)
+    p.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap)")
+    p.add_argument("--out", required=True, help="report folder")
+    p.add_argument("--extra", help="folder of extra sections (*.html fragments and images)")
+    p.add_argument("--jobs", type=int, default=None, help="parallel workers (default: the machine's cores)")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")

@@ -7,6 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
+import pandas as pd
+
 from .campaign import load_campaign, run_campaign
 from .io_utils import write_json_atomic
 
@@ -20,16 +22,17 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     print(f"campaign: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
 
+    from .report import build_report
     from .validation import validation_section
 
-    extra_sections = [validation_section(out_dir / "diagnosis")]
-
-    from .report import build_report
-
-    index = build_report(runs_dir, report_dir, extra_sections=extra_sections)
-    verdicts_file = report_dir / "verdicts.json"
-    verdicts = json.loads(verdicts_file.read_text()) if verdicts_file.is_file() else []
-    for verdict in verdicts:
+    section = validation_section(out_dir / "diagnosis")
+    index = build_report(runs_dir, report_dir, extra_sections=[section])
+    checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
+    verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
+    print("verdicts:")
+    for (check, title), status in verdicts.items():
+        print(f"  [{status.upper():4}] {title}")
+    for verdict in json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()):
         print(f"  [{'PASS' if verdict['passed'] else 'FAIL'}] {verdict['check']}: {verdict['value']}")
     print(f"report: {index.resolve()}")
     for name, error in summary["failures"].items():

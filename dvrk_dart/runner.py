@@ -143,9 +143,8 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
 def tracking_errors(record: RunRecord) -> tuple[np.ndarray, np.ndarray]:
     """Per-sample position (m) and orientation (rad, rotation vector) errors, reference - actual."""
     position = record.tool_pose_ref[:, :3] - record.tool_pose[:, :3]
-    R_ref = Rotation.from_quat(record.tool_pose_ref[:, 3:]).as_matrix()
-    R = Rotation.from_quat(record.tool_pose[:, 3:]).as_matrix()
-    orientation = np.array([orientation_error(a, b) for a, b in zip(R_ref, R)])
+    # the rotation vector of R_ref R^T, sample by sample (controllers.orientation_error, batched)
+    orientation = (Rotation.from_quat(record.tool_pose_ref[:, 3:]) * Rotation.from_quat(record.tool_pose[:, 3:]).inv()).as_rotvec()
     return position, orientation
 
 
