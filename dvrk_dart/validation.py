@@ -74,8 +74,13 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path)
         write_run_folder(record, out_dir / f"replay_{label}")
 
 
+#: the report shows the residual figures of the arm joints; diagnosis.html has all
+REPORT_FIGURE_JOINTS = ("q1", "q2", "q3")
+
+
 def _images(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.iterdir() if p.suffix in IMAGE_SUFFIXES)
+    """The diagnosis figures (not those of the replay logs)."""
+    return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
 
 
 def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
@@ -125,7 +130,7 @@ def run_diagnosis(arm: Arm, measured: str, out_dir: Path, baseline=None, train=(
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", "<!DOCTYPE html><html><head><meta charset='utf-8'><title>diagnosis</title></head><body>"
-                      + diagnosis_html(result, [p.name for p in _images(out_dir)], f"diagnosis of {measured}") + "</body></html>\n")
+                      + diagnosis_html(result, [str(p.relative_to(out_dir)) for p in _images(out_dir)], f"diagnosis of {measured}") + "</body></html>\n")
     if logs:
         log_replays(arm, measured, _sim_config_of(result), out_dir)
     return result
@@ -264,7 +269,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
         if not (folder / "diagnosis.json").is_file():
             continue
         sources = []
-        for image in _images(folder):
+        for image in (p for p in _images(folder) if p.stem.endswith(REPORT_FIGURE_JOINTS)):
             staged = staging / f"{name}_{image.name}"  # the report copies extras by file name: keep them apart
             shutil.copy2(image, staged)
             files.append(staged)
