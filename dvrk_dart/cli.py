@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError
+from .errors import DvrkDartError, SimulationDiverged
 from .joints import JOINT_NAMES, effort_unit
 from .sim_config import COUNTERWEIGHT_VARIANTS, MODES
 
@@ -121,7 +121,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if measured is None:
         raise DvrkDartError("--measured: a measured run is required")
     config = replace(_sim_config(args), counterweight=args.counterweight)
-    record = replay(measured, mode=args.mode, config=config, duration_s=args.duration)
+    try:
+        record = replay(measured, mode=args.mode, config=config, duration_s=args.duration)
+    except SimulationDiverged as exc:  # keep what was logged up to the divergence
+        record = exc.record
+        record.metrics["error"] = str(exc)
     scenario = args.command if args.command in REPLAY_SHORTHANDS else f"replay-{Path(str(measured)).stem}"
     record.name = run_name(scenario, args.mode, args.counterweight)
     record.config = {"scenario": {"name": scenario, "kind": "replay", "measured": str(measured)}, "mode": args.mode,

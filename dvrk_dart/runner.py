@@ -188,7 +188,11 @@ def run(arm: Arm, scenario: Scenario, mode: str, counterweight: str, config: Sim
     if scenario.kind == "replay":
         from .replay import replay
 
-        record = replay(scenario.measured, mode=mode, config=config, duration_s=duration_s or scenario.duration_s)
+        try:
+            record = replay(scenario.measured, mode=mode, config=config, duration_s=duration_s or scenario.duration_s)
+        except SimulationDiverged as exc:  # keep what was logged up to the divergence
+            record = exc.record
+            record.metrics["error"] = str(exc)
     else:
         record = run_cartesian(arm, scenario, mode, config, duration_s)
         if mode != "kinematic":

@@ -113,3 +113,16 @@ def test_cli_unknown_mode_is_a_clear_error(tmp_path):
     )
     assert done.returncode == 2 and "--mode: scenario 'replay-two' runs in velocity, kinematic, not 'torque'" in done.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_campaign_skips_unchanged_runs_and_lists_failures(tmp_path):
+    from dvrk_dart.campaign import RunSpec, run_campaign
+
+    good = RunSpec("rectilinear", "kinematic", "on", duration_s=0.2)
+    bad = RunSpec("replay-two", "velocity", "on", duration_s=100.0)  # longer than the measured run
+    first = run_campaign([good, bad], tmp_path, jobs=1)
+    assert first["ran"] == [good.name] and list(first["failures"]) == [bad.name]
+    assert "duration 100.0 s outside" in first["failures"][bad.name]
+    assert not (tmp_path / bad.name / "inputs.sha256").exists()
+    second = run_campaign([good], tmp_path, jobs=1)
+    assert second["skipped_up_to_date"] == [good.name] and second["ran"] == []
