@@ -16,7 +16,6 @@ The `source` column says which file each number comes from.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -33,6 +32,7 @@ from .identified_model import INERTIAL_TERMS, TERMS
 from .io_utils import atomic_path, write_json_atomic, write_text_atomic
 from .joints import JOINT_NAMES, effort_unit, position_unit
 from .metrics import relative_error, rms
+from .reference_data import sha256_of
 from .scenarios import PIPELINES_DIR
 
 RUN_LOG = "run.mcap"
@@ -153,14 +153,6 @@ def discover_runs(runs_dir: str | os.PathLike) -> list[Path]:
     return sorted(p.parent for p in runs_dir.glob(f"*/{RUN_LOG}"))
 
 
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _read_json(path: Path) -> dict:
     try:
         return json.loads(path.read_text())
@@ -213,7 +205,7 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
         config=config,
         metrics=metrics,
         versions=_mcap_versions(run_dir / RUN_LOG),
-        checksums={f: sha256_file(run_dir / f) for f in CHECKSUMMED_FILES if (run_dir / f).is_file()},
+        checksums={f: sha256_of(run_dir / f) for f in CHECKSUMMED_FILES if (run_dir / f).is_file()},
         scenario=scenario,
         mode=mode,
         counterweight=counterweight,

@@ -49,6 +49,7 @@ from .effects import (
     config_effort_by_formula,
     effects_to_sim_config,
     not_simulated,
+    unsimulated_effort,
 )
 from .errors import DvrkDartError
 from .io_utils import write_json_atomic
@@ -520,24 +521,32 @@ class _Selector:
         steps = []
         while len(selected) < min(max_effects, n):
             trials = {}
+            families = {self.design.effects[i].family for i in selected}
             for i in range(n):
-                if i in selected:
+                if i in selected or self.design.effects[i].family in families:
                     continue
                 warm = [dict(p) for p in current.fold_params]
                 trials[i] = self.cross_validate(selected + [i], warm)
                 if not selected:
                     individual[i] = trials[i]
+            self._last_trials = trials
             admissible = {i: t for i, t in trials.items() if self._stable(selected, i, t, current)}
             refused = [self.design.effects[i].name for i in trials if i not in admissible and trials[i].fraction > current.fraction]
             if not admissible:
                 break
             best = self._parsimonious(admissible)
-            gain = trials[best].fraction - current.fraction
-            gains = self.bootstrap_fractions(trials[best].after) - self.bootstrap_fractions(current.after)
+            added, trial, instead_of = [best], trials[best], None
+            rival = self._offset_rival(selected, best, families, current)
+            if rival is not None:
+                added, trial, instead_of = rival[0], rival[1], self.design.effects[best].name
+            gain = trial.fraction - current.fraction
+            gains = self.bootstrap_fractions(trial.after) - self.bootstrap_fractions(current.after)
             failure = float(np.mean(gains <= 0.0))
             step = {
-                "effect": self.design.effects[best].name,
-                "cross_validated_fraction": trials[best].fraction,
+                "effect": " + ".join(self.design.effects[i].name for i in added),
+                "effects": [self.design.effects[i].name for i in added],
+                "instead_of": instead_of,
+                "cross_validated_fraction": trial.fraction,
                 "gain": gain,
                 "gain_interval": np.quantile(gains, INTERVAL_QUANTILES).tolist(),
                 "gain_not_positive_probability": failure,
@@ -549,9 +558,35 @@ class _Selector:
                 break
             step["accepted"] = True
             steps.append(step)
-            selected.append(best)
-            current = trials[best]
+            selected.extend(added)
+            current = trial
         return selected, steps, individual, current
+
+    def _offset_rival(self, selected: list[int], best: int, families: set, current: _CvResult) -> tuple[list[int], _CvResult] | None:
+        """Occam's rule for a payload: its static part is an offset on every
+        joint it moves; the payload is chosen only if it explains the held-out
+        residual significantly better than those offsets fitted together
+        (fewer parameters). Else the offsets are the step's choice (e.g. on
+        trajectory 'one' a 0.6 kg "payload" on the pitch link pinned at its
+        envelope boundary only mimicked the J1 and J2 offsets)."""
+        effect = self.design.effects[best]
+        if not isinstance(effect, PointPayload):
+            return None
+        by_name = {e.name: i for i, e in enumerate(self.design.effects)}
+        rival = [by_name[f"offset_{j}"] for j in effect.joints if f"offset_{j}" in by_name]
+        rival = [i for i in rival if i not in selected and self.design.effects[i].family not in families]
+        if not rival or sum(self.design.effects[i].n_parameters for i in rival) >= effect.n_parameters:
+            return None
+        trial = self.cross_validate(selected + rival, [dict(p) for p in current.fold_params])
+        if trial.fraction <= current.fraction:
+            return None
+        payload_boot = self.bootstrap_fractions(self._last_trials[best].after) if best in self._last_trials else None
+        if payload_boot is None:
+            return None
+        better = payload_boot - self.bootstrap_fractions(trial.after)
+        if np.mean(better <= 0.0) > GAIN_FAILURE_QUANTILE:  # the payload is not significantly better
+            return rival, trial
+        return None
 
 
 # ------------------------------------------------------------------ diagnose
@@ -741,6 +776,7 @@ def diagnose(
             "selected": i in selected,
             "selection_step": selected.index(i) + 1 if i in selected else None,
             "in_simulation": e.sim_contribution(np.asarray(p)) is not None,
+            "fully_in_simulation": e.fully_simulated(np.asarray(p)),
         }
         entries.append(entry)
 
@@ -753,7 +789,7 @@ def diagnose(
             explained = sum((e.effort(features, p) for e, p in chosen), np.zeros_like(run.residual))
             return run.residual - explained
         sim_after = np.asarray(simulate(sim_config, run.state), dtype=float)
-        sim_after = sim_after + sum((e.effort(features, p) for e, p in extra_by_regressor), np.zeros_like(sim_after))
+        sim_after = sim_after + unsimulated_effort(extra_by_regressor, features)
         after = run.state.tau - sim_after
         return after if run.baseline is None else after - run.baseline.gap
 
@@ -855,7 +891,7 @@ def synthesize_measurement(
     extra = not_simulated(list(injected))
     if extra:
         features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), sample_rate_hz())
-        tau = tau + sum(e.effort(features, p) for e, p in extra)
+        tau = tau + unsimulated_effort(extra, features)
     rng = np.random.default_rng(seed)
     noise = zero_phase_lowpass(rng.standard_normal(tau.shape), 1.0 / sample_rate_hz())
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)

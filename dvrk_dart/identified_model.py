@@ -112,7 +112,7 @@ class _ReducedDynamics:
     def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         # the glue is a large part of a 5 µs query: slices instead of fancy
         # indexing and no scaling when every coordinate maps one to one
-        k, idx = len(self.coords), self._index
+        idx = self._index
         x = q[idx] + self.offset if self._unit else self.scale * q[idx] + self.offset
         v = dq[idx] if self._unit else self.scale * dq[idx]
         M, b, g = np.zeros((self.n, self.n)), np.zeros(self.n), np.zeros(self.n)

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .context import Arm
-from .controllers import CartesianTorqueController, KinematicController, orientation_error
+from .controllers import CartesianTorqueController, KinematicController
 from .errors import DvrkDartError, SimulationDiverged
 from .identified_model import TERMS
 from .joints import N_JOINTS

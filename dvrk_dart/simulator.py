@@ -69,7 +69,6 @@ import math
 import time
 from dataclasses import dataclass
 
-import dartpy as dart
 import numpy as np
 
 from .dart_builder import DartPsm, build

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .context import Arm, load_arm
-from .effects import GravityTilt, JointArmature, JointFriction, JointOffset, JointStiffness, PointPayload, effects_to_sim_config
+from .effects import GravityTilt, JointArmature, JointFriction, JointOffset, JointStiffness, PointPayload
 from .errors import DvrkDartError
 from .io_utils import write_json_atomic, write_text_atomic
 from .joints import JOINT_NAMES, effort_unit

@@ -15,6 +15,21 @@ def arm():
 
 
 @pytest.fixture(scope="session")
+def model(arm):
+    return arm.model
+
+
+@pytest.fixture(scope="session")
+def params(arm):
+    return arm.params
+
+
+@pytest.fixture(scope="session")
+def identified(arm):
+    return arm.identified
+
+
+@pytest.fixture(scope="session")
 def processed_two():
     return process(load_run(resolve_run("two")))
 

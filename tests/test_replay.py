@@ -10,25 +10,13 @@ import pytest
 
 from dvrk_dart.identified_model import IdentifiedModel
 from dvrk_dart.joints import INSERTION
-from dvrk_dart.model import load_model
-from dvrk_dart.parameters import IdentifiedParameters, load_parameters
-from dvrk_dart.reference_data import resolve
+from dvrk_dart.parameters import IdentifiedParameters
 from dvrk_dart.replay import replay, replay_metrics_json, write_metrics
 from dvrk_dart.metrics import rms
 from dvrk_dart.sim_config import SimConfig, simulated_terms
 
 #: the shorter variants (off, pid) replay the first seconds only
 SHORT_S = 8.0
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_model()
-
-
-@pytest.fixture(scope="module")
-def params(model):
-    return load_parameters(resolve(model.default_parameters), model)
 
 
 @pytest.fixture(scope="module")

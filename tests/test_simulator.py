@@ -14,32 +14,9 @@ from dvrk_dart.dart_builder import NEGLIGIBLE_INERTIA_KG_M2, NEGLIGIBLE_MASS_KG,
 from dvrk_dart.errors import SimulationDiverged
 from dvrk_dart.identified_model import IdentifiedModel
 from dvrk_dart.joints import INSERTION
-from dvrk_dart.model import load_model
-from dvrk_dart.parameters import IdentifiedParameters, inertia_violation, load_parameters
-from dvrk_dart.reference_data import load_run, resolve, resolve_run
-from dvrk_dart.signal import process
+from dvrk_dart.parameters import IdentifiedParameters, inertia_violation
 from dvrk_dart.sim_config import Payload, SimConfig
 from dvrk_dart.simulator import PsmSimulator, measure_realtime_factor
-
-
-@pytest.fixture(scope="module")
-def model():
-    return load_model()
-
-
-@pytest.fixture(scope="module")
-def params(model):
-    return load_parameters(resolve(model.default_parameters), model)
-
-
-@pytest.fixture(scope="module")
-def identified(model, params):
-    return IdentifiedModel(model, params)
-
-
-@pytest.fixture(scope="module")
-def measured_two():
-    return process(load_run(resolve_run("two")))
 
 
 @pytest.fixture(scope="module")
@@ -65,10 +42,10 @@ def test_dart_frames_follow_the_model_kinematics(model, identified, sim):
         np.testing.assert_allclose(sim.q, q, atol=1e-12)
 
 
-def test_static_holding_efforts_equal_the_model_gravity(model, identified, measured_two, sim):
+def test_static_holding_efforts_equal_the_model_gravity(model, identified, processed_two, sim):
     """100 random static poses inside the range of the measured data."""
     rng = np.random.default_rng(1)
-    lo, hi = measured_two.q.min(axis=0), measured_two.q.max(axis=0)
+    lo, hi = processed_two.q.min(axis=0), processed_two.q.max(axis=0)
     worst_rel = 0.0
     for _ in range(100):
         q = rng.uniform(lo, hi)
@@ -84,7 +61,7 @@ def test_static_holding_efforts_equal_the_model_gravity(model, identified, measu
     assert worst_rel < 1e-3
 
 
-def test_negligible_tool_masses_change_the_efforts_by_less_than_1e_5(model, params, identified, measured_two):
+def test_negligible_tool_masses_change_the_efforts_by_less_than_1e_5(model, params, identified, processed_two):
     def negligible(p):
         link = model.links[p.key]
         if link.body and link.joint_type != "fixed" and p.mass <= 0.0:  # the bodies DART gets
@@ -92,14 +69,14 @@ def test_negligible_tool_masses_change_the_efforts_by_less_than_1e_5(model, para
         return p
 
     heavier = IdentifiedModel(model, _with_links(params, negligible))
-    run = measured_two.head(len(measured_two))
+    run = processed_two.head(len(processed_two))
     sl = slice(None, None, 10)
     a = identified.predict(run.q[sl], run.dq[sl], run.ddq[sl], "inertial")
     b = heavier.predict(run.q[sl], run.dq[sl], run.ddq[sl], "inertial")
     assert np.max(np.abs(a - b)) < 1e-5
 
 
-def test_infeasible_inertias_are_made_physical_with_a_negligible_effect(model, params, identified, measured_two):
+def test_infeasible_inertias_are_made_physical_with_a_negligible_effect(model, params, identified, processed_two):
     changed = [k for k, p in params.links.items() if p.mass > 0 and not np.allclose(physical_inertia(p.inertia_com), p.inertia_com)]
     assert changed, "the published set has slightly infeasible inertias (see IdentifiedParameters.oddities)"
     for k in changed:
@@ -108,7 +85,7 @@ def test_infeasible_inertias_are_made_physical_with_a_negligible_effect(model, p
         assert np.max(np.abs(fixed - params[k].inertia_com)) < 1e-5  # kg m^2
     projected = IdentifiedModel(model, _with_links(params, lambda p: dataclasses.replace(p, inertia_com=physical_inertia(p.inertia_com)) if p.mass > 0 else p))
     sl = slice(None, None, 10)
-    run = measured_two
+    run = processed_two
     diff = identified.predict(run.q[sl], run.dq[sl], run.ddq[sl], "inertial") - projected.predict(run.q[sl], run.dq[sl], run.ddq[sl], "inertial")
     assert np.max(np.abs(diff)) < 1e-4
 
