@@ -23,6 +23,10 @@ Selection (`diagnose`):
   simpler one, fewer parameters, not significantly worse) while the gain is at
   least MIN_HELDOUT_GAIN and positive with bootstrap confidence, refusing a
   candidate that makes a selected effect unstable across folds (collinear);
+  at most one effect of a family is selected (a joint's friction with a sharp
+  or a smooth reversal); a payload is chosen only if it beats, significantly,
+  the offsets of the joints it moves fitted together (its static part), else
+  those offsets are the step's choice;
   `holdout` runs are never used for the selection, only scored.
 """
 

@@ -140,6 +140,7 @@ TILT_NOISE_SCALE = 0.2
 SYNTHETIC_CASES = [
     # (effect factory, true parameters, index of the size parameter, noise scale)
     ("friction_q2", lambda arm: JointFriction("q2"), [0.15, 0.20], 0, 1.0),
+    ("friction_q3_smooth0.03", lambda arm: JointFriction("q3", reversal_velocity=0.03), [0.4, 0.6], 0, 1.0),
     ("payload_on_insertion_carriage", lambda arm: PointPayload(arm.model, 8), [0.20, 0.02, -0.03, 0.30], 0, 1.0),
     ("torsion_spring_q4", lambda arm: JointStiffness("q4"), [0.01], 0, 1.0),
     ("offset_q1", lambda arm: JointOffset("q1"), [-0.15], 0, 1.0),
@@ -204,9 +205,28 @@ def test_withheld_payload_found_on_the_parallelogram(payload_diagnosis):
     assert on_disk["payload"]["link"] == payload["link"]
 
 
-@pytest.mark.xfail(strict=True, reason="the mass alone is not identifiable from this run: on a link turning about the pitch shaft "
-                   "gravity sees m·c only, the inertial share is ~1 % of the residual (see mass_profile)")
+@pytest.mark.xfail(strict=True, reason="the mass alone is not identifiable from this pair of runs (see the docstring's numbers)")
 def test_withheld_payload_mass(payload_diagnosis):
+    """Why the mass is not pinned (residual = 105 g run - no-weight run, stand-in
+    simulation; point mass on a link turning with q2, position free):
+    - gravity sees the first moment only: |m c| = 0.0157 kg m in the pitch plane
+      (hand measurement 0.105 x 0.166 = 0.0174); m comes from m c c^T = h h^T / m,
+      i.e. the estimate is linear in 1/m (truth 9.5 1/kg);
+    - J2 alone: 1/m = 0.45 +- 6.9 1/kg (1 s block sandwich), so m > 0.085 kg
+      (90 %) with no upper bound: the truth's inertial effort is 0.010 N m RMS
+      on J2 (0.005 on J1) against 0.077 (0.062) N m of residual no payload explains;
+    - J1 + J2: m = 0.048 kg, 90 % [0.035, 0.076], every base period alike, but
+      driven by J1's unexplained residual: with a J1 offset nuisance (collinear
+      with the along-shaft moment, the yaw axis being horizontal) m > 1.2 kg;
+      with a J2 offset nuisance the first moment itself collapses to 0.006 kg m
+      (an offset ~ the cos(q2) gravity over q2 in +-0.8 rad): the runs share a
+      session, so offsets are not fitted;
+    - the DH-skeleton envelope binds: along the fitted moment (36 degrees above
+      the horizontal at q = 0) the pitch group's box reaches 0.112 m from the
+      shaft, so m >= 0.14 kg (> +30 %); the hand-measured 16.5 cm lies outside it;
+    - a translating link (pitch_front, intermediate: m identifiable from gravity)
+      explains less held-out residual (0.105 / 0.094 vs 0.155).
+    +-30 % is therefore not reachable honestly from these runs."""
     result, _ = payload_diagnosis
     assert abs(result["payload"]["mass_kg"] - PAYLOAD_MASS_KG) < PAYLOAD_MASS_TOLERANCE * PAYLOAD_MASS_KG
 
@@ -219,6 +239,39 @@ def test_payload_mass_is_reported_as_an_envelope_bound(payload_diagnosis):
     assert payload["at_envelope_boundary"]
     lo, hi = payload["mass_interval_kg"]
     assert lo <= payload["mass_kg"] <= hi
+
+
+def test_payload_impostor_yields_to_offsets(arm):
+    """On trajectory 'one' alone a payload on the pitch link, pinned at its
+    envelope boundary, mimics the J1 and J2 offsets (the identified J1 offset is
+    -0.30 N m): the offsets, fewer parameters and not significantly worse, are
+    selected instead of it."""
+    result = diagnose("one", arm=arm, max_effects=3, figures=False, profile_payload_mass=False)
+    selected = result["selection"]["selected"]
+    assert {"offset_q1", "offset_q2"} <= set(selected)
+    assert not any(name.startswith("payload") for name in selected)
+    step = next(s for s in result["selection"]["steps"] if "offset_q1" in s["effects"])
+    assert step["instead_of"] is not None and step["instead_of"].startswith("payload")
+    j1 = next(e for e in result["effects"] if e["name"] == "offset_q1")
+    assert j1["parameters"]["offset"] == pytest.approx(-0.30, abs=0.03)
+
+
+def test_smooth_friction_splits_between_simulation_and_model(arm, segment):
+    """A smooth Coulomb reversal: viscous part in the SimConfig (DART damping),
+    the tanh Coulomb part added as a model-based effort; together they equal
+    the regressor."""
+    from dvrk_dart.effects import not_simulated, unsimulated_effort
+
+    state = segment.head(300)
+    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
+    effect, p = JointFriction("q3", reversal_velocity=0.03), np.array([0.4, 0.6])
+    cfg = effects_to_sim_config([(effect, p)])
+    assert cfg.extra.coulomb[2] == 0.0 and cfg.extra.viscous[2] == 0.6
+    assert not_simulated([(effect, p)]) == [(effect, p)]
+    total = config_effort_by_formula(arm, cfg, state.q, state.dq, state.ddq) + unsimulated_effort([(effect, p)], features)
+    assert np.max(np.abs(total - ref - effect.effort(features, p))) < 1e-10
+    assert effect.family == JointFriction("q3").family
 
 
 # ------------------------------------------------------ where + contract
