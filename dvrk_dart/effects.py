@@ -295,6 +295,7 @@ class SimContribution:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     stiffness: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    coulomb_reversal_velocity: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
@@ -394,9 +395,11 @@ class JointFriction(Effect):
     Stribeck drop near zero velocity Fs s(dq) exp(-(dq/vs)^2).
 
     Simulation: the viscous part is DART's joint damping; a sharp Coulomb
-    part is DART's joint friction; a smooth reversal and a Stribeck curve have
-    no DART counterpart and are added as a model-based effort at the measured
-    velocities (like the identified negative motor inertias)."""
+    part is DART's joint friction; a smooth reversal is the simulator's
+    friction law Fc tanh(dq / v_r), applied as a joint effort each step from
+    the simulated velocity (SimConfig.extra.coulomb_reversal_velocity). A
+    Stribeck curve has no counterpart in the simulation: its effort is added
+    by regressor (and reported as such)."""
 
     kind = "friction"
 
@@ -432,13 +435,15 @@ class JointFriction(Effect):
 
     def sim_contribution(self, p):
         c = SimContribution()
-        if not self.stribeck and self.reversal_velocity is None:
+        if not self.stribeck:
             c.coulomb[self.joint_index] = p[0]
+            if self.reversal_velocity is not None:
+                c.coulomb_reversal_velocity[self.joint_index] = self.reversal_velocity
         c.viscous[self.joint_index] = p[1]
         return c
 
     def fully_simulated(self, p):
-        return not self.stribeck and self.reversal_velocity is None
+        return not self.stribeck
 
     def unsimulated_effort(self, features, p):
         if self.fully_simulated(p):
@@ -685,7 +690,10 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
     Effects the simulation has no field for are skipped: `not_simulated` lists
     them (the caller adds their regressor effort)."""
     extra = base.extra
-    fields = {name: np.array(getattr(extra, name), dtype=float) for name in ("coulomb", "viscous", "offset", "stiffness", "armature")}
+    fields = {
+        name: np.array(getattr(extra, name), dtype=float)
+        for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity")
+    }
     payloads = list(base.payloads)
     tilt = np.array(base.gravity_tilt_rad, dtype=float)
     for effect, p in selected:
@@ -733,7 +741,9 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
         g_tilted = _gravity_in_base(arm.model, tilt)
         total = total - efforts.terms["gravity"] + features.unit_gravity_efforts @ g_tilted
     x = config.extra
-    total = total + np.asarray(x.coulomb) * np.sign(features.dq) + np.asarray(x.viscous) * features.dq
+    reversal = np.asarray(x.coulomb_reversal_velocity, dtype=float)
+    reversal_law = np.where(reversal > 0.0, np.tanh(features.dq / np.where(reversal > 0.0, reversal, 1.0)), np.sign(features.dq))
+    total = total + np.asarray(x.coulomb) * reversal_law + np.asarray(x.viscous) * features.dq
     total = total + np.asarray(x.offset) + np.asarray(x.stiffness) * features.q + np.asarray(x.armature) * features.ddq
     for payload in config.payloads:
         params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))

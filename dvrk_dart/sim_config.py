@@ -31,6 +31,10 @@ class JointEffects:
     offset: tuple[float, ...] = (0.0,) * 7  # constant effort the actuator must supply
     stiffness: tuple[float, ...] = (0.0,) * 7  # N·m/rad (DART joint spring, rest at q = 0)
     armature: tuple[float, ...] = (0.0,) * 7  # kg m^2 (DART joint armature; >= 0)
+    # velocity scale of a smooth Coulomb reversal (rad/s or m/s): 0 = sharp
+    # (DART's Coulomb friction row); > 0 = coulomb * tanh(dq / scale), the
+    # pre-sliding of a cable transmission, applied as a joint effort each step
+    coulomb_reversal_velocity: tuple[float, ...] = (0.0,) * 7
 
 
 @dataclass(frozen=True)

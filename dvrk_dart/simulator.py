@@ -108,6 +108,8 @@ class _Explicit:
     stiffness: np.ndarray
     offset: np.ndarray
     armature: np.ndarray
+    smooth_coulomb: np.ndarray  # Fc of the joints with a smooth reversal
+    reversal_velocity: np.ndarray  # their velocity scale (1 where unused)
 
 
 class PsmSimulator:
@@ -156,7 +158,9 @@ class PsmSimulator:
         e = self._explicit
         self._has_armature = bool(np.any(e.armature))
         self._has_coulomb = bool(np.any(self._coulomb_x))
-        self._has_explicit = bool(np.any(e.coulomb) or np.any(e.viscous) or np.any(e.stiffness) or np.any(e.offset) or self._explicit_friction_links)
+        self._has_explicit = bool(
+            np.any(e.coulomb) or np.any(e.viscous) or np.any(e.stiffness) or np.any(e.offset) or np.any(e.smooth_coulomb) or self._explicit_friction_links
+        )
         self.step_index = 0
         self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
@@ -198,18 +202,24 @@ class PsmSimulator:
         offset += np.asarray(extra.offset, dtype=float)
         # extras on q1..q4 are DART joint physics (the actuated dof is the coordinate);
         # on the motor coordinates q5..q7 they are explicit.
+        reversal = np.asarray(extra.coulomb_reversal_velocity, dtype=float)
+        if np.any(reversal < 0.0):
+            raise DvrkDartError("SimConfig.extra.coulomb_reversal_velocity must be >= 0")
+        smooth = reversal > 0.0
+        smooth_coulomb = np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0)
         for j in range(N_JOINTS):
             dof = self.psm.actuated_dofs[j]
             direct = np.count_nonzero(self.psm.A[j]) == 1 and self.psm.A[j, j] == 1.0
+            sharp_coulomb = 0.0 if smooth[j] else extra.coulomb[j]  # a smooth reversal has no LCP row
             if direct:
                 self._set_damping(dof, self._implicit_damping[dof] + extra.viscous[j])
-                self._set_coulomb(dof, self._coulomb_x[dof] + extra.coulomb[j])
+                self._set_coulomb(dof, self._coulomb_x[dof] + sharp_coulomb)
                 self._set_stiffness(dof, self._implicit_stiffness[dof] + extra.stiffness[j])
             else:
-                coulomb[j] += extra.coulomb[j]
+                coulomb[j] += sharp_coulomb
                 viscous[j] += extra.viscous[j]
                 stiffness[j] += extra.stiffness[j]
-        return _Explicit(coulomb, viscous, stiffness, offset, armature)
+        return _Explicit(coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0))
 
     def _set_damping(self, dof: int, value: float) -> None:
         # not DART's joint damping: see the module docstring (implicit, applied in _step)
@@ -290,6 +300,7 @@ class PsmSimulator:
         """Model-based efforts the actuators must supply beyond DART's physics (q space)."""
         e = self._explicit
         effort = e.offset + e.viscous * dq + e.coulomb * np.sign(dq) + e.stiffness * q
+        effort = effort + e.smooth_coulomb * np.tanh(dq / e.reversal_velocity)
         for link in self._explicit_friction_links:
             p = self.params[link.key]
             rate = float(dq @ link.variable.coeffs)

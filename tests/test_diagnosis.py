@@ -256,20 +256,19 @@ def test_payload_impostor_yields_to_offsets(arm):
     assert j1["parameters"]["offset"] == pytest.approx(-0.30, abs=0.03)
 
 
-def test_smooth_friction_splits_between_simulation_and_model(arm, segment):
-    """A smooth Coulomb reversal: viscous part in the SimConfig (DART damping),
-    the tanh Coulomb part added as a model-based effort; together they equal
-    the regressor."""
-    from dvrk_dart.effects import not_simulated, unsimulated_effort
+def test_smooth_friction_goes_into_the_simulation_whole(arm, segment):
+    """A smooth Coulomb reversal is simulator physics (tanh law, viscous as
+    damping): the SimConfig carries all of it and its effort equals the regressor."""
+    from dvrk_dart.effects import not_simulated
 
     state = segment.head(300)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
     features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
     effect, p = JointFriction("q3", reversal_velocity=0.03), np.array([0.4, 0.6])
     cfg = effects_to_sim_config([(effect, p)])
-    assert cfg.extra.coulomb[2] == 0.0 and cfg.extra.viscous[2] == 0.6
-    assert not_simulated([(effect, p)]) == [(effect, p)]
-    total = config_effort_by_formula(arm, cfg, state.q, state.dq, state.ddq) + unsimulated_effort([(effect, p)], features)
+    assert cfg.extra.coulomb[2] == 0.4 and cfg.extra.viscous[2] == 0.6 and cfg.extra.coulomb_reversal_velocity[2] == 0.03
+    assert not_simulated([(effect, p)]) == []
+    total = config_effort_by_formula(arm, cfg, state.q, state.dq, state.ddq)
     assert np.max(np.abs(total - ref - effect.effort(features, p))) < 1e-10
     assert effect.family == JointFriction("q3").family
 
