@@ -180,10 +180,39 @@ def validate_payload(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[di
         error = payload["mass_kg"] / spec["expected_mass_kg"] - 1.0
         verdicts.append({"check": f"payload mass within {spec['mass_tolerance']:.0%} of {spec['expected_mass_kg']} kg",
                          "passed": abs(error) <= spec["mass_tolerance"], "value": f"{payload['mass_kg']:.3f} kg ({error:+.0%})"})
+        # the position check: what the data pins is the payload's gravity moment
+        # about the pitch shaft (a point mass on a link turning about it is seen by
+        # gravity through m r only); compare the J2 gravity effort at q = 0 with the
+        # hand-measured placement's (magnitudes: the note does not say which side)
+        estimated, hand = payload_j2_gravity_at_zero(arm, payload), hand_j2_gravity_at_zero(arm, spec)
+        moment_error = abs(estimated) / abs(hand) - 1.0
+        result["hand_check"] = {"j2_gravity_at_q0_estimated": estimated, "j2_gravity_at_q0_hand": hand, "relative_difference": moment_error}
+        verdicts.append({"check": f"payload gravity moment on J2 within {spec['mass_tolerance']:.0%} of the hand-measured placement's",
+                         "passed": abs(moment_error) <= spec["mass_tolerance"],
+                         "value": f"{abs(estimated):.3f} vs {abs(hand):.3f} N·m ({moment_error:+.0%})"})
+        write_json_atomic(out_dir / "diagnosis.json", result)
     before, after = result["gap_before"]["train"], result["gap_after"]["train"]
     verdicts.append({"check": "payload diagnosis closes the J2 gap", "passed": after[1] < before[1],
                      "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
     return result, verdicts
+
+
+def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
+    from .diagnosis import payload_gravity_efforts_at_zero
+
+    key = arm.model.link_by_name(payload["link"]).key
+    return float(payload_gravity_efforts_at_zero(arm, key, payload["mass_kg"], np.asarray(payload["position_m"]))[1])
+
+
+def hand_j2_gravity_at_zero(arm: Arm, spec: dict) -> float:
+    """J2 gravity effort at q = 0 of the hand-measured payload: the known mass at
+    the measured distance and height from the pitch shaft, on the pitch link."""
+    from .diagnosis import payload_gravity_efforts_at_zero
+
+    pitch = arm.model.link_by_name("pitch")
+    point_base = np.array([0.0, spec["check_horizontal_m"], spec["check_height_m"], 1.0])  # pitch plane at q = 0
+    point_link = np.linalg.solve(arm.model.forward_kinematics(np.zeros(len(JOINT_NAMES)))[pitch.key], point_base)[:3]
+    return float(payload_gravity_efforts_at_zero(arm, pitch.key, spec["expected_mass_kg"], point_link)[1])
 
 
 def validate_holdout(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
