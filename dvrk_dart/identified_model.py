@@ -109,6 +109,22 @@ class _ReducedDynamics:
         prow = [primary[j][1] for j in coords]
         return _ReducedDynamics(model, coords, G[prow, coords], c[prow], G.shape[1])
 
+    def batch(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N, 7) gravity, C dq + g, and M ddq + C dq + g over a trajectory."""
+        coords = self.coords
+        x = q[:, coords] * self.scale + self.offset
+        v, a = dq[:, coords] * self.scale, ddq[:, coords] * self.scale
+        zeros = np.zeros(len(coords))
+        reduced = np.empty((3, len(x), len(coords)))
+        model, data = self.model, self.data
+        for k in range(len(x)):
+            reduced[0, k] = pin.computeGeneralizedGravity(model, data, x[k])
+            reduced[1, k] = pin.rnea(model, data, x[k], v[k], zeros)
+            reduced[2, k] = pin.rnea(model, data, x[k], v[k], a[k])
+        out = np.zeros((3, len(x), self.n))
+        out[:, :, coords] = reduced * self.scale
+        return out[0], out[1], out[2]
+
     def mcg(self, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         # the glue is a large part of a 5 µs query: slices instead of fancy
         # indexing and no scaling when every coordinate maps one to one
@@ -315,18 +331,20 @@ class IdentifiedModel:
         return ModelEfforts({t: out[t] for t in terms})
 
     def _rigid_body_terms(self, q, dq, ddq, terms) -> dict[str, np.ndarray]:
+        """Gravity, Coriolis and inertia terms, sample by sample in Pinocchio, on
+        the small mimic model when there is one (same numbers, fewer joints)."""
+        if self._reduced is not None:
+            grav, nle, total = self._reduced.batch(q, dq, ddq)
+            result = {"gravity": grav, "coriolis": nle - grav, "inertia": total - nle}
+            return {t: result[t] for t in INERTIAL_TERMS if t in terms}
         qt, vt, at = self.tree_q(q), self.tree_v(dq), self.tree_v(ddq)
-        n = len(qt)
         zeros = np.zeros(self.pin_model.nv)
-        grav = np.empty_like(qt)
-        nle = np.empty_like(qt)
-        total = np.empty_like(qt)
+        grav, nle, total = np.empty_like(qt), np.empty_like(qt), np.empty_like(qt)
         model, data = self.pin_model, self.data
-        rnea, gravity = pin.rnea, pin.computeGeneralizedGravity
-        for k in range(n):
-            grav[k] = gravity(model, data, qt[k])
-            nle[k] = rnea(model, data, qt[k], vt[k], zeros)
-            total[k] = rnea(model, data, qt[k], vt[k], at[k])
+        for k in range(len(qt)):
+            grav[k] = pin.computeGeneralizedGravity(model, data, qt[k])
+            nle[k] = pin.rnea(model, data, qt[k], vt[k], zeros)
+            total[k] = pin.rnea(model, data, qt[k], vt[k], at[k])
         G = self.G
         result = {"gravity": grav @ G, "coriolis": (nle - grav) @ G, "inertia": (total - nle) @ G}
         return {t: result[t] for t in INERTIAL_TERMS if t in terms}

@@ -93,6 +93,19 @@ def test_fast_query_equals_the_projection_in_any_call_order(arm, data_ranges):
             np.testing.assert_allclose(a, b, atol=1e-12)
 
 
+def test_batch_on_the_small_model_equals_the_full_tree(arm, processed_two):
+    pr = processed_two.head(400)
+    fast = arm.identified.efforts(pr.q, pr.dq, pr.ddq, ("inertia", "coriolis", "gravity"))
+    reduced = arm.identified._reduced
+    arm.identified._reduced = None
+    try:
+        reference = arm.identified.efforts(pr.q, pr.dq, pr.ddq, ("inertia", "coriolis", "gravity"))
+    finally:
+        arm.identified._reduced = reduced
+    for term in fast.terms:
+        np.testing.assert_allclose(fast.terms[term], reference.terms[term], atol=1e-11)
+
+
 def test_non_inertial_terms_follow_the_upstream_definitions(arm):
     q = np.array([0.1, 0.2, 0.1, 0.3, 0.2, -0.1, 0.4])
     dq = np.array([0.5, -0.4, 0.05, 0.7, -0.3, 0.2, 0.6])
