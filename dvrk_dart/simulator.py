@@ -51,6 +51,10 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
       position, acceleration solved with DART's closed-chain inertia plus
       dt·D + dt²·K), which is consistent with every constraint.  Against the
       model evaluated at the start-of-step state they differ by Fv·dt·ddq.
+    - a smooth Coulomb reversal (JointEffects.coulomb_reversal_velocity > 0:
+      Fc tanh(dq / v_r), the pre-sliding of a cable transmission found by the
+      diagnosis) has no LCP row: it is a joint effort computed each step from
+      the simulated velocity, like the terms below.
     - friction of the motor-side pseudo links (14, 15, 16: no DART body),
       the offsets Fo and every JointEffects term on the motor coordinates q5..q7
       (not a DART joint variable) are explicit model-based efforts computed from
