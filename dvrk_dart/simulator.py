@@ -246,17 +246,12 @@ class PsmSimulator:
 
     def reset(self, q: np.ndarray, dq: np.ndarray | None = None) -> None:
         """Put the arm at q (closed loops, passive joints on their relations), velocity dq."""
-        q = np.asarray(q, dtype=float)
-        dq = np.zeros(N_JOINTS) if dq is None else np.asarray(dq, dtype=float)
-        self.skeleton.setPositions(self._x_of(q))
-        self.skeleton.setVelocities(self._x_of(dq))
-        self._state = None
+        self.set_kinematic(q, dq)
         self.skeleton.resetAccelerations()
         self.skeleton.resetGeneralizedForces()
         self.world.setTime(0.0)
         self.step_index = 0
         self._pid_integral = 0.0
-        self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
         self.last_counterweight_force = 0.0
 
