@@ -15,7 +15,6 @@ coordinate that variable depends on.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -353,7 +352,4 @@ class IdentifiedModel:
         terms = parse_terms(terms) if isinstance(terms, str) else terms
         return self.efforts(q, dq, ddq, terms).total(terms)
 
-    @cached_property
-    def has_tool_inertia(self) -> bool:
-        return any(self.params[l.key].mass > 0 for l in self.model.links.values() if l.group == "tool")
 
