@@ -351,5 +351,3 @@ class IdentifiedModel:
     def predict(self, q, dq, ddq, terms: tuple[str, ...] | str = "all") -> np.ndarray:
         terms = parse_terms(terms) if isinstance(terms, str) else terms
         return self.efforts(q, dq, ddq, terms).total(terms)
-
-
