@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError, SimulationDiverged
+from .errors import DvrkDartError
 from .joints import JOINT_NAMES, effort_unit
 from .sim_config import COUNTERWEIGHT_VARIANTS, MODES
 
@@ -110,27 +110,19 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Velocity-mode replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    from dataclasses import replace
-
     from .context import load_arm
-    from .replay import replay
-    from .runner import rcm_position, run_name
+    from .runner import run
+    from .scenarios import Scenario, load_scenario
+    from .sim_config import COUNTERWEIGHT_VARIANTS
 
     arm = load_arm(params_file=args.params)
-    measured = REPLAY_SHORTHANDS.get(args.command) or args.measured
-    if measured is None:
+    if args.command in REPLAY_SHORTHANDS:
+        scenario = load_scenario(args.command)
+    elif args.measured is None:
         raise DvrkDartError("--measured: a measured run is required")
-    config = replace(_sim_config(args), counterweight=args.counterweight)
-    try:
-        record = replay(measured, mode=args.mode, config=config, duration_s=args.duration)
-    except SimulationDiverged as exc:  # keep what was logged up to the divergence
-        record = exc.record
-        record.metrics["error"] = str(exc)
-    scenario = args.command if args.command in REPLAY_SHORTHANDS else f"replay-{Path(str(measured)).stem}"
-    record.name = run_name(scenario, args.mode, args.counterweight)
-    record.config = {"scenario": {"name": scenario, "kind": "replay", "measured": str(measured)}, "mode": args.mode,
-                     "counterweight": args.counterweight, "sim": config.to_dict()}
-    record.markers.setdefault("rcm", rcm_position(arm))
+    else:
+        scenario = Scenario(f"replay-{Path(args.measured).stem}", "replay", ("velocity", "kinematic"), COUNTERWEIGHT_VARIANTS, measured=args.measured)
+    record = run(arm, scenario, args.mode, args.counterweight, _sim_config(args), duration_s=args.duration)
     out = Path(args.out) if args.out else Path("out") / "runs" / record.name
     return _write_and_summarise(record, out)
 
