@@ -91,6 +91,9 @@ STABILITY_LIMIT = 0.5
 #: payload at the farthest point of the link is preferred to a heavy one near
 #: the axis.
 PAYLOAD_MASS_PRIOR_PER_KG2 = 0.01
+#: a payload's mass counts as identified when its interval's ends are within
+#: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
+MASS_IDENTIFIED_RATIO = 1.7
 #: masses tried when profiling a selected payload's mass (kg, geometric grid)
 PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
 #: safety bound of the greedy selection
@@ -605,52 +608,86 @@ def _weights(residual: np.ndarray) -> np.ndarray:
     return 1.0 / sigma**2
 
 
-def _best_fit(selector: "_Selector", chosen: list[int], cv: "_CvResult") -> _Fit:
+def _penalised_cost(selector: "_Selector", chosen: list[int], fit: _Fit) -> float:
+    """Weighted training squared residual (up to a constant) plus the payloads' Occam prior."""
+    masses = [fit.params[i][0] for i in chosen if isinstance(selector.design.effects[i], PointPayload)]
+    prior = PAYLOAD_MASS_PRIOR_PER_KG2 * selector.energy_total
+    A, g = selector.A_total, selector.g_total
+    return float(fit.beta @ A @ fit.beta - 2 * fit.beta @ g + prior * np.sum(np.square(masses)))
+
+
+def _best_fit(selector: "_Selector", chosen: list[int], cv: "_CvResult | None" = None) -> _Fit:
     """Fit on all training data from the effects' own starting points and from
     the folds' mean parameters; keep the better (nonlinear fits have local minima)."""
     candidates = [selector.fit_all(chosen)]
-    folds = [p for p in cv.fold_params if all(i in p for i in chosen)]
+    folds = [p for p in cv.fold_params if all(i in p for i in chosen)] if cv is not None else []
     if folds and chosen:
         warm = {i: np.mean([p[i] for p in folds], axis=0) for i in chosen}
         candidates.append(selector.fit_all(chosen, warm))
-    A, g = selector.A_total, selector.g_total
-    prior = PAYLOAD_MASS_PRIOR_PER_KG2 * selector.energy_total
-
-    def cost(fit: _Fit) -> float:
-        masses = [fit.params[i][0] for i in chosen if isinstance(selector.design.effects[i], PointPayload)]
-        return float(fit.beta @ A @ fit.beta - 2 * fit.beta @ g + prior * np.sum(np.square(masses)))
-
-    return min(candidates, key=cost)
+    return min(candidates, key=lambda fit: _penalised_cost(selector, chosen, fit))
 
 
-def _mass_profile(selector: "_Selector", chosen: list[int], payload: int, best: _Fit) -> dict:
+def _family_members(selector: "_Selector", payload: int) -> list[int]:
+    family = selector.design.effects[payload].family
+    return [j for j, e in enumerate(selector.design.effects) if isinstance(e, PointPayload) and e.family == family]
+
+
+def _swap(chosen: list[int], old: int, new: int) -> list[int]:
+    return [new if i == old else i for i in chosen]
+
+
+def _choose_within_families(selector: "_Selector", selected: list[int], cv: "_CvResult") -> tuple[list[int], _Fit, "_CvResult"]:
+    """A payload family (links the efforts cannot tell apart) is one hypothesis
+    over the union of its links' envelopes: its member is the one with the
+    lowest penalised cost, the Occam prior deciding as it does within one link,
+    not the held-out score, whose differences among members are noise."""
+    final, swapped = _best_fit(selector, selected, cv), False
+    for payload in [i for i in selected if isinstance(selector.design.effects[i], PointPayload)]:
+        for member in _family_members(selector, payload):
+            if member in selected:
+                continue
+            trial = _swap(selected, payload, member)
+            fit = _best_fit(selector, trial)
+            if _penalised_cost(selector, trial, fit) < _penalised_cost(selector, selected, final):
+                selected, final, payload, swapped = trial, fit, member, True
+    return selected, final, (selector.cross_validate(selected) if swapped else cv)
+
+
+def _mass_profile(selector: "_Selector", chosen: list[int], payload: int) -> dict:
     """Cross-validated score of the selected set with the payload's mass fixed
-    on a grid: where the score stays within the bootstrap spread of the best,
-    the data cannot tell the masses apart (for a link turning about a fixed
-    axis, gravity only sees m c; m alone comes from the weak inertial terms)."""
-    effect = selector.design.effects[payload]
-    original = effect.parameters
-    scores, masses = [], []
-    try:
-        for m in PROFILE_MASSES_KG:
-            if m > original[0].upper:
-                break
-            effect.parameters = (replace(original[0], lower=m * (1 - 1e-9), upper=m),) + original[1:]
-            warm = [{i: (np.r_[m, best.params[i][1:]] if i == payload else best.params[i]) for i in chosen} for _ in selector.folds]
-            scores.append(selector.cross_validate(chosen, warm))
-            masses.append(m)
-    finally:
-        effect.parameters = original
-    fractions = np.array([s.fraction for s in scores])
+    on a grid (its position free in the envelopes of its family's links): where
+    the score stays within the bootstrap spread of the best, the data cannot
+    tell the masses apart (for a link turning about a fixed axis, gravity only
+    sees m c; m alone comes from the weak inertial terms)."""
+    best_scores: dict[float, _CvResult] = {}
+    for member in _family_members(selector, payload):
+        members_set = _swap(chosen, payload, member)
+        fit = _best_fit(selector, members_set)
+        effect = selector.design.effects[member]
+        original = effect.parameters
+        try:
+            for m in PROFILE_MASSES_KG:
+                if m > original[0].upper:
+                    break
+                effect.parameters = (replace(original[0], lower=m * (1 - 1e-9), upper=m),) + original[1:]
+                warm = [{i: (np.r_[m, fit.params[i][1:]] if i == member else fit.params[i]) for i in members_set} for _ in selector.folds]
+                score = selector.cross_validate(members_set, warm)
+                if m not in best_scores or score.fraction > best_scores[m].fraction:
+                    best_scores[m] = score
+        finally:
+            effect.parameters = original
+    masses = sorted(best_scores)
+    fractions = np.array([best_scores[m].fraction for m in masses])
     k = int(np.argmax(fractions))
-    spread = float(np.std(selector.bootstrap_fractions(scores[k].after)))
+    spread = float(np.std(selector.bootstrap_fractions(best_scores[masses[k]].after)))
     inside = [m for m, f in zip(masses, fractions) if f >= fractions[k] - spread]
+    lo, hi = min(inside), max(inside)
     return {
         "masses_kg": masses,
         "cross_validated_fraction": fractions.tolist(),
         "bootstrap_spread": spread,
-        "mass_interval_kg": [min(inside), max(inside)],
-        "identifiable": bool(min(inside) > masses[0] and max(inside) < masses[-1]),
+        "mass_interval_kg": [lo, hi],
+        "identifiable": bool(lo > masses[0] and hi < masses[-1] and hi / lo <= MASS_IDENTIFIED_RATIO),
     }
 
 
@@ -676,12 +713,11 @@ def payload_gravity_efforts_at_zero(arm: Arm, link: int, mass_kg: float, positio
     return (features.body_regressor[0][:, features.body_columns(link)] @ point_mass_parameters(mass_kg, position_m))
 
 
-def _payload_report(effect: PointPayload, p: np.ndarray, profile: dict | None = None, arm: Arm | None = None) -> dict:
+def _payload_report(effect: PointPayload, p: np.ndarray, arm: Arm, profile: dict | None = None) -> dict:
     report = effect.describe(p)
     report["first_moment_kg_m"] = (p[0] * np.asarray(p[1:4])).tolist()
-    if arm is not None:
-        report["pitch_shaft_offsets_at_q0_m"] = pitch_shaft_offsets(arm, effect.position_base_at_zero(p))
-        report["gravity_efforts_at_q0"] = payload_gravity_efforts_at_zero(arm, effect.link_key, p[0], p[1:4]).tolist()
+    report["pitch_shaft_offsets_at_q0_m"] = pitch_shaft_offsets(arm, effect.position_base_at_zero(p))
+    report["gravity_efforts_at_q0"] = payload_gravity_efforts_at_zero(arm, effect.link_key, p[0], p[1:4]).tolist()
     if profile is not None:
         report["mass_profile"] = profile
         report["mass_interval_kg"] = profile["mass_interval_kg"]
@@ -739,7 +775,7 @@ def diagnose(
 
     selector = _Selector(design, train_grams, w2, folds)
     selected, steps, individual, selected_cv = selector.greedy(max_effects)
-    final = _best_fit(selector, selected, selected_cv)
+    selected, final, selected_cv = _choose_within_families(selector, selected, selected_cv)
 
     def train_fraction(beta):
         return _fraction(_sse(beta, train_grams.A.sum(0), train_grams.g.sum(0), train_grams.s.sum(0)), train_grams.s.sum(0), w2)
@@ -765,6 +801,7 @@ def diagnose(
             "rank": rank,
             "name": e.name,
             "kind": e.kind,
+            "family": e.family,
             "joints": list(e.joints),
             "parameters": e.describe(p),
             "units": e.units(),
@@ -805,7 +842,7 @@ def diagnose(
         source = "simulation" if not extra_by_regressor else "simulation+regressor"
 
     payloads = [
-        (effects[i], final.params[i], _mass_profile(selector, selected, i, final) if profile_payload_mass else None, arm)
+        (effects[i], final.params[i], arm, _mass_profile(selector, selected, i) if profile_payload_mass else None)
         for i in selected
         if isinstance(effects[i], PointPayload)
     ]
@@ -813,7 +850,7 @@ def diagnose(
         (
             {
                 "cross_validated_fraction": individual[i].fraction,
-                **_payload_report(effects[i], selector.fit_all([i]).params[i], None, arm),
+                **_payload_report(effects[i], selector.fit_all([i]).params[i], arm),
             }
             for i in range(len(effects))
             if isinstance(effects[i], PointPayload)

@@ -532,7 +532,10 @@ class PointPayload(Effect):
     kind = "payload"
     linear = False
 
-    def __init__(self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG):
+    def __init__(
+        self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,
+        equivalent_keys: tuple[int, ...] = (),
+    ):
         link = model.links[key]
         if not link.body or link.joint_type == "fixed":
             raise DvrkDartError(f"link {key} ({link.name}): a payload needs a moving link with a body")
@@ -542,6 +545,8 @@ class PointPayload(Effect):
         self.group = link.group
         self.envelope = envelope if envelope is not None else link_envelope(model, key)
         self.name = f"payload_on_{link.name}"
+        #: links on which a payload gives exactly the same efforts (`equivalent_payload_links`)
+        self.equivalent_links = tuple(model.links[k].name for k in equivalent_keys if k != key)
         self.joints = joints_moving_link(model, key)
         self.parameters = (
             Parameter("mass_kg", "kg", 0.0, max_mass_kg),
@@ -549,6 +554,11 @@ class PointPayload(Effect):
             Parameter("y_m", "m", float(self.envelope.lower[1]), float(self.envelope.upper[1])),
             Parameter("z_m", "m", float(self.envelope.lower[2]), float(self.envelope.upper[2])),
         )
+
+    @property
+    def family(self) -> str:
+        """Payloads on equivalent links are one family: the data cannot tell them apart."""
+        return "payload_on_" + "|".join(sorted((self.link_name,) + self.equivalent_links))
 
     @property
     def n_columns(self) -> int:
@@ -584,6 +594,7 @@ class PointPayload(Effect):
             "link": self.link_name,
             "link_key": self.link_key,
             "group": self.group,
+            "equivalent_links": list(self.equivalent_links),
             "position_m": [float(x) for x in p[1:4]],
             "position_base_at_q0_m": self.position_base_at_zero(p).tolist(),
             "envelope_m": {"lower": self.envelope.lower.tolist(), "upper": self.envelope.upper.tolist()},
@@ -666,6 +677,50 @@ def payload_links(model: PsmModel) -> list[int]:
     return [k for k, l in model.links.items() if l.body and l.joint_type != "fixed"]
 
 
+#: random states (q within the joint limits, dq and ddq standard normal) on
+#: which the effort signatures of two payload links are compared
+EQUIVALENCE_STATES = 24
+EQUIVALENCE_SEED = 20190802
+#: a link's body regressor lies in another's span when its residual after
+#: projection is below this fraction of its largest column (measured: round-off
+#: ~2e-15; the weakest real difference, the inertia of the two translating
+#: parallelogram links with cranks of different length, ~8e-3)
+EQUIVALENCE_TOLERANCE = 1e-6
+#: singular values below this fraction of the largest are round-off (the span
+#: of a body regressor omits the unexcitable inertia directions)
+RANK_CUT = 1e-12
+
+
+def _column_space(Y: np.ndarray) -> np.ndarray:
+    U, sv, _ = np.linalg.svd(Y, full_matrices=False)
+    return U[:, sv > sv[0] * RANK_CUT]
+
+
+def equivalent_payload_links(arm: Arm) -> dict[int, tuple[int, ...]]:
+    """For each payload link, the payload links (itself included) on which a
+    body produces exactly the efforts some body on it produces: no effort
+    measurement can tell them apart. E.g. the pitch link and the parallelogram
+    links turning with q2 about pivots that only translate along the yaw axis
+    relative to it: same kinetic energy, same potential up to a constant.
+
+    Decided numerically, not by name: the body regressors of both links over
+    random states must span the same space."""
+    model = arm.model
+    rng = np.random.default_rng(EQUIVALENCE_SEED)
+    q = rng.uniform(model.joint_lower, model.joint_upper, size=(EQUIVALENCE_STATES, N_JOINTS))
+    dq, ddq = rng.standard_normal((2, EQUIVALENCE_STATES, N_JOINTS))
+    features = TrajectoryFeatures(arm, q, dq, ddq, np.zeros_like(q), 1.0)
+    links = payload_links(model)
+    regressors = {k: features.body_regressor[:, :, features.body_columns(k)].reshape(-1, BODY_PARAMETERS) for k in links}
+    spaces = {k: _column_space(Y) for k, Y in regressors.items()}
+
+    def inside(Y: np.ndarray, U: np.ndarray) -> bool:
+        residual = np.linalg.norm(Y - U @ (U.T @ Y), axis=0)
+        return bool(np.all(residual <= EQUIVALENCE_TOLERANCE * np.linalg.norm(Y, axis=0).max()))
+
+    return {i: tuple(j for j in links if inside(regressors[j], spaces[i]) and inside(regressors[i], spaces[j])) for i in links}
+
+
 def candidate_effects(
     arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES
 ) -> list[Effect]:
@@ -678,7 +733,10 @@ def candidate_effects(
     effects += [JointOffset(j) for j in JOINT_NAMES]
     effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
     effects += [JointArmature(j) for j in JOINT_NAMES]
-    effects += [PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m)) for k in payload_links(arm.model)]
+    equivalents = equivalent_payload_links(arm)
+    effects += [
+        PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)
+    ]
     effects += [GravityTilt(arm), TimeShift(), CounterweightTransmission(arm)]
     return effects
 

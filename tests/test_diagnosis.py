@@ -30,6 +30,7 @@ from dvrk_dart.effects import (
     candidate_effects,
     config_effort_by_formula,
     effects_to_sim_config,
+    equivalent_payload_links,
     gravity_tilt_directions,
     link_envelope,
 )
@@ -142,6 +143,13 @@ SYNTHETIC_CASES = [
     ("friction_q2", lambda arm: JointFriction("q2"), [0.15, 0.20], 0, 1.0),
     ("friction_q3_smooth0.03", lambda arm: JointFriction("q3", reversal_velocity=0.03), [0.4, 0.6], 0, 1.0),
     ("payload_on_insertion_carriage", lambda arm: PointPayload(arm.model, 8), [0.20, 0.02, -0.03, 0.30], 0, 1.0),
+    # payloads elsewhere: a translating parallelogram link, the counterweight, the tool off its roll axis
+    ("payload_on_pitch_front", lambda arm: PointPayload(arm.model, 4), [0.15, 0.30, 0.0, 0.02], 0, 1.0),
+    ("payload_on_counterweight", lambda arm: PointPayload(arm.model, 9), [0.20, 0.02, 0.0, 0.03], 0, 1.0),
+    ("payload_on_tool_roll", lambda arm: PointPayload(arm.model, 10), [0.10, 0.02, 0.0, -0.30], 0, 1.0),
+    ("offset_q3", lambda arm: JointOffset("q3"), [-0.3], 0, 1.0),
+    ("armature_q3", lambda arm: JointArmature("q3"), [0.5], 0, 1.0),
+    ("cable_elasticity_q1", lambda arm: JointStiffness("q1"), [0.3], 0, 1.0),
     ("torsion_spring_q4", lambda arm: JointStiffness("q4"), [0.01], 0, 1.0),
     ("offset_q1", lambda arm: JointOffset("q1"), [-0.15], 0, 1.0),
     ("armature_q1", lambda arm: JointArmature("q1"), [0.02], 0, 1.0),
@@ -156,7 +164,7 @@ def test_injected_effect_ranks_first_with_its_size(arm, segment, noise_rms, name
     result, top = _recover(arm, segment, noise_scale * noise_rms, effect, p_true, seed=seed)
     assert top["name"] == name, [e["name"] for e in result["effects"][:3]]
     assert top["selected"]
-    values = list(top["parameters"].values()) if name != "payload_on_insertion_carriage" else [top["parameters"]["mass_kg"]]
+    values = [top["parameters"]["mass_kg"]] if top["kind"] == "payload" else list(top["parameters"].values())
     if size_index is None:  # a tilt: both angles
         estimated, true = np.array(values[:2]), np.array(p_true)
         assert np.linalg.norm(estimated - true) < SIZE_TOLERANCE * np.linalg.norm(true)
@@ -165,6 +173,45 @@ def test_injected_effect_ranks_first_with_its_size(arm, segment, noise_rms, name
     # the effect closes most of the gap of a joint it acts on, on held-out segments
     per_joint = top["explained_fraction_per_joint"]["cross_validated"]
     assert max(per_joint[JOINT_NAMES.index(j)] for j in top["joints"]) > MIN_JOINT_FRACTION_EXPLAINED
+
+
+def test_payload_links_the_efforts_cannot_tell_apart(arm, segment):
+    """The links turning with q2 about pivots that only translate along the yaw
+    axis (pitch, pitch_top, pitch_bottom) are one family: on the measured
+    trajectory the efforts of a point mass on pitch_top or pitch_bottom are
+    exactly those of some body on the pitch link; a translating link's are not."""
+    equivalents = equivalent_payload_links(arm)
+    family = {arm.model.links[k].name for k in equivalents[arm.model.link_by_name("pitch").key]}
+    assert family == {"pitch", "pitch_top", "pitch_bottom"}
+    assert all(len(v) == 1 for k, v in equivalents.items() if arm.model.links[k].name not in family)
+    state = segment.head(300)
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, np.zeros_like(state.q), sample_rate_hz())
+    pitch = features.body_regressor[:, :, features.body_columns(arm.model.link_by_name("pitch").key)].reshape(-1, 10)
+
+    def misfit_on_pitch(name: str) -> float:
+        effort = PointPayload(arm.model, arm.model.link_by_name(name).key).effort(features, np.array([0.2, 0.03, -0.04, 0.02])).ravel()
+        body, *_ = np.linalg.lstsq(pitch, effort, rcond=None)
+        return float(np.max(np.abs(pitch @ body - effort)) / np.max(np.abs(effort)))
+
+    assert misfit_on_pitch("pitch_top") < 1e-9 and misfit_on_pitch("pitch_bottom") < 1e-9
+    assert misfit_on_pitch("pitch_front") > 1e-2 and misfit_on_pitch("insertion_carriage") > 1e-2
+
+
+def test_payload_mass_interval_when_only_its_moment_is_seen(arm, segment, noise_rms):
+    """A payload on a link turning about the fixed pitch shaft: gravity sees m c
+    only, so the diagnosis finds its family and reports a mass interval that
+    contains the truth, not a mass it cannot pin."""
+    truth = PointPayload(arm.model, arm.model.link_by_name("pitch_bottom").key)
+    measured = synthesize_measurement(arm, segment, [(truth, np.array([0.15, 0.05, -0.20, 0.0]))], noise_rms, seed=3)
+    result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False)
+    payload = result["payload"]
+    assert payload["link"] in {truth.link_name, *truth_family(arm, truth)}
+    lo, hi = payload["mass_interval_kg"]
+    assert lo <= 0.15 <= hi and not payload["mass_profile"]["identifiable"]
+
+
+def truth_family(arm, effect):
+    return {arm.model.links[k].name for k in equivalent_payload_links(arm)[effect.link_key]}
 
 
 def test_tilt_at_real_noise_is_not_claimed(arm, segment, noise_rms):
