@@ -27,6 +27,10 @@ Selection (`diagnose`):
   or a smooth reversal); a payload is chosen only if it beats, significantly,
   the offsets of the joints it moves fitted together (its static part), else
   those offsets are the step's choice;
+- payloads on links whose efforts are identical (a family, see
+  `effects.equivalent_payload_links`) are one hypothesis over the union of
+  their envelopes: the member kept is the one with the lowest penalised
+  training cost, and the mass interval is profiled over the whole family;
   `holdout` runs are never used for the selection, only scored.
 """
 
@@ -881,7 +885,8 @@ def diagnose(
                 f"greedy forward selection on {len(selector.folds)}-fold contiguous time-segment cross-validation of the training runs, "
                 f"weighted least squares (joint weight 1/RMS before), bounded to physical ranges; stop when the held-out gain < "
                 f"{MIN_HELDOUT_GAIN} or not positive with probability {1 - GAIN_FAILURE_QUANTILE:.2f} (block bootstrap, "
-                f"{BLOCK_DURATION_S} s blocks, {BOOTSTRAP_RESAMPLES} resamples)"
+                f"{BLOCK_DURATION_S} s blocks, {BOOTSTRAP_RESAMPLES} resamples); a payload's link among its equivalent links "
+                f"(identical efforts) by the penalised training cost"
             ),
             "steps": steps,
             "selected": [effects[i].name for i in selected],

@@ -111,8 +111,15 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
     parts.append("</table>")
     payload = result.get("payload")
     if payload:
-        parts.append(f"<p>payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
-                     f"at {np.round(payload['position_m'], 3).tolist()} m in the link frame</p>")
+        text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
+                f"at {np.round(payload['position_m'], 3).tolist()} m in the link frame")
+        if payload.get("equivalent_links"):
+            text += f"; the efforts cannot tell it from the same payload on {e(', '.join(payload['equivalent_links']))}"
+        if payload.get("mass_profile"):
+            lo, hi = payload["mass_profile"]["mass_interval_kg"]
+            pinned = "identified" if payload["mass_profile"]["identifiable"] else "not identified by these runs"
+            text += f"; cross-validated mass interval {lo:.3f}-{hi:.3f} kg ({pinned})"
+        parts.append(f"<p>{text}</p>")
     for source in image_sources:
         name = Path(source).stem
         parts.append(f"<figure><img src='{e(source)}' alt='{e(name)}'><figcaption>{e(name)}</figcaption></figure>")
