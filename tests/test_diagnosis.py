@@ -272,7 +272,14 @@ def test_withheld_payload_mass(payload_diagnosis):
       the horizontal at q = 0) the pitch group's box reaches 0.112 m from the
       shaft, so m >= 0.14 kg (> +30 %); the hand-measured 16.5 cm lies outside it;
     - a translating link (pitch_front, intermediate: m identifiable from gravity)
-      explains less held-out residual (0.105 / 0.094 vs 0.155).
+      explains less held-out residual (0.105 / 0.094 vs 0.155); with the
+      offsets of J1..J3 as nuisances it is a tie among links (0.205 / 0.205 /
+      0.203 / 0.199 for pitch_front / intermediate / pitch_bottom / pitch) whose
+      masses differ fourfold (0.077 / 0.061 / 0.021 / 0.039 kg), and a yaw-link
+      payload beats them all (0.212): no link-and-mass claim survives;
+    - profiled over the whole family of equivalent links (pitch, pitch_top,
+      pitch_bottom: identical efforts), the cross-validated interval is still
+      0.126-2 kg.
     +-30 % is therefore not reachable honestly from these runs."""
     result, _ = payload_diagnosis
     assert abs(result["payload"]["mass_kg"] - PAYLOAD_MASS_KG) < PAYLOAD_MASS_TOLERANCE * PAYLOAD_MASS_KG
