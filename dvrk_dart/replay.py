@@ -153,9 +153,10 @@ def _record(measured, mode, config, log, bodies, identified, processed, t_meas, 
     q, dq, ddq, effort = (np.array(log[k]).reshape(shape) for k in ("q", "dq", "ddq", "effort"))
     model_terms = identified.efforts(q, dq, ddq, TERMS).terms if len(t) else {name: np.zeros(shape) for name in TERMS}
     # measured values at the logged times (exact samples when logging at the data's 200 Hz)
-    tau_meas = np.column_stack([np.interp(t, t_meas, processed.tau[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
-    q_meas = np.column_stack([np.interp(t, t_meas, processed.q[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
-    dq_meas = np.column_stack([np.interp(t, t_meas, processed.dq[:, j]) for j in range(7)]) if len(t) else np.zeros(shape)
+    def at_logged_times(x: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(t, t_meas, x[:, j]) for j in range(x.shape[1])]) if len(t) else np.zeros(shape)
+
+    tau_meas, q_meas, dq_meas = (at_logged_times(x) for x in (processed.tau, processed.q, processed.dq))
     name = f"replay-{_scenario_name(measured)}_{mode}_cw-{config.counterweight}"
     record = RunRecord(
         name=name,
