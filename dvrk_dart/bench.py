@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .context import load_arm
-from .io_utils import write_json_atomic
-from .reference_data import load_run, resolve_run, sample_rate_hz
-from .signal import central_difference
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
+from dvrk_dart.io.signal import central_difference
+from dvrk_dart.model.arm import load_arm
 
 #: (key, target, "lower" if smaller is better else "higher", unit, what the target stands for)
 TARGETS = {
@@ -49,7 +49,7 @@ def bench_model() -> dict:
 
 
 def bench_simulation() -> dict:
-    from .simulator import measure_realtime_factor
+    from dvrk_dart.sim.simulator import measure_realtime_factor
 
     return {"sim_realtime_factor": measure_realtime_factor()}
 
@@ -63,7 +63,7 @@ def bench_campaign(out_dir: Path) -> dict:
 
 
 def bench_diagnosis() -> dict:
-    from .validation import benchmark_diagnosis
+    from dvrk_dart.diagnosis.validation import benchmark_diagnosis
 
     return {"diagnose_s": benchmark_diagnosis()}
 

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError
-from .joints import JOINT_NAMES, effort_unit
-from .sim_config import COUNTERWEIGHT_VARIANTS, MODES
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
@@ -21,11 +21,11 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
 
 def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
-    from .context import load_arm
-    from .identified_model import parse_terms
-    from .metrics import relative_error, rms
-    from .reference_data import load_run, resolve_run
-    from .signal import FIRST_PERIOD_SAMPLES, process
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
+    from dvrk_dart.metrics import relative_error, rms
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.model.identified import parse_terms
 
     arm = load_arm(params_file=args.params)
     terms = parse_terms(args.terms)
@@ -51,7 +51,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
 
 def cmd_model_check(args: argparse.Namespace) -> int:
     """Print the model card facts: parameter oddities and basic model checks."""
-    from .context import load_arm
+    from dvrk_dart.model.arm import load_arm
 
     arm = load_arm(params_file=args.params)
     print(f"model: {arm.model.name} ({arm.model.source})")
@@ -72,7 +72,7 @@ REPLAY_SHORTHANDS = {
 
 
 def _sim_config(args: argparse.Namespace):
-    from .sim_config import SimConfig
+    from dvrk_dart.sim.config import SimConfig
 
     config = SimConfig(dt_s=args.dt)
     if not (0.0 < args.dt <= 0.01):
@@ -81,7 +81,7 @@ def _sim_config(args: argparse.Namespace):
 
 
 def _write_and_summarise(record, out_dir: Path) -> int:
-    from .campaign import write_run_folder
+    from dvrk_dart.runs.campaign import write_run_folder
 
     write_run_folder(record, out_dir)
     metrics = record.metrics
@@ -97,9 +97,9 @@ def _write_and_summarise(record, out_dir: Path) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """One scenario variant -> its output folder."""
-    from .context import load_arm
-    from .runner import run
-    from .scenarios import load_scenario
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.runner import run
+    from dvrk_dart.runs.scenarios import load_scenario
 
     arm = load_arm(params_file=args.params)
     scenario = load_scenario(args.scenario)
@@ -110,10 +110,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Velocity-mode replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    from .context import load_arm
-    from .runner import run
-    from .scenarios import Scenario, load_scenario
-    from .sim_config import COUNTERWEIGHT_VARIANTS
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.runner import run
+    from dvrk_dart.runs.scenarios import Scenario, load_scenario
+    from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS
 
     arm = load_arm(params_file=args.params)
     if args.command in REPLAY_SHORTHANDS:
@@ -129,13 +129,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """The main job: the campaign, its report and the sim-to-real diagnosis."""
-    from .pipeline import validate
+    from dvrk_dart.pipeline import validate
 
     return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import build_report
+    from dvrk_dart.analysis.report import build_report
 
     extra = Path(args.extra) if args.extra else None
     index = build_report(Path(args.runs), Path(args.out), extra_sections=extra, jobs=args.jobs)
@@ -144,7 +144,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from .pipeline import diagnose_command
+    from dvrk_dart.pipeline import diagnose_command
 
     return diagnose_command(args)
 

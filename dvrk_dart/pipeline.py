@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from .campaign import load_campaign, run_campaign
-from .io_utils import write_json_atomic
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.runs.campaign import load_campaign, run_campaign
 
 
 def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False) -> int:
@@ -22,8 +22,8 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     print(f"campaign: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
 
-    from .report import build_report
-    from .validation import validation_section
+    from dvrk_dart.analysis.report import build_report
+    from dvrk_dart.diagnosis.validation import validation_section
 
     section = validation_section(out_dir / "diagnosis")
     index = build_report(runs_dir, report_dir, extra_sections=[section])
@@ -41,6 +41,6 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
 
 
 def diagnose_command(args: argparse.Namespace) -> int:
-    from .validation import run_diagnosis_cli
+    from dvrk_dart.diagnosis.validation import run_diagnosis_cli
 
     return run_diagnosis_cli(args)

@@ -4,9 +4,9 @@ reference runs, loaded once per test session."""
 import numpy as np
 import pytest
 
-from dvrk_dart.context import load_arm
-from dvrk_dart.reference_data import RUNS, load_run, resolve_run
-from dvrk_dart.signal import process
+from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
+from dvrk_dart.io.signal import process
+from dvrk_dart.model.arm import load_arm
 
 
 @pytest.fixture(scope="session")

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.io_utils import write_json_atomic
-from dvrk_dart.log_mcap import write_mcap
-from dvrk_dart.run_record import RunRecord
-from dvrk_dart.sim_config import SimConfig
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.mcap_log import write_mcap
+from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.sim.config import SimConfig
 
 #: synthetic torque run: the x error is this constant after the transient, so
 #: its RMS after 1 s is known exactly
@@ -106,9 +106,9 @@ def synthetic_velocity_record(friction: bool = False) -> RunRecord:
 def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
     """Short runs of the real simulator: kinematic, velocity with and without the
     counterweight, and a replay of the measured run 'two'."""
-    from dvrk_dart.context import load_arm
-    from dvrk_dart.runner import run
-    from dvrk_dart.scenarios import load_scenario
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.runner import run
+    from dvrk_dart.runs.scenarios import load_scenario
 
     arm = load_arm()
     names = []

@@ -12,10 +12,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-
-from dvrk_dart import analysis as an
-from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.report import RATIO_DIGITS, SHOWN_DIGITS, build_report
 from report_runs import (
     SYNTHETIC_EFFORT_OFFSET,
     SYNTHETIC_ERROR_AFTER_1S_M,
@@ -24,6 +20,10 @@ from report_runs import (
     synthetic_velocity_record,
     write_run,
 )
+
+from dvrk_dart.analysis import tables as an
+from dvrk_dart.analysis.report import RATIO_DIGITS, SHOWN_DIGITS, build_report
+from dvrk_dart.errors import DvrkDartError
 
 
 @pytest.fixture(scope="module")

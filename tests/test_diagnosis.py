@@ -11,15 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis import (
-    DiagnosisRun,
-    diagnose,
-    payload_gravity_efforts_at_zero,
-    prepare_run,
-    residual_regimes,
-    synthesize_measurement,
-)
-from dvrk_dart.effects import (
+from dvrk_dart.diagnosis.effects import (
     GravityTilt,
     JointArmature,
     JointFriction,
@@ -32,12 +24,18 @@ from dvrk_dart.effects import (
     effects_to_sim_config,
     equivalent_payload_links,
     gravity_tilt_directions,
-    link_envelope,
 )
-from dvrk_dart.joints import JOINT_NAMES
+from dvrk_dart.diagnosis.selection import (
+    DiagnosisRun,
+    diagnose,
+    prepare_run,
+    residual_regimes,
+    synthesize_measurement,
+)
+from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
+from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
-from dvrk_dart.reference_data import load_run, resolve_run, sample_rate_hz
-from dvrk_dart.signal import FIRST_PERIOD_SAMPLES, process
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the size of a blindly recovered effect must be within this relative error
 SIZE_TOLERANCE = 0.20
@@ -310,7 +308,7 @@ def test_payload_impostor_yields_to_offsets(arm):
 def test_smooth_friction_goes_into_the_simulation_whole(arm, segment):
     """A smooth Coulomb reversal is simulator physics (tanh law, viscous as
     damping): the SimConfig carries all of it and its effort equals the regressor."""
-    from dvrk_dart.effects import not_simulated
+    from dvrk_dart.diagnosis.effects import not_simulated
 
     state = segment.head(300)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")

@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from dvrk_dart.identified_model import TERMS
+from dvrk_dart.model.identified import TERMS
 
 PUBLISHED_RELATIVE_ERRORS = [0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642]
 #: the published values are rounded to 4 decimals

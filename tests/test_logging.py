@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from dvrk_dart import log_mcap
-from dvrk_dart.joints import JOINT_NAMES
-from dvrk_dart.log_mcap import read_mcap, write_mcap
-from dvrk_dart.log_rerun import write_rrd
-from dvrk_dart.run_record import RunRecord
+from dvrk_dart.io import mcap_log as log_mcap
+from dvrk_dart.io.mcap_log import read_mcap, write_mcap
+from dvrk_dart.io.rerun_log import write_rrd
+from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.runs.record import RunRecord
 
 N_SAMPLES = 500
 BODIES = ("yaw", "pitch_back", "pitch_front", "insertion_carriage", "counterweight", "tool_roll")
@@ -230,7 +230,7 @@ def test_rrd_written_and_loadable(tmp_path: Path, make) -> None:
 
 def test_rrd_with_model_tree(tmp_path: Path) -> None:
     """With the PSM model, links are drawn as the model's tree (the real link names)."""
-    from dvrk_dart.model import load_model
+    from dvrk_dart.model.description import load_model
 
     path = tmp_path / "run.rrd"
     write_rrd(full_record(), path, model=load_model())
@@ -238,7 +238,7 @@ def test_rrd_with_model_tree(tmp_path: Path) -> None:
 
 
 def test_interrupted_rrd_write_leaves_no_file(tmp_path: Path, monkeypatch) -> None:
-    import dvrk_dart.log_rerun as log_rerun
+    import dvrk_dart.io.rerun_log as log_rerun
 
     def crash(*args, **kwargs):
         raise RuntimeError("simulated crash while writing")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model import GROUPS, load_model
-from dvrk_dart.parameters import load_parameters
-from dvrk_dart.reference_data import resolve
+from dvrk_dart.io.reference_data import resolve
+from dvrk_dart.model.description import GROUPS, load_model
+from dvrk_dart.model.parameters import load_parameters
 
 
 def test_every_link_has_a_group_and_the_tree_is_ordered(arm):

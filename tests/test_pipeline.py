@@ -7,10 +7,10 @@ import sys
 import numpy as np
 import pytest
 
-from dvrk_dart.controllers import TORQUE_KD, TORQUE_KP
-from dvrk_dart.log_mcap import read_mcap
-from dvrk_dart.runner import run
-from dvrk_dart.scenarios import load_scenario
+from dvrk_dart.io.mcap_log import read_mcap
+from dvrk_dart.runs.runner import run
+from dvrk_dart.runs.scenarios import load_scenario
+from dvrk_dart.sim.controllers import TORQUE_KD, TORQUE_KP
 
 #: acceptance thresholds of the scenarios issue (the paper: up to 3e-3 m, 3e-2 rad)
 TRACKING_POSITION_M = 1e-4
@@ -73,7 +73,7 @@ def test_torque_mode_error_decays(runs, scenario):
 
 
 def test_mcap_log_of_a_real_run_reads_back(runs, tmp_path):
-    from dvrk_dart.campaign import write_run_folder
+    from dvrk_dart.runs.campaign import write_run_folder
 
     record = runs("spiral", "velocity", "on", 0.5)
     write_run_folder(record, tmp_path / "run")
@@ -116,7 +116,7 @@ def test_cli_unknown_mode_is_a_clear_error(tmp_path):
 
 
 def test_campaign_skips_unchanged_runs_and_lists_failures(tmp_path):
-    from dvrk_dart.campaign import RunSpec, run_campaign
+    from dvrk_dart.runs.campaign import RunSpec, run_campaign
 
     good = RunSpec("rectilinear", "kinematic", "on", duration_s=0.2)
     bad = RunSpec("replay-two", "velocity", "on", duration_s=100.0)  # longer than the measured run

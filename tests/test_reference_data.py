@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from dvrk_dart import reference_data
+from dvrk_dart.io import reference_data
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.reference_data import load_run, resolve, resolve_run
+from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
 
 
 def test_loader_returns_named_typed_columns():

@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.identified_model import IdentifiedModel
-from dvrk_dart.joints import INSERTION
-from dvrk_dart.parameters import IdentifiedParameters
-from dvrk_dart.replay import replay, replay_metrics_json, write_metrics
 from dvrk_dart.metrics import rms
-from dvrk_dart.sim_config import SimConfig, simulated_terms
+from dvrk_dart.model.identified import IdentifiedModel
+from dvrk_dart.model.joints import INSERTION
+from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.runs.replay import replay, replay_metrics_json, write_metrics
+from dvrk_dart.sim.config import SimConfig, simulated_terms
 
 #: the shorter variants (off, pid) replay the first seconds only
 SHORT_S = 8.0

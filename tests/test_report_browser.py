@@ -18,9 +18,9 @@ from pathlib import Path
 import matplotlib.image
 import numpy as np
 import pytest
-
-from dvrk_dart.report import REPORT_FILE, build_report
 from report_runs import synthetic_torque_record, synthetic_velocity_record, write_run
+
+from dvrk_dart.analysis.report import REPORT_FILE, build_report
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 CHROMIUM = next((found for name in CHROMIUM_NAMES if (found := shutil.which(name))), None)

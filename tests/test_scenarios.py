@@ -2,9 +2,9 @@
 
 import pytest
 
-from dvrk_dart.campaign import load_campaign
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.scenarios import available_scenarios, load_scenario
+from dvrk_dart.runs.campaign import load_campaign
+from dvrk_dart.runs.scenarios import available_scenarios, load_scenario
 
 GOOD = """
 name = "line"

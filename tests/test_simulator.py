@@ -10,13 +10,18 @@ import re
 import numpy as np
 import pytest
 
-from dvrk_dart.dart_builder import NEGLIGIBLE_INERTIA_KG_M2, NEGLIGIBLE_MASS_KG, gravity_in_base, physical_inertia
 from dvrk_dart.errors import SimulationDiverged
-from dvrk_dart.identified_model import IdentifiedModel
-from dvrk_dart.joints import INSERTION
-from dvrk_dart.parameters import IdentifiedParameters, inertia_violation
-from dvrk_dart.sim_config import Payload, SimConfig
-from dvrk_dart.simulator import PsmSimulator, measure_realtime_factor
+from dvrk_dart.model.identified import IdentifiedModel
+from dvrk_dart.model.joints import INSERTION
+from dvrk_dart.model.parameters import IdentifiedParameters, inertia_violation
+from dvrk_dart.sim.builder import (
+    NEGLIGIBLE_INERTIA_KG_M2,
+    NEGLIGIBLE_MASS_KG,
+    gravity_in_base,
+    physical_inertia,
+)
+from dvrk_dart.sim.config import Payload, SimConfig
+from dvrk_dart.sim.simulator import PsmSimulator, measure_realtime_factor
 
 
 @pytest.fixture(scope="module")
@@ -155,8 +160,8 @@ def test_realtime_factor_is_measured():
 def test_smooth_coulomb_reversal_is_simulated(model, params, identified, processed_two):
     """The smooth friction law in the DART replay equals Fc tanh(dq / v_r) + Fv dq
     on top of the inertial model, at the simulated state."""
-    from dvrk_dart.replay import replay
-    from dvrk_dart.sim_config import JointEffects
+    from dvrk_dart.runs.replay import replay
+    from dvrk_dart.sim.config import JointEffects
 
     coulomb, viscous, scale = 0.4, 0.6, 0.03
     extra = JointEffects(coulomb=(0, 0, coulomb, 0, 0, 0, 0), viscous=(0, 0, viscous, 0, 0, 0, 0),

@@ -11,8 +11,13 @@ import tomllib
 import numpy as np
 import pytest
 
-from dvrk_dart.joints import JOINT_NAMES
-from dvrk_dart.validation import WITHHELD_FILE, validate_holdout, validate_payload, validate_synthetic
+from dvrk_dart.diagnosis.validation import (
+    WITHHELD_FILE,
+    validate_holdout,
+    validate_payload,
+    validate_synthetic,
+)
+from dvrk_dart.model.joints import JOINT_NAMES
 
 
 @pytest.fixture(scope="module")

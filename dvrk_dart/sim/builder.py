@@ -47,11 +47,11 @@ from dataclasses import dataclass, field
 import dartpy as dart
 import numpy as np
 
-from .errors import DvrkDartError
-from .joints import N_JOINTS
-from .model import Link, PsmModel
-from .parameters import IdentifiedParameters, inertia_violation
-from .sim_config import SimConfig
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import Link, PsmModel
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.parameters import IdentifiedParameters, inertia_violation
+from dvrk_dart.sim.config import SimConfig
 
 #: mass given to links the identification leaves massless (tool links): 0.1 g.
 #: Their gravity moment at 0.6 m from the pitch axis is < 1e-6 N·m per link.

@@ -39,13 +39,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from .analysis import (
+from dvrk_dart.analysis.tables import (
     ALL_COMPONENTS,
     CARTESIAN_ORIENTATION_AXES,
     CARTESIAN_POSITION_AXES,
     CONFIG_FILE,
-    QUANTITY_DESCRIPTIONS,
     KIND_ERROR,
+    QUANTITY_DESCRIPTIONS,
     REGIME_ALL,
     REGIME_DESCRIPTIONS,
     STATUS_FAIL,
@@ -57,8 +57,8 @@ from .analysis import (
     load_published,
     write_analysis,
 )
-from .errors import DvrkDartError
-from .joints import JOINT_NAMES
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES
 
 REPORT_FILE = "index.html"
 ANALYSIS_DIR = "analysis"
@@ -448,7 +448,7 @@ def _swap_in(built: Path, out_dir: Path) -> None:
 
 def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None) -> Path:
     """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html."""
-    from .report_figures import build_figures
+    from dvrk_dart.analysis.figures import build_figures
 
     start = time.perf_counter()
     runs_dir, out_dir = Path(runs_dir), Path(out_dir)
@@ -495,7 +495,7 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.report", description="Build the validation report from a folder of runs.")
+    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.analysis.report", description="Build the validation report from a folder of runs.")
     parser.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap, config.json, metrics.json)")
     parser.add_argument("--out", required=True, help="report folder to (re)create")
     parser.add_argument("--extra", help="folder of extra sections (*.html fragments, images)")

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError
-from .joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.paths import MODELS_DIR
 
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
 
 GROUPS = ("yaw", "parallelogram", "insertion", "counterweight", "tool")

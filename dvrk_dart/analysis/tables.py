@@ -27,13 +27,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import DvrkDartError
-from .identified_model import INERTIAL_TERMS, TERMS
-from .io_utils import atomic_path, write_json_atomic, write_text_atomic
-from .joints import JOINT_NAMES, effort_unit, position_unit
-from .metrics import relative_error, rms
-from .reference_data import sha256_of
-from .scenarios import PIPELINES_DIR
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import atomic_path, write_json_atomic, write_text_atomic
+from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.metrics import relative_error, rms
+from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
+from dvrk_dart.paths import PIPELINES_DIR
 
 RUN_LOG = "run.mcap"
 CONFIG_FILE = "config.json"
@@ -67,8 +67,8 @@ MIN_REGIME_SAMPLES = 20
 
 
 def first_period_s() -> float:
-    from .reference_data import sample_rate_hz
-    from .signal import FIRST_PERIOD_SAMPLES
+    from dvrk_dart.io.reference_data import sample_rate_hz
+    from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES
 
     return FIRST_PERIOD_SAMPLES / sample_rate_hz()
 
@@ -164,7 +164,7 @@ def _mcap_versions(path: Path) -> dict:
     """The "versions" metadata record (read_mcap does not return it)."""
     from mcap.reader import make_reader
 
-    from .log_mcap import METADATA_VERSIONS
+    from dvrk_dart.io.mcap_log import METADATA_VERSIONS
 
     with open(path, "rb") as stream:
         for record in make_reader(stream).iter_metadata():
@@ -185,7 +185,7 @@ def _identity(name: str, config: dict) -> tuple[str, str, str]:
 
 
 def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
-    from .log_mcap import read_mcap
+    from dvrk_dart.io.mcap_log import read_mcap
 
     run_dir = Path(run_dir)
     record = read_mcap(run_dir / RUN_LOG)
@@ -195,7 +195,7 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
     scenario, mode, counterweight = _identity(record.name or run_dir.name, config)
     tracking = None
     if record.tool_pose is not None and record.tool_pose_ref is not None:
-        from .runner import tracking_errors
+        from dvrk_dart.runs.runner import tracking_errors
 
         tracking = tracking_errors(record)
     return LoadedRun(
@@ -227,8 +227,7 @@ def _load_and_measure(run_dir: str) -> tuple[LoadedRun | None, pd.DataFrame | No
 
 def simulated_terms_of(config: dict) -> tuple[str, ...]:
     """The model terms the simulation includes, from the run's logged config["sim"] flags."""
-    from .sim_config import simulated_terms
-    from .sim_config import SimConfig
+    from dvrk_dart.sim.config import SimConfig, simulated_terms
 
     sim = config.get("sim") or {}
     flags = {k: bool(sim.get(k, False)) for k in ("friction", "offsets", "spring", "motor_inertia")}
@@ -266,7 +265,7 @@ def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     """The long table of one run (columns METRICS_COLUMNS)."""
-    from .runner import TORQUE_TRANSIENT_S
+    from dvrk_dart.runs.runner import TORQUE_TRANSIENT_S
 
     record = loaded.record
     rows: list[tuple] = []

@@ -22,9 +22,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from .analysis import LoadedRun, simulated_terms_of  # noqa: E402
-from .identified_model import TERMS  # noqa: E402
-from .joints import JOINT_NAMES, effort_unit  # noqa: E402
+from dvrk_dart.analysis.tables import LoadedRun, simulated_terms_of  # noqa: E402
+from dvrk_dart.model.identified import TERMS  # noqa: E402
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit  # noqa: E402
 
 COLORS = {"sim": "tab:red", "model": "tab:blue", "measured": "tab:green", "reference": "black", "command": "tab:purple"}
 REFERENCE_STYLE = "--"

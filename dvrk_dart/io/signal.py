@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
-from .reference_data import MeasuredRun, sample_rate_hz
+from dvrk_dart.io.reference_data import MeasuredRun, sample_rate_hz
 
 FILTER_ORDER = 6
 CUTOFF_PARAMETER_HZ = 5.4  # upstream's fc, used as Wn = 2 pi fc h (not a true cut-off)
@@ -67,7 +67,7 @@ def process(run: MeasuredRun) -> ProcessedRun:
     """Filtered q, dq, ddq, tau of a measured run, trimmed like upstream."""
     h = 1.0 / sample_rate_hz()
     if len(run) <= 2 * CUT_SAMPLES + 1:
-        from .errors import DvrkDartError
+        from dvrk_dart.errors import DvrkDartError
 
         raise DvrkDartError(f"{run.path}: {len(run)} rows, more than {2 * CUT_SAMPLES + 1} needed for processing")
     q = zero_phase_lowpass(run.q, h)

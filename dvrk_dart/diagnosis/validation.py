@@ -21,16 +21,24 @@ from pathlib import Path
 
 import numpy as np
 
-from .context import Arm, load_arm
-from .effects import GravityTilt, JointArmature, JointFriction, JointOffset, JointStiffness, PointPayload, equivalent_payload_links
-from .errors import DvrkDartError
-from .io_utils import write_json_atomic, write_text_atomic
-from .joints import JOINT_NAMES, effort_unit
-from .metrics import rms
-from .reference_data import load_run, resolve_run
-from .scenarios import PIPELINES_DIR
-from .signal import FIRST_PERIOD_SAMPLES, process
-from .sim_config import SimConfig
+from dvrk_dart.diagnosis.effects import (
+    GravityTilt,
+    JointArmature,
+    JointFriction,
+    JointOffset,
+    JointStiffness,
+    PointPayload,
+    equivalent_payload_links,
+)
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.paths import PIPELINES_DIR
+from dvrk_dart.sim.config import SimConfig
 
 WITHHELD_FILE = PIPELINES_DIR / "withheld.toml"
 IMAGE_SUFFIXES = (".png", ".svg")
@@ -38,14 +46,14 @@ IMAGE_SUFFIXES = (".png", ".svg")
 
 def simulation_hook(arm: Arm):
     """The diagnosis's `simulate(config, processed) -> efforts`: the DART replay."""
-    from .replay import simulate_efforts
+    from dvrk_dart.runs.replay import simulate_efforts
 
     return partial(simulate_efforts, arm)
 
 
 def _sim_config_of(result: dict) -> SimConfig:
     """The SimConfig of the selected effects (diagnose() reports it as a dict)."""
-    from .sim_config import JointEffects, Payload
+    from dvrk_dart.sim.config import JointEffects, Payload
 
     raw = dict(result.get("sim_config") or {})
     if not raw:
@@ -60,9 +68,9 @@ def _sim_config_of(result: dict) -> SimConfig:
 def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path) -> None:
     """MCAP and Rerun logs of the replay before (identified inertia only) and
     after (with the selected effects as physics)."""
-    from .campaign import write_run_folder
-    from .replay import replay_processed
-    from .runner import rcm_position
+    from dvrk_dart.runs.campaign import write_run_folder
+    from dvrk_dart.runs.replay import replay_processed
+    from dvrk_dart.runs.runner import rcm_position
 
     processed = process(load_run(resolve_run(measured)))
     for label, config in (("before", SimConfig()), ("after", config_after)):
@@ -128,7 +136,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
 
 def run_diagnosis(arm: Arm, measured: str, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True) -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs."""
-    from .diagnosis import diagnose
+    from dvrk_dart.diagnosis.selection import diagnose
 
     start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -205,7 +213,7 @@ def validate_payload(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[di
 
 
 def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
-    from .diagnosis import payload_gravity_efforts_at_zero
+    from dvrk_dart.diagnosis.selection import payload_gravity_efforts_at_zero
 
     key = arm.model.link_by_name(payload["link"]).key
     return float(payload_gravity_efforts_at_zero(arm, key, payload["mass_kg"], np.asarray(payload["position_m"]))[1])
@@ -214,7 +222,7 @@ def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
 def hand_j2_gravity_at_zero(arm: Arm, spec: dict) -> float:
     """J2 gravity effort at q = 0 of the hand-measured payload: the known mass at
     the measured distance and height from the pitch shaft, on the pitch link."""
-    from .diagnosis import payload_gravity_efforts_at_zero
+    from dvrk_dart.diagnosis.selection import payload_gravity_efforts_at_zero
 
     pitch = arm.model.link_by_name("pitch")
     point_base = np.array([0.0, spec["check_horizontal_m"], spec["check_height_m"], 1.0])  # pitch plane at q = 0
@@ -241,7 +249,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[di
 
 
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    from .diagnosis import diagnose, synthesize_measurement
+    from dvrk_dart.diagnosis.selection import diagnose, synthesize_measurement
 
     simulate = simulation_hook(arm)
     segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)

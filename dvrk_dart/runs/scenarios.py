@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError
-from .joints import N_JOINTS
-from .sim_config import COUNTERWEIGHT_VARIANTS, MODES
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
+from dvrk_dart.paths import PIPELINES_DIR
 
-PIPELINES_DIR = Path(__file__).resolve().parent.parent / "pipelines"
 SCENARIOS_DIR = PIPELINES_DIR / "scenarios"
 
 _TOP_KEYS = {"name", "kind", "duration_s", "modes", "counterweights", "start_pose", "path", "measured", "description"}

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .errors import DvrkDartError
-from .joints import N_JOINTS
-from .model import DHFrame, Link, PsmModel, dh_transform
-from .parameters import IdentifiedParameters
-from .sim_config import INERTIAL_TERMS
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import DHFrame, Link, PsmModel, dh_transform
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.sim.config import INERTIAL_TERMS
 
 NON_INERTIAL_TERMS = ("friction", "offset", "spring", "motor_inertia")
 TERMS = INERTIAL_TERMS + NON_INERTIAL_TERMS

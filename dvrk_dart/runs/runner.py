@@ -14,15 +14,15 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .context import Arm
-from .controllers import CartesianTorqueController, KinematicController
-from .errors import DvrkDartError, SimulationDiverged
-from .identified_model import TERMS
-from .joints import N_JOINTS
-from .metrics import rms
-from .run_record import RunRecord
-from .scenarios import Scenario
-from .sim_config import SimConfig, simulated_terms
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.sim.controllers import CartesianTorqueController, KinematicController
+from dvrk_dart.errors import DvrkDartError, SimulationDiverged
+from dvrk_dart.model.identified import TERMS
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.metrics import rms
+from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.runs.scenarios import Scenario
+from dvrk_dart.sim.config import SimConfig, simulated_terms
 
 #: joints held by the velocity servo under torque control (the paper drives
 #: J1..J3 only; the identified tool links are massless)
@@ -50,7 +50,7 @@ def _rk4_step(f, t: float, q: np.ndarray, dt: float) -> np.ndarray:
 
 def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, duration_s: float | None = None) -> RunRecord:
     """The Cartesian tasks (rectilinear, spiral) in kinematic, velocity or torque mode."""
-    from .simulator import PsmSimulator
+    from dvrk_dart.sim.simulator import PsmSimulator
 
     duration = duration_s or scenario.duration_s
     dt = config.dt_s
@@ -186,7 +186,7 @@ def run(arm: Arm, scenario: Scenario, mode: str, counterweight: str, config: Sim
     config = replace(config or SimConfig(), counterweight=counterweight)
     start = time.perf_counter()
     if scenario.kind == "replay":
-        from .replay import replay
+        from dvrk_dart.runs.replay import replay
 
         try:
             record = replay(scenario.measured, mode=mode, config=config, duration_s=duration_s or scenario.duration_s)

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .errors import DvrkDartError
-from .io_utils import atomic_path
-from .joints import N_JOINTS, column_names
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import atomic_path
+from dvrk_dart.model.joints import N_JOINTS, column_names
+from dvrk_dart.paths import PROJECT_DIR
 
-PROJECT_DIR = Path(__file__).resolve().parent.parent
 MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
 SHARED_DIR = PROJECT_DIR.parent / "shared" / "reference_data" / "wpi"
 ENV_DATA_DIR = "DVRK_REFERENCE_DATA"

@@ -5,7 +5,8 @@ from __future__ import annotations
 import importlib.metadata
 import platform
 import subprocess
-from pathlib import Path
+
+from dvrk_dart.paths import PACKAGE_DIR
 
 
 def software_versions() -> dict[str, str]:
@@ -29,7 +30,7 @@ def software_versions() -> dict[str, str]:
 
 def _git_state() -> tuple[str, str]:
     """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's tree."""
-    here = Path(__file__).resolve().parent
+    here = PACKAGE_DIR
 
     def git(*args: str) -> str | None:
         try:

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .context import Arm
-from .joints import N_JOINTS
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import N_JOINTS
 
 #: the paper's gains
 KINEMATIC_GAIN = 15.0  # 1/s

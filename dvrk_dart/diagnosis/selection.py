@@ -48,8 +48,7 @@ import pandas as pd
 import scipy.linalg
 import scipy.optimize
 
-from .context import Arm, load_arm
-from .effects import (
+from dvrk_dart.diagnosis.effects import (
     Effect,
     PointPayload,
     TrajectoryFeatures,
@@ -59,13 +58,14 @@ from .effects import (
     not_simulated,
     unsimulated_effort,
 )
-from .errors import DvrkDartError
-from .io_utils import write_json_atomic
-from .joints import JOINT_NAMES, N_JOINTS, effort_unit
-from .metrics import rms
-from .reference_data import load_run, resolve_run, sample_rate_hz
-from .sim_config import SimConfig
-from .signal import ProcessedRun, process, zero_phase_lowpass
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
+from dvrk_dart.io.signal import ProcessedRun, process, zero_phase_lowpass
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
+from dvrk_dart.sim.config import SimConfig
 
 #: block length for the folds and the bootstrap (s): much longer than the
 #: filtered signals' correlation time (~0.05 s), short enough for ~28 blocks a run
@@ -245,7 +245,7 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io_utils import atomic_path
+    from dvrk_dart.io.atomic import atomic_path
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -710,7 +710,7 @@ def pitch_shaft_offsets(arm: Arm, position_base: np.ndarray) -> dict:
 
 def payload_gravity_efforts_at_zero(arm: Arm, link: int, mass_kg: float, position_m: np.ndarray) -> np.ndarray:
     """Static efforts (7) a point mass needs at q = 0: what gravity identifies."""
-    from .effects import point_mass_parameters
+    from dvrk_dart.diagnosis.effects import point_mass_parameters
 
     zero = np.zeros((1, N_JOINTS))
     features = TrajectoryFeatures(arm, zero, zero, zero, zero, sample_rate_hz())
@@ -903,7 +903,7 @@ def diagnose(
 
 
 def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool) -> None:
-    from .io_utils import write_text_atomic
+    from dvrk_dart.io.atomic import write_text_atomic
 
     out_dir.mkdir(parents=True, exist_ok=True)
     before_table = residual_regimes(run.state, run.residual).assign(stage="before")
@@ -946,7 +946,7 @@ def synthesize_measurement(
 
 # ----------------------------------------------------------------------- CLI
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.diagnosis", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.diagnosis.selection", description=__doc__.splitlines()[0])
     parser.add_argument("--measured", required=True, help="run name ('one', 'two', 'one-105g' ...) or CSV path")
     parser.add_argument("--baseline", help="same trajectory without the effect under study")
     parser.add_argument("--train", nargs="*", default=[], help="further training runs")

@@ -32,11 +32,11 @@ from functools import cached_property
 import numpy as np
 import pinocchio as pin
 
-from .context import Arm
-from .errors import DvrkDartError
-from .joints import JOINT_NAMES, N_JOINTS, PRISMATIC_JOINTS, effort_unit
-from .model import PsmModel, dh_transform
-from .sim_config import JointEffects, Payload, SimConfig, simulated_terms
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.description import PsmModel, dh_transform
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PRISMATIC_JOINTS, effort_unit
+from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
 
 #: a payload heavier than this is not a "forgotten" mass on a 1 m arm (kg)
 PAYLOAD_MAX_MASS_KG = 2.0
@@ -813,7 +813,9 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
 
 def _gravity_in_base(model: PsmModel, tilt: np.ndarray) -> np.ndarray:
     """Gravity in the base frame of a tilted base: the simulator's own definition."""
-    from .dart_builder import gravity_in_base  # imports dartpy: only when a tilt is simulated
+    from dvrk_dart.sim.builder import (
+        gravity_in_base,  # imports dartpy: only when a tilt is simulated
+    )
 
     return np.asarray(gravity_in_base(model, (float(tilt[0]), float(tilt[1]))), dtype=float)
 

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DvrkDartError
-from .model import PsmModel
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import PsmModel
+
 
 @dataclass(frozen=True)
 class LinkParameters:

@@ -17,13 +17,13 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import DvrkDartError
-from .io_utils import write_json_atomic, write_text_atomic
-from .reference_data import resolve_run, sha256_of
-from .scenarios import PIPELINES_DIR, load_scenario
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+from dvrk_dart.io.reference_data import resolve_run, sha256_of
+from dvrk_dart.runs.scenarios import load_scenario
+from dvrk_dart.paths import MODELS_DIR, PACKAGE_DIR, PIPELINES_DIR
 
 CAMPAIGN_FILE = PIPELINES_DIR / "campaign.toml"
-PACKAGE_DIR = Path(__file__).resolve().parent
 INPUTS_FILE = "inputs.sha256"
 
 
@@ -36,7 +36,7 @@ class RunSpec:
 
     @property
     def name(self) -> str:
-        from .runner import run_name
+        from dvrk_dart.runs.runner import run_name
 
         return run_name(self.scenario, self.mode, self.counterweight)
 
@@ -60,7 +60,7 @@ def load_campaign(path: Path = CAMPAIGN_FILE) -> list[RunSpec]:
 def code_fingerprint() -> str:
     """Checksum of the code and model data a run depends on."""
     digest = hashlib.sha256()
-    roots = [PACKAGE_DIR, PACKAGE_DIR.parent / "models"]
+    roots = [PACKAGE_DIR, MODELS_DIR]
     for root in roots:
         for path in sorted(p for p in root.rglob("*") if p.is_file() and "__pycache__" not in p.parts):
             digest.update(str(path.relative_to(root.parent)).encode())
@@ -78,10 +78,10 @@ def inputs_fingerprint(spec: RunSpec, code: str) -> str:
 
 def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> None:
     """config.json, metrics.json, run.mcap, run.rrd; inputs.sha256 last."""
-    from .context import load_arm
-    from .log_mcap import write_mcap
-    from .provenance import software_versions
-    from .log_rerun import write_rrd
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.mcap_log import write_mcap
+    from dvrk_dart.io.provenance import software_versions
+    from dvrk_dart.io.rerun_log import write_rrd
 
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / INPUTS_FILE).unlink(missing_ok=True)
@@ -95,8 +95,8 @@ def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> N
 
 def _execute(spec: RunSpec, out_dir: str, fingerprint: str) -> tuple[str, dict]:
     """Worker: run one spec and write its folder. Returns (name, metrics)."""
-    from .context import load_arm
-    from .runner import run
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.runner import run
 
     arm = load_arm()
     record = run(arm, load_scenario(spec.scenario), spec.mode, spec.counterweight, duration_s=spec.duration_s)

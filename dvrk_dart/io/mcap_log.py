@@ -43,11 +43,11 @@ from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import Writer
 
-from .errors import DvrkDartError
-from .io_utils import atomic_path as atomic_output
-from .joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
-from .provenance import software_versions
-from .run_record import RunRecord
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import atomic_path as atomic_output
+from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
+from dvrk_dart.runs.record import RunRecord
 
 FORMAT = "dvrk_dart.run/1"
 

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
-from .identified_model import IdentifiedModel
-from .model import DEFAULT_MODEL_FILE, PsmModel, load_model
-from .parameters import IdentifiedParameters, load_parameters
-from .reference_data import resolve
+from dvrk_dart.io.reference_data import resolve
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
+from dvrk_dart.model.identified import IdentifiedModel
+from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
 
 
 @dataclass(frozen=True)

@@ -75,12 +75,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dart_builder import DartPsm, build
-from .errors import DvrkDartError, SimulationDiverged
-from .joints import INSERTION, JOINT_NAMES, N_JOINTS
-from .model import PsmModel
-from .parameters import IdentifiedParameters
-from .sim_config import SimConfig
+from dvrk_dart.errors import DvrkDartError, SimulationDiverged
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.sim.builder import DartPsm, build
+from dvrk_dart.sim.config import SimConfig
 
 #: position feedback of the velocity servo when a reference position is given:
 #: the target velocity is dq_des + (q_des - q) / tau_pos. The measured dq is not
@@ -516,9 +516,9 @@ class PsmSimulator:
 def measure_realtime_factor(seconds: float = 5.0, config: SimConfig = SimConfig()) -> float:
     """Simulated seconds per wall second of the full arm (velocity servo on a
     smooth multi-joint motion), for the benchmark."""
-    from .model import load_model
-    from .parameters import load_parameters
-    from .reference_data import resolve
+    from dvrk_dart.io.reference_data import resolve
+    from dvrk_dart.model.description import load_model
+    from dvrk_dart.model.parameters import load_parameters
 
     model = load_model()
     params = load_parameters(resolve(model.default_parameters), model)
