@@ -71,23 +71,27 @@ REPLAY_SHORTHANDS = {
 }
 
 
-def _sim_config(args: argparse.Namespace):
-    from dvrk_dart.sim.config import SimConfig
+def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: str | None = None):
+    from dvrk_dart.runs.config import RunConfig
 
-    config = SimConfig(dt_s=args.dt)
-    if not (0.0 < args.dt <= 0.01):
-        raise DvrkDartError(f"--dt: {args.dt} s is outside (0, 0.01] s")
-    return config
+    if args.duration is not None and not (args.duration > 0.0):
+        raise DvrkDartError(f"--duration: {args.duration} s must be positive")
+    return RunConfig(scenario, mode, args.counterweight, args.dynamics, args.dt, args.duration, args.params, measured)
 
 
-def _write_and_summarise(record, out_dir: Path) -> int:
+def _run_and_write(config, out: Path | None) -> int:
+    from dvrk_dart.model.arm import load_arm
     from dvrk_dart.runs.campaign import write_run_folder
+    from dvrk_dart.runs.runner import run
 
-    write_run_folder(record, out_dir)
+    arm = load_arm(params_file=config.params_file)
+    record = run(config, arm)
+    out_dir = out or Path("out") / "runs" / record.name
+    write_run_folder(record, out_dir, arm.model)
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
-    for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position_m", "tracking_rms_orientation_rad"):
-        if key in metrics and metrics[key] is not None:
+    for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position", "tracking_rms_orientation"):
+        if metrics.get(key) is not None:
             print(f"  {key}: {np.array2string(np.asarray(metrics[key]), precision=5)}")
     if "error" in metrics:
         print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
@@ -97,41 +101,26 @@ def _write_and_summarise(record, out_dir: Path) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """One scenario variant -> its output folder."""
-    from dvrk_dart.model.arm import load_arm
-    from dvrk_dart.runs.runner import run
     from dvrk_dart.runs.scenarios import load_scenario
 
-    arm = load_arm(params_file=args.params)
-    scenario = load_scenario(args.scenario)
-    mode = args.mode or scenario.modes[0]
-    record = run(arm, scenario, mode, args.counterweight, _sim_config(args), duration_s=args.duration)
-    return _write_and_summarise(record, Path(args.out))
+    mode = args.mode or load_scenario(args.scenario).modes[0]
+    return _run_and_write(_run_config(args, args.scenario, mode), Path(args.out))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    """Velocity-mode replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    from dvrk_dart.model.arm import load_arm
-    from dvrk_dart.runs.runner import run
-    from dvrk_dart.runs.scenarios import Scenario, load_scenario
-    from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS
-
-    arm = load_arm(params_file=args.params)
+    """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
     if args.command in REPLAY_SHORTHANDS:
-        scenario = load_scenario(args.command)
-    elif args.measured is None:
-        raise DvrkDartError("--measured: a measured run is required")
+        config = _run_config(args, args.command, args.mode)
     else:
-        scenario = Scenario(f"replay-{Path(args.measured).stem}", "replay", ("velocity", "kinematic"), COUNTERWEIGHT_VARIANTS, measured=args.measured)
-    record = run(arm, scenario, args.mode, args.counterweight, _sim_config(args), duration_s=args.duration)
-    out = Path(args.out) if args.out else Path("out") / "runs" / record.name
-    return _write_and_summarise(record, out)
+        config = _run_config(args, "replay", args.mode, measured=args.measured)
+    return _run_and_write(config, Path(args.out) if args.out else None)
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """The main job: the campaign, its report and the sim-to-real diagnosis."""
     from dvrk_dart.pipeline import validate
 
-    return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force)
+    return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force, dynamics=args.dynamics)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -169,6 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
         p.add_argument("--dt", type=float, default=1e-3, help="simulation step (s)")
         p.add_argument("--duration", type=float, default=None, help="simulate only the first seconds")
+        p.add_argument("--dynamics", default="inertial", metavar="inertial|identified|DIAGNOSIS.json",
+                       help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
+                            "or the simulation a diagnosis selected")
         _add_arm_options(p)
 
     p = sub.add_parser("run", help="run one scenario variant")
@@ -180,8 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     for name in ("replay", *REPLAY_SHORTHANDS):
         p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
-        p.add_argument("--measured", required=name == "replay", help="measured run: path, or one|two|one-no-weight|one-105g")
-        p.add_argument("--mode", default="velocity", choices=("velocity", "kinematic"))
+        if name == "replay":
+            p.add_argument("--measured", required=True, help="measured run: path, or one|two|one-no-weight|one-105g")
+        p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
         sim_options(p)
         p.set_defaults(func=cmd_replay)
@@ -191,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", default="report", help="report folder")
     p.add_argument("--jobs", type=int, default=2, help="parallel worker processes")
     p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
+    p.add_argument("--dynamics", default="inertial", metavar="inertial|identified|DIAGNOSIS.json",
+                   help="the simulated arm of the campaign's runs that do not name one (default: the paper's)")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")

@@ -15,3 +15,7 @@ def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> 
     """||actual - reference|| / ||reference|| per joint (the upstream metric)."""
     actual, reference = np.asarray(actual, dtype=float), np.asarray(reference, dtype=float)
     return np.linalg.norm(actual - reference, axis=axis) / np.linalg.norm(reference, axis=axis)
+
+
+#: torque-mode tracking is judged after the closed loop's initial transient (s)
+TORQUE_TRANSIENT_S = 1.0

@@ -10,22 +10,36 @@ from pathlib import Path
 import pandas as pd
 
 from dvrk_dart.io.atomic import write_json_atomic
-from dvrk_dart.runs.campaign import load_campaign, run_campaign
+from dvrk_dart.runs.campaign import load_campaign, needs_diagnosis, run_campaign
 
 
-def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False) -> int:
-    runs_dir = out_dir / "runs"
-    specs = load_campaign()
-    print(f"campaign: {len(specs)} runs -> {runs_dir} ({jobs} workers)")
-    summary = run_campaign(specs, runs_dir, jobs=jobs, force=force)
-    write_json_atomic(out_dir / "campaign.json", summary)
-    print(f"campaign: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
+def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str) -> dict:
+    print(f"{label}: {len(configs)} runs -> {runs_dir} ({jobs} workers)")
+    summary = run_campaign(configs, runs_dir, jobs=jobs, force=force)
+    print(f"{label}: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
+    return summary
+
+
+def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str = "inertial") -> int:
+    """The campaign (its entries without `dynamics` simulate the `dynamics` arm),
+    the diagnosis validation, the runs that simulate what the diagnosis found,
+    and the report."""
+    runs_dir = out_dir / "runs"
+    diagnosis_dir = out_dir / "diagnosis"
+    configs = load_campaign(diagnosis_dir=diagnosis_dir, default_dynamics=dynamics)
+    summary = _campaign([c for c in configs if not needs_diagnosis(c)], runs_dir, jobs, force, "campaign")
 
     from dvrk_dart.analysis.report import build_report
     from dvrk_dart.diagnosis.validation import validation_section
 
-    section = validation_section(out_dir / "diagnosis")
+    section = validation_section(diagnosis_dir)
+    after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs")
+    summary["ran"] += after["ran"]
+    summary["skipped_up_to_date"] += after["skipped_up_to_date"]
+    summary["failures"].update(after["failures"])
+    summary["runs"] += after["runs"]
+    write_json_atomic(out_dir / "campaign.json", summary)
     index = build_report(runs_dir, report_dir, extra_sections=[section])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")

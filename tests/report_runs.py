@@ -107,8 +107,8 @@ def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
     """Short runs of the real simulator: kinematic, velocity with and without the
     counterweight, and a replay of the measured run 'two'."""
     from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.runner import run
-    from dvrk_dart.runs.scenarios import load_scenario
 
     arm = load_arm()
     names = []
@@ -118,7 +118,7 @@ def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
         ("rectilinear", "velocity", "off"),
         ("replay-two", "velocity", "on"),
     ):
-        record = run(arm, load_scenario(scenario), mode, counterweight, duration_s=duration_s)
+        record = run(RunConfig(scenario, mode, counterweight, duration_s=duration_s), arm)
         write_run(record, runs_dir)
         names.append(record.name)
     return names

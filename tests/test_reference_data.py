@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from dvrk_dart.io import reference_data
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io import reference_data
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
 
 

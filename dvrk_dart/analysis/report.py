@@ -201,7 +201,7 @@ def verdict_section(analysis: Analysis) -> str:
     ]
     if analysis.failures:
         lines.append("<p><strong>Unreadable run folders:</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in analysis.failures.items()) + "</ul>")
-    errors = {name: (r.metrics.get("error") or r.metrics.get("diverged")) for name, r in analysis.runs.items()}
+    errors = {name: r.metrics.get("error") for name, r in analysis.runs.items()}
     errors = {k: v for k, v in errors.items() if v}
     if errors:
         lines.append("<p><strong>Runs that stopped early (diverged):</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in errors.items()) + "</ul>")

@@ -30,7 +30,7 @@ import pandas as pd
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path, write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import sha256_of
-from dvrk_dart.metrics import relative_error, rms
+from dvrk_dart.metrics import TORQUE_TRANSIENT_S, relative_error, rms
 from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
 from dvrk_dart.paths import PIPELINES_DIR
@@ -102,6 +102,8 @@ QUANTITY_DESCRIPTIONS = {
     "tracking_rms_position": "RMS of the tool-tip position error (reference - actual) per base axis",
     "tracking_rms_orientation": "RMS of the tool orientation error (rotation vector of reference vs actual) per base axis",
     "tracking_rms_position_after_1s": "torque mode: RMS of the tool-tip position error after the initial transient (t >= 1 s)",
+    "rms_sim_vs_measured_excess": "RMS(simulated - measured) minus the full identified model's RMS(model - measured) at the measured states: "
+    "below 0 when the simulation is closer to the real arm than the identified model",
     "closure_residual_max": "maximum loop-closure residual over the run (parallelograms, counterweight)",
     "samples": "number of samples the joint's values in that regime are computed on",
 }
@@ -121,8 +123,9 @@ class LoadedRun:
     scenario: str
     mode: str
     counterweight: str
+    dynamics: str = "inertial"  # the simulated arm (runs.config.RunConfig.dynamics label)
     #: per-sample (position m, orientation rad) tracking errors of a Cartesian task,
-    #: computed once (runner.tracking_errors) for the tables and the figures
+    #: computed once (RunRecord.tracking_errors) for the tables and the figures
     tracking: tuple[np.ndarray, np.ndarray] | None = None
 
 
@@ -195,9 +198,7 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
     scenario, mode, counterweight = _identity(record.name or run_dir.name, config)
     tracking = None
     if record.tool_pose is not None and record.tool_pose_ref is not None:
-        from dvrk_dart.runs.runner import tracking_errors
-
-        tracking = tracking_errors(record)
+        tracking = record.tracking_errors()
     return LoadedRun(
         name=record.name or run_dir.name,
         path=run_dir,
@@ -209,6 +210,7 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
         scenario=scenario,
         mode=mode,
         counterweight=counterweight,
+        dynamics=str(config.get("dynamics", "inertial")),
         tracking=tracking,
     )
 
@@ -265,8 +267,6 @@ def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     """The long table of one run (columns METRICS_COLUMNS)."""
-    from dvrk_dart.runs.runner import TORQUE_TRANSIENT_S
-
     record = loaded.record
     rows: list[tuple] = []
 
@@ -302,8 +302,12 @@ def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
 
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
+        sim_vs_measured = {row[0]: row[3] for row in rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}
         for joint, value in zip(JOINT_NAMES, at_measured):
-            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, math.nan if value is None else value, effort_unit(joint), METRICS_FILE)
+            value = math.nan if value is None else value
+            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, effort_unit(joint), METRICS_FILE)
+            if joint in sim_vs_measured:
+                add(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, effort_unit(joint))
 
     if loaded.tracking is not None:
         position, orientation = loaded.tracking
@@ -485,7 +489,7 @@ def run_summary(loaded: LoadedRun) -> dict:
         "counterweight": loaded.counterweight,
         "samples": len(loaded.record),
         "duration_s": loaded.config.get("duration_s", m.get("duration_s")),
-        "error": m.get("error") or m.get("diverged"),
+        "error": m.get("error"),
         "checksums_sha256": loaded.checksums,
         "inputs_sha256": loaded.config.get("inputs_sha256"),
         "git_revision": loaded.versions.get("git_revision"),

@@ -79,7 +79,7 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path)
         record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
                          "counterweight": config.counterweight, "sim": config.to_dict()}
         record.markers.setdefault("rcm", rcm_position(arm))
-        write_run_folder(record, out_dir / f"replay_{label}")
+        write_run_folder(record, out_dir / f"replay_{label}", arm.model)
 
 
 #: the report shows the residual figures of the arm joints; diagnosis.html has all

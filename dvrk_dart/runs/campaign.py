@@ -14,12 +14,12 @@ import json
 import time
 import tomllib
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.reference_data import resolve_run, sha256_of
+from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.runs.config import RunConfig, run_name
 from dvrk_dart.runs.scenarios import load_scenario
 from dvrk_dart.paths import MODELS_DIR, PACKAGE_DIR, PIPELINES_DIR
 
@@ -27,34 +27,44 @@ CAMPAIGN_FILE = PIPELINES_DIR / "campaign.toml"
 INPUTS_FILE = "inputs.sha256"
 
 
-@dataclass(frozen=True)
-class RunSpec:
-    scenario: str
-    mode: str
-    counterweight: str
-    duration_s: float | None = None
-
-    @property
-    def name(self) -> str:
-        from dvrk_dart.runs.runner import run_name
-
-        return run_name(self.scenario, self.mode, self.counterweight)
+#: a campaign `dynamics` entry "@FOLDER" means the diagnosis.json that the
+#: validation's diagnosis stage writes in OUT/diagnosis/FOLDER: such runs wait for it
+DIAGNOSIS_PREFIX = "@"
 
 
-def load_campaign(path: Path = CAMPAIGN_FILE) -> list[RunSpec]:
+def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None, default_dynamics: str = "inertial") -> list[RunConfig]:
+    """The campaign's runs; entries without `dynamics` simulate `default_dynamics`;
+    "@FOLDER" dynamics resolve under diagnosis_dir (left out when it is None)."""
     try:
-        raw = tomllib.loads(Path(path).read_text())
+        raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise DvrkDartError(f"{path}: campaign file not found") from None
-    specs = []
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
+    configs = []
     for entry in raw.get("runs", []):
-        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s"}
+        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s", "dynamics"}
         if unknown:
             raise DvrkDartError(f"{path}: unknown key(s) {', '.join(sorted(unknown))} in a [[runs]] entry")
         scenario = load_scenario(entry["scenario"])
-        for cw in entry.get("counterweights", ["on"]):
-            specs.append(RunSpec(scenario.name, entry["mode"], cw, entry.get("duration_s")))
-    return specs
+        for dynamics in entry.get("dynamics", [default_dynamics]):
+            if dynamics.startswith(DIAGNOSIS_PREFIX):
+                if diagnosis_dir is None:
+                    continue
+                dynamics = str(diagnosis_dir / dynamics[len(DIAGNOSIS_PREFIX):] / "diagnosis.json")
+            for cw in entry.get("counterweights", ["on"]):
+                configs.append(RunConfig(scenario.name, entry["mode"], cw, dynamics, duration_s=entry.get("duration_s")))
+    return configs
+
+
+def needs_diagnosis(config: RunConfig) -> bool:
+    return config.dynamics.endswith(".json")
+
+
+def config_name(config: RunConfig) -> str:
+    from dvrk_dart.runs.runner import scenario_of
+
+    return run_name(scenario_of(config).name, config.mode, config.counterweight, config.dynamics_label)
 
 
 def code_fingerprint() -> str:
@@ -68,17 +78,20 @@ def code_fingerprint() -> str:
     return digest.hexdigest()
 
 
-def inputs_fingerprint(spec: RunSpec, code: str) -> str:
-    scenario = load_scenario(spec.scenario)
-    parts = [code, scenario.source.read_text(), json.dumps(spec.__dict__, sort_keys=True)]
-    if scenario.measured:
-        parts.append(sha256_of(resolve_run(scenario.measured)))
+def inputs_fingerprint(config: RunConfig, code: str) -> str:
+    from dvrk_dart.runs.runner import input_checksums, scenario_of
+
+    scenario = scenario_of(config)
+    parts = [code, json.dumps(scenario.to_dict(), sort_keys=True), json.dumps(config.to_dict(), sort_keys=True)]
+    parts += [f"{k}={v}" for k, v in sorted(input_checksums(config, scenario).items())]
+    if config.params_file:
+        parts.append(sha256_of(Path(config.params_file)))
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
 
 
-def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> None:
-    """config.json, metrics.json, run.mcap, run.rrd; inputs.sha256 last."""
-    from dvrk_dart.model.arm import load_arm
+def write_run_folder(record, out_dir: Path, model, fingerprint: str | None = None) -> None:
+    """config.json, metrics.json, run.mcap, run.rrd (drawn with `model`, the
+    run's own arm description); inputs.sha256 last."""
     from dvrk_dart.io.mcap_log import write_mcap
     from dvrk_dart.io.provenance import software_versions
     from dvrk_dart.io.rerun_log import write_rrd
@@ -88,36 +101,37 @@ def write_run_folder(record, out_dir: Path, fingerprint: str | None = None) -> N
     write_json_atomic(out_dir / "config.json", {"run": record.name, **record.config, "versions": software_versions(), "inputs_sha256": fingerprint})
     write_json_atomic(out_dir / "metrics.json", record.metrics)
     write_mcap(record, out_dir / "run.mcap")
-    write_rrd(record, out_dir / "run.rrd", model=load_arm().model)
+    write_rrd(record, out_dir / "run.rrd", model=model)
     if fingerprint:
         write_text_atomic(out_dir / INPUTS_FILE, fingerprint + "\n")
 
 
-def _execute(spec: RunSpec, out_dir: str, fingerprint: str) -> tuple[str, dict]:
-    """Worker: run one spec and write its folder. Returns (name, metrics)."""
+def _execute(config: RunConfig, out_dir: str, fingerprint: str) -> tuple[str, dict]:
+    """Worker: run one config and write its folder. Returns (name, metrics)."""
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.runs.runner import run
 
-    arm = load_arm()
-    record = run(arm, load_scenario(spec.scenario), spec.mode, spec.counterweight, duration_s=spec.duration_s)
-    write_run_folder(record, Path(out_dir) / spec.name, fingerprint)
+    arm = load_arm(params_file=config.params_file)
+    record = run(config, arm)
+    write_run_folder(record, Path(out_dir) / record.name, arm.model, fingerprint)
     if "error" in record.metrics:
         raise DvrkDartError(record.metrics["error"])
-    return spec.name, record.metrics
+    return record.name, record.metrics
 
 
-def run_campaign(specs: list[RunSpec], runs_dir: Path, jobs: int = 2, force: bool = False) -> dict:
+def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: bool = False) -> dict:
     """Run every spec not already up to date; returns a summary with failures."""
     from tqdm import tqdm
 
     start = time.perf_counter()
     code = code_fingerprint()
     todo, skipped = [], []
+    names = {spec: config_name(spec) for spec in specs}
     for spec in specs:
         fingerprint = inputs_fingerprint(spec, code)
-        marker = runs_dir / spec.name / INPUTS_FILE
+        marker = runs_dir / names[spec] / INPUTS_FILE
         if not force and marker.is_file() and marker.read_text().strip() == fingerprint:
-            skipped.append(spec.name)
+            skipped.append(names[spec])
         else:
             todo.append((spec, fingerprint))
     failures: dict[str, str] = {}
@@ -129,12 +143,12 @@ def run_campaign(specs: list[RunSpec], runs_dir: Path, jobs: int = 2, force: boo
                 spec = futures[future]
                 try:
                     future.result()
-                    done.append(spec.name)
+                    done.append(names[spec])
                 except Exception as exc:  # a failed run must not stop the campaign
-                    failures[spec.name] = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                    failures[names[spec]] = f"{type(exc).__name__}: {exc}".splitlines()[0]
                 bar.update()
     summary = {
-        "runs": [s.name for s in specs],
+        "runs": [names[s] for s in specs],
         "ran": sorted(done),
         "skipped_up_to_date": sorted(skipped),
         "failures": failures,
@@ -142,6 +156,3 @@ def run_campaign(specs: list[RunSpec], runs_dir: Path, jobs: int = 2, force: boo
         "jobs": jobs,
     }
     return summary
-
-
-

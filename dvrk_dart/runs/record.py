@@ -10,6 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def pose_vector(T: np.ndarray) -> np.ndarray:
+    """4x4 -> position (m) + quaternion (x, y, z, w)."""
+    return np.r_[T[:3, 3], Rotation.from_matrix(T[:3, :3]).as_quat()]
 
 
 @dataclass
@@ -43,3 +49,10 @@ class RunRecord:
         for name in names:
             out = out + self.effort_model[name]
         return out
+
+    def tracking_errors(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-sample position (m) and orientation (rad, rotation vector of
+        R_ref R^T) errors, reference - actual, of a Cartesian task."""
+        position = self.tool_pose_ref[:, :3] - self.tool_pose[:, :3]
+        orientation = (Rotation.from_quat(self.tool_pose_ref[:, 3:]) * Rotation.from_quat(self.tool_pose[:, 3:]).inv()).as_rotvec()
+        return position, orientation

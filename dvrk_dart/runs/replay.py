@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.spatial.transform import Rotation
 
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.io.atomic import write_text_atomic
@@ -26,6 +25,7 @@ from dvrk_dart.runs.record import RunRecord
 from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.sim.config import MODES, SimConfig, simulated_terms
 from dvrk_dart.sim.simulator import PsmSimulator
+from dvrk_dart.runs.loop import LoopLog, simulate
 
 #: torque-mode replay: bandwidth of the PD that stabilises the model feedforward
 #: (gains scaled by the model's joint-space inertia, critically damped)
@@ -49,7 +49,7 @@ def replay(
     """Replay a measured run ('two', a manifest name or a CSV path).
 
     On divergence, raises SimulationDiverged whose `record` attribute holds the
-    RunRecord of what was logged so far (metrics["diverged"] = the message)."""
+    RunRecord of what was logged so far (metrics["error"] = the message)."""
     if mode not in MODES:
         raise DvrkDartError(f"mode must be one of {', '.join(MODES)}, not '{mode}'")
     if log_every < 1:
@@ -88,78 +88,62 @@ def replay_processed(
     dq_ref = CubicSpline(t_meas, processed.dq)
     sim = PsmSimulator(model, params, config)
     sim.reset(q_ref(0.0), dq_ref(0.0))
-    if mode == "torque":
-        t_grid = np.arange(steps) * dt
-        feedforward = identified.predict(q_ref(t_grid), dq_ref(t_grid), dq_ref(t_grid, 1), simulated_terms(config))
-        inertia = np.diag(identified.mass_matrix(q_ref(0.0)) + identified.motor_inertia_matrix() * config.motor_inertia)
-        omega = 2.0 * np.pi * TORQUE_REPLAY_BANDWIDTH_HZ
-        kp, kd = inertia * omega**2, 2.0 * inertia * omega
-
     # references on the simulation grid, evaluated once (t_k = k dt, k = 0..steps)
     grid = np.arange(steps + 1) * dt
-    q_grid, dq_grid = q_ref(grid), dq_ref(grid)
-    log: dict[str, list] = {k: [] for k in ("t", "q", "dq", "ddq", "effort", "tool", "closure", "passive", "cw")}
-    bodies: dict[str, list] = {}
+    driver = ReplayDriver(mode, q_ref(grid), dq_ref(grid), dt)
+    if mode == "torque":
+        driver.feedforward = identified.predict(driver.q_grid[:-1], driver.dq_grid[:-1], dq_ref(grid[:-1], 1), simulated_terms(config))
+        inertia = np.diag(identified.mass_matrix(q_ref(0.0)) + identified.motor_inertia_matrix() * config.motor_inertia)
+        omega = 2.0 * np.pi * TORQUE_REPLAY_BANDWIDTH_HZ
+        driver.kp, driver.kd = inertia * omega**2, 2.0 * inertia * omega
     wall_start = time.perf_counter()
-    diverged = None
-    steps_done = 0
-    try:
-        for k in range(steps):
-            logging = k % log_every == 0
-            if logging:  # the state at the start of the step: where the model is evaluated
-                q_k, dq_k = sim.q, sim.dq
-                log["t"].append(k * dt)
-                log["q"].append(q_k)
-                log["dq"].append(dq_k)
-                pose = sim.tool_tip_pose()
-                log["tool"].append(np.concatenate([pose[:3, 3], Rotation.from_matrix(pose[:3, :3]).as_quat()]))
-                log["closure"].append(sim.closure_residual_m())
-                log["passive"].append(max((abs(e) for n, e in sim.passive_joint_errors().items() if n != "counterweight"), default=0.0))
-                cw = sim.counterweight_error_m()
-                log["cw"].append(np.nan if cw is None else cw)
-                for name, xyz in sim.body_positions().items():
-                    bodies.setdefault(name, []).append(xyz)
-            if mode == "velocity":
-                sim.step_velocity(dq_grid[k + 1], q_grid[k + 1])
-            elif mode == "torque":
-                sim.step_torque(feedforward[k] + kp * (q_grid[k] - sim.q) + kd * (dq_grid[k] - sim.dq))
-            else:
-                dq_before = sim.dq
-                sim.set_kinematic(q_grid[k + 1], dq_grid[k + 1])
-                sim.last_ddq = (sim.dq - dq_before) / dt
-            steps_done = k + 1
-            if logging:
-                log["ddq"].append(sim.last_ddq.copy())
-                log["effort"].append(sim.last_effort.copy())
-    except SimulationDiverged as exc:
-        diverged = exc
-        if len(log["ddq"]) < len(log["t"]):  # the diverged step's start state has no result
-            for key in ("t", "q", "dq", "tool", "closure", "passive", "cw"):
-                log[key].pop()
-            for values in bodies.values():
-                values.pop()
+    log = simulate(sim, driver, steps, log_every)
     wall = time.perf_counter() - wall_start
 
-    record = _record(measured, mode, config, log, bodies, identified, processed, t_meas, steps_done, duration, wall, diverged)
-    if diverged is not None:
-        diverged.record = record
-        raise diverged
+    record = _record(measured, mode, config, log, identified, processed, t_meas, duration, wall)
+    if log.error is not None:
+        log.error.record = record
+        raise log.error
     return record
 
 
-def _record(measured, mode, config, log, bodies, identified, processed, t_meas, steps, duration, wall, diverged) -> RunRecord:
-    t = np.array(log["t"])
+class ReplayDriver:
+    """Velocity servo to the measured velocities (with position feedback),
+    torque feedforward of the model with a PD, or imposed positions."""
+
+    def __init__(self, mode: str, q_grid: np.ndarray, dq_grid: np.ndarray, dt: float):
+        self.mode, self.q_grid, self.dq_grid, self.dt = mode, q_grid, dq_grid, dt
+        self.feedforward = self.kp = self.kd = None
+
+    def impose(self, k: int, sim) -> None:
+        pass
+
+    def advance(self, k: int, sim) -> tuple[np.ndarray, np.ndarray]:
+        if self.mode == "velocity":
+            sim.step_velocity(self.dq_grid[k + 1], self.q_grid[k + 1])
+            return sim.last_ddq, sim.last_effort
+        if self.mode == "torque":
+            sim.step_torque(self.feedforward[k] + self.kp * (self.q_grid[k] - sim.q) + self.kd * (self.dq_grid[k] - sim.dq))
+            return sim.last_ddq, sim.last_effort
+        dq_before = sim.dq
+        sim.set_kinematic(self.q_grid[k + 1], self.dq_grid[k + 1])
+        return (sim.dq - dq_before) / self.dt, sim.last_effort
+
+
+def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas, duration, wall) -> RunRecord:
+    dt = config.dt_s
+    t = np.asarray(log.steps, dtype=float) * dt
     shape = (len(t), 7)
-    q, dq, ddq, effort = (np.array(log[k]).reshape(shape) for k in ("q", "dq", "ddq", "effort"))
+    q, dq, ddq, effort = (log.array(k) for k in ("q", "dq", "ddq", "effort"))
     model_terms = identified.efforts(q, dq, ddq, TERMS).terms if len(t) else {name: np.zeros(shape) for name in TERMS}
+
     # measured values at the logged times (exact samples when logging at the data's 200 Hz)
     def at_logged_times(x: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(t, t_meas, x[:, j]) for j in range(x.shape[1])]) if len(t) else np.zeros(shape)
 
     tau_meas, q_meas, dq_meas = (at_logged_times(x) for x in (processed.tau, processed.q, processed.dq))
-    name = f"replay-{_scenario_name(measured)}_{mode}_cw-{config.counterweight}"
     record = RunRecord(
-        name=name,
+        name=f"replay-{_scenario_name(measured)}_{mode}_cw-{config.counterweight}",
         config={**config.to_dict(), "mode": mode, "measured": str(measured)},
         t=t,
         q=q,
@@ -170,33 +154,34 @@ def _record(measured, mode, config, log, bodies, identified, processed, t_meas, 
         q_measured=q_meas,
         dq_measured=dq_meas,
         effort_measured=tau_meas,
-        tool_pose=np.array(log["tool"]).reshape(len(t), 7),
-        closure_residual_m=np.array(log["closure"]),
-        body_positions={k: np.array(v) for k, v in bodies.items()},
+        tool_pose=log.tool_pose(),
+        closure_residual_m=np.asarray(log.closure, dtype=float),
+        body_positions=log.body_positions(),
     )
     in_window = t_meas <= duration + 1e-9
     full_model = identified.predict(processed.q[in_window], processed.dq[in_window], processed.ddq[in_window], TERMS)
     sim_terms = simulated_terms(config)
+    dynamic = mode != "kinematic" and len(t) > 0
     metrics = {
         "scenario": _scenario_name(measured),
         "mode": mode,
         "counterweight": config.counterweight,
-        "dt_s": config.dt_s,
-        "duration_s": steps * config.dt_s,
-        "steps": steps,
+        "dt_s": dt,
+        "duration_s": log.steps_done * dt,
+        "steps": log.steps_done,
         "wall_time_s": wall,
-        "realtime_factor": (steps * config.dt_s / wall) if wall > 0 else None,
+        "realtime_factor": (log.steps_done * dt / wall) if wall > 0 else None,
         "model_terms_compared": list(sim_terms),
-        "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if mode != "kinematic" else None,
-        "rms_sim_vs_measured": rms(effort - tau_meas).tolist() if mode != "kinematic" else None,
+        "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if dynamic else None,
+        "rms_sim_vs_measured": rms(effort - tau_meas).tolist() if dynamic else None,
         "rms_model_vs_measured": rms(full_model - processed.tau[in_window]).tolist(),
-        "rms_q_sim_vs_measured": rms(q - q_meas).tolist(),
+        "rms_q_sim_vs_measured": rms(q - q_meas).tolist() if len(t) else None,
         "closure_residual_max_m": float(np.max(record.closure_residual_m, initial=0.0)),
-        "passive_joint_error_max_rad": float(np.max(log["passive"], initial=0.0)),
-        "counterweight_error_max_m": float(np.nanmax(np.abs(log["cw"]), initial=0.0)) if len(t) else 0.0,
+        "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
+        "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(t) else 0.0,
     }
-    if diverged is not None:
-        metrics["diverged"] = str(diverged)
+    if log.error is not None:
+        metrics["error"] = str(log.error)
     record.metrics = metrics
     return record
 

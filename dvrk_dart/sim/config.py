@@ -56,6 +56,16 @@ class SimConfig:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, raw: dict) -> "SimConfig":
+        """The inverse of to_dict (JSON lists back to tuples and dataclasses)."""
+        raw = dict(raw)
+        raw["extra"] = JointEffects(**{k: tuple(v) for k, v in raw.get("extra", {}).items()})
+        raw["payloads"] = tuple(Payload(p["link"], p["mass_kg"], tuple(p["position_m"])) for p in raw.get("payloads", []))
+        raw["gravity_tilt_rad"] = tuple(raw.get("gravity_tilt_rad", cls.gravity_tilt_rad))
+        raw["counterweight_pid"] = tuple(raw.get("counterweight_pid", cls.counterweight_pid))
+        return cls(**raw)
+
 
 def simulated_terms(config: SimConfig) -> tuple[str, ...]:
     """The identified-model terms a simulation with this config includes:
