@@ -19,3 +19,6 @@ def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> 
 
 #: torque-mode tracking is judged after the closed loop's initial transient (s)
 TORQUE_TRANSIENT_S = 1.0
+
+#: the motion regime of whole-run values (the analysis's other regimes select samples)
+REGIME_ALL = "all"

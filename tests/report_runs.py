@@ -105,20 +105,22 @@ def synthetic_velocity_record(friction: bool = False) -> RunRecord:
 
 def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
     """Short runs of the real simulator: kinematic, velocity with and without the
-    counterweight, and a replay of the measured run 'two'."""
+    counterweight, and replays of the measured run 'two' with the paper's arm
+    and with every identified term simulated."""
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.runner import run
 
     arm = load_arm()
     names = []
-    for scenario, mode, counterweight in (
-        ("rectilinear", "kinematic", "on"),
-        ("rectilinear", "velocity", "on"),
-        ("rectilinear", "velocity", "off"),
-        ("replay-two", "velocity", "on"),
+    for scenario, mode, counterweight, dynamics in (
+        ("rectilinear", "kinematic", "on", "inertial"),
+        ("rectilinear", "velocity", "on", "inertial"),
+        ("rectilinear", "velocity", "off", "inertial"),
+        ("replay-two", "velocity", "on", "inertial"),
+        ("replay-two", "velocity", "on", "identified"),
     ):
-        record = run(RunConfig(scenario, mode, counterweight, duration_s=duration_s), arm)
+        record = run(RunConfig(scenario, mode, counterweight, dynamics, duration_s=duration_s), arm)
         write_run(record, runs_dir)
         names.append(record.name)
     return names

@@ -303,3 +303,25 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
 def _copy(source: Path, target: Path) -> Path:
     shutil.copyfile(source, target)
     return target
+
+
+def test_no_ratio_in_the_report_compares_with_round_off(report):
+    """Ratios above MAX_MEANINGFUL_RATIO compare a physical error with round-off: none is shown."""
+    comparison = pd.read_csv(report.parent / "analysis" / "comparison.csv")
+    assert (comparison.ratio_published_over_ours.dropna() <= an.MAX_MEANINGFUL_RATIO).all()
+    ratios = [float(c["attrs"]["data-value"]) for c in parse(report).cells if c["attrs"].get("data-field") == "ratio_published_over_ours"]
+    assert ratios and max(r for r in ratios if math.isfinite(r)) <= an.MAX_MEANINGFUL_RATIO
+    # the paper's dynamic-engine tracking is compared with our velocity mode; the kinematic run is not ratioed
+    tracking = comparison[comparison.published == "paper-rectilinear-position"]
+    assert set(tracking[tracking.goal == "smaller"].run) == {"rectilinear_velocity_cw-on"}
+    assert tracking[tracking.run == "rectilinear_kinematic_cw-on"].ratio_published_over_ours.isna().all()
+    # reproducing the published model errors is an equality goal: the difference is shown, not a ratio
+    reproduction = comparison[(comparison.published == "wang2019-relative-error-two") & (comparison.goal == "equal")]
+    assert len(reproduction) == 7 and reproduction.ratio_published_over_ours.isna().all() and reproduction.reproduced_to.notna().all()
+
+
+def test_report_shows_the_realistic_arm_per_joint(report):
+    text = report.read_text()
+    assert "id='realistic-arm'" in text
+    cells = [c for c in parse(report).cells if c["attrs"].get("data-quantity") == "rms_sim_vs_measured"]
+    assert {"replay-two_velocity_cw-on", "replay-two_velocity_cw-on_identified"} <= {c["attrs"]["data-run"] for c in cells}

@@ -1,7 +1,8 @@
 """The report as a reader sees it: opened in headless Chromium, every image
 loads, nothing is written to the console, and the page renders.
 
-Skipped when Chromium is absent (Debian: `apt-get install chromium`).
+Skipped when Chromium is absent (Debian: `apt-get install chromium`), except
+in CI (CI=true), where .ci/run installs it and its absence fails the test.
 `make check-report` runs this file alone.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import html
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -24,6 +26,10 @@ from dvrk_dart.analysis.report import REPORT_FILE, build_report
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 CHROMIUM = next((found for name in CHROMIUM_NAMES if (found := shutil.which(name))), None)
+#: in CI (CI=true) the browser is installed by .ci/run: its absence is a failure, not a skip
+REQUIRED = os.environ.get("CI", "").lower() == "true"
+if CHROMIUM is None and REQUIRED:
+    pytest.fail(f"CI=true but headless Chromium is not installed (none of {', '.join(CHROMIUM_NAMES)} on PATH)", pytrace=False)
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason=f"headless Chromium not installed (none of {', '.join(CHROMIUM_NAMES)} on PATH)")
 
 BROWSER_TIMEOUT_S = 90

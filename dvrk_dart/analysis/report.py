@@ -25,7 +25,6 @@ and images (png, svg, jpg) each become a section.
 from __future__ import annotations
 
 import argparse
-import html
 import json
 import math
 import os
@@ -33,18 +32,33 @@ import shutil
 import sys
 import time
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
 import pandas as pd
 
+from dvrk_dart.analysis.html import (
+    DIMENSIONLESS,
+    INTEGER,
+    RATIO_DIGITS,
+    SHOWN_DIGITS,
+    STYLE,
+    _e,
+    code_cell,
+    fmt,
+    num_cell,
+    table,
+    text_cell,
+    unit_text,
+)
 from dvrk_dart.analysis.tables import (
     ALL_COMPONENTS,
     CARTESIAN_ORIENTATION_AXES,
     CARTESIAN_POSITION_AXES,
     CONFIG_FILE,
     KIND_ERROR,
+    MAX_MEANINGFUL_RATIO,
     QUANTITY_DESCRIPTIONS,
     REGIME_ALL,
     REGIME_DESCRIPTIONS,
@@ -64,9 +78,6 @@ REPORT_FILE = "index.html"
 ANALYSIS_DIR = "analysis"
 EXTRA_DIR = "figures/extra"
 IMAGE_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg")
-#: significant digits shown in the tables (the exact value is in data-value)
-SHOWN_DIGITS = 4
-RATIO_DIGITS = 3
 
 #: per-run tables, whole run: quantity -> its columns
 WHOLE_RUN_TABLES = (
@@ -85,76 +96,6 @@ WHOLE_RUN_TABLES = (
 )
 #: per-regime tables: quantity (rows: run x regime, columns: joints)
 REGIME_TABLES = ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_full_vs_measured", "samples")
-
-STYLE = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1300px; padding: 0 1em; color: #222; }
-h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: 0.2em; margin-top: 2em; }
-table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.88em; }
-th, td { border: 1px solid #ddd; padding: 0.25em 0.55em; text-align: left; vertical-align: top; }
-th { background: #f4f4f4; } td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-tr.pass td.status { background: #dff5df; } tr.fail td.status { background: #fbdede; } tr.missing td.status { background: #fff1cc; }
-td.better { background: #eef8ee; } td.worse { background: #fdf0f0; }
-figure { margin: 1.5em 0; } figure img { max-width: 100%; border: 1px solid #eee; }
-figcaption { font-size: 0.9em; color: #444; } .note { color: #555; font-size: 0.9em; }
-details { margin: 0.3em 0; } pre { background: #f8f8f8; padding: 0.6em; overflow-x: auto; font-size: 0.8em; }
-.summary { font-size: 1.15em; padding: 0.6em 1em; border-radius: 4px; display: inline-block; }
-.summary.ok { background: #dff5df; } .summary.ko { background: #fbdede; }
-"""
-
-
-# ---------------------------------------------------------------- small HTML helpers
-
-
-#: `digits` value of a count (samples): shown in full
-INTEGER = 0
-
-
-def fmt(value: float, digits: int = SHOWN_DIGITS) -> str:
-    """A number as shown in a table: `digits` significant digits (INTEGER: a count); '—' when missing."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
-    if math.isinf(value):
-        return "∞" if value > 0 else "-∞"
-    if digits == INTEGER:
-        return str(int(round(value)))
-    return f"{value:.{digits}g}"
-
-
-DIMENSIONLESS = "1"
-
-
-def unit_text(unit: str) -> str:
-    """A unit as shown: a ratio's unit "1" reads as a number in a table."""
-    return "dimensionless" if unit == DIMENSIONLESS else unit
-
-
-def _e(text: object) -> str:
-    return html.escape(str(text), quote=True)
-
-
-def _attrs(attrs: dict) -> str:
-    return "".join(f' data-{k}="{_e(v)}"' for k, v in attrs.items())
-
-
-def num_cell(value: float, digits: int = SHOWN_DIGITS, css: str = "", **attrs) -> str:
-    exact = repr(float(value)) if value is not None else "nan"
-    classes = f"num {css}".strip()
-    return f'<td class="{classes}"{_attrs(attrs)} data-value="{exact}">{fmt(value, digits)}</td>'
-
-
-def text_cell(text: object, css: str = "") -> str:
-    return f'<td class="{css}">{_e(text)}</td>' if css else f"<td>{_e(text)}</td>"
-
-
-def code_cell(text: object, title: str = "") -> str:
-    title_attr = f' title="{_e(title)}"' if title else ""
-    return f"<td><code{title_attr}>{_e(text)}</code></td>"
-
-
-def table(header: Sequence[str], rows: Iterable[str], css: str = "data") -> str:
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    return f'<table class="{css}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
-
 
 # ---------------------------------------------------------------- sections
 
@@ -234,6 +175,8 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
     parts = [
         "<h2 id='comparison'>Comparison with the published numbers</h2>",
         "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red); "
+        f"a ratio above {MAX_MEANINGFUL_RATIO:.0e} would compare a physical error with round-off and is shown as 'at round-off'; "
+        "where the goal is to reproduce a published number, the difference is shown instead. "
         "for the runs without counterweight (nCW) the error is the counterweight's physical effect, so the ratio only compares sizes. "
         "The paper's kinematic control with the dynamic engine on is our velocity mode; its nCW is our cw-off, its wCW (a PID mirror of q3) our cw-pid, "
         "and our default cw-on is the ideal tendon. Published values: <code>pipelines/published.toml</code>; a dash means the run is not in the folder.</p>",
@@ -251,21 +194,33 @@ def comparison_section(analysis: Analysis, published: dict) -> str:
         ]
         is_error = entry.get("kind", KIND_ERROR) == KIND_ERROR
         better = total = 0
-        for (run, quantity, regime), group in rows_of_entry.groupby(["run", "quantity", "regime"], sort=False):
+        for (run, quantity, regime, goal), group in rows_of_entry.groupby(["run", "quantity", "regime", "goal"], sort=False):
             group = group.set_index("component")
-            label = f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
-            ours, ratios = [], []
+            note = next((n for n in group.note if isinstance(n, str) and n and n != "at round-off"), "")
+            label = (f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
+                     + (f" ({note})" if note else ""))
+            ours, second = [], []
             for c in entry["components"]:
                 row = group.loc[c]
                 key = {"published": entry["id"], "run": run, "component": c, "quantity": quantity, "regime": regime}
-                ratio = row.ratio_published_over_ours
-                css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
                 ours.append(num_cell(row.our_value, **key, joint=c, field="our_value"))
-                ratios.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
-                better += int(ratio > 1)
-                total += int(math.isfinite(row.our_value))
+                if goal == "equal":
+                    second.append(num_cell(row.reproduced_to, **key, field="reproduced_to"))
+                elif row.note == "at round-off":
+                    second.append(text_cell("at round-off", "better"))
+                    better += 1
+                else:
+                    ratio = row.ratio_published_over_ours
+                    css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
+                    second.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
+                    better += int(ratio > 1)
+                if goal == "smaller":
+                    total += int(math.isfinite(row.our_value))
             rows.append("<tr>" + text_cell(label) + "".join(ours) + "</tr>")
-            rows.append("<tr>" + text_cell("published / ours") + "".join(ratios) + "</tr>")
+            if goal == "equal":
+                rows.append("<tr>" + text_cell("reproduced to |ours - published|") + "".join(second) + "</tr>")
+            elif goal == "smaller":
+                rows.append("<tr>" + text_cell("published / ours") + "".join(second) + "</tr>")
         verdict = (
             f"ours better on {better} of {total} compared values" if is_error
             else "an effect that must show, not an error: the ratio compares its size, neither side is better"
@@ -449,6 +404,7 @@ def _swap_in(built: Path, out_dir: Path) -> None:
 def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None) -> Path:
     """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html."""
     from dvrk_dart.analysis.figures import build_figures
+    from dvrk_dart.analysis.realistic_arm import realistic_arm_section
 
     start = time.perf_counter()
     runs_dir, out_dir = Path(runs_dir), Path(out_dir)
@@ -465,7 +421,7 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         figures = build_figures(analysis.runs, building, jobs=jobs)
         extras = _extra_items(extra_sections, building)
         generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-        navigation = ["verdicts", "comparison", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
+        navigation = ["verdicts", "comparison", "realistic-arm", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
         header = (
             "<h1>dvrk_dart validation report</h1>"
             f"<p class='note'>DART simulator of the dVRK PSM vs the identified model (Wang et al. 2019) and the real robot. "
@@ -479,6 +435,7 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
             header,
             verdict_section(analysis),
             comparison_section(analysis, published),
+            realistic_arm_section(analysis),
             figures_section(figures),
             per_run_section(analysis),
             *[f"<h2 id='extra-{i}'>{_e(title)}</h2>\n{body}" for i, (title, body) in enumerate(extras)],

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,19 +26,32 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysis API)
+    CHECK_COLUMNS,
+    CHECKS_FILE,
+    COMPARISON_COLUMNS,
+    KIND_EFFECT,
+    KIND_ERROR,
+    MAX_MEANINGFUL_RATIO,
+    PUBLISHED_FILE,
+    STATUS_FAIL,
+    STATUS_MISSING,
+    STATUS_PASS,
+    compare_with_published,
+    evaluate_checks,
+    load_checks,
+    load_published,
+)
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path, write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import sha256_of
-from dvrk_dart.metrics import TORQUE_TRANSIENT_S, relative_error, rms
+from dvrk_dart.metrics import REGIME_ALL, TORQUE_TRANSIENT_S, relative_error, rms
 from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
-from dvrk_dart.paths import PIPELINES_DIR
 
 RUN_LOG = "run.mcap"
 CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.json"
-CHECKS_FILE = PIPELINES_DIR / "checks.toml"
-PUBLISHED_FILE = PIPELINES_DIR / "published.toml"
 #: files of a run folder whose checksums the report lists (provenance)
 CHECKSUMMED_FILES = (RUN_LOG, CONFIG_FILE, METRICS_FILE)
 
@@ -49,7 +61,6 @@ METRICS_COLUMNS = ["run", "scenario", "mode", "counterweight", "joint", "quantit
 # Regimes are defined per joint on the *simulated* state of the run (which follows
 # the measured one in a replay), so every comparison of a run uses the same samples.
 
-REGIME_ALL = "all"
 REGIME_NEAR_ZERO_VELOCITY = "near_zero_velocity"
 REGIME_HIGH_ACCELERATION = "high_acceleration"
 REGIME_FIRST_PERIOD = "first_period"
@@ -329,114 +340,6 @@ def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     for column, value in (("counterweight", loaded.counterweight), ("mode", loaded.mode), ("scenario", loaded.scenario), ("run", loaded.name)):
         table.insert(0, column, value)
     return table[METRICS_COLUMNS]
-
-
-# ---------------------------------------------------------------- checks and published numbers
-
-
-def _load_toml(path: Path, what: str) -> dict:
-    try:
-        return tomllib.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise DvrkDartError(f"{path}: {what} file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise DvrkDartError(f"{path}: {exc}") from None
-
-
-def load_checks(path: str | os.PathLike = CHECKS_FILE) -> list[dict]:
-    checks = _load_toml(Path(path), "checks").get("checks", [])
-    required = {"id", "title", "quantity", "runs", "components", "operator", "threshold", "unit"}
-    for check in checks:
-        missing = required - set(check)
-        if missing:
-            raise DvrkDartError(f"{path}: check {check.get('id', '?')} lacks {', '.join(sorted(missing))}")
-        if check["operator"] not in OPERATORS:
-            raise DvrkDartError(f"{path}: check {check['id']}: operator must be one of {', '.join(OPERATORS)}")
-    return checks
-
-
-def load_published(path: str | os.PathLike = PUBLISHED_FILE) -> dict:
-    data = _load_toml(Path(path), "published numbers")
-    for entry in data.get("published", []):
-        if entry.get("source") not in data.get("sources", {}):
-            raise DvrkDartError(f"{path}: {entry.get('id')}: unknown source '{entry.get('source')}'")
-        if entry.get("kind", KIND_ERROR) not in (KIND_ERROR, KIND_EFFECT):
-            raise DvrkDartError(f"{path}: {entry['id']}: kind must be '{KIND_ERROR}' or '{KIND_EFFECT}'")
-        if len(entry["values"]) != len(entry["components"]):
-            raise DvrkDartError(f"{path}: {entry['id']}: {len(entry['values'])} values for {len(entry['components'])} components")
-    return data
-
-
-#: operator -> (test of a value against the threshold, the worst of several values)
-OPERATORS = {"<=": (lambda v, limit: v <= limit, max), ">": (lambda v, limit: v > limit, min)}
-
-CHECK_COLUMNS = ["check", "title", "run", "component", "value", "operator", "threshold", "unit", "status"]
-STATUS_PASS, STATUS_FAIL, STATUS_MISSING = "pass", "fail", "missing"
-
-
-def evaluate_checks(metrics: pd.DataFrame, checks: list[dict]) -> pd.DataFrame:
-    """One row per (check, run): the worst listed component, its value and the verdict."""
-    rows = []
-    for check in checks:
-        passes, worst = OPERATORS[check["operator"]]
-        regime = check.get("regime", REGIME_ALL)
-        selected = metrics[(metrics.quantity == check["quantity"]) & (metrics.regime == regime)]
-        runs = sorted(selected.run.unique()) if check["runs"] == ["*"] else check["runs"]
-        for run in runs:
-            values = selected[(selected.run == run) & selected.joint.isin(check["components"])]
-            base = {"check": check["id"], "title": check["title"], "run": run, "operator": check["operator"], "threshold": float(check["threshold"]), "unit": check["unit"]}
-            if len(values) < len(check["components"]) or values.value.isna().any():
-                rows.append(base | {"component": ", ".join(check["components"]), "value": math.nan, "status": STATUS_MISSING})
-                continue
-            value = worst(values.value)
-            component = values.joint[values.value == value].iloc[0]
-            ok = all(passes(v, check["threshold"]) for v in values.value)
-            rows.append(base | {"component": component, "value": float(value), "status": STATUS_PASS if ok else STATUS_FAIL})
-    return pd.DataFrame(rows, columns=CHECK_COLUMNS)
-
-
-#: published entries whose ratio says who is better (smaller is better); "effect"
-#: entries (e.g. the error without counterweight) are compared without a verdict
-KIND_ERROR, KIND_EFFECT = "error", "effect"
-
-COMPARISON_COLUMNS = [
-    "published", "kind", "source", "where", "run", "quantity", "regime", "component",
-    "published_value", "our_value", "unit", "ratio_published_over_ours",
-]
-
-
-def _units(entry: dict) -> list[str]:
-    unit = entry["unit"]
-    return list(unit) if isinstance(unit, list) else [unit] * len(entry["components"])
-
-
-def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFrame:
-    """Each published number next to ours; ratio published / ours (> 1: we are better)."""
-    index = metrics.set_index(["run", "quantity", "joint", "regime"]).value
-    index = index[~index.index.duplicated()]
-    rows = []
-    for entry in published.get("published", []):
-        for target in entry.get("compare", []):
-            quantity = target.get("quantity", entry["quantity"])
-            regime = target.get("regime", REGIME_ALL)
-            for component, value, unit in zip(entry["components"], entry["values"], _units(entry)):
-                ours = float(index.get((target["run"], quantity, component, regime), math.nan))
-                ratio = value / ours if ours and math.isfinite(ours) else (math.inf if ours == 0 else math.nan)
-                rows.append({
-                    "published": entry["id"],
-                    "kind": entry.get("kind", KIND_ERROR),
-                    "source": entry["source"],
-                    "where": entry["where"],
-                    "run": target["run"],
-                    "quantity": quantity,
-                    "regime": regime,
-                    "component": component,
-                    "published_value": float(value),
-                    "our_value": ours,
-                    "unit": unit,
-                    "ratio_published_over_ours": ratio,
-                })
-    return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
 
 
 # ---------------------------------------------------------------- the whole folder
