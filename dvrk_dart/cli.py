@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -74,19 +76,18 @@ REPLAY_SHORTHANDS = {
 def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: str | None = None):
     from dvrk_dart.runs.config import RunConfig
 
-    if args.duration is not None and not (args.duration > 0.0):
-        raise DvrkDartError(f"--duration: {args.duration} s must be positive")
     return RunConfig(scenario, mode, args.counterweight, args.dynamics, args.dt, args.duration, args.params, measured)
 
 
 def _run_and_write(config, out: Path | None) -> int:
+    from dvrk_dart.io.outputs import check_output_folder
     from dvrk_dart.model.arm import load_arm
-    from dvrk_dart.runs.campaign import write_run_folder
+    from dvrk_dart.runs.campaign import config_name, write_run_folder
     from dvrk_dart.runs.runner import run
 
+    out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
     arm = load_arm(params_file=config.params_file)
     record = run(config, arm)
-    out_dir = out or Path("out") / "runs" / record.name
     write_run_folder(record, out_dir, arm.model)
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
@@ -118,24 +119,39 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     """The main job: the campaign, its report and the sim-to-real diagnosis."""
+    from dvrk_dart.io.outputs import (
+        check_not_inside,
+        check_output_folder,
+        check_writable_folder,
+    )
     from dvrk_dart.pipeline import validate
+
+    check_writable_folder(args.out)
+    check_output_folder(args.report, "report", "--report")
+    check_not_inside(args.out, args.report, "--out", "--report")
 
     return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force, dynamics=args.dynamics)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from dvrk_dart.analysis.report import build_report
+    from dvrk_dart.analysis.report import build_report, unreadable_runs
 
-    extra = Path(args.extra) if args.extra else None
-    index = build_report(Path(args.runs), Path(args.out), extra_sections=extra, jobs=args.jobs)
+    index = build_report(Path(args.runs), Path(args.out), extra_sections=Path(args.extra) if args.extra else None, jobs=args.jobs)
+    unreadable = unreadable_runs(Path(args.out))
+    for name, error in unreadable.items():
+        print(f"dvrk-dart: unreadable run {name}: {error}", file=sys.stderr)
     print(f"report: {index}")
-    return 0
+    return 2 if unreadable and not args.allow_unreadable else 0
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from dvrk_dart.pipeline import diagnose_command
+    """The diagnosis folder is built beside --out and replaces it whole at the end."""
+    from dvrk_dart.diagnosis.validation import run_diagnosis_cli
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
 
-    return diagnose_command(args)
+    check_output_folder(args.out, "diagnosis")
+    with building_folder(args.out, "diagnosis") as folder:
+        return run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -193,6 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--extra", help="folder of extra sections (*.html fragments and images)")
     p.add_argument("--jobs", type=int, default=None, help="parallel workers (default: the machine's cores)")
+    p.add_argument("--allow-unreadable", action="store_true", help="exit 0 even when some run folders could not be read")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
@@ -206,16 +223,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised like Ctrl-C so that partial outputs are cleaned up."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
         return args.func(args)
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("dvrk-dart: interrupted", file=sys.stderr)
+        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
         return 130
+    except Terminated:
+        print("dvrk-dart: terminated (partial outputs removed)", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,6 @@ diagnosis with its withheld-effect validations, in one command."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -52,9 +51,3 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     for name, error in summary["failures"].items():
         print(f"  failed run {name}: {error}")
     return 1 if summary["failures"] else 0
-
-
-def diagnose_command(args: argparse.Namespace) -> int:
-    from dvrk_dart.diagnosis.validation import run_diagnosis_cli
-
-    return run_diagnosis_cli(args)

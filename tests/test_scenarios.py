@@ -44,7 +44,11 @@ def test_paper_values_are_the_scenario_data():
         (lambda s: s.replace('modes = ["kinematic"]', 'modes = ["fast"]'), "modes must be"),
         (lambda s: s.replace("duration_s = 1.0", "duration_s = -1.0"), "duration_s must be a positive number"),
         (lambda s: s.replace("length_m = 0.01", "length_m = 0.0"), "path.length_m must be a positive number"),
-        (lambda s: s.replace("[0.0, 0.0, 0.14, 0.0, 0.0, 0.0, 0.0]", "[0.0, 0.0]"), "start_pose must hold 7"),
+        (lambda s: s.replace("[0.0, 0.0, 0.14, 0.0, 0.0, 0.0, 0.0]", "[0.0, 0.0]"), "start_pose must be a list of 7 finite numbers"),
+        (lambda s: s.replace("[0.0, 0.0, 0.14, 0.0, 0.0, 0.0, 0.0]", '"home"'), "start_pose must be a list of 7 finite numbers"),
+        (lambda s: s.replace("[0.0, 0.0, 0.14, 0.0, 0.0, 0.0, 0.0]", "[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 0.0]"), "start_pose: q3 = 5.0 outside the joint range"),
+        (lambda s: s.replace('modes = ["kinematic"]', "modes = 5"), "modes must be a non-empty list"),
+        (lambda s: s.replace("[1.0, 0.0, 0.0]", '"up"'), "path.direction must be a list of 3 finite numbers"),
         (lambda s: s.replace("length_m = 0.01", "length_m = 0.01\nradius_m = 0.1"), "takes exactly"),
     ],
 )
@@ -54,6 +58,17 @@ def test_bad_scenario_files_give_clear_errors(tmp_path, edit, message):
     with pytest.raises(DvrkDartError, match=message) as info:
         load_scenario(str(path))
     assert str(path) in str(info.value)
+
+
+def test_unreadable_scenario_files_give_clear_errors(tmp_path):
+    binary = tmp_path / "latin1.toml"
+    binary.write_bytes("name = 'caf\xe9'".encode("latin-1"))
+    with pytest.raises(DvrkDartError, match="not UTF-8 text"):
+        load_scenario(str(binary))
+    folder = tmp_path / "folder.toml"
+    folder.mkdir()
+    with pytest.raises(DvrkDartError, match="is a folder, not a scenario file"):
+        load_scenario(str(folder))
 
 
 def test_unknown_scenario_names_the_known_ones():

@@ -24,14 +24,11 @@ and images (png, svg, jpg) each become a section.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
 import shutil
-import sys
 import time
-import uuid
 from collections.abc import Sequence
 from datetime import datetime, timezone
 from pathlib import Path
@@ -72,6 +69,7 @@ from dvrk_dart.analysis.tables import (
     write_analysis,
 )
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.outputs import building_folder, check_not_inside, check_output_folder
 from dvrk_dart.model.joints import JOINT_NAMES
 
 REPORT_FILE = "index.html"
@@ -390,17 +388,6 @@ def _page(sections: list[str], title: str) -> str:
 # ---------------------------------------------------------------- build
 
 
-def _swap_in(built: Path, out_dir: Path) -> None:
-    """Replace out_dir by the freshly built folder (the old one is removed after)."""
-    old = None
-    if out_dir.exists():
-        old = out_dir.with_name(f".{out_dir.name}.old-{uuid.uuid4().hex[:8]}")
-        os.replace(out_dir, old)
-    os.replace(built, out_dir)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
 def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None) -> Path:
     """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html."""
     from dvrk_dart.analysis.figures import build_figures
@@ -408,15 +395,16 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
 
     start = time.perf_counter()
     runs_dir, out_dir = Path(runs_dir), Path(out_dir)
+    check_not_inside(runs_dir, out_dir, "--runs", "--out")
+    check_output_folder(out_dir, "report")
+    if extra_sections is not None and not isinstance(extra_sections, (list, tuple)) and not Path(extra_sections).is_dir():
+        raise DvrkDartError(f"--extra: {extra_sections} is not a folder")
     jobs = jobs or default_jobs()
     analysis = analyze(runs_dir, jobs=jobs)
     if not analysis.runs and not analysis.failures:
         raise DvrkDartError(f"--runs: no run folder (<run>/run.mcap) in {runs_dir}")
     published = load_published()
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    building = out_dir.with_name(f".{out_dir.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    building.mkdir()
-    try:
+    with building_folder(out_dir, "report") as building:
         write_analysis(analysis, building / ANALYSIS_DIR)
         figures = build_figures(analysis.runs, building, jobs=jobs)
         extras = _extra_items(extra_sections, building)
@@ -444,28 +432,9 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
             f"<p class='note'>Built in {time.perf_counter() - start:.1f} s.</p>",
         ]
         (building / REPORT_FILE).write_text(_page(sections, "dvrk_dart validation report"))
-        _swap_in(building, out_dir)
-    finally:
-        if building.exists():
-            shutil.rmtree(building, ignore_errors=True)
     return out_dir / REPORT_FILE
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.analysis.report", description="Build the validation report from a folder of runs.")
-    parser.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap, config.json, metrics.json)")
-    parser.add_argument("--out", required=True, help="report folder to (re)create")
-    parser.add_argument("--extra", help="folder of extra sections (*.html fragments, images)")
-    parser.add_argument("--jobs", type=int, default=None, help="processes reading the logs (default: the CPU count)")
-    args = parser.parse_args(argv)
-    try:
-        path = build_report(args.runs, args.out, extra_sections=args.extra, jobs=args.jobs)
-    except DvrkDartError as exc:
-        print(f"dvrk-dart: {exc}", file=sys.stderr)
-        return exc.exit_code
-    print(path)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def unreadable_runs(report_dir: str | os.PathLike) -> dict[str, str]:
+    """The run folders a report could not read (name -> error), from its summary."""
+    return json.loads((Path(report_dir) / ANALYSIS_DIR / "summary.json").read_text()).get("unreadable_runs") or {}

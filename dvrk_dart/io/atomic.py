@@ -41,9 +41,28 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
 
 
+def strict_json(value):
+    """`value` with every non-finite number (NaN, inf) replaced by None: JSON
+    has no NaN, and a missing value is null."""
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return strict_json(value.tolist())
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
+
+
+def json_text(data) -> str:
+    """Strict JSON (null for missing values), indented, with a final newline."""
+    return json.dumps(strict_json(data), indent=2, default=_jsonable, allow_nan=False) + "\n"
+
+
 def write_json_atomic(target: str | os.PathLike, data) -> None:
     with atomic_path(target) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, default=_jsonable) + "\n")
+        tmp.write_text(json_text(data))
 
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:

@@ -45,6 +45,7 @@ from mcap.writer import Writer
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path as atomic_output
+from dvrk_dart.io.atomic import strict_json
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
 from dvrk_dart.runs.record import RunRecord
@@ -232,7 +233,7 @@ def _to_json(value: object) -> object:
 
 
 def _json_strings(mapping: dict) -> dict[str, str]:
-    return {str(k): json.dumps(v, default=_to_json) for k, v in mapping.items()}
+    return {str(k): json.dumps(strict_json(v), default=_to_json, allow_nan=False) for k, v in mapping.items()}
 
 
 def _checked(name: str, array: np.ndarray | None, n: int, width: int | None) -> np.ndarray | None:

@@ -4,6 +4,7 @@ sampled at 200 Hz)."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import tomllib
@@ -34,8 +35,6 @@ RUNS = {
     "one-105g": "one_105_grams_parallel_results.csv",
 }
 CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
-#: fewer rows than this cannot be filtered and trimmed like the upstream processing
-MIN_ROWS = 64
 
 
 @cache
@@ -96,7 +95,10 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
         raise DvrkDartError(f"unknown reference file '{name}' (known: {', '.join(manifest()['files'])})")
     candidates = []
     if os.environ.get(ENV_DATA_DIR):
-        candidates.append(Path(os.environ[ENV_DATA_DIR]))
+        folder = Path(os.environ[ENV_DATA_DIR])
+        if not folder.is_dir():  # a setting the user made must not be silently ignored
+            raise DvrkDartError(f"{ENV_DATA_DIR}={folder}: not a folder")
+        candidates.append(folder)
     candidates += [SHARED_DIR, cache_dir()]
     for folder in candidates:
         if (folder / name).is_file():
@@ -145,6 +147,27 @@ class MeasuredRun:
         return len(self.data)
 
 
+def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
+    """Positions within the model's joint ranges (the simulator's own limits)."""
+    lower, upper = joint_ranges()
+    outside = (q < lower) | (q > upper)
+    if outside.any():
+        row, j = np.argwhere(outside)[0]
+        raise DvrkDartError(
+            f"{where}: row {row + 1}, column {CSV_COLUMNS[j]}: {float(q[row, j])!r} outside the joint range "
+            f"[{float(lower[j])!r}, {float(upper[j])!r}]"
+        )
+
+
+@functools.cache
+def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) joint ranges of the model description (rad, m)."""
+    from dvrk_dart.model.description import load_model
+
+    model = load_model()
+    return model.joint_lower, model.joint_upper
+
+
 def load_run(path: Path | str) -> MeasuredRun:
     """Load a measured run in the upstream CSV format, with one-line errors."""
     path = Path(path)
@@ -167,8 +190,13 @@ def load_run(path: Path | str) -> MeasuredRun:
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
         raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: missing, NaN or infinite value")
+    from dvrk_dart.io.signal import (
+        MIN_ROWS,  # the processing's own need (signal imports this module)
+    )
+
     if len(values) < MIN_ROWS:
-        raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed")
+        raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
+    check_joint_ranges(values[:, :N_JOINTS], path)
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / sample_rate_hz())
     assert data.shape[1] == 1 + 3 * N_JOINTS

@@ -22,6 +22,8 @@ from dvrk_dart.io.reference_data import MeasuredRun, sample_rate_hz
 FILTER_ORDER = 6
 CUTOFF_PARAMETER_HZ = 5.4  # upstream's fc, used as Wn = 2 pi fc h (not a true cut-off)
 CUT_SAMPLES = 200
+#: the fewest samples the processing works on: the trimmed ends and one more
+MIN_ROWS = 2 * CUT_SAMPLES + 2
 #: the excitation's base period at 200 Hz: 1 / 0.18 Hz = 5.56 s
 FIRST_PERIOD_SAMPLES = 1111
 
@@ -66,10 +68,10 @@ def zero_phase_lowpass(x: np.ndarray, h: float) -> np.ndarray:
 def process(run: MeasuredRun) -> ProcessedRun:
     """Filtered q, dq, ddq, tau of a measured run, trimmed like upstream."""
     h = 1.0 / sample_rate_hz()
-    if len(run) <= 2 * CUT_SAMPLES + 1:
+    if len(run) < MIN_ROWS:
         from dvrk_dart.errors import DvrkDartError
 
-        raise DvrkDartError(f"{run.path}: {len(run)} rows, more than {2 * CUT_SAMPLES + 1} needed for processing")
+        raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
     q = zero_phase_lowpass(run.q, h)
     dq = zero_phase_lowpass(run.dq, h)
     ddq = zero_phase_lowpass(central_difference(run.dq, h), h)

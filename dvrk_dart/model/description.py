@@ -117,6 +117,8 @@ class PsmModel:
     joint_upper: np.ndarray
     dvrk_wrist_matrix: np.ndarray
     inertia_tolerance: float = 0.0  # kg m^2, see [parameter_checks]
+    max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
+    max_com_distance_m: float = float("inf")
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
 
     @property
@@ -289,5 +291,7 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         joint_upper=np.array(limits["upper"], dtype=float),
         dvrk_wrist_matrix=np.array(wrist["matrix"], dtype=float),
         inertia_tolerance=float(raw.get("parameter_checks", {}).get("inertia_tolerance_kg_m2", 0.0)),
+        max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
+        max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),
         model_angles=dict(reader.model_angles),
     )

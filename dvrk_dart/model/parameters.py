@@ -100,6 +100,8 @@ def _excitable_inertia(model: PsmModel, key: int, inertia_link: np.ndarray) -> f
 
 def _vector(entry: dict, name: str, size: int, where: str) -> np.ndarray:
     value = entry.get(name)
+    if name not in entry:
+        raise DvrkDartError(f"{where}: '{name}' is missing")
     if not isinstance(value, list) or len(value) != size:
         raise DvrkDartError(f"{where}: '{name}' must be a list of {size} numbers")
     try:
@@ -112,7 +114,9 @@ def _vector(entry: dict, name: str, size: int, where: str) -> np.ndarray:
 
 
 def _scalar(entry: dict, name: str, where: str) -> float:
-    value = entry.get(name, 0.0)
+    if name not in entry:
+        raise DvrkDartError(f"{where}: '{name}' is missing")
+    value = entry[name]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
         raise DvrkDartError(f"{where}: '{name}' must be a finite number")
     return float(value)
@@ -147,9 +151,13 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
     """Read params.json, check it, and convert every link to its own frame."""
     path = Path(path)
     try:
-        raw = json.loads(path.read_text())
+        raw = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise DvrkDartError(f"{path}: parameter file not found") from None
+    except IsADirectoryError:
+        raise DvrkDartError(f"{path}: is a folder, not a parameter file") from None
+    except UnicodeDecodeError:
+        raise DvrkDartError(f"{path}: not UTF-8 text") from None
     except json.JSONDecodeError as exc:
         raise DvrkDartError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
     if not isinstance(raw, dict):
@@ -163,6 +171,11 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
         mass = _scalar(entry, "m", where)
         if mass < 0.0:
             raise DvrkDartError(f"{where}: negative mass {mass}")
+        if mass > model.max_link_mass_kg:
+            raise DvrkDartError(f"{where}: mass {mass!r} kg above the plausible {model.max_link_mass_kg:g} kg (model card)")
+        com_distance = float(np.linalg.norm(_vector(entry, "r", 3, where)))
+        if com_distance > model.max_com_distance_m:
+            raise DvrkDartError(f"{where}: centre of mass {com_distance!r} m from the link frame, above the plausible {model.max_com_distance_m:g} m (model card)")
         R0 = model.rotations_at_zero[key]
         inertia_base = inertia_matrix(_vector(entry, "I", 6, where))
         check_inertia(inertia_base, where, model.inertia_tolerance)

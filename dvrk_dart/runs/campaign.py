@@ -18,6 +18,7 @@ from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+from dvrk_dart.io.outputs import building_folder
 from dvrk_dart.io.reference_data import sha256_of
 from dvrk_dart.runs.config import RunConfig, run_name
 from dvrk_dart.runs.scenarios import load_scenario
@@ -91,19 +92,21 @@ def inputs_fingerprint(config: RunConfig, code: str) -> str:
 
 def write_run_folder(record, out_dir: Path, model, fingerprint: str | None = None) -> None:
     """config.json, metrics.json, run.mcap, run.rrd (drawn with `model`, the
-    run's own arm description); inputs.sha256 last."""
+    run's own arm description), inputs.sha256 last; the folder replaces a
+    previous one as a whole or not at all. A run that diverged before its
+    first logged sample has no logs, only its config and metrics."""
     from dvrk_dart.io.mcap_log import write_mcap
     from dvrk_dart.io.provenance import software_versions
     from dvrk_dart.io.rerun_log import write_rrd
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / INPUTS_FILE).unlink(missing_ok=True)
-    write_json_atomic(out_dir / "config.json", {"run": record.name, **record.config, "versions": software_versions(), "inputs_sha256": fingerprint})
-    write_json_atomic(out_dir / "metrics.json", record.metrics)
-    write_mcap(record, out_dir / "run.mcap")
-    write_rrd(record, out_dir / "run.rrd", model=model)
-    if fingerprint:
-        write_text_atomic(out_dir / INPUTS_FILE, fingerprint + "\n")
+    with building_folder(out_dir, "run") as folder:
+        write_json_atomic(folder / "config.json", {"run": record.name, **record.config, "versions": software_versions(), "inputs_sha256": fingerprint})
+        write_json_atomic(folder / "metrics.json", record.metrics)
+        if len(record):
+            write_mcap(record, folder / "run.mcap")
+            write_rrd(record, folder / "run.rrd", model=model)
+        if fingerprint:
+            write_text_atomic(folder / INPUTS_FILE, fingerprint + "\n")
 
 
 def _execute(config: RunConfig, out_dir: str, fingerprint: str) -> tuple[str, dict]:

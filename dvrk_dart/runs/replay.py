@@ -7,7 +7,6 @@ measured efforts at the logged times, and the metrics of metrics.json."""
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -15,7 +14,6 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
-from dvrk_dart.io.atomic import write_text_atomic
 from dvrk_dart.model.identified import TERMS, IdentifiedModel
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel, load_model
@@ -184,18 +182,6 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         metrics["error"] = str(log.error)
     record.metrics = metrics
     return record
-
-
-def replay_metrics_json(record: RunRecord) -> str:
-    """metrics.json text of a replay (per-joint lists, SI units)."""
-    return json.dumps(record.metrics, indent=2, allow_nan=True) + "\n"
-
-
-def write_metrics(record: RunRecord, out_dir: str | Path) -> Path:
-    """Write out_dir/metrics.json atomically."""
-    target = Path(out_dir) / "metrics.json"
-    write_text_atomic(target, replay_metrics_json(record))
-    return target
 
 
 def simulate_efforts(arm, config: SimConfig, processed: ProcessedRun) -> np.ndarray:

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import joint_ranges
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 from dvrk_dart.paths import PIPELINES_DIR
@@ -95,36 +96,60 @@ def _positive(path: Path, table: dict, key: str, where: str) -> float:
     return float(value)
 
 
-def load_scenario_file(path: Path) -> Scenario:
+def _string_list(path: Path, raw: dict, key: str, allowed: tuple[str, ...], default: tuple[str, ...] | None) -> tuple[str, ...]:
+    value = raw.get(key, default)
+    if not isinstance(value, (list, tuple)) or not value or any(not isinstance(v, str) or v not in allowed for v in value):
+        _fail(path, f"{key} must be a non-empty list of {', '.join(allowed)}, got {value!r}")
+    return tuple(value)
+
+
+def _vector(path: Path, table: dict, key: str, size: int, where: str = "") -> np.ndarray:
+    value = table.get(key)
+    if (not isinstance(value, list) or len(value) != size
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in value)):
+        _fail(path, f"{where}{key} must be a list of {size} finite numbers, got {value!r}")
+    return np.asarray(value, dtype=float)
+
+
+def _read_toml(path: Path) -> dict:
     try:
-        raw = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise DvrkDartError(f"{path}: scenario file not found") from None
+    except IsADirectoryError:
+        raise DvrkDartError(f"{path}: is a folder, not a scenario file") from None
+    except UnicodeDecodeError:
+        raise DvrkDartError(f"{path}: not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
+
+
+def load_scenario_file(path: Path) -> Scenario:
+    """A scenario file checked against its schema: types, units (SI), ranges."""
+    raw = _read_toml(path)
     unknown = set(raw) - _TOP_KEYS
     if unknown:
         _fail(path, f"unknown key(s) {', '.join(sorted(unknown))}")
+    name = raw.get("name", path.stem)
+    if not isinstance(name, str) or not name or "/" in name:
+        _fail(path, f"name must be a non-empty string without '/', got {name!r}")
     kind = raw.get("kind")
     if kind not in ("cartesian", "replay"):
         _fail(path, f"kind must be 'cartesian' or 'replay', got {kind!r}")
-    modes = tuple(raw.get("modes", ()))
-    if not modes or any(m not in MODES for m in modes):
-        _fail(path, f"modes must be a non-empty subset of {MODES}, got {list(modes)}")
-    counterweights = tuple(raw.get("counterweights", ("on",)))
-    if any(c not in COUNTERWEIGHT_VARIANTS for c in counterweights):
-        _fail(path, f"counterweights must be a subset of {COUNTERWEIGHT_VARIANTS}, got {list(counterweights)}")
+    modes = _string_list(path, raw, "modes", MODES, None)
+    counterweights = _string_list(path, raw, "counterweights", COUNTERWEIGHT_VARIANTS, ("on",))
+    if "description" in raw and not isinstance(raw["description"], str):
+        _fail(path, "description must be a string")
     if kind == "replay":
-        if not isinstance(raw.get("measured"), str):
+        if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
-        duration = raw.get("duration_s")
-        if duration is not None:
-            duration = _positive(path, raw, "duration_s", "")
-        return Scenario(raw.get("name", path.stem), kind, modes, counterweights, duration, measured=raw["measured"], source=path)
+        duration = _positive(path, raw, "duration_s", "") if "duration_s" in raw else None
+        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path)
     duration = _positive(path, raw, "duration_s", "")
-    start = np.asarray(raw.get("start_pose", []), dtype=float)
-    if start.shape != (N_JOINTS,) or not np.all(np.isfinite(start)):
-        _fail(path, f"start_pose must hold {N_JOINTS} finite numbers")
+    start = _vector(path, raw, "start_pose", N_JOINTS)
+    lower, upper = joint_ranges()
+    for j in np.flatnonzero((start < lower) | (start > upper)):
+        _fail(path, f"start_pose: q{j + 1} = {float(start[j])!r} outside the joint range [{float(lower[j])!r}, {float(upper[j])!r}]")
     path_table = raw.get("path")
     if not isinstance(path_table, dict) or path_table.get("type") not in _PATH_KEYS:
         _fail(path, f"[path] must have type one of {sorted(_PATH_KEYS)}")
@@ -133,11 +158,9 @@ def load_scenario_file(path: Path) -> Scenario:
         _fail(path, f"[path] of type {path_table['type']} takes exactly {sorted(expected)}, got {sorted(path_table)}")
     for key in expected - {"type", "direction"}:
         _positive(path, path_table, key, "path.")
-    if "direction" in path_table:
-        direction = np.asarray(path_table["direction"], dtype=float)
-        if direction.shape != (3,) or not np.linalg.norm(direction) > 0:
-            _fail(path, "path.direction must be a non-zero 3-vector")
-    return Scenario(raw.get("name", path.stem), kind, modes, counterweights, duration, start, dict(path_table), source=path)
+    if "direction" in path_table and not np.linalg.norm(_vector(path, path_table, "direction", 3, "path.")) > 0:
+        _fail(path, "path.direction must be a non-zero 3-vector")
+    return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path)
 
 
 def available_scenarios() -> list[str]:

@@ -487,7 +487,8 @@ class PsmSimulator:
         outside = np.flatnonzero((q < lower) | (q > upper))
         if outside.size:
             j = int(outside[0])
-            raise SimulationDiverged(f"{where}: joint {JOINT_NAMES[j]} at {q[j]:.4g} outside its range [{lower[j]:g}, {upper[j]:g}]")
+            # repr: the shortest text that is the exact value, so the violation shows
+            raise SimulationDiverged(f"{where}: joint {JOINT_NAMES[j]} at {float(q[j])!r} outside its range [{float(lower[j])!r}, {float(upper[j])!r}]")
         residuals = self.closure_residuals_m()
         name, worst = max(residuals.items(), key=lambda kv: kv[1], default=("", 0.0))
         if worst > self.config.closure_residual_limit_m:

@@ -1,0 +1,299 @@
+"""Hostile-but-fair input: every command answers bad input with one line on
+stderr and exit code 2, loses nothing it did not make, and leaves nothing
+half-written. One test per item of the hardening issue."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.io.reference_data import resolve, resolve_run
+from dvrk_dart.io.signal import MIN_ROWS
+from dvrk_dart.model.arm import load_arm
+
+
+def tree_digest(folder: Path) -> dict[str, str]:
+    """Every file under `folder` (names included) with its sha256: a byte-identity check."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def cli(capsys, *argv: str) -> tuple[int, list[str]]:
+    """Run the CLI in-process: (exit code, stderr lines)."""
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    return code, [line for line in err.splitlines() if line.strip()]
+
+
+def assert_one_line_error(code: int, lines: list[str], *fragments: str) -> None:
+    assert code == 2, lines
+    assert len(lines) == 1 and lines[0].startswith("dvrk-dart: "), lines
+    assert "Traceback" not in lines[0]
+    for fragment in fragments:
+        assert fragment in lines[0], lines
+
+
+def measured_csv(tmp_path: Path, name: str, edit=None, rows: int | None = None) -> Path:
+    values = np.loadtxt(resolve_run("two"), delimiter=",")[:rows]
+    if edit is not None:
+        edit(values)
+    path = tmp_path / name
+    np.savetxt(path, values, delimiter=",")
+    return path
+
+
+@pytest.fixture(scope="module")
+def a_run_folder(tmp_path_factory) -> Path:
+    runs = tmp_path_factory.mktemp("runs")
+    assert main(["run", "rectilinear", "--mode", "kinematic", "--duration", "0.05", "--out", str(runs / "rect")]) == 0
+    return runs / "rect"
+
+
+# ---------------------------------------------------------------- 1. report never deletes what it did not make
+
+
+def test_report_refuses_an_out_folder_holding_its_runs_and_leaves_it_byte_identical(tmp_path, capsys, a_run_folder):
+    project = tmp_path / "P"
+    (project / "runs").mkdir(parents=True)
+    subprocess.run(["cp", "-r", str(a_run_folder), str(project / "runs")], check=True)
+    (project / "notes.txt").write_text("keep\n")
+    before = tree_digest(project)
+    code, lines = cli(capsys, "report", "--runs", project / "runs", "--out", project)
+    assert_one_line_error(code, lines, "--out", "contains --runs")
+    assert tree_digest(project) == before
+
+
+def test_report_refuses_a_folder_or_file_it_did_not_make(tmp_path, capsys, a_run_folder):
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "thesis.tex").write_text("\\documentclass{article}\n")
+    code, lines = cli(capsys, "report", "--runs", a_run_folder.parent, "--out", foreign)
+    assert_one_line_error(code, lines, "not made by dvrk-dart")
+    assert (foreign / "thesis.tex").read_text().startswith("\\documentclass")
+    a_file = tmp_path / "report.html"
+    a_file.write_text("mine")
+    code, lines = cli(capsys, "report", "--runs", a_run_folder.parent, "--out", a_file)
+    assert_one_line_error(code, lines, "is a file")
+    assert a_file.read_text() == "mine" and not list(tmp_path.glob(".report.html*"))
+
+
+def test_report_replaces_its_own_report(tmp_path, capsys, a_run_folder):
+    out = tmp_path / "report"
+    assert cli(capsys, "report", "--runs", a_run_folder.parent, "--out", out)[0] == 0
+    assert cli(capsys, "report", "--runs", a_run_folder.parent, "--out", out)[0] == 0
+    assert (out / "index.html").is_file() and not list(tmp_path.glob(".report*"))
+
+
+# ---------------------------------------------------------------- 2. a run folder is replaced whole or not at all
+
+
+def test_a_failed_rerun_leaves_the_previous_run_folder_intact(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "run"
+    assert cli(capsys, "run", "rectilinear", "--mode", "velocity", "--duration", "0.05", "--out", out)[0] == 0
+    before = tree_digest(out)
+
+    def broken_rrd(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr("dvrk_dart.io.rerun_log.write_rrd", broken_rrd)
+    with pytest.raises(OSError, match="disk full"):
+        main(["run", "rectilinear", "--mode", "velocity", "--duration", "0.1", "--out", str(out)])
+    assert tree_digest(out) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]
+
+
+# ---------------------------------------------------------------- 3. a divergence at the first step
+
+
+def test_a_divergence_at_the_first_step_says_why_and_keeps_strict_json(tmp_path, capsys):
+    def fling(values):  # q1 just inside its range, driven out of it at once
+        values[:, 0] = 1.599
+        values[:, 7] = 50.0
+
+    bad = measured_csv(tmp_path, "fling.csv", fling)
+    out = tmp_path / "X"
+    code, lines = cli(capsys, "replay", "--measured", bad, "--out", out)
+    assert_one_line_error(code, lines, "step 1", "joint q1 at 1.6", "outside its range [-1.6, 1.6]")
+    metrics = json.loads((out / "metrics.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in metrics.json"))
+    assert "step 1" in metrics["error"] and metrics["samples"] == 0
+    assert (out / "config.json").is_file()
+
+
+# ---------------------------------------------------------------- 4. unreadable run logs are named
+
+
+@pytest.mark.parametrize("damage", ["corrupt", "truncated", "empty", "foreign"])
+def test_report_names_unreadable_runs_and_fails_unless_allowed(tmp_path, capsys, a_run_folder, damage):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    subprocess.run(["cp", "-r", str(a_run_folder), str(runs / "good")], check=True)
+    subprocess.run(["cp", "-r", str(a_run_folder), str(runs / "bad")], check=True)
+    log = runs / "bad" / "run.mcap"
+    content = log.read_bytes()
+    log.write_bytes({"corrupt": content[:100] + b"\0" * 500 + content[600:], "truncated": content[: len(content) // 2],
+                     "empty": b"", "foreign": b"PK\x03\x04 a zip file"}[damage])
+    code, lines = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "report")
+    assert code == 2 and any("unreadable run bad" in line for line in lines), lines
+    assert "bad" in (tmp_path / "report" / "index.html").read_text()
+    code, _ = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "report", "--allow-unreadable")
+    assert code == 0
+
+
+# ---------------------------------------------------------------- 5. bad --out, before any work
+
+
+@pytest.mark.parametrize("command", [
+    ["replay", "--measured", "two"],
+    ["run", "spiral"],
+    ["diagnose", "--measured", "two"],
+    ["report", "--runs", "RUNS"],
+    ["validate", "--report", "REPORT"],
+])
+@pytest.mark.parametrize("where", ["a file", "under a file"])
+def test_a_bad_out_is_refused_before_any_work(tmp_path, capsys, a_run_folder, command, where):
+    a_file = tmp_path / "file.txt"
+    a_file.write_text("mine")
+    out = a_file if where == "a file" else a_file / "sub"
+    argv = [str(a_run_folder.parent) if a == "RUNS" else str(tmp_path / "report") if a == "REPORT" else a for a in command]
+    start = time.perf_counter()
+    code, lines = cli(capsys, *argv, "--out", out)
+    assert_one_line_error(code, lines, "--out", "file")
+    assert time.perf_counter() - start < 5.0  # refused up front, not after a simulation
+    assert a_file.read_text() == "mine" and sorted(p.name for p in tmp_path.iterdir()) == ["file.txt"]
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write anywhere")
+def test_an_unwritable_out_is_refused(tmp_path, capsys):
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    code, lines = cli(capsys, "run", "spiral", "--out", locked / "run")
+    assert_one_line_error(code, lines, "not writable")
+
+
+# ---------------------------------------------------------------- 6. unreadable parameter files
+
+
+def test_a_non_utf8_parameter_file_is_a_one_line_error(tmp_path, capsys):
+    params = tmp_path / "params.json"
+    params.write_bytes(b'{"1": {"m": "caf\xe9"}}')
+    code, lines = cli(capsys, "model-errors", "--measured", "two", "--params", params)
+    assert_one_line_error(code, lines, str(params), "not UTF-8")
+
+
+# ---------------------------------------------------------------- 7. durations
+
+
+@pytest.mark.parametrize("duration", ["-1", "0", "1e12", "nan"])
+def test_an_impossible_duration_is_a_one_line_error(tmp_path, capsys, duration):
+    code, lines = cli(capsys, "run", "spiral", "--duration", duration, "--out", tmp_path / "x")
+    assert_one_line_error(code, lines, "--duration")
+    assert not (tmp_path / "x").exists()
+
+
+# ---------------------------------------------------------------- 8. parameter files: missing keys, implausible values
+
+
+def edited_params(tmp_path: Path, edit) -> Path:
+    raw = json.loads(resolve(load_arm().model.default_parameters).read_text())
+    edit(raw)
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps(raw))
+    return path
+
+
+@pytest.mark.parametrize("edit, fragments", [
+    (lambda raw: raw["4"].pop("m"), ("link 4", "'m' is missing")),
+    (lambda raw: raw["2"].pop("Fc"), ("link 2", "'Fc' is missing")),
+    (lambda raw: raw["5"].pop("r"), ("link 5", "'r' is missing")),
+    (lambda raw: raw["4"].update(m=1e30), ("link 4", "mass 1e+30 kg above the plausible")),
+    (lambda raw: raw["4"].update(r=[1e6, 0.0, 0.0]), ("link 4", "centre of mass", "above the plausible")),
+])
+def test_parameter_files_missing_keys_or_implausible_values_are_refused(tmp_path, capsys, edit, fragments):
+    params = edited_params(tmp_path, edit)
+    code, lines = cli(capsys, "model-errors", "--measured", "two", "--params", params)
+    assert_one_line_error(code, lines, str(params), *fragments)
+
+
+# ---------------------------------------------------------------- 9. measured positions outside the joint ranges
+
+
+@pytest.mark.parametrize("column, value", [(2, 5.0), (0, 1e300)])
+@pytest.mark.parametrize("command", [["replay", "--mode", "kinematic"], ["model-errors"]])
+def test_measured_positions_outside_the_joint_ranges_are_refused(tmp_path, capsys, column, value, command):
+    def edit(values):
+        values[10, column] = value
+
+    bad = measured_csv(tmp_path, "far.csv", edit)
+    extra = ["--out", str(tmp_path / "out")] if command[0] == "replay" else []
+    code, lines = cli(capsys, command[0], "--measured", bad, *command[1:], *extra)
+    assert_one_line_error(code, lines, "row 11", f"q{column + 1}", "outside the joint range")
+    assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------- 10. shorthands take no --measured
+
+
+def test_replay_shorthands_do_not_offer_an_ignored_measured_option(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["replay-two", "--measured", "one"])
+    assert info.value.code == 2 and "unrecognized arguments: --measured" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- 11. the minor ones
+
+
+def test_the_row_count_message_states_what_the_processing_needs(tmp_path, capsys):
+    short = measured_csv(tmp_path, "short.csv", rows=1)
+    code, lines = cli(capsys, "model-errors", "--measured", short)
+    assert_one_line_error(code, lines, f"1 rows, at least {MIN_ROWS} needed")
+    assert MIN_ROWS == 402
+
+
+def test_diagnose_leaves_no_out_folder_on_input_errors(tmp_path, capsys):
+    code, lines = cli(capsys, "diagnose", "--measured", tmp_path / "missing.csv", "--out", tmp_path / "diag")
+    assert_one_line_error(code, lines, "missing.csv")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_report_extra_must_be_a_folder(tmp_path, capsys, a_run_folder):
+    extra = tmp_path / "extra.html"
+    extra.write_text("<p>x</p>")
+    code, lines = cli(capsys, "report", "--runs", a_run_folder.parent, "--out", tmp_path / "report", "--extra", extra)
+    assert_one_line_error(code, lines, "--extra", "not a folder")
+    assert not (tmp_path / "report").exists()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_run_leaves_no_partial_folder(tmp_path, signum):
+    out = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-m", "dvrk_dart.cli", "replay", "--measured", "two", "--out", str(out)],
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".run.building-*")) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.05)  # interrupt while the folder is being written
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode in (130, 143) or (process.returncode == 0 and out.is_dir()), err
+    assert "Traceback" not in err
+    assert not list(tmp_path.glob(".run.*")), "a partial folder was left"
+
+
+def test_divergence_values_show_enough_digits(tmp_path, capsys):
+    def edge(values):  # just past the pitch limit after the first step
+        values[:, 1] = 0.8999999
+        values[:, 8] = 0.5
+
+    code, lines = cli(capsys, "replay", "--measured", measured_csv(tmp_path, "edge.csv", edge), "--out", tmp_path / "x")
+    assert code == 2
+    value, bounds = lines[0].split(" at ")[1].split(" outside its range ")
+    low, high = (float(b) for b in bounds.split("]")[0].strip("[").split(","))
+    assert not (low <= float(value) <= high), lines[0]  # the printed value itself shows the violation
