@@ -44,7 +44,7 @@ GOOD_ROW = [0.1] * 21
         ([[0.1] * 20] * 100, "20 columns, expected 21"),
         ([GOOD_ROW] * 50 + [[0.1] * 5 + ["abc"] + [0.1] * 15] + [GOOD_ROW] * 49, "row 51, column q6: 'abc' is not a number"),
         ([GOOD_ROW] * 10 + [[0.1] * 14 + ["nan"] + [0.1] * 6] + [GOOD_ROW] * 89, "row 11, column tau1: missing, NaN or infinite"),
-        ([GOOD_ROW] * 10, "10 rows, at least 64 needed"),
+        ([GOOD_ROW] * 10, "10 rows, at least 402 needed"),
         ("", "file is empty"),
     ],
 )
