@@ -11,27 +11,24 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.effects import (
-    GravityTilt,
+from dvrk_dart.diagnosis.arm_effects import GravityTilt, gravity_tilt_directions
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.joint_effects import (
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
-    PointPayload,
-    TrajectoryFeatures,
+)
+from dvrk_dart.diagnosis.library import (
     candidate_effects,
     config_effort_by_formula,
     effects_to_sim_config,
-    equivalent_payload_links,
-    gravity_tilt_directions,
 )
-from dvrk_dart.diagnosis.selection import (
-    DiagnosisRun,
-    diagnose,
-    prepare_run,
-    residual_regimes,
-    synthesize_measurement,
-)
+from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
+from dvrk_dart.diagnosis.regimes import residual_regimes
+from dvrk_dart.diagnosis.runs import DiagnosisRun, prepare_run
+from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
@@ -308,7 +305,7 @@ def test_payload_impostor_yields_to_offsets(arm):
 def test_smooth_friction_goes_into_the_simulation_whole(arm, segment):
     """A smooth Coulomb reversal is simulator physics (tanh law, viscous as
     damping): the SimConfig carries all of it and its effort equals the regressor."""
-    from dvrk_dart.diagnosis.effects import not_simulated
+    from dvrk_dart.diagnosis.library import not_simulated
 
     state = segment.head(300)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")

@@ -21,15 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effects import (
-    GravityTilt,
+from dvrk_dart.diagnosis.arm_effects import GravityTilt
+from dvrk_dart.diagnosis.joint_effects import (
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
-    PointPayload,
-    equivalent_payload_links,
 )
+from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
@@ -136,7 +135,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
 
 def run_diagnosis(arm: Arm, measured: str, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True) -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs."""
-    from dvrk_dart.diagnosis.selection import diagnose
+    from dvrk_dart.diagnosis.diagnose import diagnose
 
     start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -213,7 +212,7 @@ def validate_payload(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[di
 
 
 def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
-    from dvrk_dart.diagnosis.selection import payload_gravity_efforts_at_zero
+    from dvrk_dart.diagnosis.payload_report import payload_gravity_efforts_at_zero
 
     key = arm.model.link_by_name(payload["link"]).key
     return float(payload_gravity_efforts_at_zero(arm, key, payload["mass_kg"], np.asarray(payload["position_m"]))[1])
@@ -222,7 +221,7 @@ def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
 def hand_j2_gravity_at_zero(arm: Arm, spec: dict) -> float:
     """J2 gravity effort at q = 0 of the hand-measured payload: the known mass at
     the measured distance and height from the pitch shaft, on the pitch link."""
-    from dvrk_dart.diagnosis.selection import payload_gravity_efforts_at_zero
+    from dvrk_dart.diagnosis.payload_report import payload_gravity_efforts_at_zero
 
     pitch = arm.model.link_by_name("pitch")
     point_base = np.array([0.0, spec["check_horizontal_m"], spec["check_height_m"], 1.0])  # pitch plane at q = 0
@@ -249,7 +248,8 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[di
 
 
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    from dvrk_dart.diagnosis.selection import diagnose, synthesize_measurement
+    from dvrk_dart.diagnosis.diagnose import diagnose
+    from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 
     simulate = simulation_hook(arm)
     segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)

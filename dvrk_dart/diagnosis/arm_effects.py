@@ -1,0 +1,102 @@
+"""Effects of the whole arm or of the measurement: base tilt, time shift, counterweight transmission."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.geometry import joints_moving_link
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+
+#: the largest base mounting tilt considered (rad, about 2.9 degrees): a
+#: larger one would be visible by eye and is not a plausible unknown
+TILT_LIMIT_RAD = 0.05
+#: the largest time shift between positions and efforts considered (s):
+#: 10 samples at 200 Hz, far beyond any controller latency of the dVRK
+TIME_SHIFT_LIMIT_S = 0.05
+#: the counterweight tendon cannot transmit more than +-50 % of its force wrongly
+COUNTERWEIGHT_SCALE_LIMIT = 0.5
+#: a tension-proportional tendon loss beyond 50 % is not a transmission
+COUNTERWEIGHT_LOSS_LIMIT = 0.5
+
+
+def gravity_tilt_directions(gravity: np.ndarray) -> np.ndarray:
+    """d(gravity in base)/d(tilt_x, tilt_y) at zero tilt, (3, 2).
+
+    Convention of `dart_builder.gravity_in_base`: the base frame is
+    R = Rx(tilt_x) Ry(tilt_y) in the world and gravity in base coordinates is
+    R^T g, so to first order g_base = g - (tilt_x e_x + tilt_y e_y) x g."""
+    g = np.asarray(gravity, dtype=float)
+    return np.column_stack([-np.cross([1.0, 0.0, 0.0], g), -np.cross([0.0, 1.0, 0.0], g)])
+
+
+
+class TimeShift(Effect):
+    """Efforts recorded late (delta > 0) relative to the positions:
+    tau_meas(t) = tau(t - delta) ~ tau(t) - delta dtau/dt, tau the simulated effort."""
+
+    kind = "time_shift"
+    name = "time_shift"
+    joints = JOINT_NAMES
+    parameters = (Parameter("delay_s", "s", -TIME_SHIFT_LIMIT_S, TIME_SHIFT_LIMIT_S),)
+
+    def columns(self, features):
+        return -features.reference_rate[:, :, None]
+
+    def sim_contribution(self, p):
+        return None  # a property of the measurement, not of the physics
+
+
+class GravityTilt(Effect):
+    """Base mounted with a small tilt about base x, then y (dart_builder's
+    convention): the gravity efforts of the identified bodies for the gravity
+    direction change, linearised in the two angles."""
+
+    kind = "gravity_tilt"
+    name = "gravity_tilt"
+    parameters = (
+        Parameter("tilt_x_rad", "rad", -TILT_LIMIT_RAD, TILT_LIMIT_RAD),
+        Parameter("tilt_y_rad", "rad", -TILT_LIMIT_RAD, TILT_LIMIT_RAD),
+    )
+
+    def __init__(self, arm: Arm):
+        self.directions = gravity_tilt_directions(arm.model.gravity)
+        massive = [k for k, l in arm.model.links.items() if l.body and arm.params[k].mass > 0.0]
+        moved = set().union(*(joints_moving_link(arm.model, k) for k in massive))
+        self.joints = tuple(j for j in JOINT_NAMES if j in moved)
+
+    def columns(self, features):
+        return features.unit_gravity_efforts @ self.directions
+
+    def sim_contribution(self, p):
+        return SimContribution(gravity_tilt_rad=np.array([p[0], p[1]], dtype=float))
+
+    def size(self, p):
+        return float(np.hypot(p[0], p[1]))
+
+
+class CounterweightTransmission(Effect):
+    """The counterweight tendon transmits its force F to J3 with a scale error
+    (1 + kappa) and a tension-proportional loss mu |F| sign(dq3)."""
+
+    kind = "counterweight_transmission"
+    name = "counterweight_transmission"
+    joints = ("q3",)
+    parameters = (
+        Parameter("force_scale_error", "1", -COUNTERWEIGHT_SCALE_LIMIT, COUNTERWEIGHT_SCALE_LIMIT),
+        Parameter("loss_coefficient", "1", 0.0, COUNTERWEIGHT_LOSS_LIMIT),
+    )
+
+    def __init__(self, arm: Arm):
+        self.leader = JOINT_NAMES.index("q3")
+
+    def columns(self, features):
+        force = features.counterweight_effort[:, self.leader]
+        out = np.zeros((len(features), N_JOINTS, 2))
+        out[:, self.leader, 0] = force
+        out[:, self.leader, 1] = np.abs(force) * np.sign(features.dq[:, self.leader])
+        return out
+
+    def sim_contribution(self, p):
+        return None  # SimConfig's tendon is ideal (or the paper's PID)

@@ -1,0 +1,189 @@
+"""The effects' regressors in one design, per-block normal equations, and the bounded least-squares fit."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from dvrk_dart.diagnosis.effect import Effect
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload import PointPayload
+from dvrk_dart.model.joints import N_JOINTS
+
+#: block length for the folds and the bootstrap (s): much longer than the
+#: filtered signals' correlation time (~0.05 s), short enough for ~28 blocks a run
+BLOCK_DURATION_S = 1.0
+#: Occam prior of a payload: a mass m costs this fraction of the training
+#: residual energy per kg^2. Far below what a real payload explains (0.1 kg:
+#: 1e-4), it only chooses among explanations the data cannot tell apart: on a
+#: link turning about a fixed axis gravity sees m c, not m, and the lightest
+#: payload at the farthest point of the link is preferred to a heavy one near
+#: the axis.
+PAYLOAD_MASS_PRIOR_PER_KG2 = 0.01
+#: relative Tikhonov term on the scaled normal equations: regressors of
+#: different effects can be nearly collinear on a short trajectory
+RIDGE_RELATIVE = 1e-9
+
+
+class Design:
+    """Column layout of all candidate effects in one regressor."""
+
+    def __init__(self, effects: Sequence[Effect]):
+        self.effects = list(effects)
+        self.slices = []
+        start = 0
+        for e in self.effects:
+            self.slices.append(slice(start, start + e.n_columns))
+            start += e.n_columns
+        self.n_columns = start
+
+    def columns(self, features: TrajectoryFeatures) -> np.ndarray:
+        return np.concatenate([e.columns(features) for e in self.effects], axis=2)
+
+    def index(self, chosen: Sequence[int]) -> np.ndarray:
+        return np.concatenate([np.arange(self.slices[i].start, self.slices[i].stop) for i in chosen]) if chosen else np.zeros(0, int)
+
+
+@dataclass
+class Grams:
+    """Per-block, per-joint normal equations of one or several runs."""
+
+    A: np.ndarray  # (n_blocks, 7, P, P)
+    g: np.ndarray  # (n_blocks, 7, P)
+    s: np.ndarray  # (n_blocks, 7) squared residual before
+    n: np.ndarray  # (n_blocks,) samples
+    fold: np.ndarray  # (n_blocks,) fold index
+
+    @staticmethod
+    def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int) -> "Grams":
+        Phi = design.columns(features)  # (N, 7, P)
+        block = max(1, int(round(BLOCK_DURATION_S * features.sample_rate_hz)))
+        n_blocks = max(1, len(residual) // block)
+        edges = np.linspace(0, len(residual), n_blocks + 1).astype(int)
+        P = design.n_columns
+        A = np.empty((n_blocks, N_JOINTS, P, P))
+        g = np.empty((n_blocks, N_JOINTS, P))
+        s = np.empty((n_blocks, N_JOINTS))
+        for b in range(n_blocks):
+            sl = slice(edges[b], edges[b + 1])
+            X = Phi[sl].transpose(1, 0, 2)  # (7, n, P)
+            A[b] = np.matmul(X.transpose(0, 2, 1), X)
+            g[b] = np.einsum("jnp,nj->jp", X, residual[sl])
+            s[b] = np.sum(residual[sl] ** 2, axis=0)
+        fold = (np.arange(n_blocks) * min(folds, n_blocks)) // n_blocks
+        return Grams(A, g, s, np.diff(edges), fold)
+
+    @staticmethod
+    def concat(parts: list["Grams"]) -> "Grams":
+        return Grams(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("A", "g", "s", "n", "fold")))
+
+
+@dataclass
+class Fit:
+    params: dict[int, np.ndarray]  # effect index -> physical parameters
+    beta: np.ndarray  # (P,) regression coefficients, zero outside the chosen effects
+
+
+class Fitter:
+    """Bounded weighted least squares of a set of effects on Gram matrices."""
+
+    def __init__(self, design: Design):
+        self.design = design
+
+    def fit(self, chosen: Sequence[int], A: np.ndarray, g: np.ndarray, warm: dict[int, np.ndarray] | None = None, energy: float = 0.0) -> Fit:
+        """Minimise beta^T A beta - 2 beta^T g (+ the payload mass prior, scaled by
+        `energy`, the weighted residual energy before) within the bounds."""
+        design = self.design
+        beta_full = np.zeros(design.n_columns)
+        if not chosen:
+            return Fit({}, beta_full)
+        idx = design.index(chosen)
+        A_S, g_S = A[np.ix_(idx, idx)], g[idx]
+        d = np.sqrt(np.clip(np.diag(A_S), 0.0, None))
+        d[d == 0.0] = 1.0
+        As = A_S / np.outer(d, d) + RIDGE_RELATIVE * np.eye(len(idx))
+        L = scipy.linalg.cholesky(As, lower=True)
+        y = scipy.linalg.solve_triangular(L, g_S / d, lower=True)
+        M = L.T  # ||M b - y||^2 + const in the scaled coefficients b = d * beta
+        effects = [design.effects[i] for i in chosen]
+        local = []
+        start = 0
+        for e in effects:
+            local.append(slice(start, start + e.n_columns))
+            start += e.n_columns
+        if all(e.linear for e in effects):
+            lb = np.concatenate([e.lower for e in effects]) * d
+            ub = np.concatenate([e.upper for e in effects]) * d
+            sol = scipy.optimize.lsq_linear(M, y, bounds=(lb, ub), method="bvls" if len(idx) <= 60 else "trf")
+            beta = sol.x / d
+            params = {i: beta[sl].copy() for i, sl in zip(chosen, local)}
+        else:
+            params = self._fit_nonlinear(chosen, effects, local, M, y, d, warm or {}, energy)
+            beta = np.concatenate([e.coefficients(params[i]) for i, e in zip(chosen, effects)])
+        beta_full[idx] = beta
+        return Fit(params, beta_full)
+
+    def _fit_nonlinear(self, chosen, effects, local, M, y, d, warm, energy) -> dict[int, np.ndarray]:
+        lower = np.concatenate([e.lower for e in effects])
+        upper = np.concatenate([e.upper for e in effects])
+        p_slices, start = [], 0
+        for e in effects:
+            p_slices.append(slice(start, start + e.n_parameters))
+            start += e.n_parameters
+
+        def beta_of(p):
+            return np.concatenate([e.coefficients(p[ps]) for e, ps in zip(effects, p_slices)])
+
+        # mass prior rows: sqrt(prior * energy) * m for every payload
+        mass_index = [ps.start for e, ps in zip(effects, p_slices) if isinstance(e, PointPayload)]
+        prior = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0))
+        P = np.zeros((len(mass_index), len(lower)))
+        P[np.arange(len(mass_index)), mass_index] = prior
+
+        def residual(p):
+            return np.concatenate([M @ (d * beta_of(p)) - y, P @ p])
+
+        def jacobian(p):
+            J = scipy.linalg.block_diag(*[e.coefficients_jacobian(p[ps]) for e, ps in zip(effects, p_slices)])
+            return np.vstack([M @ (d[:, None] * J), P])
+
+        # starting points: the unconstrained linear solution, read by each effect
+        linear = np.linalg.lstsq(M, y, rcond=None)[0] / d
+        per_effect_starts = []
+        for i, e, sl in zip(chosen, effects, local):
+            starts = [warm[i]] if i in warm else e.initial_guesses(linear[sl])
+            per_effect_starts.append([np.clip(s, e.lower, e.upper) for s in starts])
+        n_starts = max(len(s) for s in per_effect_starts)
+        best = None
+        for k in range(n_starts):
+            x0 = np.concatenate([s[min(k, len(s) - 1)] for s in per_effect_starts])
+            sol = scipy.optimize.least_squares(residual, x0, jac=jacobian, bounds=(lower, upper), method="trf", x_scale="jac")
+            if best is None or sol.cost < best.cost:
+                best = sol
+        return {i: best.x[ps].copy() for i, ps in zip(chosen, p_slices)}
+
+
+def sse(beta: np.ndarray, A: np.ndarray, g: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Squared residual after subtracting Y beta, from Grams (..., P, P), (..., P), (...)."""
+    nz = np.flatnonzero(beta)
+    if len(nz) == 0:
+        return s.copy()
+    b = beta[nz]
+    quad = np.einsum("...pq,p,q->...", A[..., nz[:, None], nz[None, :]], b, b)
+    return np.maximum(s - 2.0 * g[..., nz] @ b + quad, 0.0)
+
+
+def weighted_fraction(after: np.ndarray, before: np.ndarray, w2: np.ndarray) -> float:
+    """Explained fraction of the weighted squared residual (arrays (..., 7))."""
+    total = np.sum(before * w2)
+    return float(1.0 - np.sum(after * w2) / total) if total > 0 else 0.0
+
+
+def per_joint_fraction(after: np.ndarray, before: np.ndarray) -> list[float]:
+    a, b = after.reshape(-1, N_JOINTS).sum(0), before.reshape(-1, N_JOINTS).sum(0)
+    return [float(1.0 - x / y) if y > 0 else 0.0 for x, y in zip(a, b)]

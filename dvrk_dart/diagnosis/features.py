@@ -1,0 +1,93 @@
+"""Per-sample quantities of one trajectory that the effect regressors are built from."""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import pinocchio as pin
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import N_JOINTS
+
+#: coordinates of the 10 dynamic parameters of a body in Pinocchio's regressor
+#: (m, m cx, m cy, m cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz about the joint frame origin)
+BODY_PARAMETERS = 10
+
+
+class TrajectoryFeatures:
+    """Per-sample quantities of one trajectory that the regressors are built from.
+
+    `reference_effort` is the simulated effort at the measured samples (the
+    time-shift effect differentiates it)."""
+
+    def __init__(self, arm: Arm, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, reference_effort: np.ndarray, sample_rate_hz: float):
+        self.arm = arm
+        self.q, self.dq, self.ddq = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, dq, ddq))
+        self.reference_effort = np.asarray(reference_effort, dtype=float)
+        if self.reference_effort.shape != self.q.shape:
+            raise DvrkDartError(f"reference efforts {self.reference_effort.shape} do not match the states {self.q.shape}")
+        self.sample_rate_hz = float(sample_rate_hz)
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    @cached_property
+    def _pin_joint_of_link(self) -> dict[int, int]:
+        im = self.arm.identified
+        out = {}
+        for link in im.tree_links:
+            if hasattr(link, "key") and link.key in self.arm.model.links:
+                out[link.key] = im.pin_model.getJointId(f"link{link.key}_{link.name}")
+        return out
+
+    def body_columns(self, key: int) -> slice:
+        """Columns of `body_regressor` belonging to a moving link's body."""
+        if key not in self._pin_joint_of_link:
+            raise DvrkDartError(f"link {key} has no joint of its own in the identified model tree")
+        j = self._pin_joint_of_link[key]
+        return slice(BODY_PARAMETERS * (j - 1), BODY_PARAMETERS * j)
+
+    @cached_property
+    def body_regressor(self) -> np.ndarray:
+        """(N, 7, 10 n_joints): efforts per unit dynamic parameter of every tree body,
+        projected onto the 7 coordinates (tau = G^T tau_tree)."""
+        im = self.arm.identified
+        pm, data = im.pin_model, im.pin_model.createData()
+        qt, vt, at = im.tree_q(self.q), im.tree_v(self.dq), im.tree_v(self.ddq)
+        out = np.empty((len(qt), N_JOINTS, BODY_PARAMETERS * (pm.njoints - 1)))
+        GT = im.G.T
+        for k in range(len(qt)):
+            out[k] = GT @ pin.computeJointTorqueRegressor(pm, data, qt[k], vt[k], at[k])
+        return out
+
+    @cached_property
+    def unit_gravity_efforts(self) -> np.ndarray:
+        """(N, 7, 3): gravity efforts of the identified bodies for a unit gravity
+        vector along base x, y, z (efforts are linear in the gravity vector)."""
+        im = self.arm.identified
+        model = pin.Model(im.pin_model)
+        data = model.createData()
+        qt = im.tree_q(self.q)
+        out = np.empty((len(qt), N_JOINTS, 3))
+        for axis in range(3):
+            model.gravity = pin.Motion(np.r_[np.eye(3)[axis], np.zeros(3)])
+            for k in range(len(qt)):
+                out[k, :, axis] = im.G.T @ pin.computeGeneralizedGravity(model, data, qt[k])
+        return out
+
+    @cached_property
+    def reference_rate(self) -> np.ndarray:
+        """d/dt of the simulated effort (N, 7), per second."""
+        if len(self) < 2:
+            return np.zeros_like(self.reference_effort)
+        return np.gradient(self.reference_effort, 1.0 / self.sample_rate_hz, axis=0)
+
+    @cached_property
+    def counterweight_effort(self) -> np.ndarray:
+        """(N, 7) efforts due to the counterweight body alone (identified inertia)."""
+        im = self.arm.identified
+        key = self.arm.model.counterweight_link
+        j = self._pin_joint_of_link[key]
+        return self.body_regressor[:, :, self.body_columns(key)] @ im.pin_model.inertias[j].toDynamicParameters()

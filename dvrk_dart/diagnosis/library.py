@@ -1,0 +1,151 @@
+"""The library of candidate effects, and the effects as simulator physics (SimConfig)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pinocchio as pin
+
+from dvrk_dart.diagnosis.arm_effects import (
+    CounterweightTransmission,
+    GravityTilt,
+    TimeShift,
+)
+from dvrk_dart.diagnosis.effect import Effect
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.geometry import ENVELOPE_MARGIN_M, link_envelope
+from dvrk_dart.diagnosis.joint_effects import (
+    CABLE_ELASTICITY_JOINTS,
+    REVERSAL_VELOCITIES,
+    TORSION_SPRING_JOINT,
+    JointArmature,
+    JointFriction,
+    JointOffset,
+    JointStiffness,
+)
+from dvrk_dart.diagnosis.payload import (
+    PointPayload,
+    equivalent_payload_links,
+    payload_links,
+    point_mass_parameters,
+)
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
+
+
+def candidate_effects(
+    arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES
+) -> list[Effect]:
+    """The library of candidate effects, in a fixed order."""
+    effects: list[Effect] = []
+    effects += [JointFriction(j) for j in JOINT_NAMES]
+    effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
+    if stribeck:
+        effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
+    effects += [JointOffset(j) for j in JOINT_NAMES]
+    effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
+    effects += [JointArmature(j) for j in JOINT_NAMES]
+    equivalents = equivalent_payload_links(arm)
+    effects += [
+        PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)
+    ]
+    effects += [GravityTilt(arm), TimeShift(), CounterweightTransmission(arm)]
+    return effects
+
+
+# ----------------------------------------------------------- to the simulator
+def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimConfig = SimConfig()) -> SimConfig:
+    """SimConfig with the effects added as physics on top of `base`.
+
+    Effects the simulation has no field for are skipped: `not_simulated` lists
+    them (the caller adds their regressor effort)."""
+    extra = base.extra
+    fields = {
+        name: np.array(getattr(extra, name), dtype=float)
+        for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity")
+    }
+    payloads = list(base.payloads)
+    tilt = np.array(base.gravity_tilt_rad, dtype=float)
+    for effect, p in selected:
+        contribution = effect.sim_contribution(np.asarray(p, dtype=float))
+        if contribution is None:
+            continue
+        for name in fields:
+            fields[name] += getattr(contribution, name)
+        payloads += list(contribution.payloads)
+        tilt += contribution.gravity_tilt_rad
+    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()})
+    return replace(base, extra=new_extra, payloads=tuple(payloads), gravity_tilt_rad=(float(tilt[0]), float(tilt[1])))
+
+
+def not_simulated(selected: list[tuple[Effect, np.ndarray]]) -> list[tuple[Effect, np.ndarray]]:
+    """The effects that `effects_to_sim_config` cannot put (wholly) into a
+    SimConfig: their `unsimulated_effort` is added to the simulated efforts."""
+    return [(e, p) for e, p in selected if not e.fully_simulated(np.asarray(p, dtype=float))]
+
+
+def unsimulated_effort(selected: list[tuple[Effect, np.ndarray]], features: TrajectoryFeatures) -> np.ndarray:
+    """(N, 7) sum of the efforts of `selected` that the simulation does not produce."""
+    total = np.zeros((len(features), N_JOINTS))
+    for e, p in selected:
+        part = e.unsimulated_effort(features, p)
+        if part is not None:
+            total = total + part
+    return total
+
+
+def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+    """The efforts a SimConfig's physics should produce, from the model's formulas.
+
+    An independent statement of what the simulator must do with the identified
+    flags, JointEffects, payloads (exact point masses) and the tilt (exact, not
+    linearised), for checking the DART replay and the effect mapping. Ideal
+    counterweight only."""
+    im = arm.identified
+    terms = simulated_terms(config)
+    efforts = im.efforts(q, dq, ddq, terms)
+    tilt = np.asarray(config.gravity_tilt_rad, dtype=float)
+    features = TrajectoryFeatures(arm, q, dq, ddq, np.zeros_like(np.atleast_2d(q)), 1.0)
+    total = efforts.total(terms)
+    if np.any(tilt != 0.0):
+        g_tilted = _gravity_in_base(arm.model, tilt)
+        total = total - efforts.terms["gravity"] + features.unit_gravity_efforts @ g_tilted
+    x = config.extra
+    reversal = np.asarray(x.coulomb_reversal_velocity, dtype=float)
+    reversal_law = np.where(reversal > 0.0, np.tanh(features.dq / np.where(reversal > 0.0, reversal, 1.0)), np.sign(features.dq))
+    total = total + np.asarray(x.coulomb) * reversal_law + np.asarray(x.viscous) * features.dq
+    total = total + np.asarray(x.offset) + np.asarray(x.stiffness) * features.q + np.asarray(x.armature) * features.ddq
+    for payload in config.payloads:
+        params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))
+        total = total + features.body_regressor[:, :, features.body_columns(payload.link)] @ params
+        if np.any(tilt != 0.0):  # the body regressor carries the nominal gravity
+            total = total + _payload_gravity_correction(arm, features, payload, tilt)
+    return total
+
+
+def _gravity_in_base(model: PsmModel, tilt: np.ndarray) -> np.ndarray:
+    """Gravity in the base frame of a tilted base: the simulator's own definition."""
+    from dvrk_dart.sim.builder import (
+        gravity_in_base,  # imports dartpy: only when a tilt is simulated
+    )
+
+    return np.asarray(gravity_in_base(model, (float(tilt[0]), float(tilt[1]))), dtype=float)
+
+
+def _payload_gravity_correction(arm: Arm, features: TrajectoryFeatures, payload: Payload, tilt: np.ndarray) -> np.ndarray:
+    """Gravity efforts of a payload under tilted minus nominal gravity (N, 7)."""
+    im = arm.identified
+    model = pin.Model(im.pin_model)
+    key = payload.link
+    j = features._pin_joint_of_link[key]
+    for i in range(1, model.njoints):
+        model.inertias[i] = pin.Inertia.Zero()
+    model.inertias[j] = pin.Inertia.FromDynamicParameters(point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m)))
+    data = model.createData()
+    qt = im.tree_q(features.q)
+    delta_g = _gravity_in_base(arm.model, tilt) - arm.model.gravity
+    model.gravity = pin.Motion(np.r_[delta_g, np.zeros(3)])
+    return np.array([im.G.T @ pin.computeGeneralizedGravity(model, data, qk) for qk in qt])

@@ -1,0 +1,135 @@
+"""What a selected payload is: its member among equivalent links, its mass profile, its report."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from dvrk_dart.diagnosis.design import PAYLOAD_MASS_PRIOR_PER_KG2, Fit
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload import PointPayload, point_mass_parameters
+from dvrk_dart.diagnosis.selection import CvResult, Selector
+from dvrk_dart.io.reference_data import sample_rate_hz
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import N_JOINTS
+
+#: a payload's mass counts as identified when its interval's ends are within
+#: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
+MASS_IDENTIFIED_RATIO = 1.7
+#: masses tried when profiling a selected payload's mass (kg, geometric grid)
+PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
+
+
+def _penalised_cost(selector: "Selector", chosen: list[int], fit: Fit) -> float:
+    """Weighted training squared residual (up to a constant) plus the payloads' Occam prior."""
+    masses = [fit.params[i][0] for i in chosen if isinstance(selector.design.effects[i], PointPayload)]
+    prior = PAYLOAD_MASS_PRIOR_PER_KG2 * selector.energy_total
+    A, g = selector.A_total, selector.g_total
+    return float(fit.beta @ A @ fit.beta - 2 * fit.beta @ g + prior * np.sum(np.square(masses)))
+
+
+def _best_fit(selector: "Selector", chosen: list[int], cv: "CvResult | None" = None) -> Fit:
+    """Fit on all training data from the effects' own starting points and from
+    the folds' mean parameters; keep the better (nonlinear fits have local minima)."""
+    candidates = [selector.fit_all(chosen)]
+    folds = [p for p in cv.fold_params if all(i in p for i in chosen)] if cv is not None else []
+    if folds and chosen:
+        warm = {i: np.mean([p[i] for p in folds], axis=0) for i in chosen}
+        candidates.append(selector.fit_all(chosen, warm))
+    return min(candidates, key=lambda fit: _penalised_cost(selector, chosen, fit))
+
+
+def _family_members(selector: "Selector", payload: int) -> list[int]:
+    family = selector.design.effects[payload].family
+    return [j for j, e in enumerate(selector.design.effects) if isinstance(e, PointPayload) and e.family == family]
+
+
+def _swap(chosen: list[int], old: int, new: int) -> list[int]:
+    return [new if i == old else i for i in chosen]
+
+
+def choose_within_families(selector: "Selector", selected: list[int], cv: "CvResult") -> tuple[list[int], Fit, "CvResult"]:
+    """A payload family (links the efforts cannot tell apart) is one hypothesis
+    over the union of its links' envelopes: its member is the one with the
+    lowest penalised cost, the Occam prior deciding as it does within one link,
+    not the held-out score, whose differences among members are noise."""
+    final, swapped = _best_fit(selector, selected, cv), False
+    for payload in [i for i in selected if isinstance(selector.design.effects[i], PointPayload)]:
+        for member in _family_members(selector, payload):
+            if member in selected:
+                continue
+            trial = _swap(selected, payload, member)
+            fit = _best_fit(selector, trial)
+            if _penalised_cost(selector, trial, fit) < _penalised_cost(selector, selected, final):
+                selected, final, payload, swapped = trial, fit, member, True
+    return selected, final, (selector.cross_validate(selected) if swapped else cv)
+
+
+def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
+    """Cross-validated score of the selected set with the payload's mass fixed
+    on a grid (its position free in the envelopes of its family's links): where
+    the score stays within the bootstrap spread of the best, the data cannot
+    tell the masses apart (for a link turning about a fixed axis, gravity only
+    sees m c; m alone comes from the weak inertial terms)."""
+    best_scores: dict[float, CvResult] = {}
+    for member in _family_members(selector, payload):
+        members_set = _swap(chosen, payload, member)
+        fit = _best_fit(selector, members_set)
+        effect = selector.design.effects[member]
+        original = effect.parameters
+        try:
+            for m in PROFILE_MASSES_KG:
+                if m > original[0].upper:
+                    break
+                effect.parameters = (replace(original[0], lower=m * (1 - 1e-9), upper=m),) + original[1:]
+                warm = [{i: (np.r_[m, fit.params[i][1:]] if i == member else fit.params[i]) for i in members_set} for _ in selector.folds]
+                score = selector.cross_validate(members_set, warm)
+                if m not in best_scores or score.fraction > best_scores[m].fraction:
+                    best_scores[m] = score
+        finally:
+            effect.parameters = original
+    masses = sorted(best_scores)
+    fractions = np.array([best_scores[m].fraction for m in masses])
+    k = int(np.argmax(fractions))
+    spread = float(np.std(selector.bootstrap_fractions(best_scores[masses[k]].after)))
+    inside = [m for m, f in zip(masses, fractions) if f >= fractions[k] - spread]
+    lo, hi = min(inside), max(inside)
+    return {
+        "masses_kg": masses,
+        "cross_validated_fraction": fractions.tolist(),
+        "bootstrap_spread": spread,
+        "mass_interval_kg": [lo, hi],
+        "identifiable": bool(lo > masses[0] and hi < masses[-1] and hi / lo <= MASS_IDENTIFIED_RATIO),
+    }
+
+
+def pitch_shaft_offsets(arm: Arm, position_base: np.ndarray) -> dict:
+    """Where a base-frame point (q = 0) sits relative to the pitch shaft centre:
+    horizontal distance perpendicular to the shaft and height above it (m), the
+    quantities of a hand measurement."""
+    pitch = next(l for l in arm.model.links.values() if l.group == "parallelogram" and l.variable is not None and l.joint_type == "revolute")
+    T = arm.model.forward_kinematics(np.zeros(N_JOINTS))[pitch.key]
+    up = -arm.model.gravity / np.linalg.norm(arm.model.gravity)
+    v = np.asarray(position_base) - T[:3, 3]
+    v_perp = v - (v @ T[:3, 2]) * T[:3, 2]  # remove the along-shaft component
+    height = float(v_perp @ up)
+    return {"horizontal_m": float(np.linalg.norm(v_perp - height * up)), "height_m": height, "along_shaft_m": float(v @ T[:3, 2])}
+
+
+def payload_gravity_efforts_at_zero(arm: Arm, link: int, mass_kg: float, position_m: np.ndarray) -> np.ndarray:
+    """Static efforts (7) a point mass needs at q = 0: what gravity identifies."""
+    zero = np.zeros((1, N_JOINTS))
+    features = TrajectoryFeatures(arm, zero, zero, zero, zero, sample_rate_hz())
+    return (features.body_regressor[0][:, features.body_columns(link)] @ point_mass_parameters(mass_kg, position_m))
+
+
+def describe_payload(effect: PointPayload, p: np.ndarray, arm: Arm, profile: dict | None = None) -> dict:
+    report = effect.describe(p)
+    report["first_moment_kg_m"] = (p[0] * np.asarray(p[1:4])).tolist()
+    report["pitch_shaft_offsets_at_q0_m"] = pitch_shaft_offsets(arm, effect.position_base_at_zero(p))
+    report["gravity_efforts_at_q0"] = payload_gravity_efforts_at_zero(arm, effect.link_key, p[0], p[1:4]).tolist()
+    if profile is not None:
+        report["mass_profile"] = profile
+        report["mass_interval_kg"] = profile["mass_interval_kg"]
+    return report

@@ -1,0 +1,100 @@
+"""Where the gap is: residual statistics per motion regime, and residual figures."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dvrk_dart.io.signal import ProcessedRun
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+#: |dq| below this fraction of the run's largest |dq| counts as "near zero"
+NEAR_ZERO_VELOCITY_FRACTION = 0.05
+#: quantile bins of the acceleration and pose regimes (terciles)
+REGIME_QUANTILES = (1 / 3, 2 / 3)
+#: samples plotted per figure at most (thinned evenly): scatter plots of 6000
+#: points say no more than 3000 and take twice as long
+MAX_PLOTTED_SAMPLES = 3000
+
+
+def residual_regimes(state: ProcessedRun, residual: np.ndarray) -> pd.DataFrame:
+    """Residual statistics per joint and motion regime (tidy: one row per
+    joint, regime and bin): velocity sign / near zero, acceleration level,
+    insertion depth q3 and pitch angle q2."""
+    rows = []
+    q3, q2 = state.q[:, JOINT_NAMES.index("q3")], state.q[:, JOINT_NAMES.index("q2")]
+
+    def tercile_bins(values: np.ndarray, labels: tuple[str, str, str]) -> list[tuple[str, np.ndarray, float, float]]:
+        edges = np.quantile(values, REGIME_QUANTILES)
+        masks = [values <= edges[0], (values > edges[0]) & (values <= edges[1]), values > edges[1]]
+        bounds = [(values.min(), edges[0]), (edges[0], edges[1]), (edges[1], values.max())]
+        return [(lab, m, lo, hi) for lab, m, (lo, hi) in zip(labels, masks, bounds)]
+
+    pose_bins = {
+        "insertion_depth_q3": tercile_bins(q3, ("shallow", "middle", "deep")),
+        "pitch_q2": tercile_bins(q2, ("low", "middle", "high")),
+    }
+    for j, joint in enumerate(JOINT_NAMES):
+        v, a, r = state.dq[:, j], state.ddq[:, j], residual[:, j]
+        near = NEAR_ZERO_VELOCITY_FRACTION * np.max(np.abs(v))
+        regimes = {
+            "velocity": [
+                ("negative", v < -near, -np.inf, -near),
+                ("near_zero", np.abs(v) <= near, -near, near),
+                ("positive", v > near, near, np.inf),
+            ],
+            "acceleration": tercile_bins(np.abs(a), ("low", "medium", "high")),
+            **pose_bins,
+        }
+        for regime, bins in regimes.items():
+            for label, mask, lo, hi in bins:
+                x = r[mask]
+                rows.append(
+                    {
+                        "joint": joint,
+                        "unit": effort_unit(joint),
+                        "regime": regime,
+                        "bin": label,
+                        "bin_lower": float(lo),
+                        "bin_upper": float(hi),
+                        "samples": int(mask.sum()),
+                        "mean": float(x.mean()) if len(x) else math.nan,
+                        "std": float(x.std()) if len(x) else math.nan,
+                        "rms": float(np.sqrt(np.mean(x**2))) if len(x) else math.nan,
+                    }
+                )
+    return pd.DataFrame(rows)
+
+
+def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str, label: str = "residual") -> list[Path]:
+    """One figure per joint: the residual against q, dq and ddq of that joint."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dvrk_dart.io.atomic import atomic_path
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    keep = np.linspace(0, len(state) - 1, min(len(state), MAX_PLOTTED_SAMPLES)).astype(int)
+    paths = []
+    for j, joint in enumerate(JOINT_NAMES):
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
+        pu = "m" if effort_unit(joint) == "N" else "rad"
+        for ax, x, xlabel in zip(axes, (state.q, state.dq, state.ddq), (f"{joint} ({pu})", f"d{joint} ({pu}/s)", f"dd{joint} ({pu}/s²)")):
+            ax.scatter(x[keep, j], residual[keep, j], s=2, alpha=0.4, c=state.dq[keep, j] > 0, cmap="coolwarm")
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.set_xlabel(xlabel)
+        axes[0].set_ylabel(f"{label} ({effort_unit(joint)})")
+        fig.suptitle(f"{label} of {joint} (colour: velocity sign)")
+        fig.tight_layout()
+        target = folder / f"{label}_{joint}.png"
+        with atomic_path(target) as tmp:
+            fig.savefig(tmp, format="png", dpi=90)
+        plt.close(fig)
+        paths.append(target)
+    return paths

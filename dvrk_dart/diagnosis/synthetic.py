@@ -1,0 +1,46 @@
+"""Synthetic measurements: the simulator with hidden effects plus realistic noise."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from dvrk_dart.diagnosis.effect import Effect
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.library import (
+    effects_to_sim_config,
+    not_simulated,
+    unsimulated_effort,
+)
+from dvrk_dart.diagnosis.runs import Simulate, simulated_efforts
+from dvrk_dart.io.reference_data import sample_rate_hz
+from dvrk_dart.io.signal import ProcessedRun, zero_phase_lowpass
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.sim.config import SimConfig
+
+
+def synthesize_measurement(
+    arm: Arm,
+    state: ProcessedRun,
+    injected: Sequence[tuple[Effect, np.ndarray]],
+    noise_rms: np.ndarray,
+    seed: int = 0,
+    simulate: Simulate | None = None,
+    base_config: SimConfig = SimConfig(),
+) -> ProcessedRun:
+    """A measured run with hidden effects: the efforts of the simulation with
+    the effects as physics (SimConfig) plus the regressor efforts of effects the
+    simulation has no field for, plus coloured noise of the given RMS per joint
+    (white noise through the upstream low-pass filter)."""
+    config = effects_to_sim_config(list(injected), base_config)
+    tau = simulated_efforts(arm, state, simulate, config)
+    extra = not_simulated(list(injected))
+    if extra:
+        features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), sample_rate_hz())
+        tau = tau + unsimulated_effort(extra, features)
+    rng = np.random.default_rng(seed)
+    noise = zero_phase_lowpass(rng.standard_normal(tau.shape), 1.0 / sample_rate_hz())
+    noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)
+    return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise)
