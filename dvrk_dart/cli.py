@@ -75,8 +75,10 @@ REPLAY_SHORTHANDS = {
 
 def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: str | None = None):
     from dvrk_dart.runs.config import RunConfig
+    from dvrk_dart.runs.scenarios import load_scenario
 
-    return RunConfig(scenario, mode, args.counterweight, args.dynamics, args.dt, args.duration, args.params, measured)
+    dynamics = args.dynamics or load_scenario(scenario).dynamics
+    return RunConfig(scenario, mode, args.counterweight, dynamics, args.dt, args.duration, args.params, measured)
 
 
 def _run_and_write(config, out: Path | None) -> int:
@@ -174,9 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
         p.add_argument("--dt", type=float, default=1e-3, help="simulation step (s)")
         p.add_argument("--duration", type=float, default=None, help="simulate only the first seconds")
-        p.add_argument("--dynamics", default="inertial", metavar="inertial|identified|DIAGNOSIS.json",
+        p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                        help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
-                            "or the simulation a diagnosis selected")
+                            "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
         _add_arm_options(p)
 
     p = sub.add_parser("run", help="run one scenario variant")
@@ -200,8 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", default="report", help="report folder")
     p.add_argument("--jobs", type=int, default=2, help="parallel worker processes")
     p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
-    p.add_argument("--dynamics", default="inertial", metavar="inertial|identified|DIAGNOSIS.json",
-                   help="the simulated arm of the campaign's runs that do not name one (default: the paper's)")
+    p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
+                   help="the simulated arm of the campaign's runs that do not name one (default: their scenario's)")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")

@@ -20,7 +20,7 @@ def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str) -> di
     return summary
 
 
-def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str = "inertial") -> int:
+def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str | None = None) -> int:
     """The campaign (its entries without `dynamics` simulate the `dynamics` arm),
     the diagnosis validation, the runs that simulate what the diagnosis found,
     and the report."""

@@ -84,3 +84,16 @@ def test_identified_arm_replay_of_two_matches_model_and_measured():
     assert m["rms_sim_vs_model"][2] <= THRESHOLDS["identified-sim-vs-model-insertion"]
     excess = np.subtract(m["rms_sim_vs_measured"][:3], m["rms_model_vs_measured"][:3])
     assert np.all(excess <= THRESHOLDS["identified-sim-vs-measured"])
+
+
+def test_a_scenario_file_names_its_arm_and_the_command_line_overrides_it(tmp_path, capsys):
+    scenario = tmp_path / "two-realistic.toml"
+    scenario.write_text('name = "two-realistic"\nkind = "replay"\nmeasured = "two"\nmodes = ["velocity"]\ndynamics = "identified"\n')
+    for extra, label in (([], "identified"), (["--dynamics", "inertial"], "inertial")):
+        out = tmp_path / label
+        assert main(["run", str(scenario), "--duration", "0.05", "--out", str(out), *extra]) == 0
+        config = json.loads((out / "config.json").read_text())
+        assert config["dynamics"] == label and config["sim"]["friction"] == (label == "identified")
+    scenario.write_text(scenario.read_text().replace('"identified"', '"realistic"'))
+    assert main(["run", str(scenario), "--out", str(tmp_path / "bad")]) == 2
+    assert "dynamics must be one of inertial, identified" in capsys.readouterr().err

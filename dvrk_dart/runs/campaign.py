@@ -33,8 +33,9 @@ INPUTS_FILE = "inputs.sha256"
 DIAGNOSIS_PREFIX = "@"
 
 
-def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None, default_dynamics: str = "inertial") -> list[RunConfig]:
-    """The campaign's runs; entries without `dynamics` simulate `default_dynamics`;
+def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None, default_dynamics: str | None = None) -> list[RunConfig]:
+    """The campaign's runs; entries without `dynamics` simulate `default_dynamics`
+    (when given, else their scenario's);
     "@FOLDER" dynamics resolve under diagnosis_dir (left out when it is None)."""
     try:
         raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
@@ -48,7 +49,7 @@ def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None,
         if unknown:
             raise DvrkDartError(f"{path}: unknown key(s) {', '.join(sorted(unknown))} in a [[runs]] entry")
         scenario = load_scenario(entry["scenario"])
-        for dynamics in entry.get("dynamics", [default_dynamics]):
+        for dynamics in entry.get("dynamics", [default_dynamics or scenario.dynamics]):
             if dynamics.startswith(DIAGNOSIS_PREFIX):
                 if diagnosis_dir is None:
                     continue

@@ -61,7 +61,7 @@ def scenario_of(config: RunConfig) -> Scenario:
         if scenario.kind != "replay":
             raise DvrkDartError(f"--measured: scenario '{scenario.name}' is not a replay")
         scenario = Scenario(f"replay-{Path(config.measured).stem}", "replay", scenario.modes, scenario.counterweights,
-                            scenario.duration_s, measured=config.measured)
+                            scenario.duration_s, measured=config.measured, dynamics=scenario.dynamics)
     return scenario
 
 

@@ -18,7 +18,9 @@ from dvrk_dart.paths import PIPELINES_DIR
 
 SCENARIOS_DIR = PIPELINES_DIR / "scenarios"
 
-_TOP_KEYS = {"name", "kind", "duration_s", "modes", "counterweights", "start_pose", "path", "measured", "description"}
+_TOP_KEYS = {"name", "kind", "duration_s", "modes", "counterweights", "start_pose", "path", "measured", "description", "dynamics"}
+#: the simulated arms a scenario may ask for (runs.config.RunConfig.dynamics), or a diagnosis.json
+DYNAMICS_CHOICES = ("inertial", "identified")
 _PATH_KEYS = {
     "line": {"type", "length_m", "direction"},
     "spiral": {"type", "radius_m", "height_m", "radius_frequency_hz", "height_frequency_hz"},
@@ -66,6 +68,7 @@ class Scenario:
     path: dict | None = None
     measured: str | None = None
     source: Path | None = None
+    dynamics: str = "inertial"  # the simulated arm, unless a run overrides it
 
     def cartesian_path(self, start_position: np.ndarray) -> CartesianPath:
         params = dict(self.path or {})
@@ -82,6 +85,7 @@ class Scenario:
             "start_pose": None if self.start_pose is None else self.start_pose.tolist(),
             "path": self.path,
             "measured": self.measured,
+            "dynamics": self.dynamics,
         }
 
 
@@ -140,11 +144,16 @@ def load_scenario_file(path: Path) -> Scenario:
     counterweights = _string_list(path, raw, "counterweights", COUNTERWEIGHT_VARIANTS, ("on",))
     if "description" in raw and not isinstance(raw["description"], str):
         _fail(path, "description must be a string")
+    dynamics = raw.get("dynamics", "inertial")
+    if not isinstance(dynamics, str) or (dynamics not in DYNAMICS_CHOICES and not dynamics.endswith(".json")):
+        _fail(path, f"dynamics must be one of {', '.join(DYNAMICS_CHOICES)} or a diagnosis .json file, got {dynamics!r}")
+    if dynamics.endswith(".json"):  # relative to the scenario file
+        dynamics = str((path.parent / dynamics).resolve())
     if kind == "replay":
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
         duration = _positive(path, raw, "duration_s", "") if "duration_s" in raw else None
-        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path)
+        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics)
     duration = _positive(path, raw, "duration_s", "")
     start = _vector(path, raw, "start_pose", N_JOINTS)
     lower, upper = joint_ranges()
@@ -160,7 +169,7 @@ def load_scenario_file(path: Path) -> Scenario:
         _positive(path, path_table, key, "path.")
     if "direction" in path_table and not np.linalg.norm(_vector(path, path_table, "direction", 3, "path.")) > 0:
         _fail(path, "path.direction must be a non-zero 3-vector")
-    return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path)
+    return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path, dynamics=dynamics)
 
 
 def available_scenarios() -> list[str]:
