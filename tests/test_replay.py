@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from dvrk_dart.analysis.checks import load_checks
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.identified import IdentifiedModel
@@ -18,6 +19,8 @@ from dvrk_dart.sim.config import SimConfig, simulated_terms
 
 #: the shorter variants (off, pid) replay the first seconds only
 SHORT_S = 8.0
+#: the validation's own thresholds (pipelines/checks.toml)
+THRESHOLDS = {check["id"]: check["threshold"] for check in load_checks()}
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +37,8 @@ def without_cw():
 def test_closed_chain_holds_over_the_whole_replay(with_cw):
     m = with_cw.metrics
     assert m["duration_s"] > 27.9
-    assert m["closure_residual_max_m"] <= 1e-6
-    assert m["passive_joint_error_max_rad"] <= 1e-6
+    assert m["closure_residual_max_m"] <= THRESHOLDS["loop-closure"]
+    assert m["passive_joint_error_max_rad"] <= THRESHOLDS["loop-closure"]  # rad at ~1 m lever arms: the same scale
     assert m["counterweight_error_max_m"] <= 1e-9
 
 
@@ -48,8 +51,8 @@ def test_tool_tip_pose_equals_the_model_kinematics(model, params, with_cw):
 
 def test_simulated_efforts_equal_the_identified_model(with_cw):
     rms = np.array(with_cw.metrics["rms_sim_vs_model"])
-    # CoppeliaSim: 0.62 N·m, 0.93 N·m, 0.37 N; the target is 0.01
-    assert np.all(rms[:3] <= 0.01), rms
+    # CoppeliaSim: 0.62 N·m, 0.93 N·m, 0.37 N; the target is the validation's
+    assert np.all(rms[:3] <= THRESHOLDS["velocity-sim-vs-model-with-counterweight"]), rms
     assert np.all(rms[3:] <= 1e-5), rms  # the tool is massless in the identification
     # the simulation is not trivially equal to its reference: it differs from the measurement
     assert np.all(np.array(with_cw.metrics["rms_sim_vs_measured"])[:3] > 0.05)
