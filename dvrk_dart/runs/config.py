@@ -1,0 +1,97 @@
+"""One run's configuration: a frozen dataclass built by the command line and by
+the campaign alike, resolved into the simulator's options, and written as the
+run's config.json (with what the resolution found: files, checksums).
+
+`dynamics` chooses how realistic the simulated arm is:
+- "inertial": the identified rigid-body parameters only (the CoppeliaSim
+  paper's arm; the default for the paper's checks);
+- "identified": every identified term as DART physics: Coulomb and viscous
+  friction, offsets, the J4 spring and the motor inertias;
+- a diagnosis.json path: the simulation that diagnosis selected (the arm it
+  was fitted on plus its effects as physics, as recorded in its `sim_config`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES
+from dvrk_dart.sim.config import SimConfig
+
+#: the simulation step bounds a user may ask for (s): above 10 ms the closed
+#: chain's constraint stabilisation no longer holds the loops
+MAX_STEP_S = 0.01
+#: the longest run (s): an hour of simulated time at 1 kHz is 3.6 M steps, whose
+#: logs still fit in memory; longer runs belong in several files
+MAX_DURATION_S = 3600.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    scenario: str  # scenario name (pipelines/scenarios/) or .toml path
+    mode: str
+    counterweight: str = "on"
+    dynamics: str = "inertial"  # inertial | identified | path of a diagnosis.json
+    dt_s: float = 1e-3
+    duration_s: float | None = None  # None: the scenario's (or the whole measured run)
+    params_file: str | None = None  # None: the upstream params.json, resolved at run time
+    measured: str | None = None  # overrides a replay scenario's measured run
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.dt_s <= MAX_STEP_S):
+            raise DvrkDartError(f"--dt: {self.dt_s} s is outside (0, {MAX_STEP_S}] s")
+        if self.duration_s is not None and not (0.0 < self.duration_s <= MAX_DURATION_S):
+            raise DvrkDartError(f"--duration: {self.duration_s} s is outside (0, {MAX_DURATION_S:g}] s")
+        if self.dynamics not in DYNAMICS_CHOICES and not Path(self.dynamics).suffix == ".json":
+            raise DvrkDartError(f"--dynamics: '{self.dynamics}' is not one of {', '.join(DYNAMICS_CHOICES)} nor a diagnosis.json")
+
+    @property
+    def dynamics_label(self) -> str:
+        """Short name of the dynamics for run names: inertial, identified, diagnosed-<folder>."""
+        if self.dynamics in DYNAMICS_CHOICES:
+            return self.dynamics
+        return f"diagnosed-{Path(self.dynamics).resolve().parent.name}"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, raw: dict) -> "RunConfig":
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in raw.items() if k in names})
+
+
+def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial") -> str:
+    """The run folder's name; the paper's arm (inertial) keeps the historical name."""
+    base = f"{scenario}_{mode}_cw-{counterweight}"
+    return base if dynamics_label == "inertial" else f"{base}_{dynamics_label}"
+
+
+def sim_config_for(config: RunConfig) -> SimConfig:
+    """The simulator's options of a run: step, counterweight and dynamics."""
+    if config.dynamics == "inertial":
+        sim = SimConfig()
+    elif config.dynamics == "identified":
+        sim = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+    else:
+        sim = diagnosis_sim_config(Path(config.dynamics))
+    return replace(sim, dt_s=config.dt_s, counterweight=config.counterweight)
+
+
+def diagnosis_sim_config(path: Path) -> SimConfig:
+    """The SimConfig a diagnosis selected (its diagnosis.json `sim_config`)."""
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise DvrkDartError(f"--dynamics: {path}: diagnosis file not found") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, IsADirectoryError) as exc:
+        raise DvrkDartError(f"--dynamics: {path}: not a diagnosis.json ({type(exc).__name__})") from None
+    if not isinstance(raw, dict) or not isinstance(raw.get("sim_config"), dict):
+        raise DvrkDartError(f"--dynamics: {path}: no 'sim_config' object (not written by dvrk-dart diagnose?)")
+    try:
+        return SimConfig.from_dict(raw["sim_config"])
+    except (TypeError, ValueError, KeyError) as exc:
+        raise DvrkDartError(f"--dynamics: {path}: malformed sim_config ({exc})") from None
