@@ -156,6 +156,36 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         return run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}))
 
 
+def cmd_identify(args: argparse.Namespace) -> int:
+    """Identify the dynamic parameters from measured runs: params.json and its reports."""
+    from dvrk_dart.identification.identify import IdentificationConfig, identify
+    from dvrk_dart.identification.outputs import write_outputs
+    from dvrk_dart.identification.regressor import FrictionLaw
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
+
+    check_output_folder(args.out, "identification")
+    config = IdentificationConfig(
+        runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
+        friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
+        prior=args.prior, seed=args.seed, solver=args.solver,
+    )
+    result = identify(config)
+    with building_folder(args.out, "identification") as folder:
+        data = write_outputs(result, folder)
+    print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {', '.join(args.runs)}: "
+          f"condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
+    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + "   (relative error)")
+    for kind, runs in data["errors"].items():
+        for name, spans in runs.items():
+            for span, e in spans.items():
+                print(f"{name + ' ' + span.replace('_run', ''):<22} " + " ".join(f"{v:7.4f}" for v in e["relative_error"]) + f"   {kind}")
+    worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
+    outside = [k for k, m in data["masses_kg"].items() if not m["lower"] <= m["value"] <= m["upper"]]
+    print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
+          f"params: {Path(args.out) / 'params.json'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dvrk-dart", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -167,6 +197,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)
     p.set_defaults(func=cmd_model_errors)
+
+    p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
+    p.add_argument("--runs", nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")
+    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs, scored only")
+    p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
+    p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
+    p.add_argument("--friction-law", default="sign", choices=("sign", "tanh"),
+                   help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
+    p.add_argument("--reversal-velocity", type=float, default=None, help="velocity scale of the tanh law (rad/s or m/s)")
+    p.add_argument("--bounds", default=None, help="bounds and prior file (default models/psm/identification.toml)")
+    p.add_argument("--prior", default="default",
+                   help="prior parameters: 'default' (the model's default params.json), 'none' (minimum norm) or a params file")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
+    p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
+    p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("model-check", help="parameter oddities and model facts")
     _add_arm_options(p)

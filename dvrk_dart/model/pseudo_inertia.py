@@ -38,3 +38,30 @@ def from_pseudo_inertia(J: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
 def smallest_eigenvalue(mass_kg: float, com_m: np.ndarray, inertia_com: np.ndarray) -> float:
     """The pseudo-inertia's smallest eigenvalue: >= 0 for a physical body."""
     return float(np.linalg.eigvalsh(pseudo_inertia(mass_kg, com_m, inertia_com))[0])
+
+
+def _dynamic_parameter_basis() -> np.ndarray:
+    """B (10, 4, 4) with J = sum_i p_i B_i for Pinocchio's dynamic parameters
+    p = (m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz), inertia about the
+    frame origin: Sigma = tr(I)/2 1 - I, h = m c. J is linear in p, so the
+    basis also builds the LMI of a convex program from a vector variable."""
+    B = np.zeros((10, 4, 4))
+    B[0, 3, 3] = 1.0
+    for i in range(3):
+        B[1 + i, i, 3] = B[1 + i, 3, i] = 1.0
+    diagonal = {4: 0, 6: 1, 9: 2}  # Ixx, Iyy, Izz
+    for index, axis in diagonal.items():
+        B[index, :3, :3] = 0.5 * np.eye(3)
+        B[index, axis, axis] -= 1.0
+    for index, (a, b) in {5: (0, 1), 7: (0, 2), 8: (1, 2)}.items():  # Ixy, Ixz, Iyz
+        B[index, a, b] = B[index, b, a] = -1.0
+    return B
+
+
+#: J = sum_i p_i PSEUDO_INERTIA_BASIS[i] (see _dynamic_parameter_basis)
+PSEUDO_INERTIA_BASIS = _dynamic_parameter_basis()
+
+
+def pseudo_inertia_of_dynamic_parameters(parameters: np.ndarray) -> np.ndarray:
+    """J (4x4) of Pinocchio's 10 dynamic parameters of a body."""
+    return np.tensordot(np.asarray(parameters, dtype=float), PSEUDO_INERTIA_BASIS, axes=1)

@@ -1,0 +1,96 @@
+"""Base parameters: the combinations of standard parameters that the joint
+efforts depend on, found numerically rather than by hand.
+
+The regressor is evaluated at random states (positions uniform within the
+model's joint ranges, rates and accelerations uniform within +-RANDOM_RATE and
++-RANDOM_ACCELERATION, drawn with `seed`), its columns are normalised, and a
+QR decomposition with column pivoting ranks them: a column whose |R_ii| is
+below RANK_TOLERANCE times the largest one is a combination of the columns
+before it. This is the structure of the model, independent of any measured
+motion (whether a run excites the base parameters is the fit's condition
+number). The result:
+
+    Y theta = Y[:, independent] beta,   beta = K theta   (K: n_base x n_standard)
+
+A standard parameter is identifiable on its own when its unit vector lies in
+the row space of K; the others enter only through combinations and are set by
+the constraints and the prior of the convex program.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from dvrk_dart.identification.regressor import Regressor
+from dvrk_dart.model.joints import N_JOINTS
+
+#: |R_ii| / max |R_ii| below which a (unit-norm) column is dependent: the
+#: structural dependencies sit at ~1e-15, the weakest base column at ~1e-3
+RANK_TOLERANCE = 1e-8
+#: random states of the structural rank test: enough rows (x 7 efforts) to
+#: exceed the ~115 standard parameters many times over
+RANDOM_SAMPLES = 400
+#: rad/s or m/s, rad/s^2 or m/s^2: covers the measured excitation (RMS ~1 rad/s)
+RANDOM_RATE = 2.0
+RANDOM_ACCELERATION = 10.0
+#: a row of K or a projection residual below this is numerically zero
+ZERO_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class BaseParameters:
+    independent: np.ndarray  # indices of the standard parameters kept as base columns
+    K: np.ndarray  # (n_base, n_standard): beta = K theta
+    names: tuple[str, ...]  # a readable name of each base parameter
+    identifiable: np.ndarray  # (n_standard,) bool: identifiable on its own
+    tolerance: float
+
+    def __len__(self) -> int:
+        return len(self.independent)
+
+    def beta(self, theta: np.ndarray) -> np.ndarray:
+        return self.K @ theta
+
+
+def _combination_name(row: np.ndarray, standard_names: tuple[str, ...]) -> str:
+    terms = []
+    for i in np.flatnonzero(np.abs(row) > ZERO_TOLERANCE):
+        coeff = row[i]
+        if abs(coeff - 1.0) < 1e-9:
+            terms.append(f"+ {standard_names[i]}")
+        else:
+            terms.append(f"{'+' if coeff >= 0 else '-'} {abs(coeff):.6g} {standard_names[i]}")
+    text = " ".join(terms)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray | None = None) -> BaseParameters:
+    """Structural base parameters of the rows `joints` (default: all seven)."""
+    model = regressor.model
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
+    dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
+    ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
+    rows = np.arange(N_JOINTS) if joints is None else np.asarray(joints)
+    W = regressor(q, dq, ddq)[:, rows, :].reshape(-1, len(regressor.layout))
+    norms = np.linalg.norm(W, axis=0)
+    used = norms > 0.0
+    _, R, pivots = scipy.linalg.qr(W[:, used] / norms[used], mode="economic", pivoting=True)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > RANK_TOLERANCE * diag[0]))
+    used_index = np.flatnonzero(used)
+    independent = np.sort(used_index[pivots[:rank]])
+    dependent = np.setdiff1d(np.arange(W.shape[1]), independent)
+    # beta = theta_ind + X theta_dep with W_ind X = W_dep (exact: W_dep is in the span)
+    X = np.linalg.lstsq(W[:, independent], W[:, dependent], rcond=None)[0]
+    X[np.abs(X) < ZERO_TOLERANCE] = 0.0
+    K = np.zeros((rank, W.shape[1]))
+    K[:, independent] = np.eye(rank)
+    K[:, dependent] = X
+    basis = np.linalg.qr(K.T)[0]  # orthonormal basis of the row space of K
+    residual = np.linalg.norm(np.eye(W.shape[1]) - basis @ basis.T, axis=0)
+    names = tuple(_combination_name(row, regressor.layout.names) for row in K)
+    return BaseParameters(independent, K, names, residual < 1e-6, RANK_TOLERANCE)

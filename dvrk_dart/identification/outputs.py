@@ -1,0 +1,245 @@
+"""What `dvrk-dart identify` writes into its folder:
+
+- `params.json`: the upstream layout (keys "1".."16"; m, r and I about the
+  centre of mass with the base-frame axes at q = 0; Fc, Fv, Fo, Im, K), read
+  by every command that takes `--params`;
+- `params_covariance.json`: the uncertainty of the standard parameters, for
+  `dvrk-dart uncertainty --params-cov FILE`:
+      {"format": "dvrk-dart-params-covariance/1",
+       "names":   ["link1.m", "link1.mcx", ..., "link10.K"],   # standard parameters
+       "units":   ["kg", "kg m", ...],
+       "nominal": [...],                                       # the identified values (SI)
+       "covariance": [[...], ...],                             # n x n, SI units
+       "frame": ..., "params_file": "params.json"}
+  Names: `link<key>.<m|mcx|mcy|mcz|Ixx|Ixy|Iyy|Ixz|Iyz|Izz|Fc|Fv|Fo|Im|K>`,
+  where m c and I are Pinocchio's dynamic parameters (first moment, inertia
+  about the *link frame origin*, link-frame axes; params.json holds the same
+  bodies as m, r, I about the centre of mass in base axes). The covariance is
+  that of the weighted fit on the base parameters beta = K theta, mapped to the
+  standard ones with the minimum-norm inverse of K: C = K+ C_beta K+^T. It
+  varies only the combinations the data determine (the rest, set by the
+  prior and the constraints, is held at its nominal value), and a sample
+  nominal + L z need not be physically consistent: project or reject;
+- `identification.json`: errors per run and joint, base parameters with
+  standard errors, condition number, identifiable parameters and those set by
+  the constraints, pseudo-inertia eigenvalues, masses and bounds, timings;
+- `identification.html`: measured vs predicted efforts (training and held-out
+  runs, first period) and the parameter tables.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.analysis.html import STYLE, fmt, num_cell, table, text_cell
+from dvrk_dart.identification.fit import MAX_CONDITION_NUMBER, PSD_MARGIN_KG_M2
+from dvrk_dart.identification.identify import IdentificationResult, RunData
+from dvrk_dart.identification.regressor import body_of, params_json
+from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
+from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
+from dvrk_dart.model.parameters import load_parameters
+from dvrk_dart.model.pseudo_inertia import pseudo_inertia
+
+PARAMS_FILE = "params.json"
+COVARIANCE_FILE = "params_covariance.json"
+SUMMARY_FILE = "identification.json"
+HTML_FILE = "identification.html"
+COVARIANCE_FORMAT = "dvrk-dart-params-covariance/1"
+#: what an identification folder is made of (io/outputs.py KNOWN_ENTRIES)
+FOLDER_ENTRIES = {PARAMS_FILE, COVARIANCE_FILE, SUMMARY_FILE, HTML_FILE}
+
+
+def parameter_units(result: IdentificationResult) -> list[str]:
+    units = []
+    links = result.model.links
+    for name in result.regressor.layout.names:
+        key, what = name.split(".", 1)
+        prismatic = bool(links[int(key[4:])].variable.coeffs[INSERTION]) if what in ("Fc", "Fv", "Fo") else False
+        force = "N" if prismatic else "N·m"
+        units.append({
+            "m": "kg", "mcx": "kg m", "mcy": "kg m", "mcz": "kg m", "Fc": force, "Fo": force,
+            "Fv": f"{force} s/{'m' if prismatic else 'rad'}", "Im": "kg m^2", "K": "N·m/rad",
+        }.get(what, "kg m^2"))
+    return units
+
+
+def standard_covariance(result: IdentificationResult) -> np.ndarray:
+    K_plus = np.linalg.pinv(result.base.K)
+    C = K_plus @ result.wls.covariance @ K_plus.T
+    return 0.5 * (C + C.T)
+
+
+def pseudo_inertia_eigenvalues(result: IdentificationResult) -> dict[str, list[float]]:
+    layout = result.regressor.layout
+    return {str(k): np.linalg.eigvalsh(pseudo_inertia(*body_of(result.theta, layout, k))).tolist() for k in layout.inertial_links}
+
+
+def _run_entry(run: RunData) -> dict:
+    return {"name": run.name, "path": str(run.path), "sha256": sha256_of(run.path), "samples_after_processing": len(run.processed)}
+
+
+def summary(result: IdentificationResult) -> dict:
+    layout, base, wls, cfg = result.regressor.layout, result.base, result.wls, result.config
+    theta = result.theta
+    units = parameter_units(result)
+    errors = {
+        "train": {run.name: {"whole_run": result.errors(run)} for run in result.train},
+        "holdout": {
+            run.name: {"whole_run": result.errors(run), "first_period": result.errors(run, first_period=True)} for run in result.holdout
+        },
+    }
+    prior_errors = {run.name: result.errors(run, first_period=True, theta=result.prior_theta) for run in result.holdout}
+    se = wls.standard_errors
+    return {
+        "joints": list(JOINT_NAMES),
+        "fitted_joints": [JOINT_NAMES[j] for j in wls.joints],
+        "config": {
+            "runs": list(cfg.runs), "holdout": list(cfg.holdout), "joints": list(cfg.joints),
+            "friction_law": result.regressor.friction_law.describe(), "bounds_file": str(result.bounds.source),
+            "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": cfg.model_file,
+        },
+        "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
+        "processing": "io/signal.py (upstream-compatible); first period = the first %d processed samples" % FIRST_PERIOD_SAMPLES,
+        "errors": errors,
+        "prior_errors_first_period": prior_errors,
+        "condition_number": wls.condition_number,
+        "condition_number_limit": MAX_CONDITION_NUMBER,
+        "noise_sigma": wls.sigma.tolist(),
+        "residual_autocorrelation_samples": wls.autocorrelation_samples.tolist(),
+        "rank_tolerance": base.tolerance,
+        "n_standard": len(layout),
+        "n_base": len(base),
+        "base_parameters": [
+            {"name": name, "wls": float(b), "standard_error": float(s), "consistent": float(c)}
+            for name, b, s, c in zip(base.names, wls.beta, se, base.K @ theta)
+        ],
+        "standard_parameters": [
+            {"name": n, "value": float(v), "unit": u, "identifiable": bool(i), "prior": float(p)}
+            for n, v, u, i, p in zip(layout.names, theta, units, base.identifiable, result.prior_theta)
+        ],
+        "identifiable": [n for n, i in zip(layout.names, base.identifiable) if i],
+        "set_by_constraints_and_prior": [n for n, i in zip(layout.names, base.identifiable) if not i],
+        "active_constraints": result.consistent.active,
+        "pseudo_inertia_eigenvalues_kg_m2": pseudo_inertia_eigenvalues(result),
+        "pseudo_inertia_margin_kg_m2": PSD_MARGIN_KG_M2,
+        "masses_kg": {
+            str(k): {"value": float(theta[layout.body_slice(k)][0]), "lower": result.bounds.mass_kg[k][0], "upper": result.bounds.mass_kg[k][1]}
+            for k in layout.inertial_links
+        },
+        "convex_program": {
+            "solver": result.consistent.solver, "status": result.consistent.status,
+            "data_term": result.consistent.objective_data, "prior_term": result.consistent.objective_prior,
+        },
+        "timings_s": result.timings_s,
+    }
+
+
+def covariance_document(result: IdentificationResult) -> dict:
+    return {
+        "format": COVARIANCE_FORMAT,
+        "names": list(result.regressor.layout.names),
+        "units": parameter_units(result),
+        "nominal": result.theta.tolist(),
+        "covariance": standard_covariance(result).tolist(),
+        "frame": "m, m c and inertia about the link frame origin, link-frame axes (Pinocchio dynamic parameters)",
+        "params_file": PARAMS_FILE,
+        "basis": "weighted least squares on the base parameters, mapped with the minimum-norm inverse of K",
+    }
+
+
+# ------------------------------------------------------------------ html
+def _figure_png(result: IdentificationResult, run: RunData, title: str) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = min(FIRST_PERIOD_SAMPLES, len(run.processed))
+    t = run.processed.t[:n] - run.processed.t[0]
+    predicted = result.predicted(run)[:n]
+    fig, axes = plt.subplots(len(JOINT_NAMES), 1, figsize=(10, 13), sharex=True)
+    for j, ax in enumerate(axes):
+        ax.plot(t, run.processed.tau[:n, j], color="#c0392b", lw=1.0, label="measured")
+        ax.plot(t, predicted[:, j], color="#2c6fbb", lw=1.0, label="identified")
+        ax.plot(t, predicted[:, j] - run.processed.tau[:n, j], color="k", lw=0.6, ls="--", label="difference")
+        ax.set_ylabel(f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=3, loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("t (s), first base period")
+    fig.suptitle(title)
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=80)
+    plt.close(fig)
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def _error_table(result: IdentificationResult, data: dict) -> str:
+    rows = []
+    for kind, runs in (("train", data["errors"]["train"]), ("held out", data["errors"]["holdout"])):
+        for name, entries in runs.items():
+            for span, e in entries.items():
+                cells = [text_cell(f"{name} ({kind}, {span.replace('_', ' ')})")]
+                cells += [num_cell(v, run=name, quantity="relative_error", joint=j) for v, j in zip(e["relative_error"], JOINT_NAMES)]
+                cells += [num_cell(v, run=name, quantity="rms", joint=j) for v, j in zip(e["rms"], JOINT_NAMES)]
+                rows.append("<tr>" + "".join(cells) + "</tr>")
+    header = ["run"] + [f"rel {j}" for j in JOINT_NAMES] + [f"RMS {j} ({effort_unit(j)})" for j in JOINT_NAMES]
+    return table(header, rows)
+
+
+def html_page(result: IdentificationResult, data: dict) -> str:
+    parts = [f"<h1>Identification: {', '.join(data['config']['runs'])}</h1>"]
+    parts.append(
+        f"<p class='note'>Base regressor condition number {fmt(data['condition_number'])} (limit {fmt(MAX_CONDITION_NUMBER)}); "
+        f"{data['n_base']} base of {data['n_standard']} standard parameters; friction law {data['config']['friction_law']}; "
+        f"prior {data['config']['prior']}; solver {data['convex_program']['solver']} ({data['convex_program']['status']}).</p>"
+    )
+    parts.append("<h2>Errors per joint</h2>" + _error_table(result, data))
+    for label, runs in (("training", result.train), ("held-out", result.holdout)):
+        for run in runs:
+            png = _figure_png(result, run, f"{run.name} ({label}): measured vs identified efforts")
+            parts.append(f"<figure><img src='data:image/png;base64,{png}' alt='{run.name}'><figcaption>{run.name} ({label}), first base period</figcaption></figure>")
+    rows = []
+    for key, m in data["masses_kg"].items():
+        eig = data["pseudo_inertia_eigenvalues_kg_m2"][key]
+        rows.append("<tr>" + text_cell(f"link {key} ({result.model.links[int(key)].name})") + num_cell(m["value"]) + num_cell(m["lower"]) + num_cell(m["upper"]) + num_cell(eig[0]) + "</tr>")
+    parts.append("<h2>Bodies</h2>" + table(["link", "mass (kg)", "lower", "upper", "smallest pseudo-inertia eigenvalue (kg m^2)"], rows))
+    rows = [
+        "<tr>" + text_cell(p["name"]) + num_cell(p["value"]) + text_cell(p["unit"]) + text_cell("yes" if p["identifiable"] else "constraints and prior") + num_cell(p["prior"]) + "</tr>"
+        for p in data["standard_parameters"]
+    ]
+    parts.append("<h2>Standard parameters</h2>" + table(["parameter", "value", "unit", "identifiable alone", "prior"], rows))
+    rows = [
+        "<tr>" + text_cell(b["name"]) + num_cell(b["wls"]) + num_cell(b["standard_error"]) + num_cell(b["consistent"]) + "</tr>"
+        for b in data["base_parameters"]
+    ]
+    parts.append("<h2>Base parameters</h2>" + table(["combination", "weighted LS", "standard error", "consistent fit"], rows))
+    if data["active_constraints"]:
+        parts.append("<h2>Active constraints</h2><ul>" + "".join(f"<li>{c}</li>" for c in data["active_constraints"]) + "</ul>")
+    return (
+        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dvrk-dart identification</title>"
+        f"<style>{STYLE}</style></head><body>{''.join(parts)}</body></html>\n"
+    )
+
+
+def write_outputs(result: IdentificationResult, folder: Path) -> dict:
+    """Write the four files into `folder` (a folder being built); returns the summary."""
+    folder = Path(folder)
+    write_json_atomic(folder / PARAMS_FILE, params_json(result.theta, result.regressor.layout, result.model))
+    load_parameters(folder / PARAMS_FILE, result.model)  # the file every --params reader will see: its own checks
+    data = summary(result)
+    write_json_atomic(folder / COVARIANCE_FILE, covariance_document(result))
+    write_text_atomic(folder / SUMMARY_FILE, json_text(data))
+    write_text_atomic(folder / HTML_FILE, html_page(result, data))
+    return data
+
+
+def worst_eigenvalue(data: dict) -> float:
+    return min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values()) if data["pseudo_inertia_eigenvalues_kg_m2"] else math.inf
