@@ -38,6 +38,10 @@ RANDOM_RATE = 2.0
 RANDOM_ACCELERATION = 10.0
 #: a row of K or a projection residual below this is numerically zero
 ZERO_TOLERANCE = 1e-9
+#: a column whose norm is below this fraction of the largest is rounding
+#: (e.g. ~1e-32 for the inertia of a link about an axis it never turns
+#: about): it is a zero column, not a direction to normalise
+ZERO_COLUMN_TOLERANCE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -77,7 +81,7 @@ def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray
     rows = np.arange(N_JOINTS) if joints is None else np.asarray(joints)
     W = regressor(q, dq, ddq)[:, rows, :].reshape(-1, len(regressor.layout))
     norms = np.linalg.norm(W, axis=0)
-    used = norms > 0.0
+    used = norms > ZERO_COLUMN_TOLERANCE * norms.max()
     _, R, pivots = scipy.linalg.qr(W[:, used] / norms[used], mode="economic", pivoting=True)
     diag = np.abs(np.diag(R))
     rank = int(np.sum(diag > RANK_TOLERANCE * diag[0]))

@@ -32,7 +32,7 @@ import cvxpy as cp
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.identification.base import BaseParameters
+from dvrk_dart.identification.base import ZERO_COLUMN_TOLERANCE, BaseParameters
 from dvrk_dart.identification.regressor import PARAMETER_CLASSES, ParameterLayout
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -115,7 +115,7 @@ def condition_number(A: np.ndarray) -> float:
     """Of the columns scaled to unit norm (independent of the parameters' units);
     infinite when a column is never excited."""
     norms = np.linalg.norm(A, axis=0)
-    if np.any(norms == 0.0):
+    if not np.all(norms > ZERO_COLUMN_TOLERANCE * norms.max()):
         return math.inf
     return float(np.linalg.cond(A / norms))
 

@@ -1,0 +1,182 @@
+"""`dvrk-dart identify`: the regressor is the identified model's, the base
+parameters are exact, the fit recovers known parameters, the result is
+physically consistent and predicts the held-out run as well as the published
+parameters, and bad input gives one line."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.identification.base import find_base_parameters
+from dvrk_dart.identification.fit import load_bounds
+from dvrk_dart.identification.identify import (
+    IdentificationConfig,
+    check_consistent_runs,
+    identify,
+)
+from dvrk_dart.identification.outputs import (
+    COVARIANCE_FORMAT,
+    standard_covariance,
+    write_outputs,
+)
+from dvrk_dart.identification.regressor import (
+    FrictionLaw,
+    Regressor,
+    params_json,
+    standard_vector,
+)
+from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.signal import process
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.parameters import load_parameters
+from dvrk_dart.model.pseudo_inertia import pseudo_inertia
+
+#: relative errors on "two", first period, of the published parameters (data README)
+PUBLISHED = np.array([0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642])
+
+
+@pytest.fixture(scope="module")
+def regressor(model):
+    return Regressor(model)
+
+
+@pytest.fixture(scope="module")
+def result():
+    return identify(IdentificationConfig(runs=("one",), holdout=("two",)))
+
+
+def test_regressor_is_the_identified_model(regressor, identified, params, processed_two):
+    """Y theta(published) = IdentifiedModel.predict, every term, to rounding."""
+    run = processed_two.head(400)
+    Y = regressor(run.q, run.dq, run.ddq)
+    theta = standard_vector(params, regressor.layout)
+    expected = identified.predict(run.q, run.dq, run.ddq, "all")
+    assert np.max(np.abs(Y @ theta - expected)) < 1e-9 * max(1.0, np.max(np.abs(expected)))
+
+
+def test_params_json_round_trip(regressor, model, params, tmp_path):
+    theta = standard_vector(params, regressor.layout)
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps(params_json(theta, regressor.layout, model)))
+    back = standard_vector(load_parameters(path, model), regressor.layout)
+    assert np.allclose(back, theta, rtol=1e-10, atol=1e-12)
+
+
+def test_base_parameters_reproduce_the_regressor(regressor, model):
+    base = find_base_parameters(regressor, seed=0)
+    other = find_base_parameters(regressor, seed=1)
+    assert len(base) == len(other) and 40 < len(base) < len(regressor.layout)
+    rng = np.random.default_rng(7)
+    q = rng.uniform(model.joint_lower, model.joint_upper, (50, N_JOINTS))
+    dq, ddq = rng.normal(size=(50, N_JOINTS)), rng.normal(size=(50, N_JOINTS))
+    Y = regressor(q, dq, ddq)
+    theta = rng.normal(size=len(regressor.layout))
+    full, reduced = Y @ theta, Y[:, :, base.independent] @ base.beta(theta)
+    assert np.max(np.abs(full - reduced)) < 1e-9 * np.max(np.abs(full))
+    # a mass on a link that only translates along the yaw-pitch chain is identifiable; link 4's
+    # inertia about axes it never turns about is not
+    names = regressor.layout.names
+    assert base.identifiable[names.index("link8.m")]
+    assert not base.identifiable[names.index("link4.Ixx")]
+
+
+def test_fit_recovers_known_parameters(result, tmp_path):
+    """Efforts synthesised from the identified parameters, plus noise of the
+    measured size, are identified again: the base parameters within 4 standard
+    errors and the consistent fit's predictions within the noise."""
+    rng = np.random.default_rng(3)
+    truth = result.theta
+    run = result.train[0]
+    noisy = run.Y @ truth + rng.normal(size=run.processed.tau.shape) * result.wls.sigma
+    from dvrk_dart.identification.fit import fit_consistent, fit_weighted
+
+    Yb = run.Y[:, :, result.base.independent]
+    wls = fit_weighted(Yb, noisy, result.wls.joints, "synthetic")
+    z = (wls.beta - result.base.beta(truth)) / wls.standard_errors
+    assert np.max(np.abs(z)) < 4.0
+    fit = fit_consistent(wls, result.base, result.regressor.layout, result.bounds, result.prior_theta)
+    error = run.Y @ fit.theta - run.Y @ truth
+    assert np.all(np.sqrt(np.mean(error**2, axis=0)) < 0.2 * result.wls.sigma)
+
+
+def test_identification_is_physical_and_predicts_the_held_out_run(result):
+    layout = result.regressor.layout
+    for key in layout.inertial_links:
+        from dvrk_dart.identification.regressor import body_of
+
+        eig = np.linalg.eigvalsh(pseudo_inertia(*body_of(result.theta, layout, key)))
+        assert eig[0] >= -1e-9, key
+        lower, upper = result.bounds.mass_kg[key]
+        assert lower <= result.theta[layout.body_slice(key)][0] <= upper
+    friction = [i for i, n in enumerate(layout.names) if n.endswith((".Fc", ".Fv"))]
+    assert np.all(result.theta[friction] >= 0.0)
+    held_out = np.array(result.errors(result.holdout[0], first_period=True)["relative_error"])
+    # at most 2 % above the published errors, except the insertion joint q3 (index 2):
+    # 0.196 vs 0.191 (+2.7 %), see the README's identification section
+    limits = 1.02 * PUBLISHED
+    limits[2] = 1.03 * PUBLISHED[2]
+    assert np.all(held_out <= limits), held_out
+    train = np.array(result.errors(result.train[0])["relative_error"])
+    assert np.all(train < held_out + 0.02)  # no overfitting beyond the day-to-day difference
+
+
+def test_outputs_and_covariance(result, model, tmp_path):
+    data = write_outputs(result, tmp_path)
+    params = load_parameters(tmp_path / "params.json", model)
+    assert np.allclose(standard_vector(params, result.regressor.layout), result.theta, rtol=1e-9, atol=1e-12)
+    cov = json.loads((tmp_path / "params_covariance.json").read_text())
+    assert cov["format"] == COVARIANCE_FORMAT and cov["names"] == list(result.regressor.layout.names)
+    C = np.array(cov["covariance"])
+    assert C.shape == (len(cov["names"]),) * 2 and np.allclose(C, C.T)
+    assert np.linalg.eigvalsh(C)[0] > -1e-12 * np.max(np.abs(C))
+    # the covariance moves the efforts only as much as the base parameters' covariance says
+    K = result.base.K
+    assert np.allclose(K @ standard_covariance(result) @ K.T, result.wls.covariance, rtol=1e-6, atol=1e-18)
+    assert data["n_base"] == len(result.base) and data["condition_number"] < 1e4
+    assert set(data["identifiable"]) | set(data["set_by_constraints_and_prior"]) == set(cov["names"])
+    assert "data:image/png;base64" in (tmp_path / "identification.html").read_text()
+
+
+def _constant_pose_csv(path, rows=500):
+    q = np.array([0.1, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0])
+    values = np.hstack([np.tile(q, (rows, 1)), np.zeros((rows, 7)), np.tile(np.linspace(0.1, 0.7, 7), (rows, 1))])
+    np.savetxt(path, values, delimiter=",")
+    return path
+
+
+def test_unexciting_run_is_refused_in_one_line(tmp_path, capsys):
+    run = _constant_pose_csv(tmp_path / "still.csv")
+    out = tmp_path / "out"
+    assert main(["identify", "--runs", str(run), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "condition number" in err
+    assert not out.exists()
+
+
+def test_inconsistent_runs_are_refused(tmp_path, capsys):
+    bad = tmp_path / "twenty.csv"
+    np.savetxt(bad, np.zeros((500, 20)), delimiter=",")
+    assert main(["identify", "--runs", "one", str(bad), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "twenty.csv" in err and "20 columns" in err
+    # a different sampling rate (a bag at another rate): named in one line
+    from dvrk_dart.identification.identify import RunData
+
+    a = process(load_run(resolve_run("two")))
+    b = type(a)(a.t * 2.0, a.q, a.dq, a.ddq, a.tau)
+    with pytest.raises(DvrkDartError, match="Hz"):
+        check_consistent_runs([RunData("a", tmp_path / "a.csv", a, None), RunData("b", tmp_path / "b.csv", b, None)])
+
+
+def test_options_are_checked(model, tmp_path):
+    with pytest.raises(DvrkDartError, match="--joints"):
+        identify(IdentificationConfig(runs=("one",), joints=("q9",)))
+    with pytest.raises(DvrkDartError, match="reversal"):
+        FrictionLaw("tanh", None)
+    bounds = tmp_path / "bounds.toml"
+    bounds.write_text("[mass_bounds_kg]\n1 = [2.0, 1.0]\n")
+    with pytest.raises(DvrkDartError, match="lower <= upper"):
+        load_bounds(bounds, model)
