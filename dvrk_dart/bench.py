@@ -22,6 +22,7 @@ TARGETS = {
     "sim_realtime_factor": (20.0, "higher", "x", "simulated s per wall s, full closed-chain arm with counterweight at 1 ms"),
     "campaign_s": (300.0, "lower", "s", "the whole validation campaign on this machine"),
     "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
+    "identify_s": (60.0, "lower", "s", "identification from one 30 s run, outputs written (dvrk-dart identify --runs one)"),
 }
 
 
@@ -68,13 +69,26 @@ def bench_diagnosis() -> dict:
     return {"diagnose_s": benchmark_diagnosis()}
 
 
+def bench_identification() -> dict:
+    """`identify --runs one` end to end: processing, regressor, fits and the four files."""
+    import tempfile
+
+    from dvrk_dart.identification.identify import IdentificationConfig, identify
+    from dvrk_dart.identification.outputs import write_outputs
+
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        write_outputs(identify(IdentificationConfig(runs=("one",))), Path(folder))
+        return {"identify_s": time.perf_counter() - start}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="out/bench.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
     figures = {}
-    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis):
+    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification):
         figures.update(part())
     print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():

@@ -158,20 +158,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify the dynamic parameters from measured runs: params.json and its reports."""
-    from dvrk_dart.identification.identify import IdentificationConfig, identify
-    from dvrk_dart.identification.outputs import write_outputs
+    from dvrk_dart.identification.identify import IdentificationConfig
+    from dvrk_dart.identification.outputs import identify_into_folder
     from dvrk_dart.identification.regressor import FrictionLaw
-    from dvrk_dart.io.outputs import building_folder, check_output_folder
 
-    check_output_folder(args.out, "identification")
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
         prior=args.prior, seed=args.seed, solver=args.solver,
     )
-    result = identify(config)
-    with building_folder(args.out, "identification") as folder:
-        data = write_outputs(result, folder)
+    result, data = identify_into_folder(config, args.out)
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {', '.join(args.runs)}: "
           f"condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
     print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + "   (relative error)")

@@ -20,6 +20,16 @@ def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str) -> di
     return summary
 
 
+def _identification_section(out_dir: Path) -> tuple[str, str]:
+    """The project's own identification on "one", scored on the held-out "two"."""
+    from dvrk_dart.identification.identify import IdentificationConfig
+    from dvrk_dart.identification.outputs import identify_into_folder, report_section
+
+    _, data = identify_into_folder(IdentificationConfig(runs=("one",), holdout=("two",)), out_dir / "identification")
+    print(f"identification: {data['n_base']} base parameters from one -> {out_dir / 'identification'}")
+    return report_section(data)
+
+
 def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str | None = None) -> int:
     """The campaign (its entries without `dynamics` simulate the `dynamics` arm),
     the diagnosis validation, the runs that simulate what the diagnosis found,
@@ -33,13 +43,14 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     from dvrk_dart.diagnosis.validation import validation_section
 
     section = validation_section(diagnosis_dir)
+    identification = _identification_section(out_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs")
     summary["ran"] += after["ran"]
     summary["skipped_up_to_date"] += after["skipped_up_to_date"]
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section])
+    index = build_report(runs_dir, report_dir, extra_sections=[section, identification])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")

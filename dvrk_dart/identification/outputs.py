@@ -37,11 +37,17 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.analysis.html import STYLE, fmt, num_cell, table, text_cell
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.fit import MAX_CONDITION_NUMBER, PSD_MARGIN_KG_M2
-from dvrk_dart.identification.identify import IdentificationResult, RunData
-from dvrk_dart.identification.regressor import body_of, params_json
+from dvrk_dart.identification.identify import (
+    IdentificationConfig,
+    IdentificationResult,
+    RunData,
+    identify,
+)
+from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
-from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.io.reference_data import resolve, sha256_of
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
 from dvrk_dart.model.parameters import load_parameters
@@ -81,6 +87,19 @@ def pseudo_inertia_eigenvalues(result: IdentificationResult) -> dict[str, list[f
     return {str(k): np.linalg.eigvalsh(pseudo_inertia(*body_of(result.theta, layout, k))).tolist() for k in layout.inertial_links}
 
 
+def reference_theta(result: IdentificationResult) -> tuple[np.ndarray, str, float] | None:
+    """The model's default parameters (the published identification): theta, file,
+    smallest pseudo-inertia eigenvalue; None when the file cannot be found."""
+    try:
+        path = resolve(result.model.default_parameters)
+        params = load_parameters(path, result.model)
+    except DvrkDartError:
+        return None
+    layout = result.regressor.layout
+    worst = min(float(np.linalg.eigvalsh(pseudo_inertia(p.mass, p.com, p.inertia_com))[0]) for k, p in params.links.items() if k in layout.inertial_links)
+    return standard_vector(params, layout), str(path), worst
+
+
 def _run_entry(run: RunData) -> dict:
     return {"name": run.name, "path": str(run.path), "sha256": sha256_of(run.path), "samples_after_processing": len(run.processed)}
 
@@ -96,6 +115,8 @@ def summary(result: IdentificationResult) -> dict:
         },
     }
     prior_errors = {run.name: result.errors(run, first_period=True, theta=result.prior_theta) for run in result.holdout}
+    reference = reference_theta(result)
+    reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0]) for run in result.holdout} if reference else {}
     se = wls.standard_errors
     return {
         "joints": list(JOINT_NAMES),
@@ -109,6 +130,11 @@ def summary(result: IdentificationResult) -> dict:
         "processing": "io/signal.py (upstream-compatible); first period = the first %d processed samples" % FIRST_PERIOD_SAMPLES,
         "errors": errors,
         "prior_errors_first_period": prior_errors,
+        "reference": {
+            "params_file": reference[1] if reference else None,
+            "errors_first_period": reference_errors,
+            "pseudo_inertia_smallest_eigenvalue_kg_m2": reference[2] if reference else None,
+        },
         "condition_number": wls.condition_number,
         "condition_number_limit": MAX_CONDITION_NUMBER,
         "noise_sigma": wls.sigma.tolist(),
@@ -239,6 +265,47 @@ def write_outputs(result: IdentificationResult, folder: Path) -> dict:
     write_text_atomic(folder / SUMMARY_FILE, json_text(data))
     write_text_atomic(folder / HTML_FILE, html_page(result, data))
     return data
+
+
+def identify_into_folder(config: IdentificationConfig, out: str | Path) -> tuple[IdentificationResult, dict]:
+    """The folder is checked before any work, built beside `out` and swapped in whole."""
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
+
+    check_output_folder(out, "identification")
+    result = identify(config)
+    with building_folder(out, "identification") as folder:
+        data = write_outputs(result, folder)
+    return result, data
+
+
+def report_section(data: dict) -> tuple[str, str]:
+    """(title, html) of the validation report: the published parameters vs the
+    project's own identification on each held-out run, per joint."""
+    ref = data["reference"]
+    parts = [
+        f"<p>Parameters identified by <code>dvrk-dart identify</code> on {', '.join(data['config']['runs'])} "
+        f"({data['n_base']} base parameters, condition number {fmt(data['condition_number'])}, physically consistent: "
+        f"smallest pseudo-inertia eigenvalue {fmt(worst_eigenvalue(data))} kg m^2, against "
+        f"{fmt(ref['pseudo_inertia_smallest_eigenvalue_kg_m2'])} kg m^2 in the published file), scored on the held-out "
+        "runs like <code>model-errors --first-period</code>: relative error ||tau_model - tau_measured|| / ||tau_measured||.</p>"
+    ]
+    for run, own in data["errors"]["holdout"].items():
+        published = ref["errors_first_period"].get(run)
+        rows = []
+        for j, name in enumerate(JOINT_NAMES):
+            mine = own["first_period"]["relative_error"][j]
+            theirs = published["relative_error"][j] if published else None
+            ratio = mine / theirs if theirs else None
+            css = "" if ratio is None else ("better" if ratio <= 1.0 else "worse")
+            rows.append(
+                "<tr>" + text_cell(name) + num_cell(theirs, run=run, quantity="relative_error_published_params", joint=name)
+                + num_cell(mine, css=css, run=run, quantity="relative_error_identified", joint=name)
+                + num_cell(ratio, run=run, quantity="ratio_identified_to_published", joint=name)
+                + num_cell(own["first_period"]["rms"][j], run=run, quantity="rms_identified", joint=name) + text_cell(effort_unit(name)) + "</tr>"
+            )
+        parts.append(f"<h3>Held-out run {run} (first period)</h3>" + table(
+            ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows))
+    return "Own identification vs the published parameters", "".join(parts)
 
 
 def worst_eigenvalue(data: dict) -> float:
