@@ -203,8 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
     p.add_argument("--reversal-velocity", type=float, default=None, help="velocity scale of the tanh law (rad/s or m/s)")
     p.add_argument("--bounds", default=None, help="bounds and prior file (default models/psm/identification.toml)")
-    p.add_argument("--prior", default="default",
-                   help="prior parameters: 'default' (the model's default params.json), 'none' (minimum norm) or a params file")
+    p.add_argument("--prior", default="none",
+                   help="prior of the parameters the data leave free: 'none' (about zero: minimum norm, the default), "
+                        "'default' (the model's default params.json) or a params file")
     p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     p.set_defaults(func=cmd_identify)

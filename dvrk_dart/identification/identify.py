@@ -43,7 +43,7 @@ class IdentificationConfig:
     joints: tuple[str, ...] = JOINT_NAMES
     friction_law: FrictionLaw = FrictionLaw()
     bounds_file: str | None = None
-    prior: str = PRIOR_DEFAULT
+    prior: str = PRIOR_NONE
     seed: int = 0
     solver: str = "CLARABEL"
     model_file: str = str(DEFAULT_MODEL_FILE)
