@@ -170,11 +170,13 @@ def cmd_identify(args: argparse.Namespace) -> int:
     result, data = identify_into_folder(config, args.out)
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {', '.join(args.runs)}: "
           f"condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
-    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + "   (relative error)")
+    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (relative error; fitted: {' '.join(data['fitted_joints'])})")
     for kind, runs in data["errors"].items():
         for name, spans in runs.items():
             for span, e in spans.items():
                 print(f"{name + ' ' + span.replace('_run', ''):<22} " + " ".join(f"{v:7.4f}" for v in e["relative_error"]) + f"   {kind}")
+    if args.friction_law != "sign":
+        print(f"note: errors above use the fitted law {data['config']['friction_law']}; params.json readers apply sign(v)")
     worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
     outside = [k for k, m in data["masses_kg"].items() if not m["lower"] <= m["value"] <= m["upper"]]
     print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
