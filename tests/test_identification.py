@@ -177,3 +177,18 @@ def test_options_are_checked(model, tmp_path):
     bounds.write_text("[mass_bounds_kg]\n1 = [2.0, 1.0]\n")
     with pytest.raises(DvrkDartError, match="lower <= upper"):
         load_bounds(bounds, model)
+
+
+def test_report_section_compares_with_the_published_parameters(tmp_path):
+    """The validation report's section: per joint, the published parameters and
+    ours on the held-out run, the numbers of identification.json."""
+    from dvrk_dart.pipeline import _identification_section
+
+    title, body = _identification_section(tmp_path)
+    data = json.loads((tmp_path / "identification" / "identification.json").read_text())
+    assert (tmp_path / "identification" / ".dvrk-dart").read_text().strip() == "identification"
+    assert "published" in title
+    for j, value in enumerate(data["errors"]["holdout"]["two"]["first_period"]["relative_error"]):
+        assert f'data-quantity="relative_error_identified" data-joint="q{j + 1}" data-value="{value!r}"' in body
+    published = data["reference"]["errors_first_period"]["two"]["relative_error"]
+    assert np.allclose(published, PUBLISHED, atol=1e-4)  # the published file reproduces the published numbers
