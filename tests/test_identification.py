@@ -11,6 +11,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.base import find_base_parameters
+from dvrk_dart.identification.fit import DEFAULT_BOUNDS_FILE as DEFAULT_BOUNDS
 from dvrk_dart.identification.fit import load_bounds
 from dvrk_dart.identification.identify import (
     IdentificationConfig,
@@ -192,3 +193,13 @@ def test_report_section_compares_with_the_published_parameters(tmp_path):
         assert f'data-quantity="relative_error_identified" data-joint="q{j + 1}" data-value="{value!r}"' in body
     published = data["reference"]["errors_first_period"]["two"]["relative_error"]
     assert np.allclose(published, PUBLISHED, atol=1e-4)  # the published file reproduces the published numbers
+
+
+def test_bounds_file_is_honoured(tmp_path):
+    """A site's bounds file: the pitch link's mass pinned to 2 kg is obeyed."""
+    text = DEFAULT_BOUNDS.read_text().replace("2 = [0.1, 10.0]", "2 = [2.0, 2.0]")
+    bounds = tmp_path / "bounds.toml"
+    bounds.write_text(text)
+    pinned = identify(IdentificationConfig(runs=("one",), bounds_file=str(bounds)))
+    mass = pinned.theta[pinned.regressor.layout.body_slice(2)][0]
+    assert abs(mass - 2.0) < 1e-6

@@ -10,7 +10,7 @@
        "units":   ["kg", "kg m", ...],
        "nominal": [...],                                       # the identified values (SI)
        "covariance": [[...], ...],                             # n x n, SI units
-       "frame": ..., "params_file": "params.json"}
+       "frame": ..., "params_file": "params.json", "friction_law": "sign(v)", "basis": ...}
   Names: `link<key>.<m|mcx|mcy|mcz|Ixx|Ixy|Iyy|Ixz|Iyz|Izz|Fc|Fv|Fo|Im|K>`,
   where m c and I are Pinocchio's dynamic parameters (first moment, inertia
   about the *link frame origin*, link-frame axes; params.json holds the same
@@ -176,6 +176,7 @@ def covariance_document(result: IdentificationResult) -> dict:
         "covariance": standard_covariance(result).tolist(),
         "frame": "m, m c and inertia about the link frame origin, link-frame axes (Pinocchio dynamic parameters)",
         "params_file": PARAMS_FILE,
+        "friction_law": result.regressor.friction_law.describe(),
         "basis": "weighted least squares on the base parameters, mapped with the minimum-norm inverse of K",
     }
 
