@@ -125,6 +125,10 @@ def test_outputs_and_covariance(result, model, tmp_path):
     data = write_outputs(result, tmp_path)
     params = load_parameters(tmp_path / "params.json", model)
     assert np.allclose(standard_vector(params, result.regressor.layout), result.theta, rtol=1e-9, atol=1e-12)
+    # the file as every --params reader sees it is physical (the published one: -1.9e-6 kg m^2)
+    for key in result.regressor.layout.inertial_links:
+        p = params[key]
+        assert np.linalg.eigvalsh(pseudo_inertia(p.mass, p.com, p.inertia_com))[0] >= -1e-9, key
     cov = json.loads((tmp_path / "params_covariance.json").read_text())
     assert cov["format"] == COVARIANCE_FORMAT and cov["names"] == list(result.regressor.layout.names)
     C = np.array(cov["covariance"])
@@ -203,3 +207,14 @@ def test_bounds_file_is_honoured(tmp_path):
     pinned = identify(IdentificationConfig(runs=("one",), bounds_file=str(bounds)))
     mass = pinned.theta[pinned.regressor.layout.body_slice(2)][0]
     assert abs(mass - 2.0) < 1e-6
+
+
+def test_model_errors_reads_the_identified_file(result, tmp_path, capsys):
+    """The acceptance path: `model-errors --measured two --first-period --params
+    DIR/params.json` gives the held-out numbers of identification.json."""
+    data = write_outputs(result, tmp_path)
+    capsys.readouterr()
+    assert main(["model-errors", "--measured", "two", "--first-period", "--json", "--params", str(tmp_path / "params.json")]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    expected = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
+    assert np.allclose(printed["relative_error"], expected, rtol=1e-9)

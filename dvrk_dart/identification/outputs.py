@@ -114,7 +114,9 @@ def summary(result: IdentificationResult) -> dict:
             run.name: {"whole_run": result.errors(run), "first_period": result.errors(run, first_period=True)} for run in result.holdout
         },
     }
-    prior_errors = {run.name: result.errors(run, first_period=True, theta=result.prior_theta) for run in result.holdout}
+    prior_errors = {} if not np.any(result.prior_theta) else {
+        run.name: result.errors(run, first_period=True, theta=result.prior_theta) for run in result.holdout
+    }
     reference = reference_theta(result)
     reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0]) for run in result.holdout} if reference else {}
     se = wls.standard_errors
@@ -128,6 +130,13 @@ def summary(result: IdentificationResult) -> dict:
         },
         "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
         "processing": "io/signal.py (upstream-compatible); first period = the first %d processed samples" % FIRST_PERIOD_SAMPLES,
+        "definitions": {
+            "relative_error": "||tau_predicted - tau_measured|| / ||tau_measured|| per joint (metrics.relative_error)",
+            "rms": "root mean square of tau_predicted - tau_measured per joint, N·m (N for q3)",
+            "condition_number": "of the training runs' base regressor with unit-norm columns",
+            "noise_sigma": "per-joint residual standard deviation of the first, unweighted fit (the weights)",
+            "residual_autocorrelation_samples": "integrated autocorrelation time of that residual: the covariance counts this many samples as one",
+        },
         "errors": errors,
         "prior_errors_first_period": prior_errors,
         "reference": {
