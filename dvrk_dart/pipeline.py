@@ -26,7 +26,11 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
     from dvrk_dart.identification.outputs import identify_into_folder, report_section
 
     _, data = identify_into_folder(IdentificationConfig(runs=("one",), holdout=("two",)), out_dir / "identification")
-    print(f"identification: {data['n_base']} base parameters from one -> {out_dir / 'identification'}")
+    own = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
+    published = data["reference"]["errors_first_period"].get("two", {}).get("relative_error")
+    print(f"identification: {data['n_base']} base parameters from one -> {out_dir / 'identification'}; "
+          f"held-out two {' '.join(f'{v:.4f}' for v in own)}"
+          + (f" (published parameters {' '.join(f'{v:.4f}' for v in published)})" if published else ""))
     return report_section(data)
 
 

@@ -194,7 +194,7 @@ def test_report_section_compares_with_the_published_parameters(tmp_path):
     assert (tmp_path / "identification" / ".dvrk-dart").read_text().strip() == "identification"
     assert "published" in title
     for j, value in enumerate(data["errors"]["holdout"]["two"]["first_period"]["relative_error"]):
-        assert f'data-quantity="relative_error_identified" data-joint="q{j + 1}" data-value="{value!r}"' in body
+        assert f'data-identification="relative_error_identified" data-joint="q{j + 1}" data-value="{value!r}"' in body
     published = data["reference"]["errors_first_period"]["two"]["relative_error"]
     assert np.allclose(published, PUBLISHED, atol=1e-4)  # the published file reproduces the published numbers
 

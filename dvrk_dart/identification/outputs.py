@@ -290,7 +290,9 @@ def identify_into_folder(config: IdentificationConfig, out: str | Path) -> tuple
 
 def report_section(data: dict) -> tuple[str, str]:
     """(title, html) of the validation report: the published parameters vs the
-    project's own identification on each held-out run, per joint."""
+    project's own identification on each held-out run, per joint. Cells carry
+    data-identification (not data-quantity: these are not analysis/metrics.csv
+    rows; identification.json holds them)."""
     ref = data["reference"]
     parts = [
         f"<p>Parameters identified by <code>dvrk-dart identify</code> on {', '.join(data['config']['runs'])} "
@@ -308,10 +310,10 @@ def report_section(data: dict) -> tuple[str, str]:
             ratio = mine / theirs if theirs else None
             css = "" if ratio is None else ("better" if ratio <= 1.0 else "worse")
             rows.append(
-                "<tr>" + text_cell(name) + num_cell(theirs, run=run, quantity="relative_error_published_params", joint=name)
-                + num_cell(mine, css=css, run=run, quantity="relative_error_identified", joint=name)
-                + num_cell(ratio, run=run, quantity="ratio_identified_to_published", joint=name)
-                + num_cell(own["first_period"]["rms"][j], run=run, quantity="rms_identified", joint=name) + text_cell(effort_unit(name)) + "</tr>"
+                "<tr>" + text_cell(name) + num_cell(theirs, run=run, identification="relative_error_published_params", joint=name)
+                + num_cell(mine, css=css, run=run, identification="relative_error_identified", joint=name)
+                + num_cell(ratio, run=run, identification="ratio_identified_to_published", joint=name)
+                + num_cell(own["first_period"]["rms"][j], run=run, identification="rms_identified", joint=name) + text_cell(effort_unit(name)) + "</tr>"
             )
         parts.append(f"<h3>Held-out run {run} (first period)</h3>" + table(
             ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows))
