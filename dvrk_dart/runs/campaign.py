@@ -20,9 +20,9 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.outputs import building_folder
 from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.paths import MODELS_DIR, PACKAGE_DIR, PIPELINES_DIR
 from dvrk_dart.runs.config import RunConfig, run_name
 from dvrk_dart.runs.scenarios import load_scenario
-from dvrk_dart.paths import MODELS_DIR, PACKAGE_DIR, PIPELINES_DIR
 
 CAMPAIGN_FILE = PIPELINES_DIR / "campaign.toml"
 INPUTS_FILE = "inputs.sha256"

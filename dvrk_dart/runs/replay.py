@@ -13,17 +13,17 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from dvrk_dart.errors import DvrkDartError, SimulationDiverged
-from dvrk_dart.model.identified import TERMS, IdentifiedModel
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
+from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel, load_model
+from dvrk_dart.model.identified import TERMS, IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
-from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
+from dvrk_dart.runs.loop import LoopLog, simulate
 from dvrk_dart.runs.record import RunRecord
-from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.sim.config import MODES, SimConfig, simulated_terms
 from dvrk_dart.sim.simulator import PsmSimulator
-from dvrk_dart.runs.loop import LoopLog, simulate
 
 #: torque-mode replay: bandwidth of the PD that stabilises the model feedforward
 #: (gains scaled by the model's joint-space inertia, critically damped)

@@ -13,8 +13,8 @@ import numpy as np
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import joint_ranges
 from dvrk_dart.model.joints import N_JOINTS
-from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 from dvrk_dart.paths import PIPELINES_DIR
+from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 SCENARIOS_DIR = PIPELINES_DIR / "scenarios"
 
