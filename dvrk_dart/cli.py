@@ -259,10 +259,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
-    p.add_argument("--measured", required=True, help="measured run: path, or one|two|one-no-weight|one-105g")
+    p.add_argument("--measured", required=True, nargs="+",
+                   help="measured run(s): path, or one|two|one-no-weight|one-105g|one-105g-half|one-105g-insertion; several: one set of effects for all")
     p.add_argument("--baseline", help="same trajectory without the withheld effect (isolates a payload)")
     p.add_argument("--train", nargs="*", default=[], help="training runs (default: the measured run)")
     p.add_argument("--holdout", nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
+    p.add_argument("--repeat", help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
+    p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     p.set_defaults(func=cmd_diagnose)

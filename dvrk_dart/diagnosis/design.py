@@ -45,8 +45,33 @@ class Design:
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
         return np.concatenate([e.columns(features) for e in self.effects], axis=2)
 
+    @property
+    def withheld(self) -> np.ndarray:
+        """Column mask of the effects under study (payloads): absent from a
+        baseline run, not cancelled by subtracting one."""
+        mask = np.zeros(self.n_columns, dtype=bool)
+        for e, sl in zip(self.effects, self.slices):
+            mask[sl] = e.kind in WITHHELD_KINDS
+        return mask
+
+    def run_columns(self, role: str, features: TrajectoryFeatures, baseline_features: TrajectoryFeatures | None = None) -> np.ndarray:
+        """(N, 7, P) columns of a run by its role (`runs.DiagnosisRun.role`): a
+        run minus its baseline sample by sample has the shared effects'
+        columns minus the baseline's; a baseline run has no withheld effect."""
+        Phi = self.columns(features)
+        if role == "difference":
+            shared = ~self.withheld
+            Phi[:, :, shared] -= self.columns(baseline_features)[:, :, shared]
+        elif role == "baseline":
+            Phi[:, :, self.withheld] = 0.0
+        return Phi
+
     def index(self, chosen: Sequence[int]) -> np.ndarray:
         return np.concatenate([np.arange(self.slices[i].start, self.slices[i].stop) for i in chosen]) if chosen else np.zeros(0, int)
+
+
+#: effect kinds under study when a baseline is given (`Design.withheld`)
+WITHHELD_KINDS = ("payload", "payload_at_position")
 
 
 @dataclass
@@ -60,8 +85,14 @@ class Grams:
     fold: np.ndarray  # (n_blocks,) fold index
 
     @staticmethod
-    def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int) -> "Grams":
-        Phi = design.columns(features)  # (N, 7, P)
+    def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int, demean: bool = False, Phi: np.ndarray | None = None) -> "Grams":
+        """demean: a constant per joint is a nuisance term of this run; it is
+        projected out of the residual and of every column (Frisch-Waugh-Lovell:
+        the same fit as with the run's own offsets as free parameters)."""
+        Phi = design.columns(features) if Phi is None else Phi  # (N, 7, P)
+        if demean:
+            Phi = Phi - Phi.mean(axis=0)
+            residual = residual - residual.mean(axis=0)
         block = max(1, int(round(BLOCK_DURATION_S * features.sample_rate_hz)))
         n_blocks = max(1, len(residual) // block)
         edges = np.linspace(0, len(residual), n_blocks + 1).astype(int)
@@ -77,6 +108,11 @@ class Grams:
             s[b] = np.sum(residual[sl] ** 2, axis=0)
         fold = (np.arange(n_blocks) * min(folds, n_blocks)) // n_blocks
         return Grams(A, g, s, np.diff(edges), fold)
+
+    def scaled(self, weight: np.ndarray) -> "Grams":
+        """The normal equations with joint j's rows weighted by weight[j] (squared residual units)."""
+        w = np.asarray(weight, dtype=float)
+        return Grams(self.A * w[None, :, None, None], self.g * w[None, :, None], self.s * w[None, :], self.n, self.fold)
 
     @staticmethod
     def concat(parts: list["Grams"]) -> "Grams":
@@ -119,6 +155,13 @@ class Fitter:
         if all(e.linear for e in effects):
             lb = np.concatenate([e.lower for e in effects]) * d
             ub = np.concatenate([e.upper for e in effects]) * d
+            # Occam prior of a linear payload (first moment): energy * prior * (beta / scale)^2
+            scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_columns, np.inf)) for e in effects])
+            if np.any(np.isfinite(scales)):
+                rows = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / scales / d
+                keep = np.isfinite(scales)
+                M = np.vstack([M, np.diag(rows)[keep]])
+                y = np.concatenate([y, np.zeros(int(keep.sum()))])
             sol = scipy.optimize.lsq_linear(M, y, bounds=(lb, ub), method="bvls" if len(idx) <= 60 else "trf")
             beta = sol.x / d
             params = {i: beta[sl].copy() for i, sl in zip(chosen, local)}

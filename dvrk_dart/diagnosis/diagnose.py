@@ -12,6 +12,7 @@ import pandas as pd
 
 from dvrk_dart.diagnosis.design import (
     BLOCK_DURATION_S,
+    WITHHELD_KINDS,
     Design,
     Grams,
     per_joint_fraction,
@@ -20,6 +21,12 @@ from dvrk_dart.diagnosis.design import (
 )
 from dvrk_dart.diagnosis.effect import Effect
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.first_moment import (
+    FirstMomentPayload,
+    PayloadAtPosition,
+    parse_payload_at,
+)
+from dvrk_dart.diagnosis.identifiable import first_moment_report
 from dvrk_dart.diagnosis.library import (
     candidate_effects,
     effects_to_sim_config,
@@ -41,11 +48,12 @@ from dvrk_dart.diagnosis.selection import (
     MIN_HELDOUT_GAIN,
     Selector,
 )
+from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 from dvrk_dart.sim.config import SimConfig
 
 #: safety bound of the greedy selection
@@ -66,6 +74,17 @@ def _weights(residual: np.ndarray) -> np.ndarray:
     return 1.0 / sigma**2
 
 
+def _run_weights(parts: list[Grams]) -> list[np.ndarray]:
+    """Per run and joint, weights that give every training run the pooled
+    residual level: runs are heteroscedastic (a run minus its baseline has a
+    tenth of a raw run's residual) and each must count, not only the largest."""
+    if len(parts) < 2:
+        return [np.ones(N_JOINTS) for _ in parts]
+    energy = [p.s.sum(0) / max(p.n.sum(), 1) for p in parts]
+    pooled = np.sum([p.s.sum(0) for p in parts], axis=0) / max(sum(p.n.sum() for p in parts), 1)
+    return [np.where(e > 0, pooled / np.maximum(e, 1e-300), 1.0) for e in energy]
+
+
 
 def diagnose(
     measured,
@@ -82,12 +101,29 @@ def diagnose(
     folds: int = CV_FOLDS,
     figures: bool = True,
     profile_payload_mass: bool = True,
+    repeat=None,
+    payload_at: str | tuple[int, np.ndarray] | None = None,
+    nuisance_offsets: bool | None = None,
+    payload_model: str | None = None,
 ) -> dict:
     """Diagnose the gap of `measured` (a run name such as 'two', a path, a
-    ProcessedRun or a DiagnosisRun carrying its simulated efforts).
+    ProcessedRun or a DiagnosisRun carrying its simulated efforts), or of
+    several runs at once (a list: one set of physical effects for all, each
+    with the same baseline).
 
-    baseline: the same trajectory without the effect under study (its residual
-        is subtracted, sample by sample);
+    baseline: the same trajectory without the effect under study (its gap is
+        subtracted sample by sample from a run of the same motion, and
+        predicted by a session model for a run at another speed:
+        `runs.session_model_gap`);
+    repeat: the same motion recorded in another session: the session-to-
+        session floor per joint and each joint's gap split (`session_floor`);
+    payload_at: 'LINK:x,y,z' or (link key, position in its frame): a selected
+        payload's mass at that (hand-measured) position, with its interval;
+    nuisance_offsets: a constant per run and joint fitted as a nuisance term
+        and reported (default: with a baseline or several runs, where the
+        session's offsets dominate constant differences);
+    payload_model: "first_moment" (default with a baseline: the identifiable
+        quantity) or "point" (`library.candidate_effects`);
     train: further runs to fit on (each a run spec or a (run, baseline) pair);
         `measured` is always a training run;
     holdout: runs never used for fitting nor selection, only scored;
@@ -97,24 +133,50 @@ def diagnose(
     out_dir: where diagnosis.json, the regime tables and the figures go.
     Returns the diagnosis dict (the contract of diagnosis.json)."""
     arm = arm or load_arm()
-    effects = list(effects) if effects is not None else candidate_effects(arm)
+    measured_list = list(measured) if isinstance(measured, (list, tuple)) else [measured]
+    several = baseline is not None or len(measured_list) > 1
+    nuisance = several if nuisance_offsets is None else bool(nuisance_offsets)
+    payload_model = payload_model or ("first_moment" if baseline is not None else "point")
+    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, offsets=not nuisance)
+    at_index = None
+    if payload_at is not None:
+        key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
+        effects.append(PayloadAtPosition(arm.model, key, position))
+        at_index = len(effects) - 1
 
     def as_run(spec):
         if isinstance(spec, tuple):
             return prepare_run(spec[0], arm, simulate, base_config, baseline=spec[1])
         return prepare_run(spec, arm, simulate, base_config)
 
-    train_runs = [prepare_run(measured, arm, simulate, base_config, baseline=baseline)]
-    train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) == str(measured))]
+    baseline_run = prepare_run(baseline, arm, simulate, base_config) if baseline is not None else None
+    train_runs = [prepare_run(m, arm, simulate, base_config, baseline=baseline_run) for m in measured_list]
+    train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
     holdout_runs = [as_run(s) for s in (holdout or [])]
+    if baseline_run is not None and any(r.role == "joint" for r in train_runs):  # another motion: the baseline is fitted with them
+        train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role="baseline"))
 
     design = Design(effects)
-    train_features = [run_features(arm, r) for r in train_runs]
-    holdout_features = [run_features(arm, r) for r in holdout_runs]
-    train_grams = Grams.concat([Grams.of_run(design, f, r.residual, folds) for f, r in zip(train_features, train_runs)])
-    holdout_grams = [Grams.of_run(design, f, r.residual, 1) for f, r in zip(holdout_features, holdout_runs)]
+    features_cache: dict[int, TrajectoryFeatures] = {}
+
+    def features_of(run: DiagnosisRun) -> TrajectoryFeatures:
+        if id(run) not in features_cache:
+            features_cache[id(run)] = run_features(arm, run)
+        return features_cache[id(run)]
+
+    def columns_of(run: DiagnosisRun) -> np.ndarray:
+        return design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None)
+
+    train_features = [features_of(r) for r in train_runs]
+    holdout_features = [features_of(r) for r in holdout_runs]
+    train_columns = [columns_of(r) for r in train_runs]
+    holdout_columns = [columns_of(r) for r in holdout_runs]
+    train_parts = [Grams.of_run(design, f, r.residual, folds, nuisance, Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
+    holdout_grams = [Grams.of_run(design, f, r.residual, 1, nuisance, Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
     train_residuals = [r.residual for r in train_runs]
     w2 = _weights(np.vstack(train_residuals))
+    run_weights = _run_weights(train_parts)
+    train_grams = Grams.concat([part.scaled(weight) for part, weight in zip(train_parts, run_weights)])
 
     selector = Selector(design, train_grams, w2, folds)
     selected, steps, individual, selected_cv = selector.greedy(max_effects)
@@ -133,7 +195,7 @@ def diagnose(
 
     # every candidate alone, fitted on all training data, for its parameters and scores
     entries = []
-    rank_order = selected + sorted((i for i in range(len(effects)) if i not in selected), key=lambda i: -individual[i].fraction)
+    rank_order = selected + sorted((i for i in individual if i not in selected), key=lambda i: -individual[i].fraction)
     for rank, i in enumerate(rank_order, start=1):
         e = effects[i]
         alone = selector.fit_all([i])
@@ -168,17 +230,35 @@ def diagnose(
     sim_config = effects_to_sim_config(chosen, base_config)
     extra_by_regressor = not_simulated(chosen)
 
-    def after_residual(run: DiagnosisRun, features: TrajectoryFeatures) -> np.ndarray:
-        if simulate is None:
-            explained = sum((e.effort(features, p) for e, p in chosen), np.zeros_like(run.residual))
-            return run.residual - explained
-        sim_after = np.asarray(simulate(sim_config, run.state), dtype=float)
-        sim_after = sim_after + unsimulated_effort(extra_by_regressor, features)
-        after = run.state.tau - sim_after
-        return after if run.baseline is None else after - run.baseline.gap
+    shared = [(e, p) for e, p in chosen if e.kind not in WITHHELD_KINDS]
+    shared_config, shared_extra = effects_to_sim_config(shared, base_config), not_simulated(shared)
 
-    train_after = [after_residual(r, f) for r, f in zip(train_runs, train_features)]
-    holdout_after = [after_residual(r, f) for r, f in zip(holdout_runs, holdout_features)]
+    def simulated_after(run: DiagnosisRun, with_withheld: bool = True) -> np.ndarray:
+        """(tau - the simulation with the effects) of a run, as its role asks."""
+        config, extra = (sim_config, extra_by_regressor) if with_withheld else (shared_config, shared_extra)
+        return run.state.tau - np.asarray(simulate(config, run.state), dtype=float) - unsimulated_effort(extra, features_of(run))
+
+    def after_residual(run: DiagnosisRun, columns: np.ndarray) -> np.ndarray:
+        if simulate is None:
+            after = run.residual - columns @ final.beta
+        elif run.role == "difference":
+            after = simulated_after(run) - simulated_after(run.baseline, with_withheld=False)
+        else:
+            after = simulated_after(run, with_withheld=run.role != "baseline")
+        return after - after.mean(axis=0) if nuisance else after
+
+    train_after = [after_residual(r, c) for r, c in zip(train_runs, train_columns)]
+    holdout_after = [after_residual(r, c) for r, c in zip(holdout_runs, holdout_columns)]
+    nuisance_report = None
+    if nuisance:  # the run's own constants: the mean of what the effects leave (Frisch-Waugh-Lovell)
+        nuisance_report = {r.name: dict(zip(JOINT_NAMES, (r.residual.mean(0) - (c @ final.beta).mean(0)).tolist()))
+                           for r, c in zip(train_runs + holdout_runs, train_columns + holdout_columns)}
+    del train_columns, holdout_columns
+    floor = None
+    if repeat is not None:  # two runs without the effect under study, of two sessions
+        floor = session_floor(baseline_run or train_runs[0], prepare_run(repeat, arm, simulate, base_config))
+    split_source = (holdout_runs, holdout_after) if holdout_runs else (train_runs, train_after)
+    split = gap_split(np.asarray(_gaps([r.residual for r in split_source[0]])), np.asarray(_gaps(split_source[1])), floor)
     if simulate is None:
         source = "regressor"
     else:
@@ -189,6 +269,8 @@ def diagnose(
         for i in selected
         if isinstance(effects[i], PointPayload)
     ]
+    first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index)
+                     for i in selected if isinstance(effects[i], FirstMomentPayload)]
     payload_candidates = sorted(
         (
             {
@@ -199,15 +281,26 @@ def diagnose(
             if isinstance(effects[i], PointPayload)
         ),
         key=lambda c: -c["cross_validated_fraction"],
+    ) + sorted(
+        ({"cross_validated_fraction": individual[i].fraction, **effects[i].describe(selector.fit_all([i]).params[i])}
+         for i in individual if isinstance(effects[i], FirstMomentPayload)),
+        key=lambda c: -c["cross_validated_fraction"],
     )
     result = {
         "joints": list(JOINT_NAMES),
         "units": [effort_unit(j) for j in JOINT_NAMES],
         "measured": train_runs[0].name,
+        "measured_runs": [r.name for r in train_runs[: len(measured_list)]],
+        "baseline_source": {r.name: r.baseline_source for r in train_runs if r.baseline is not None},
+        "nuisance_offsets": nuisance_report,
+        "session_floor": floor.tolist() if floor is not None else None,
+        "repeat": (prepare_run(repeat, arm, simulate, base_config).name if not isinstance(repeat, (str, Path)) else Path(str(repeat)).stem) if repeat is not None else None,
+        "gap_split": {"runs": "holdout" if holdout_runs else "train", "joints": split},
         "baseline": train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         "train_runs": [r.name for r in train_runs],
         "holdout_runs": [r.name for r in holdout_runs],
-        "residual_definition": "measured - simulated" + (" - (baseline measured - baseline simulated)" if baseline is not None else ""),
+        "residual_definition": "measured - simulated" + (" - (baseline measured - baseline simulated)" if baseline is not None else "")
+        + (" - a constant per run and joint (nuisance)" if nuisance else ""),
         "simulated_source": "simulation" if simulate is not None else "identified model at the measured state (stand-in for the DART replay)",
         "gap_before": {"train": _gaps(train_residuals), "holdout": _gaps([r.residual for r in holdout_runs])},
         "gap_after": {"train": _gaps(train_after), "holdout": _gaps(holdout_after)},
@@ -230,8 +323,8 @@ def diagnose(
             "steps": steps,
             "selected": [effects[i].name for i in selected],
         },
-        "payload": describe_payload(*payloads[0]) if payloads else None,
-        "payloads": [describe_payload(*pl) for pl in payloads],
+        "payload": first_moments[0] if first_moments else (describe_payload(*payloads[0]) if payloads else None),
+        "payloads": first_moments + [describe_payload(*pl) for pl in payloads],
         "payload_candidates": payload_candidates,
         "sim_config": sim_config.to_dict(),
         "not_in_simulation": [e.name for e, _ in extra_by_regressor],

@@ -14,6 +14,7 @@ from dvrk_dart.diagnosis.arm_effects import (
 )
 from dvrk_dart.diagnosis.effect import Effect
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.geometry import ENVELOPE_MARGIN_M, link_envelope
 from dvrk_dart.diagnosis.joint_effects import (
     CABLE_ELASTICITY_JOINTS,
@@ -30,27 +31,40 @@ from dvrk_dart.diagnosis.payload import (
     payload_links,
     point_mass_parameters,
 )
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
 
+#: the payload models of `candidate_effects`
+PAYLOAD_MODELS = ("point", "first_moment")
+
 
 def candidate_effects(
-    arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES
+    arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES,
+    payload_model: str = "point", offsets: bool = True,
 ) -> list[Effect]:
-    """The library of candidate effects, in a fixed order."""
+    """The library of candidate effects, in a fixed order.
+
+    payload_model: "point" (a point mass inside the link's envelope, simulated
+    as a body) or "first_moment" (what the efforts determine, `first_moment`);
+    offsets: False when constant efforts are per-run nuisance terms."""
+    if payload_model not in PAYLOAD_MODELS:
+        raise DvrkDartError(f"payload model '{payload_model}': expected one of {', '.join(PAYLOAD_MODELS)}")
     effects: list[Effect] = []
     effects += [JointFriction(j) for j in JOINT_NAMES]
     effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
     if stribeck:
         effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
-    effects += [JointOffset(j) for j in JOINT_NAMES]
+    if offsets:
+        effects += [JointOffset(j) for j in JOINT_NAMES]
     effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
     effects += [JointArmature(j) for j in JOINT_NAMES]
     equivalents = equivalent_payload_links(arm)
+    payload_class = PointPayload if payload_model == "point" else FirstMomentPayload
     effects += [
-        PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)
+        payload_class(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)
     ]
     effects += [GravityTilt(arm), TimeShift(), CounterweightTransmission(arm)]
     return effects

@@ -18,6 +18,13 @@ from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.sim.config import SimConfig
 
+#: two runs share their motion (a baseline's gap is subtracted sample by sample)
+#: when their positions differ by less than this RMS (rad or m; two recordings
+#: of trajectory one differ by ~1e-3, the half-speed run by ~0.5) ...
+SAME_MOTION_POSITION_RMS = 0.01
+#: ... and their velocities by less than this fraction of the velocity RMS
+SAME_MOTION_VELOCITY_FRACTION = 0.1
+
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 """simulate(config, run) -> (N, 7) simulated efforts at the run's samples (DART replay)."""
 
@@ -32,12 +39,19 @@ class DiagnosisRun:
     state: ProcessedRun
     simulated: np.ndarray
     baseline: "DiagnosisRun | None" = None
+    #: "raw" (the gap itself), "difference" (minus its baseline's gap, sample by
+    #: sample), "baseline" (a run without the effect under study, fitted with the
+    #: others: its withheld-effect columns are zero), "joint" (a run whose
+    #: baseline has another motion: its gap, fitted with the baseline run)
+    role: str = "raw"
 
     def __post_init__(self):
         self.simulated = np.asarray(self.simulated, dtype=float)
         if self.simulated.shape != self.state.tau.shape:
             raise DvrkDartError(f"{self.name}: simulated efforts {self.simulated.shape} do not match the measured {self.state.tau.shape}")
-        if self.baseline is not None and len(self.baseline.state) != len(self.state):
+        if self.baseline is not None and self.role == "raw":
+            self.role = "difference"
+        if self.role == "difference" and len(self.baseline.state) != len(self.state):
             raise DvrkDartError(f"{self.name}: baseline {self.baseline.name} has {len(self.baseline.state)} samples, not {len(self.state)}")
 
     def __len__(self) -> int:
@@ -49,9 +63,19 @@ class DiagnosisRun:
         return self.state.tau - self.simulated
 
     @property
+    def baseline_effort(self) -> np.ndarray:
+        """What is subtracted from the gap: the baseline's gap, sample by sample (N, 7)."""
+        return self.baseline.gap if self.role == "difference" else np.zeros_like(self.state.tau)
+
+    @property
+    def baseline_source(self) -> str | None:
+        return {"difference": "subtracted sample by sample", "joint": "fitted together with the baseline run (another motion)",
+                "baseline": "the baseline itself (withheld effects absent)"}.get(self.role)
+
+    @property
     def residual(self) -> np.ndarray:
         """The residual to explain: the gap, minus the baseline's gap if any."""
-        return self.gap if self.baseline is None else self.gap - self.baseline.gap
+        return self.gap - self.baseline_effort
 
 
 RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
@@ -81,8 +105,21 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
         label, state = _load_state(spec)
         run = DiagnosisRun(name or label, state, simulated_efforts(arm, state, simulate, base_config))
     if baseline is not None:
-        run = DiagnosisRun(run.name, run.state, run.simulated, prepare_run(baseline, arm, simulate, base_config))
+        base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config)
+        if same_motion(run.state, base.state):
+            return DiagnosisRun(run.name, run.state, run.simulated, base)
+        return DiagnosisRun(run.name, run.state, run.simulated, None, role="joint")
     return run
+
+
+def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
+    """Whether two runs follow the same motion sample by sample (a baseline's
+    gap can then be subtracted as it is)."""
+    if len(a) != len(b):
+        return False
+    position = float(np.sqrt(np.mean((a.q - b.q) ** 2)))
+    velocity = float(np.sqrt(np.mean((a.dq - b.dq) ** 2)) / max(np.sqrt(np.mean(b.dq**2)), 1e-12))
+    return position < SAME_MOTION_POSITION_RMS and velocity < SAME_MOTION_VELOCITY_FRACTION
 
 
 def run_features(arm: Arm, run: DiagnosisRun) -> TrajectoryFeatures:

@@ -176,7 +176,7 @@ class Selector:
             trials = {}
             families = {self.design.effects[i].family for i in selected}
             for i in range(n):
-                if i in selected or self.design.effects[i].family in families:
+                if i in selected or self.design.effects[i].family in families or not getattr(self.design.effects[i], "candidate", True):
                     continue
                 warm = [dict(p) for p in current.fold_params]
                 trials[i] = self.cross_validate(selected + [i], warm)

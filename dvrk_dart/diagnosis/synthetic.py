@@ -29,17 +29,21 @@ def synthesize_measurement(
     seed: int = 0,
     simulate: Simulate | None = None,
     base_config: SimConfig = SimConfig(),
+    extra_effort: np.ndarray | None = None,
 ) -> ProcessedRun:
     """A measured run with hidden effects: the efforts of the simulation with
     the effects as physics (SimConfig) plus the regressor efforts of effects the
     simulation has no field for, plus coloured noise of the given RMS per joint
-    (white noise through the upstream low-pass filter)."""
+    (white noise through the upstream low-pass filter); `extra_effort` (N, 7)
+    is physics outside the effect library (`out_of_library`), added as is."""
     config = effects_to_sim_config(list(injected), base_config)
     tau = simulated_efforts(arm, state, simulate, config)
     extra = not_simulated(list(injected))
     if extra:
         features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), sample_rate_hz())
         tau = tau + unsimulated_effort(extra, features)
+    if extra_effort is not None:
+        tau = tau + np.asarray(extra_effort, dtype=float)
     rng = np.random.default_rng(seed)
     noise = zero_phase_lowpass(rng.standard_normal(tau.shape), 1.0 / sample_rate_hz())
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)

@@ -116,8 +116,14 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
         parts.append(row([rank, e(effect["name"]), e(", ".join(effect.get("joints", []))), "yes" if effect.get("selected") else "no",
                           fmt(frac.get("train")), fmt(frac.get("holdout")), params]))
     parts.append("</table>")
+    parts += _split_and_nuisance_html(result)
     payload = result.get("payload")
-    if payload:
+    if payload and payload.get("words"):  # the identifiable quantity first (first_moment payload)
+        parts.append("<p>" + " ".join(e(w) for w in payload["words"]) + "</p>")
+        g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
+        parts += ["<table>", row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
+                  row(["gravity effort (interval)", *(f"{fmt(v)} ({fmt(lo)} .. {fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
+    elif payload:
         text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
                 f"at {np.round(payload['position_m'], 3).tolist()} m in the link frame")
         if payload.get("equivalent_links"):
@@ -133,14 +139,35 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
     return "\n".join(parts)
 
 
-def run_diagnosis(arm: Arm, measured: str, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True) -> dict:
-    """diagnose() with the DART replay, plus diagnosis.html and the replay logs."""
+def _split_and_nuisance_html(result: dict) -> list[str]:
+    """The gap split per joint (explained, session-to-session, left over) and the per-run nuisance offsets."""
+    e = html.escape
+    parts = []
+    split = (result.get("gap_split") or {}).get("joints") or []
+    if split and split[0].get("session_to_session") is not None:
+        parts.append(f"<p>Gap of the {e(result['gap_split']['runs'])} runs split per joint (RMS, adding in squares): explained by the selected "
+                     f"effects, session-to-session (floor from two sessions of the same trajectory, {e(str(result.get('repeat')))}: no fixed "
+                     "effect can remove it), left over.</p>")
+        parts.append("<table><tr><th>joint</th><th>before</th><th>explained</th><th>session-to-session</th><th>left over</th><th>after</th></tr>")
+        for r in split[:3]:
+            parts.append(f"<tr><td>{r['joint']} ({e(r['unit'])})</td>" + "".join(f"<td>{r[k]:.4f}</td>" for k in ("before", "explained", "session_to_session", "left_over", "after")) + "</tr>")
+        parts.append("</table>")
+    for run, offsets in (result.get("nuisance_offsets") or {}).items():
+        parts.append(f"<p>nuisance offsets of {e(run)} (a constant per run and joint, fitted, not an effect): "
+                     + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]) + "</p>")
+    return parts
+
+
+def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None) -> dict:
+    """diagnose() with the DART replay, plus diagnosis.html and the replay logs
+    (of the first measured run)."""
     from dvrk_dart.diagnosis.diagnose import diagnose
 
     start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
-                      simulate=simulation_hook(arm), out_dir=out_dir, arm=arm)
+                      simulate=simulation_hook(arm), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at)
+    measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", "<!DOCTYPE html><html><head><meta charset='utf-8'><title>diagnosis</title></head><body>"
@@ -152,7 +179,9 @@ def run_diagnosis(arm: Arm, measured: str, out_dir: Path, baseline=None, train=(
 
 def run_diagnosis_cli(args: argparse.Namespace) -> int:
     arm = load_arm(params_file=args.params)
-    result = run_diagnosis(arm, args.measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout)
+    measured = args.measured[0] if len(args.measured) == 1 else args.measured
+    result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
+                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
@@ -162,6 +191,15 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     if result.get("payload"):
         p = result["payload"]
         print(f"payload: {p['mass_kg']:.3f} kg on {p['link']} ({p['group']})")
+        for sentence in p.get("words", []):
+            print(f"  {sentence}")
+    if result.get("nuisance_offsets"):
+        for run, offsets in result["nuisance_offsets"].items():
+            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
+    for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
+        if row.get("session_to_session") is not None:
+            print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
+                  f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
     print(f"written {Path(args.out) / 'diagnosis.json'}")
     return 0
 
@@ -185,53 +223,22 @@ def _effect(arm: Arm, case: dict):
 
 
 def validate_payload(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    result = run_diagnosis(arm, spec["measured"], out_dir, baseline=spec["baseline"])
-    payload = result.get("payload")
-    verdicts = [{"check": "withheld 105 g payload found on a parallelogram link",
-                 "passed": bool(payload and payload["group"] == spec["expected_group"]),
-                 "value": f"{payload['link']} ({payload['group']})" if payload else "no payload selected"}]
-    if payload:
-        error = payload["mass_kg"] / spec["expected_mass_kg"] - 1.0
-        verdicts.append({"check": f"payload mass within {spec['mass_tolerance']:.0%} of {spec['expected_mass_kg']} kg",
-                         "passed": abs(error) <= spec["mass_tolerance"], "value": f"{payload['mass_kg']:.3f} kg ({error:+.0%})"})
-        # the position check: what the data pins is the payload's gravity moment
-        # about the pitch shaft (a point mass on a link turning about it is seen by
-        # gravity through m r only); compare the J2 gravity effort at q = 0 with the
-        # hand-measured placement's (magnitudes: the note does not say which side)
-        estimated, hand = payload_j2_gravity_at_zero(arm, payload), hand_j2_gravity_at_zero(arm, spec)
-        moment_error = abs(estimated) / abs(hand) - 1.0
-        result["hand_check"] = {"j2_gravity_at_q0_estimated": estimated, "j2_gravity_at_q0_hand": hand, "relative_difference": moment_error}
-        verdicts.append({"check": f"payload gravity moment on J2 within {spec['mass_tolerance']:.0%} of the hand-measured placement's",
-                         "passed": abs(moment_error) <= spec["mass_tolerance"],
-                         "value": f"{abs(estimated):.3f} vs {abs(hand):.3f} N·m ({moment_error:+.0%})"})
-        write_json_atomic(out_dir / "diagnosis.json", result)
-    before, after = result["gap_before"]["train"], result["gap_after"]["train"]
-    verdicts.append({"check": "payload diagnosis closes the J2 gap", "passed": after[1] < before[1],
-                     "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
-    return result, verdicts
+    """The 105 g parallelogram runs (full and half speed together) against the no-weight run."""
+    from dvrk_dart.diagnosis.payload_checks import validate_real_payload
+
+    return validate_real_payload(arm, spec, out_dir, "105 g parallelogram")
 
 
-def payload_j2_gravity_at_zero(arm: Arm, payload: dict) -> float:
-    from dvrk_dart.diagnosis.payload_report import payload_gravity_efforts_at_zero
+def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
+    """The 105 g weight on the insertion stage's base against the no-weight run."""
+    from dvrk_dart.diagnosis.payload_checks import validate_real_payload
 
-    key = arm.model.link_by_name(payload["link"]).key
-    return float(payload_gravity_efforts_at_zero(arm, key, payload["mass_kg"], np.asarray(payload["position_m"]))[1])
-
-
-def hand_j2_gravity_at_zero(arm: Arm, spec: dict) -> float:
-    """J2 gravity effort at q = 0 of the hand-measured payload: the known mass at
-    the measured distance and height from the pitch shaft, on the pitch link."""
-    from dvrk_dart.diagnosis.payload_report import payload_gravity_efforts_at_zero
-
-    pitch = arm.model.link_by_name("pitch")
-    point_base = np.array([0.0, spec["check_horizontal_m"], spec["check_height_m"], 1.0])  # pitch plane at q = 0
-    point_link = np.linalg.solve(arm.model.forward_kinematics(np.zeros(len(JOINT_NAMES)))[pitch.key], point_base)[:3]
-    return float(payload_gravity_efforts_at_zero(arm, pitch.key, spec["expected_mass_kg"], point_link)[1])
+    return validate_real_payload(arm, spec, out_dir, "105 g insertion-stage base")
 
 
 def validate_holdout(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     train, *others = spec["train"]
-    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"])
+    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"))
     # the bar: the full identified model on the held-out run
     identified = []
     for name in spec["holdout"]:
@@ -287,7 +294,11 @@ def validate_withheld(out_dir: Path, arm: Arm | None = None) -> list[dict]:
     arm = arm or load_arm()
     spec = tomllib.loads(WITHHELD_FILE.read_text())
     verdicts: list[dict] = []
-    for name, step in (("payload", validate_payload), ("holdout", validate_holdout), ("synthetic", validate_synthetic)):
+    from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
+
+    steps = (("payload", validate_payload), ("insertion", validate_insertion), ("holdout", validate_holdout), ("synthetic", validate_synthetic),
+             ("out_of_library", validate_out_of_library))
+    for name, step in steps:
         start = time.perf_counter()
         _, found = step(arm, spec[name], out_dir / name)
         for v in found:
@@ -311,7 +322,9 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     for v in verdicts:
         body.append(f"<tr><td>{e(v['check'])}</td><td>{'PASS' if v['passed'] else 'FAIL'}</td><td>{e(str(v['value']))}</td></tr>")
     body.append("</table>")
-    for name, title in (("payload", "withheld 105 g payload (baseline: same session without it)"), ("holdout", "effects fitted on 'one', scored on held-out 'two'")):
+    for name, title in (("payload", "withheld 105 g payload on the parallelogram, full and half speed together (baseline: the session's run without it)"),
+                        ("insertion", "105 g on the insertion stage's base (baseline: the session's run without it)"),
+                        ("holdout", "effects fitted on 'one', scored on held-out 'two'")):
         folder = out_dir / name
         if not (folder / "diagnosis.json").is_file():
             continue

@@ -33,6 +33,8 @@ RUNS = {
     "two": "two_results.csv",
     "one-no-weight": "one_no_weight_results.csv",
     "one-105g": "one_105_grams_parallel_results.csv",
+    "one-105g-half": "one_105_grams_parallel_half_speed_results.csv",
+    "one-105g-insertion": "one_105_grams_insertion_results.csv",
 }
 CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
 

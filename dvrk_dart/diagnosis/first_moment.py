@@ -1,0 +1,134 @@
+"""A payload as what the efforts determine: its first moment (and its mass where seen).
+
+A point mass m at c on a link gives efforts linear in (m, m c) up to its small
+second moment m (|c|^2 I - c c^T) (inertia about the link origin: for 0.1 kg at
+0.2 m, 4e-3 kg·m², a few mN·m at the runs' accelerations, below the noise).
+`FirstMomentPayload` fits (m, m c) linearly, with no envelope on c: on a link
+turning about a fixed axis gravity sees m c only, and whatever reaches J1 with
+the weight (a yaw axis not quite where the model has it, a transmission
+coupling) is read by the model's geometry as a first-moment component along the
+pitch shaft. It is therefore reported as the first moment *the efforts*
+determine, in the base frame at q = 0, with the gravity efforts it causes per
+joint; the mass only where its own column is seen (a translating link, or runs
+at several speeds), else an interval.
+
+`PayloadAtPosition` is a point mass at a given (hand-measured) position: its
+efforts are linear in m, so a first moment becomes a mass with an interval.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
+from dvrk_dart.diagnosis.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.sim.config import Payload
+
+#: (m, m cx, m cy, m cz): the first four of a body's dynamic parameters
+FIRST_MOMENT_COLUMNS = 4
+#: the Occam prior (design.PAYLOAD_MASS_PRIOR_PER_KG2 per kg^2) counts a first
+#: moment in units of kg at this lever: it only decides directions the efforts
+#: do not see (e.g. along the yaw axis of a link that only translates in the
+#: parallelogram), which would otherwise run to their bounds
+FIRST_MOMENT_PRIOR_LENGTH_M = 0.1
+
+
+def _moving_body_link(model: PsmModel, key: int):
+    link = model.links[key]
+    if not link.body or link.joint_type == "fixed":
+        raise DvrkDartError(f"link {key} ({link.name}): a payload needs a moving link with a body")
+    return link
+
+
+class FirstMomentPayload(Effect):
+    """A payload on a link as its mass and first moment (m, m c), c in the link frame."""
+
+    kind = "payload"
+
+    def __init__(self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,
+                 equivalent_keys: tuple[int, ...] = ()):
+        link = _moving_body_link(model, key)
+        self.model, self.link_key, self.link_name, self.group = model, key, link.name, link.group
+        self.envelope = envelope if envelope is not None else link_envelope(model, key)
+        self.name = f"payload_on_{link.name}"
+        self.equivalent_links = tuple(model.links[k].name for k in equivalent_keys if k != key)
+        self.joints = joints_moving_link(model, key)
+        # the largest first moment a plausible payload has: the heaviest mass at
+        # the far end of the link's envelope, along each axis
+        reach = np.maximum(np.abs(self.envelope.lower), np.abs(self.envelope.upper))
+        self.parameters = (Parameter("mass_kg", "kg", 0.0, max_mass_kg),) + tuple(
+            Parameter(f"first_moment_{a}_kg_m", "kg·m", -max_mass_kg * r, max_mass_kg * r) for a, r in zip("xyz", reach)
+        )
+
+    #: scales of the Occam prior on (m, m c) (`design.Fitter`)
+    prior_scales = np.array([1.0] + [FIRST_MOMENT_PRIOR_LENGTH_M] * 3)
+
+    @property
+    def family(self) -> str:
+        return "payload_on_" + "|".join(sorted((self.link_name,) + self.equivalent_links))
+
+    def columns(self, features: TrajectoryFeatures) -> np.ndarray:
+        return features.body_regressor[:, :, features.body_columns(self.link_key)][:, :, :FIRST_MOMENT_COLUMNS]
+
+    def sim_contribution(self, p):
+        return None  # a first moment without a position is not a body: added by regressor
+
+    def first_moment_base_at_zero(self, p) -> np.ndarray:
+        """m (p_origin + R c) in the base frame at q = 0 (kg·m)."""
+        T = self.model.forward_kinematics(np.zeros(N_JOINTS))[self.link_key]
+        return p[0] * T[:3, 3] + T[:3, :3] @ np.asarray(p[1:4], dtype=float)
+
+    def describe(self, p):
+        return {"mass_kg": float(p[0]), "link": self.link_name, "link_key": self.link_key, "group": self.group,
+                "equivalent_links": list(self.equivalent_links), "first_moment_link_kg_m": [float(x) for x in p[1:4]],
+                "first_moment_base_at_q0_kg_m": self.first_moment_base_at_zero(p).tolist()}
+
+    def size(self, p):
+        return float(np.linalg.norm(p[1:4]))
+
+
+class PayloadAtPosition(Effect):
+    """A point mass of unknown mass at a known position (link frame): efforts linear in m."""
+
+    kind = "payload_at_position"
+    candidate = False  # never selected: it turns a selected payload into a mass
+
+    def __init__(self, model: PsmModel, key: int, position_m, max_mass_kg: float = PAYLOAD_MAX_MASS_KG):
+        link = _moving_body_link(model, key)
+        self.link_key, self.link_name, self.group = key, link.name, link.group
+        self.position = np.asarray(position_m, dtype=float)
+        self.name = f"payload_at_{link.name}"
+        self.joints = joints_moving_link(model, key)
+        self.parameters = (Parameter("mass_kg", "kg", 0.0, max_mass_kg),)
+
+    def columns(self, features):
+        body = features.body_regressor[:, :, features.body_columns(self.link_key)]
+        return (body @ point_mass_parameters(1.0, self.position))[:, :, None]
+
+    def sim_contribution(self, p):
+        return SimContribution(payloads=(Payload(link=self.link_key, mass_kg=float(p[0]), position_m=tuple(float(x) for x in self.position)),))
+
+
+def parse_payload_at(text: str, model: PsmModel) -> tuple[int, np.ndarray]:
+    """'LINK:x,y,z' (link name or key; position in the link frame, m) -> (key, position)."""
+    try:
+        name, coords = text.split(":")
+        position = np.array([float(v) for v in coords.split(",")])
+    except ValueError:
+        raise DvrkDartError(f"--payload-at {text!r}: expected LINK:x,y,z (link name, position in its frame in m)") from None
+    if position.shape != (3,) or not np.all(np.isfinite(position)):
+        raise DvrkDartError(f"--payload-at {text!r}: expected three finite coordinates")
+    key = int(name) if name.isdigit() else None
+    if key is None:
+        try:
+            key = model.link_by_name(name).key
+        except (KeyError, DvrkDartError):
+            raise DvrkDartError(f"--payload-at {text!r}: unknown link '{name}'") from None
+    if key not in model.links:
+        raise DvrkDartError(f"--payload-at {text!r}: unknown link {key}")
+    return key, position

@@ -1,0 +1,104 @@
+"""What the data determine of a selected payload, with cross-validated intervals.
+
+Intervals are delete-one-fold jackknife intervals over the cross-validation
+folds (each fold's fit leaves out one contiguous time segment of every run):
+estimate +- z se, se^2 = (K-1)/K sum_k (theta_k - mean theta)^2, z for the
+central INTERVAL_QUANTILES of a normal law.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import norm
+
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.first_moment import FirstMomentPayload, PayloadAtPosition
+from dvrk_dart.diagnosis.payload import point_mass_parameters
+from dvrk_dart.diagnosis.payload_report import (
+    MASS_IDENTIFIED_RATIO,
+    pitch_shaft_offsets,
+)
+from dvrk_dart.diagnosis.selection import INTERVAL_QUANTILES, Selector
+from dvrk_dart.io.reference_data import sample_rate_hz
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
+
+
+def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
+    """(2, ...) interval around `full` from the fold estimates (K, ...)."""
+    folds = np.asarray(folds, dtype=float)
+    k = len(folds)
+    if k < 2:
+        return np.stack([np.asarray(full, float), np.asarray(full, float)])
+    se = np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0))
+    z = norm.ppf(INTERVAL_QUANTILES[1])
+    return np.stack([full - z * se, full + z * se])
+
+
+def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
+    """(7, 10) efforts at q = 0 at rest per unit dynamic parameter of a link's body."""
+    zero = np.zeros((1, N_JOINTS))
+    f = TrajectoryFeatures(arm, zero, zero, zero, zero, sample_rate_hz())
+    return f.body_regressor[0][:, f.body_columns(link)]
+
+
+def _quantities(effect: FirstMomentPayload, p: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
+    return {"mass_kg": np.array(p[0]), "first_moment_base_at_q0_kg_m": effect.first_moment_base_at_zero(p),
+            "gravity_efforts_at_q0": gravity[:, :4] @ p}
+
+
+def _with_intervals(values: dict, folds: list[dict]) -> dict:
+    out = {}
+    for key, v in values.items():
+        interval = jackknife_interval(v, np.array([f[key] for f in folds]))
+        out[key] = v.tolist()
+        out[f"{key}_interval"] = interval.T.tolist() if v.ndim else interval.tolist()
+    return out
+
+
+def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
+                        at_index: int | None = None) -> dict:
+    """The payload as the efforts determine it: first moment (base frame, q = 0)
+    and gravity efforts at q = 0 per joint, each with its interval; the mass
+    with its interval and whether it is identified; with a payload at a given
+    position (`at_index`, a PayloadAtPosition in the design), its mass."""
+    effect: FirstMomentPayload = selector.design.effects[index]
+    gravity = _gravity_at_zero(arm, effect.link_key)
+    p = fit_params[index]
+    report = effect.describe(p)
+    report.update(_with_intervals(_quantities(effect, p, gravity), [_quantities(effect, f[index], gravity) for f in fold_params if index in f]))
+    lo, hi = report["mass_kg_interval"]
+    mass_identified = bool(lo > 0.0 and hi / lo <= MASS_IDENTIFIED_RATIO)
+    report["mass_identified"] = mass_identified
+    report["position_m"] = (np.asarray(p[1:4]) / p[0]).tolist() if mass_identified else None
+    report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(report["first_moment_base_at_q0_kg_m"]))
+    units = [effort_unit(j) for j in JOINT_NAMES]
+    moment = np.asarray(report["first_moment_base_at_q0_kg_m"])
+    words = [
+        f"The efforts determine the payload's first moment m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "
+        f"(base frame, q = 0; pitch shaft centre at the base origin, shaft along base x, +y towards the remote centre of motion, +z up) "
+        f"and its gravity efforts at q = 0: " + ", ".join(f"{j} {v:+.3f} {u}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units)) + ".",
+        f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts."
+        if effect.equivalent_links else f"The link ({effect.link_name}) is the only one whose payload gives these efforts.",
+    ]
+    if mass_identified:
+        words.append(f"The mass is identified: {p[0]:.3f} kg (interval {lo:.3f}-{hi:.3f} kg), seen through the link's translation or the inertia at several speeds.")
+    else:
+        words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed axis sees m·c only, "
+                     "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
+    words.append("A first-moment component along the pitch shaft (base x) is how the model's geometry reads an effort on J1 that scales with the "
+                 "weight (a yaw axis not where the model has it, or a coupling in the transmission); it is not a placement.")
+    if at_index is not None:
+        at: PayloadAtPosition = selector.design.effects[at_index]
+        at_set = [at_index if i == index else i for i in chosen]
+        at_cv = selector.cross_validate(at_set)
+        m = float(selector.fit_all(at_set).params[at_index][0])
+        m_lo, m_hi = jackknife_interval(np.array(m), np.array([f[at_index][0] for f in at_cv.fold_params if at_index in f])).tolist()
+        at_gravity = _gravity_at_zero(arm, at.link_key) @ point_mass_parameters(m, at.position)
+        report["payload_at"] = {"link": at.link_name, "position_m": at.position.tolist(), "mass_kg": m, "mass_kg_interval": [m_lo, m_hi],
+                                "gravity_efforts_at_q0": at_gravity.tolist(), "cross_validated_fraction": at_cv.fraction}
+        report["position_m"] = at.position.tolist()
+        words.append(f"At the given position ({at.link_name}, {np.round(at.position, 3).tolist()} m in its frame) the mass is {m:.3f} kg "
+                     f"(interval {m_lo:.3f}-{m_hi:.3f} kg).")
+    report["words"] = words
+    return report

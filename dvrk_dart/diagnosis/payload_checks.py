@@ -1,0 +1,88 @@
+"""Checks of the diagnosis on the real payload runs (pipelines/withheld.toml).
+
+The hand measurements of the data README are checks, never fit inputs; the one
+exception is `--payload-at`, which turns the fitted first moment into a mass at
+the hand-measured position (the user states the position, the data the rest).
+
+The model's geometry at q = 0 (models/psm): the pitch shaft centre is the base
+origin and the shaft lies along base x; +y points from the shaft towards the
+remote centre of motion (RCM), +z is up (gravity -z); the parallelogram's front
+link and the insertion stage are vertical at q = 0, the RCM below the stage.
+A hand placement "h horizontally from a reference point, z above it" is the
+base point reference + (0, h, z).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import N_JOINTS
+
+#: hand-measurement reference points
+REFERENCES = ("pitch_shaft", "rcm")
+
+
+def hand_point_base(arm: Arm, spec: dict) -> np.ndarray:
+    """The hand-measured point in the base frame at q = 0."""
+    if spec["hand_reference"] == "rcm":
+        from dvrk_dart.runs.runner import rcm_position
+
+        reference = rcm_position(arm)
+    else:  # the pitch shaft centre: the pitch link's origin
+        reference = arm.model.forward_kinematics(np.zeros(N_JOINTS))[arm.model.link_by_name("pitch").key][:3, 3]
+    return reference + np.array([0.0, spec["check_horizontal_m"], spec["check_height_m"]])
+
+
+def hand_position_on_link(arm: Arm, spec: dict) -> tuple[int, np.ndarray]:
+    """(link key, position in its frame) of the hand-measured placement on `hand_link`."""
+    key = arm.model.link_by_name(spec["hand_link"]).key
+    T = arm.model.forward_kinematics(np.zeros(N_JOINTS))[key]
+    return key, np.linalg.solve(T, np.r_[hand_point_base(arm, spec), 1.0])[:3]
+
+
+def _inside(value: float, interval) -> bool:
+    return bool(interval[0] <= value <= interval[1])
+
+
+def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tuple[dict, list[dict]]:
+    """Diagnose the payload run(s) against their baseline, with the hand
+    position given as --payload-at, and check group, first moment, masses."""
+    from dvrk_dart.diagnosis.validation import run_diagnosis
+
+    key, position = hand_position_on_link(arm, spec)
+    result = run_diagnosis(arm, spec["measured"], out_dir, baseline=spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position))
+    payload = result.get("payload")
+    m_true, tol = spec["expected_mass_kg"], spec["mass_tolerance"]
+    verdicts = [{"check": f"{title}: payload found on a {spec['expected_group']} link",
+                 "passed": bool(payload and payload["group"] == spec["expected_group"]),
+                 "value": f"{payload['link']} ({payload['group']})" if payload else "no payload selected"}]
+    hand_moment = m_true * hand_point_base(arm, spec)
+    result["hand_check"] = {"hand_point_base_at_q0_m": hand_point_base(arm, spec).tolist(), "hand_position_link_m": position.tolist(),
+                            "hand_link": spec["hand_link"], "hand_first_moment_base_at_q0_kg_m": hand_moment.tolist()}
+    if payload and "first_moment_base_at_q0_kg_m_interval" in payload:
+        intervals = payload["first_moment_base_at_q0_kg_m_interval"]
+        # the components gravity sees on a link turning about the pitch shaft: y (towards the RCM) and z (up)
+        for axis, name in ((1, "y (towards the RCM)"), (2, "z (up)")):
+            verdicts.append({"check": f"{title}: hand placement's first moment {name} inside the reported interval",
+                             "passed": _inside(hand_moment[axis], intervals[axis]),
+                             "value": f"{hand_moment[axis]:+.4f} kg·m vs [{intervals[axis][0]:+.4f}, {intervals[axis][1]:+.4f}]"})
+        lo, hi = payload["mass_kg_interval"]
+        error = payload["mass_kg"] / m_true - 1.0
+        verdicts.append({"check": f"{title}: mass from the data alone within {tol:.0%} of {m_true} kg" + ("" if payload["mass_identified"] else " (reported as not identified)"),
+                         "passed": bool(payload["mass_identified"] and abs(error) <= tol) or bool(not payload["mass_identified"] and lo <= m_true <= hi),
+                         "value": f"{payload['mass_kg']:.3f} kg ({error:+.0%}), interval {lo:.3f}-{hi:.3f} kg, identified: {payload['mass_identified']}"})
+        at = payload.get("payload_at")
+        if at:
+            error = at["mass_kg"] / m_true - 1.0
+            verdicts.append({"check": f"{title}: mass with --payload-at (hand position) within {tol:.0%} of {m_true} kg",
+                             "passed": abs(error) <= tol,
+                             "value": f"{at['mass_kg']:.3f} kg ({error:+.0%}), interval {at['mass_kg_interval'][0]:.3f}-{at['mass_kg_interval'][1]:.3f} kg"})
+    before, after = result["gap_before"]["train"], result["gap_after"]["train"]
+    verdicts.append({"check": f"{title}: the diagnosis closes the J2 gap", "passed": after[1] < before[1],
+                     "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
+    write_json_atomic(out_dir / "diagnosis.json", result)
+    return result, verdicts

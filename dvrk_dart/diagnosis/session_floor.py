@@ -1,0 +1,48 @@
+"""The session-to-session floor, and a joint's gap split by what explains it.
+
+Two recordings of the same trajectory in different sessions (`one_results.csv`
+and `one_no_weight_results.csv`) differ by what changes from day to day
+(cable tension, temperature, the controller's offsets ...). A fixed effect,
+the same in every session, cannot explain that difference: with independent
+session deviations of RMS s, the two runs differ by RMS s sqrt(2), so
+s = RMS(tau_A - tau_B) / sqrt(2) per joint bounds from below what any fixed
+effect leaves of a run's gap.
+
+A joint's gap (RMS before) is split in energy: explained by the selected
+effects (before^2 - after^2), session-to-session (the part of after^2 up to
+s^2), and left over (the rest), each reported as an RMS-equivalent sqrt.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dvrk_dart.diagnosis.runs import DiagnosisRun, same_motion
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+
+def session_floor(a: DiagnosisRun, b: DiagnosisRun) -> np.ndarray:
+    """Per-joint RMS of one session's deviation, from two runs of the same motion."""
+    if not same_motion(a.state, b.state):
+        raise DvrkDartError(f"--repeat {b.name}: not the same motion as {a.name} (a repeat is the same trajectory at the same speed)")
+    return rms(a.gap - b.gap) / math.sqrt(2.0)
+
+
+def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None) -> list[dict]:
+    """Per joint: the gap before, split into explained, session-to-session, left over (RMS-equivalents)."""
+    rows = []
+    for j, joint in enumerate(JOINT_NAMES):
+        b2, a2 = float(before[j]) ** 2, float(after[j]) ** 2
+        session2 = min(a2, float(floor[j]) ** 2) if floor is not None else None
+        row = {"joint": joint, "unit": effort_unit(joint), "before": float(before[j]), "after": float(after[j]),
+               "explained": math.sqrt(max(b2 - a2, 0.0)), "session_to_session": None, "left_over": None}
+        if session2 is not None:
+            row["session_to_session"] = math.sqrt(session2)
+            row["left_over"] = math.sqrt(max(a2 - session2, 0.0))
+            row["session_floor"] = float(floor[j])
+        rows.append(row)
+    return rows
