@@ -291,7 +291,7 @@ def diagnose(
         "units": [effort_unit(j) for j in JOINT_NAMES],
         "measured": train_runs[0].name,
         "measured_runs": [r.name for r in train_runs[: len(measured_list)]],
-        "baseline_source": {r.name: r.baseline_source for r in train_runs if r.baseline is not None},
+        "baseline_source": {r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},
         "nuisance_offsets": nuisance_report,
         "session_floor": floor.tolist() if floor is not None else None,
         "repeat": (prepare_run(repeat, arm, simulate, base_config).name if not isinstance(repeat, (str, Path)) else Path(str(repeat)).stem) if repeat is not None else None,

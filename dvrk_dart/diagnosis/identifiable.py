@@ -23,6 +23,10 @@ from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
+#: a payload's mass column whose energy is below this fraction of the largest
+#: column's is not seen by the efforts (round-off of a zero column)
+MASS_UNSEEN_FRACTION = 1e-12
+
 
 def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
     """(2, ...) interval around `full` from the fold estimates (K, ...)."""
@@ -67,6 +71,9 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     p = fit_params[index]
     report = effect.describe(p)
     report.update(_with_intervals(_quantities(effect, p, gravity), [_quantities(effect, f[index], gravity) for f in fold_params if index in f]))
+    mass_column = selector.design.slices[index].start
+    if selector.A_total[mass_column, mass_column] <= MASS_UNSEEN_FRACTION * np.max(np.diag(selector.A_total)):
+        report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
     lo, hi = report["mass_kg_interval"]
     mass_identified = bool(lo > 0.0 and hi / lo <= MASS_IDENTIFIED_RATIO)
     report["mass_identified"] = mass_identified

@@ -48,3 +48,19 @@ def synthesize_measurement(
     noise = zero_phase_lowpass(rng.standard_normal(tau.shape), 1.0 / sample_rate_hz())
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)
     return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise)
+
+
+def time_scaled(state: ProcessedRun, speed: float) -> ProcessedRun:
+    """The same path played at `speed` times the rate, over the same number of
+    samples (same positions, velocities x speed, accelerations x speed^2): what
+    a run of the same trajectory at another speed measures. Efforts are those
+    of the original (overwrite them with synthesize_measurement)."""
+    t = state.t
+    source = t[0] + (t - t[0]) * speed  # time along the original path
+    if source[-1] > t[-1] + 1e-12:
+        raise ValueError(f"speed {speed}: the path is {t[-1] - t[0]:.1f} s long, {source[-1] - t[0]:.1f} s asked")
+
+    def at(x: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(source, t, x[:, j]) for j in range(x.shape[1])])
+
+    return ProcessedRun(t.copy(), at(state.q), speed * at(state.dq), speed**2 * at(state.ddq), at(state.tau))
