@@ -23,6 +23,7 @@ TARGETS = {
     "campaign_s": (300.0, "lower", "s", "the whole validation campaign on this machine"),
     "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
     "identify_s": (60.0, "lower", "s", "identification from one 30 s run, outputs written (dvrk-dart identify --runs one)"),
+    "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
 }
 
 
@@ -66,7 +67,7 @@ def bench_campaign(out_dir: Path) -> dict:
 def bench_diagnosis() -> dict:
     from dvrk_dart.diagnosis.validation import benchmark_diagnosis
 
-    return {"diagnose_s": benchmark_diagnosis()}
+    return {"diagnose_s": benchmark_diagnosis(), "diagnose_three_s": benchmark_diagnosis(("one-105g", "one-105g-half"), "one-no-weight")}
 
 
 def bench_identification() -> dict:

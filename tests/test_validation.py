@@ -11,9 +11,11 @@ import tomllib
 import numpy as np
 import pytest
 
+from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.validation import (
     WITHHELD_FILE,
     validate_holdout,
+    validate_insertion,
     validate_payload,
     validate_synthetic,
 )
@@ -33,6 +35,10 @@ def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
     assert np.all(after <= bar), (after, bar)
     assert np.all(after < 0.5 * before)  # most of the inertial-only gap is closed
     assert all(v["passed"] for v in verdicts)
+    # the held-out gap split: explained, session-to-session (floor from one vs one-no-weight), left over
+    for row in result["gap_split"]["joints"][:3]:
+        assert row["session_to_session"] is not None and row["session_to_session"] <= row["after"] + 1e-12
+        assert row["explained"] ** 2 + row["session_to_session"] ** 2 + row["left_over"] ** 2 == pytest.approx(row["before"] ** 2, rel=1e-6)
 
 
 def test_synthetic_injections_generated_by_the_simulator_are_found_blind(arm, spec, tmp_path):
@@ -42,28 +48,79 @@ def test_synthetic_injections_generated_by_the_simulator_are_found_blind(arm, sp
     assert len(summary["cases"]) >= 6
 
 
-def test_withheld_payload_is_found_on_the_parallelogram(arm, spec, tmp_path):
-    result, verdicts = validate_payload(arm, spec["payload"], tmp_path)
-    payload = result["payload"]
-    assert payload["group"] == "parallelogram"
-    # the identifiable quantity: the payload's gravity moment about the pitch shaft,
-    # checked against the hand-measured placement (J2 gravity effort at q = 0)
-    check = result["hand_check"]
-    assert abs(check["relative_difference"]) <= spec["payload"]["mass_tolerance"], check
-    assert result["gap_after"]["train"][1] < 0.7 * result["gap_before"]["train"][1]  # J2 gap closed by > 30 %
-    for name in ("replay_before", "replay_after"):
-        assert (tmp_path / name / "run.mcap").is_file() and (tmp_path / name / "run.rrd").is_file()
-    assert (tmp_path / "diagnosis.html").is_file()
-    assert {v["check"].split(" within")[0] for v in verdicts}  # verdicts are produced, mass included
-    mass_verdict = next(v for v in verdicts if "mass" in v["check"])
-    if not mass_verdict["passed"]:
-        pytest.xfail(f"payload mass not identifiable from these runs (see test_diagnosis): {mass_verdict['value']}")
+@pytest.fixture(scope="module")
+def insertion(arm, spec, tmp_path_factory):
+    return validate_insertion(arm, spec["insertion"], tmp_path_factory.mktemp("insertion"))
+
+
+@pytest.fixture(scope="module")
+def parallelogram(arm, spec, tmp_path_factory):
+    out = tmp_path_factory.mktemp("payload")
+    return validate_payload(arm, spec["payload"], out) + (out,)
+
+
+def _verdict(verdicts, words):
+    return next(v for v in verdicts if words in v["check"])
+
+
+def test_insertion_base_weight_found_with_its_mass(insertion):
+    """105 g on the insertion stage's base: the right group, the mass from the data within 30 %."""
+    result, verdicts = insertion
+    assert result["payload"]["group"] == "parallelogram"
+    assert result["payload"]["mass_identified"]  # its link translates: gravity sees m
+    assert _verdict(verdicts, "mass from the data alone")["passed"], verdicts
+    assert result["gap_after"]["train"][1] < 0.5 * result["gap_before"]["train"][1]
+    assert result["session_floor"] is not None and len(result["gap_split"]["joints"]) == 7
+
+
+@pytest.mark.xfail(strict=True, reason="measured 2026-11-23: 0.138 kg (+32 %), interval 0.133-0.144 kg")
+def test_insertion_base_mass_with_the_hand_position(insertion):
+    """--payload-at with the hand position (2.4 cm from the RCM, 53.5 cm above it,
+    on pitch_bottom) gives 0.138 kg (+32 %, interval 0.133-0.144 kg): just outside
+    +-30 %. The data alone put the weight on the intermediate link (same group)
+    with 0.098 kg (-7 %) and a first moment z of 0.036 kg·m against the hand
+    placement's 0.056: the hand height is ~1/3 larger than the efforts say (the
+    hand position's sign and reference are uncertain by about a centimetre; the
+    RCM of the model is a DH construction)."""
+    _, verdicts = insertion
+    assert _verdict(verdicts, "--payload-at")["passed"], verdicts
+
+
+@pytest.mark.xfail(strict=True, reason="measured 2026-11-23: no payload selected on the two runs together; see the docstring")
+def test_parallelogram_weight_full_and_half_speed(parallelogram):
+    """The 105 g parallelogram runs at full and half speed together (baseline
+    no-weight; the half-speed run has no baseline of its own motion, so the
+    no-weight run is fitted with it, a constant per run as nuisance):
+    - together: no payload is selected (the shared friction/armature effects
+      explain the raw half-speed and no-weight runs; a payload's held-out gain
+      stays below 0.005); J2 gap 0.278 -> 0.141 N·m;
+    - full speed alone: pitch_front (parallelogram), first moment (base, q = 0)
+      (-0.004, -0.002, +0.020) kg·m against the hand placement's (0, +0.017,
+      +0.002): outside the intervals; mass 0.041 kg; with --payload-at 0.052 kg
+      (-50 %, interval 0.037-0.067 kg);
+    - cause found: the J1 difference to the no-weight run follows q1, not cos(q2)
+      (J1 on q1, q1^2: RMS 0.058 -> 0.018 N·m; on cos q2, sin q2: 0.058 -> 0.057),
+      about 4x larger for the insertion-base weight; the model reads it as the
+      gravity of a link that only translates in the parallelogram (the yaw axis
+      is horizontal in the model's base frame), hence pitch_front."""
+    result, verdicts, _ = parallelogram
+    assert result["payload"] and result["payload"]["group"] == "parallelogram"
+    assert _verdict(verdicts, "--payload-at")["passed"], verdicts
+    assert _verdict(verdicts, "first moment y")["passed"], verdicts
+
+
+def test_out_of_library_injections_leave_a_leftover(arm, spec, tmp_path):
+    summary, verdicts = validate_out_of_library(arm, spec["out_of_library"], tmp_path)
+    assert all(v["passed"] for v in verdicts), verdicts
+    for case in summary["cases"]:
+        assert case["left_over_above_noise"] > 0.0 and case["gap_after"] > case["noise_rms"]
 
 
 def test_diagnose_cli_writes_the_contract(tmp_path):
     out = tmp_path / "diag"
     done = subprocess.run(
-        [sys.executable, "-m", "dvrk_dart.cli", "diagnose", "--measured", "one-105g", "--baseline", "one-no-weight", "--out", str(out)],
+        [sys.executable, "-m", "dvrk_dart.cli", "diagnose", "--measured", "one-105g", "--baseline", "one-no-weight", "--repeat", "one",
+         "--payload-at", "pitch:-0.165,0.02,0", "--out", str(out)],
         capture_output=True, text=True,
     )
     assert done.returncode == 0, done.stderr
@@ -73,4 +130,7 @@ def test_diagnose_cli_writes_the_contract(tmp_path):
         assert len(result[key]["train"]) == 7 and result[key]["holdout"] is None
     assert result["effects"] and {"name", "joints", "parameters", "explained_fraction", "selected"} <= set(result["effects"][0])
     assert {"mass_kg", "link", "group", "position_m"} <= set(result["payload"])
+    assert {"first_moment_base_at_q0_kg_m_interval", "gravity_efforts_at_q0_interval", "payload_at", "words"} <= set(result["payload"])
+    assert result["nuisance_offsets"] and result["session_floor"] is not None
+    assert "gap split q2" in done.stdout and "nuisance offsets" in done.stdout
     assert (out / "diagnosis.html").is_file()

@@ -335,6 +335,14 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
             files.append(staged)
             sources.append(f"figures/extra/{staged.name}")
         body.append(diagnosis_html(json.loads((folder / "diagnosis.json").read_text()), sources, title))
+    ool = out_dir / "out_of_library" / "out_of_library.json"
+    if ool.is_file():
+        body.append("<h3>physics outside the effect library, injected blind</h3><table><tr><th>case</th><th>joint</th><th>closest library effect</th>"
+                    "<th>share of the gap explained</th><th>gap after</th><th>noise</th><th>left over above the noise</th></tr>")
+        for c in json.loads(ool.read_text())["cases"]:
+            body.append(f"<tr><td>{e(c['case'])}</td><td>{c['joint']}</td><td>{e(str(c['closest_library_effect']))}</td><td>{c['explained_share_of_gap']:.0%}</td>"
+                        f"<td>{c['gap_after']:.4f}</td><td>{c['noise_rms']:.4f}</td><td>{c['left_over_above_noise']:.4f} {e(c['unit'])}</td></tr>")
+        body.append("</table>")
     return ("Sim-to-real gap diagnosis", "\n".join(body), files)
 
 
@@ -344,13 +352,13 @@ def validation_section(out_dir: Path) -> tuple[str, str, list[Path]]:
     return report_section(out_dir, verdicts)
 
 
-def benchmark_diagnosis() -> float:
-    """Wall time (s) of a diagnosis of one 30 s run, re-simulation included."""
+def benchmark_diagnosis(measured=("two",), baseline=None) -> float:
+    """Wall time (s) of a diagnosis of 30 s runs (default: one), re-simulation included."""
     import tempfile
 
     arm = load_arm()
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        run_diagnosis(arm, "two", Path(tmp), logs=False)
+        run_diagnosis(arm, list(measured) if len(measured) > 1 else measured[0], Path(tmp), baseline=baseline, logs=False)
         return time.perf_counter() - start
 
