@@ -6,8 +6,8 @@ second moment m (|c|^2 I - c c^T) (inertia about the link origin: for 0.1 kg at
 `FirstMomentPayload` fits (m, m c) linearly, with no envelope on c: on a link
 turning about a fixed axis gravity sees m c only, and whatever reaches J1 with
 the weight (a yaw axis not quite where the model has it, a transmission
-coupling) is read by the model's geometry as a first-moment component along the
-pitch shaft. It is therefore reported as the first moment *the efforts*
+coupling) is read by the model's geometry as first-moment components across
+the yaw axis (horizontal, base -y, in the model's base frame). It is therefore reported as the first moment *the efforts*
 determine, in the base frame at q = 0, with the gravity efforts it causes per
 joint; the mass only where its own column is seen (a translating link, or runs
 at several speeds), else an interval.

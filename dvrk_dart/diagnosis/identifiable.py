@@ -93,8 +93,9 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     else:
         words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed axis sees m·c only, "
                      "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
-    words.append("A first-moment component along the pitch shaft (base x) is how the model's geometry reads an effort on J1 that scales with the "
-                 "weight (a yaw axis not where the model has it, or a coupling in the transmission); it is not a placement.")
+    words.append("In the model's base frame the yaw axis is horizontal (base -y), so gravity loads J1 through the first-moment components "
+                 "across it (x, and z as the arm yaws): an effort on J1 that scales with the weight but that the model's geometry does not "
+                 "predict (a yaw axis mounted otherwise, a coupling in the transmission) shows up in these components; they are not a placement.")
     if at_index is not None:
         at: PayloadAtPosition = selector.design.effects[at_index]
         at_set = [at_index if i == index else i for i in chosen]
