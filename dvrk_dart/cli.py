@@ -132,7 +132,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     check_output_folder(args.report, "report", "--report")
     check_not_inside(args.out, args.report, "--out", "--report")
 
-    return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force, dynamics=args.dynamics)
+    return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force, dynamics=args.dynamics,
+                    executor=args.executor, ray_address=args.ray_address)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -182,6 +183,32 @@ def cmd_identify(args: argparse.Namespace) -> int:
     print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
           f"params: {Path(args.out) / 'params.json'}")
     return 0
+
+
+def cmd_uncertainty(args: argparse.Namespace) -> int:
+    """Monte Carlo over the parameters' uncertainty: the effort band and the measured run in it."""
+    from dvrk_dart.runs.uncertainty import UncertaintyConfig, run_uncertainty
+
+    if args.params_cov is None and args.relative_std is None:
+        args.relative_std = 0.05
+    config = UncertaintyConfig(args.measured, args.samples, args.seed, None if args.params_cov else args.relative_std,
+                               args.params_cov, args.duration, executor=args.executor, jobs=args.jobs)
+    if config.duration_s is not None and not config.duration_s > 0.0:
+        raise DvrkDartError(f"--duration: {config.duration_s} s must be positive")
+    summary = run_uncertainty(config, args.out, args.ray_address)
+    print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays, {summary['wall_time_s']:.0f} s -> {args.out}")
+    print(f"{'joint':>6} {'inside':>7} {'outside rms':>12} {'model inside':>13}")
+    for j, name in enumerate(JOINT_NAMES):
+        print(f"{name:>6} {summary['measured_inside_band_fraction'][j]:7.3f} {summary['rms_measured_outside_band'][j]:12.4f} "
+              f"{summary['nominal_model_inside_band_fraction'][j]:13.3f} {effort_unit(name)}")
+    for name, error in summary["failed_samples"].items():
+        print(f"dvrk-dart: sample {name} failed: {error}", file=sys.stderr)
+    return 0
+
+
+def _executor_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--executor", default="local", choices=("local", "ray"), help="where the runs execute: local processes or Ray")
+    p.add_argument("--ray-address", default=None, help="an existing Ray cluster (default: start a local Ray instance with --jobs CPUs)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -248,7 +275,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
     p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                    help="the simulated arm of the campaign's runs that do not name one (default: their scenario's)")
+    _executor_options(p)
     p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
+    p.add_argument("--measured", required=True, help="measured run: path, or one|two|...")
+    p.add_argument("--samples", type=int, default=64, help="parameter sets drawn")
+    p.add_argument("--out", required=True, help="output folder")
+    source = p.add_mutually_exclusive_group()
+    source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
+    source.add_argument("--relative-std", type=float, help="fallback: relative std of every parameter (default 0.05)")
+    p.add_argument("--duration", type=float, default=None, help="replay only the first seconds")
+    p.add_argument("--seed", type=int, default=0, help="seed of the parameter draws")
+    p.add_argument("--jobs", type=int, default=2, help="parallel workers")
+    _executor_options(p)
+    p.set_defaults(func=cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
     p.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap)")

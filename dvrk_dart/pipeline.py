@@ -9,12 +9,13 @@ from pathlib import Path
 import pandas as pd
 
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.runs.campaign import load_campaign, needs_diagnosis, run_campaign
 
 
-def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str) -> dict:
-    print(f"{label}: {len(configs)} runs -> {runs_dir} ({jobs} workers)")
-    summary = run_campaign(configs, runs_dir, jobs=jobs, force=force)
+def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str, executor: str = "local", ray_address: str | None = None) -> dict:
+    print(f"{label}: {len(configs)} runs -> {runs_dir} ({jobs} workers, {executor} executor)")
+    summary = run_campaign(configs, runs_dir, jobs=jobs, force=force, executor=executor, ray_address=ray_address)
     print(f"{label}: {len(summary['ran'])} ran, {len(summary['skipped_up_to_date'])} up to date, "
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
     return summary
@@ -34,27 +35,49 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
     return report_section(data)
 
 
-def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str | None = None) -> int:
+UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"
+
+
+def _uncertainty_section(out_dir: Path, jobs: int, executor: str, ray_address: str | None):
+    """The Monte Carlo of pipelines/uncertainty.toml and its report section."""
+    import tomllib
+
+    from dvrk_dart.analysis.uncertainty_section import uncertainty_section
+    from dvrk_dart.runs.uncertainty import UncertaintyConfig, run_uncertainty
+
+    spec = tomllib.loads(UNCERTAINTY_FILE.read_text(encoding="utf-8"))
+    config = UncertaintyConfig(spec["measured"], spec["samples"], spec["seed"], spec["relative_std"],
+                               duration_s=spec["duration_s"], executor=executor, jobs=jobs)
+    summary = run_uncertainty(config, out_dir / "uncertainty", ray_address)
+    inside = ", ".join(f"{f:.2f}" for f in summary["measured_inside_band_fraction"][:3])
+    print(f"uncertainty: {summary['samples_replayed']} parameter sets, measured inside the band on J1..J3: {inside} "
+          f"({summary['wall_time_s']:.0f} s)")
+    return uncertainty_section(out_dir / "uncertainty")
+
+
+def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False, dynamics: str | None = None,
+             executor: str = "local", ray_address: str | None = None) -> int:
     """The campaign (its entries without `dynamics` simulate the `dynamics` arm),
     the diagnosis validation, the runs that simulate what the diagnosis found,
     and the report."""
     runs_dir = out_dir / "runs"
     diagnosis_dir = out_dir / "diagnosis"
     configs = load_campaign(diagnosis_dir=diagnosis_dir, default_dynamics=dynamics)
-    summary = _campaign([c for c in configs if not needs_diagnosis(c)], runs_dir, jobs, force, "campaign")
+    summary = _campaign([c for c in configs if not needs_diagnosis(c)], runs_dir, jobs, force, "campaign", executor, ray_address)
 
     from dvrk_dart.analysis.report import build_report
     from dvrk_dart.diagnosis.validation import validation_section
 
     section = validation_section(diagnosis_dir)
     identification = _identification_section(out_dir)
-    after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs")
+    after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)
     summary["ran"] += after["ran"]
     summary["skipped_up_to_date"] += after["skipped_up_to_date"]
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section, identification])
+    uncertainty = _uncertainty_section(out_dir, jobs, executor, ray_address)
+    index = build_report(runs_dir, report_dir, extra_sections=[section, identification, uncertainty])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")

@@ -23,6 +23,7 @@ MARKER = ".dvrk-dart"
 KNOWN_ENTRIES = {
     "run": {"config.json", "metrics.json", "run.mcap", "run.rrd", "inputs.sha256"},
     "report": {"index.html", "analysis", "figures"},
+    "uncertainty": {"uncertainty.json", "band.csv", "params", "figures"},
     "diagnosis": {"diagnosis.json", "diagnosis.html", "figures", "replay_before", "replay_after", "where.csv"},
     "identification": {"params.json", "params_covariance.json", "identification.json", "identification.html"},
 }

@@ -13,7 +13,6 @@ import hashlib
 import json
 import time
 import tomllib
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
@@ -22,6 +21,7 @@ from dvrk_dart.io.outputs import building_folder
 from dvrk_dart.io.reference_data import sha256_of
 from dvrk_dart.paths import MODELS_DIR, PACKAGE_DIR, PIPELINES_DIR
 from dvrk_dart.runs.config import RunConfig, run_name
+from dvrk_dart.runs.executors import error_text, run_tasks
 from dvrk_dart.runs.scenarios import load_scenario
 
 CAMPAIGN_FILE = PIPELINES_DIR / "campaign.toml"
@@ -106,51 +106,60 @@ def write_run_folder(record, out_dir: Path, model, fingerprint: str | None = Non
         if len(record):
             write_mcap(record, folder / "run.mcap")
             write_rrd(record, folder / "run.rrd", model=model)
-        if fingerprint:
+        if fingerprint and "error" not in record.metrics:  # a failed run is run again next time
             write_text_atomic(folder / INPUTS_FILE, fingerprint + "\n")
 
 
-def _execute(config: RunConfig, out_dir: str, fingerprint: str) -> tuple[str, dict]:
-    """Worker: run one config and write its folder. Returns (name, metrics)."""
+def _execute(task: tuple[RunConfig, str | None, str]):
+    """Worker: run one config. With a folder (local workers share the driver's
+    file system) it writes the run there and returns its metrics; without, it
+    returns the record for the driver to write (Ray)."""
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.runs.runner import run
 
+    config, runs_dir, fingerprint = task
     arm = load_arm(params_file=config.params_file)
     record = run(config, arm)
-    write_run_folder(record, Path(out_dir) / record.name, arm.model, fingerprint)
-    if "error" in record.metrics:
-        raise DvrkDartError(record.metrics["error"])
-    return record.name, record.metrics
+    if runs_dir is None:
+        return record
+    write_run_folder(record, Path(runs_dir) / record.name, arm.model, fingerprint)
+    return record.metrics
 
 
-def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: bool = False) -> dict:
-    """Run every spec not already up to date; returns a summary with failures."""
-    from tqdm import tqdm
+def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: bool = False,
+                 executor: str = "local", ray_address: str | None = None) -> dict:
+    """Run every spec not already up to date, on the executor; returns a summary
+    with the failures by run name (a failed run does not stop the others)."""
+    from dvrk_dart.model.arm import load_arm
 
     start = time.perf_counter()
     code = code_fingerprint()
-    todo, skipped = [], []
+    tasks, skipped = [], []
     names = {spec: config_name(spec) for spec in specs}
+    worker_writes = executor == "local"
     for spec in specs:
         fingerprint = inputs_fingerprint(spec, code)
         marker = runs_dir / names[spec] / INPUTS_FILE
         if not force and marker.is_file() and marker.read_text().strip() == fingerprint:
             skipped.append(names[spec])
         else:
-            todo.append((spec, fingerprint))
+            tasks.append((spec, str(runs_dir) if worker_writes else None, fingerprint))
     failures: dict[str, str] = {}
     done: list[str] = []
-    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {pool.submit(_execute, spec, str(runs_dir), fp): spec for spec, fp in todo}
-        with tqdm(total=len(futures), desc="runs", unit="run") as bar:
-            for future in as_completed(futures):
-                spec = futures[future]
-                try:
-                    future.result()
-                    done.append(names[spec])
-                except Exception as exc:  # a failed run must not stop the campaign
-                    failures[names[spec]] = f"{type(exc).__name__}: {exc}".splitlines()[0]
-                bar.update()
+    for (spec, _, fingerprint), result, error in run_tasks(_execute, tasks, executor, jobs, ray_address):
+        name = names[spec]
+        if error is None and not worker_writes:  # the driver writes what the Ray worker returned
+            try:
+                write_run_folder(result, runs_dir / name, load_arm(params_file=spec.params_file).model, fingerprint)
+            except Exception as exc:
+                error = error_text(exc)
+        if error is None:
+            metrics = result if worker_writes else result.metrics
+            error = metrics.get("error")
+        if error is None:
+            done.append(name)
+        else:
+            failures[name] = error
     summary = {
         "runs": [names[s] for s in specs],
         "ran": sorted(done),
@@ -158,5 +167,6 @@ def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: b
         "failures": failures,
         "wall_time_s": time.perf_counter() - start,
         "jobs": jobs,
+        "executor": executor,
     }
     return summary

@@ -1,0 +1,79 @@
+"""Where a batch's independent tasks run: a local process pool (the default)
+or a Ray cluster (`--executor ray`, `--ray-address ADDR`; without an address a
+local Ray instance with `jobs` CPUs is started and shut down afterwards).
+
+`run_tasks(fn, tasks, ...)` calls fn(task) for every task and yields
+(task, result, error) as they finish, with a progress bar. A task that raises
+is reported with its error; the others go on. Results travel back to the
+driver, which writes every output: Ray workers need not share its file system.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+from dvrk_dart.errors import DvrkDartError
+
+EXECUTORS = ("local", "ray")
+
+
+def error_text(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}".splitlines()[0]
+
+
+@contextlib.contextmanager
+def _ray(jobs: int, address: str | None):
+    try:
+        import ray
+    except ImportError:  # a dependency of the project: only a broken install lands here
+        raise DvrkDartError("--executor ray: the ray package is not installed") from None
+    started = not ray.is_initialized()
+    if started:
+        try:
+            if address:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(num_cpus=max(1, jobs), include_dashboard=False, log_to_driver=False)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise DvrkDartError(f"--ray-address: cannot connect to Ray at {address!r} ({error_text(exc)})") from None
+    try:
+        yield ray
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
+              desc: str = "runs", unit: str = "run") -> Iterator[tuple[object, object, str | None]]:
+    """(task, result, None) or (task, None, error) for each task, as they finish."""
+    from tqdm import tqdm
+
+    if executor not in EXECUTORS:
+        raise DvrkDartError(f"--executor: '{executor}' is not one of {', '.join(EXECUTORS)}")
+    if not tasks:
+        return
+    with tqdm(total=len(tasks), desc=desc, unit=unit) as bar:
+        if executor == "local":
+            with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+                futures = {pool.submit(fn, task): task for task in tasks}
+                for future in as_completed(futures):
+                    try:
+                        yield futures[future], future.result(), None
+                    except Exception as exc:  # one failed task must not stop the batch
+                        yield futures[future], None, error_text(exc)
+                    bar.update()
+            return
+        with _ray(jobs, ray_address) as ray:
+            remote = ray.remote(fn)
+            pending = {remote.remote(task): task for task in tasks}
+            while pending:
+                done, _ = ray.wait(list(pending), num_returns=1)
+                task = pending.pop(done[0])
+                try:
+                    yield task, ray.get(done[0]), None
+                except Exception as exc:  # RayTaskError wraps the task's own exception
+                    cause = getattr(exc, "cause", None) or exc
+                    yield task, None, error_text(cause)
+                bar.update()

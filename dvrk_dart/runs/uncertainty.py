@@ -1,0 +1,151 @@
+"""Monte Carlo over parameter uncertainty: is the measured effort already
+inside what the identified parameters' uncertainty allows?
+
+`dvrk-dart uncertainty --measured RUN --samples N --out DIR` draws N
+physically consistent parameter sets (identification.sampling), replays the
+run in DART (velocity mode) with each, on the chosen executor, and writes:
+
+- uncertainty.json: how the sets were drawn, per joint the fraction of the
+  measured samples inside the 5-95 % band of the simulated efforts, the RMS
+  of the measured effort's distance to the band (0 inside: the gap that no
+  parameter set within the uncertainty explains), and the fraction of the
+  nominal model's efforts inside the band (a check of the band itself);
+- band.csv: t, and per joint the band, the measured, the nominal simulated
+  and the nominal model efforts; params/: every parameter set used;
+- figures/band_<joint>.png: the measured efforts over the band.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.outputs import building_folder, check_output_folder
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.runs.executors import run_tasks
+
+#: the band: these quantiles of the simulated efforts over the samples
+BAND_QUANTILES = (0.05, 0.95)
+
+
+@dataclass(frozen=True)
+class UncertaintyConfig:
+    measured: str
+    samples: int
+    seed: int = 0
+    relative_std: float | None = None
+    params_cov: str | None = None
+    duration_s: float | None = None
+    dt_s: float = 1e-3
+    dynamics: str = "identified"  # every identified term simulated: friction is uncertain too
+    executor: str = "local"
+    jobs: int = 2
+
+
+def _replay(task: tuple[str, str, float | None, float, str]) -> dict:
+    """Worker: the velocity replay with one parameter file -> its efforts."""
+    from dvrk_dart.runs.config import RunConfig
+    from dvrk_dart.runs.runner import run
+
+    measured, params_file, duration, dt, dynamics = task
+    record = run(RunConfig("replay", "velocity", dynamics=dynamics, measured=measured, params_file=params_file, duration_s=duration, dt_s=dt))
+    if "error" in record.metrics:
+        raise DvrkDartError(record.metrics["error"])
+    return {"t": record.t, "sim": record.effort_sim, "measured": record.effort_measured,
+            "model": record.model_total(tuple(record.metrics["model_terms_compared"]))}
+
+
+def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint: fraction of `values` inside [low, high], and the RMS of their distance to it."""
+    outside = np.maximum(band_low - values, 0.0) + np.maximum(values - band_high, 0.0)
+    return np.mean(outside == 0.0, axis=0), rms(outside)
+
+
+def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
+    from dvrk_dart.identification.sampling import sample_parameters
+    from dvrk_dart.io.reference_data import resolve_run
+    from dvrk_dart.model.arm import load_arm
+
+    out = check_output_folder(out, "uncertainty")
+    resolve_run(config.measured)  # a missing run is an error before any work
+    start = time.perf_counter()
+    drawn = sample_parameters(load_arm(), config.samples, config.seed, config.relative_std, config.params_cov)
+    with building_folder(out, "uncertainty") as folder:
+        (folder / "params").mkdir()
+        paths = [folder / "params" / "nominal.json"] + [folder / "params" / f"sample_{i:04d}.json" for i in range(config.samples)]
+        for path, params in zip(paths, [drawn.nominal, *drawn.samples]):
+            path.write_text(json.dumps(params, indent=1))
+        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics) for p in paths]
+        results, failures = {}, {}
+        for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
+            if error is None:
+                results[Path(task[1]).name] = result
+            else:
+                failures[Path(task[1]).name] = error
+        if "nominal.json" not in results:
+            raise DvrkDartError(f"the nominal replay failed: {failures.get('nominal.json')}")
+        sims = np.stack([r["sim"] for name, r in sorted(results.items()) if name != "nominal.json"])
+        if len(sims) < 2:
+            raise DvrkDartError(f"only {len(sims)} sample replay(s) succeeded: no band ({next(iter(failures.values()), '')})")
+        nominal = results["nominal.json"]
+        low, high = np.quantile(sims, BAND_QUANTILES, axis=0)
+        inside, gap = band_statistics(low, high, nominal["measured"])
+        model_inside, _ = band_statistics(low, high, nominal["model"])
+        summary = {
+            "config": asdict(config),
+            "parameters": drawn.source,
+            "projected_bodies": drawn.projected_bodies,
+            "clipped_friction_coefficients": drawn.clipped_friction,
+            "samples_replayed": len(sims),
+            "failed_samples": failures,
+            "band_quantiles": list(BAND_QUANTILES),
+            "joints": list(JOINT_NAMES),
+            "measured_inside_band_fraction": inside.tolist(),
+            "rms_measured_outside_band": gap.tolist(),
+            "nominal_model_inside_band_fraction": model_inside.tolist(),
+            "band_width_rms": rms(high - low).tolist(),
+            "rms_nominal_sim_vs_measured": rms(nominal["sim"] - nominal["measured"]).tolist(),
+            "wall_time_s": time.perf_counter() - start,
+        }
+        write_json_atomic(folder / "uncertainty.json", summary)
+        columns = {"t": nominal["t"]}
+        for j, name in enumerate(JOINT_NAMES):
+            columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
+                        f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
+        pd.DataFrame(columns).to_csv(folder / "band.csv", index=False)
+        plot_bands(folder / "band.csv", folder / "figures")
+    return summary
+
+
+def plot_bands(band_csv: Path, folder: Path, joints: tuple[str, ...] = JOINT_NAMES[:3]) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    band = pd.read_csv(band_csv)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name in joints:
+        fig, ax = plt.subplots(figsize=(9, 3))
+        ax.fill_between(band.t, band[f"{name}_band_low"], band[f"{name}_band_high"], color="tab:red", alpha=0.3,
+                        label=f"simulated, {BAND_QUANTILES[0]:.0%}-{BAND_QUANTILES[1]:.0%} over the parameter samples")
+        ax.plot(band.t, band[f"{name}_measured"], color="k", lw=0.8, label="measured")
+        ax.plot(band.t, band[f"{name}_nominal_model"], color="tab:blue", lw=0.8, ls="--", label="identified model (nominal)")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(f"{name} effort ({effort_unit(name)})")
+        ax.legend(fontsize=7, loc="upper right")
+        fig.tight_layout()
+        path = folder / f"band_{name}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        paths.append(path)
+    return paths

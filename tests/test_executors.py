@@ -1,0 +1,49 @@
+"""Batches on the local process pool and on Ray give the same runs; a failed
+task is reported by name and the others land."""
+
+import json
+
+import pytest
+
+from dvrk_dart.runs.campaign import config_name, run_campaign
+from dvrk_dart.runs.config import RunConfig
+from dvrk_dart.runs.executors import run_tasks
+
+#: fields that measure the machine, not the run
+TIMING_FIELDS = {"wall_time_s", "realtime_factor"}
+CAMPAIGN = [
+    RunConfig("rectilinear", "kinematic", duration_s=0.2),
+    RunConfig("rectilinear", "velocity", duration_s=0.2),
+    RunConfig("spiral", "torque", duration_s=0.2),
+    RunConfig("replay-two", "velocity", "off", duration_s=0.5),
+]
+
+
+def _metrics(folder, config):
+    metrics = json.loads((folder / config_name(config) / "metrics.json").read_text())
+    return {k: v for k, v in metrics.items() if k not in TIMING_FIELDS}
+
+
+def test_a_campaign_on_ray_gives_the_local_executors_metrics(tmp_path):
+    local = run_campaign(CAMPAIGN, tmp_path / "local", jobs=2, executor="local")
+    ray = run_campaign(CAMPAIGN, tmp_path / "ray", jobs=2, executor="ray")
+    assert not local["failures"] and not ray["failures"]
+    assert sorted(ray["ran"]) == sorted(local["ran"]) == sorted(config_name(c) for c in CAMPAIGN)
+    for config in CAMPAIGN:
+        assert _metrics(tmp_path / "ray", config) == _metrics(tmp_path / "local", config)
+        assert {p.name for p in (tmp_path / "ray" / config_name(config)).iterdir()} >= {"run.mcap", "run.rrd", "config.json", "inputs.sha256"}
+
+
+@pytest.mark.parametrize("executor", ["local", "ray"])
+def test_a_failed_task_is_reported_and_the_others_land(executor):
+    # a library function, importable by every worker (a test module is not on Ray's path)
+    results = {task: (result, error) for task, result, error in run_tasks(json.loads, ["10", "{", "30"], executor, jobs=2)}
+    assert results["10"] == (10, None) and results["30"] == (30, None)
+    assert results["{"][0] is None and results["{"][1].startswith("JSONDecodeError: Expecting property name")
+
+
+def test_a_failed_campaign_run_is_named_and_the_others_land_on_ray(tmp_path):
+    good, bad = CAMPAIGN[0], RunConfig("replay-two", "velocity", duration_s=100.0)  # longer than the measured run
+    summary = run_campaign([good, bad], tmp_path, jobs=2, executor="ray")
+    assert summary["ran"] == [config_name(good)] and list(summary["failures"]) == [config_name(bad)]
+    assert "duration 100.0 s outside" in summary["failures"][config_name(bad)]

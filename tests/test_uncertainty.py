@@ -1,0 +1,67 @@
+"""Monte Carlo over parameter uncertainty: consistent samples, the band, the
+measured run in it."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.identification.sampling import project_body, sample_parameters
+from dvrk_dart.model.pseudo_inertia import pseudo_inertia_of_dynamic_parameters
+from dvrk_dart.runs.uncertainty import band_statistics
+
+#: the band must hold the nominal model's efforts almost everywhere: at 5-95 %
+#: over a handful of samples a few percent of the samples may sit on its edge
+NOMINAL_INSIDE_MIN = 0.9
+
+
+def test_projection_gives_a_consistent_body_and_keeps_consistent_ones():
+    consistent = np.array([0.5, 0.01, 0.0, 0.02, 0.003, 0.0, 0.003, 0.0, 0.0, 0.001])
+    assert np.array_equal(project_body(consistent)[0], consistent)
+    broken = consistent.copy()
+    broken[9] = 0.02  # Izz above Ixx + Iyy: a triangle inequality broken
+    fixed, moved = project_body(broken)
+    assert moved and np.linalg.eigvalsh(pseudo_inertia_of_dynamic_parameters(fixed))[0] >= -1e-12
+
+
+def test_samples_are_physically_consistent(arm):
+    drawn = sample_parameters(arm, 16, seed=1, relative_std=0.05)
+    assert len(drawn.samples) == 16 and "relative std 0.05" in drawn.source
+    for sample in drawn.samples[:4]:
+        for key, link in sample.items():
+            assert link["Fc"] >= 0.0 and link["Fv"] >= 0.0
+    masses = np.array([[s[k]["m"] for k in sorted(s, key=int)] for s in drawn.samples])
+    nominal = np.array([drawn.nominal[k]["m"] for k in sorted(drawn.nominal, key=int)])
+    spread = masses.std(axis=0)[nominal > 0] / nominal[nominal > 0]
+    assert np.all((spread > 0.01) & (spread < 0.1))  # about the asked 5 %
+
+
+def test_band_statistics_count_inside_and_measure_outside():
+    low, high = np.zeros((4, 1)), np.ones((4, 1))
+    inside, gap = band_statistics(low, high, np.array([[0.5], [1.0], [2.0], [-1.0]]))
+    assert inside[0] == 0.5 and np.isclose(gap[0], np.sqrt((1.0 + 1.0) / 4))
+
+
+def test_uncertainty_cli_writes_the_band_and_the_fractions(tmp_path, capsys):
+    out = tmp_path / "mc"
+    assert main(["uncertainty", "--measured", "two", "--samples", "6", "--duration", "1", "--relative-std", "0.05", "--out", str(out)]) == 0
+    summary = json.loads((out / "uncertainty.json").read_text())
+    assert summary["samples_replayed"] == 6 and "relative std 0.05" in summary["parameters"]
+    assert all(0.0 <= f <= 1.0 for f in summary["measured_inside_band_fraction"])
+    assert min(summary["nominal_model_inside_band_fraction"][:3]) >= NOMINAL_INSIDE_MIN
+    assert len(list((out / "params").glob("sample_*.json"))) == 6 and (out / "band.csv").is_file()
+    assert {p.name for p in (out / "figures").iterdir()} == {"band_q1.png", "band_q2.png", "band_q3.png"}
+    assert "inside" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--params-cov", "missing.json"], "--params-cov: missing.json: file not found"),
+    (["--relative-std", "2"], "--relative-std: 2.0 must be in (0, 1)"),
+    (["--samples", "0"], "--samples: 0 must be at least 1"),
+])
+def test_uncertainty_bad_input_is_one_line(tmp_path, capsys, argv, message):
+    code = main(["uncertainty", "--measured", "two", "--out", str(tmp_path / "mc"), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0]
+    assert not (tmp_path / "mc").exists()
