@@ -23,6 +23,8 @@ TARGETS = {
     "campaign_s": (300.0, "lower", "s", "the whole validation campaign on this machine"),
     "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
     "identify_s": (60.0, "lower", "s", "identification from one 30 s run, outputs written (dvrk-dart identify --runs one)"),
+    "mc_runs_per_s": (1.0, "higher", "1/s", "Monte Carlo replays of a 5 s run per second (dvrk-dart uncertainty, local executor, 2 workers)"),
+    "mc_runs_per_s_ray": (1.0, "higher", "1/s", "the same on a local Ray instance started with 2 CPUs (start-up included)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
 }
 
@@ -83,13 +85,29 @@ def bench_identification() -> dict:
         return {"identify_s": time.perf_counter() - start}
 
 
+def bench_monte_carlo(samples: int = 8) -> dict:
+    """`dvrk-dart uncertainty` end to end (sampling, replays, band, files) on each executor."""
+    import tempfile
+
+    from dvrk_dart.runs.uncertainty import UncertaintyConfig, run_uncertainty
+
+    figures = {}
+    for executor, key in (("local", "mc_runs_per_s"), ("ray", "mc_runs_per_s_ray")):
+        config = UncertaintyConfig(measured="two", samples=samples, relative_std=0.05, duration_s=5.0, executor=executor, jobs=2)
+        with tempfile.TemporaryDirectory() as folder:
+            start = time.perf_counter()
+            run_uncertainty(config, Path(folder) / "mc")
+            figures[key] = (samples + 1) / (time.perf_counter() - start)  # the nominal replay counts too
+    return figures
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="out/bench.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
     figures = {}
-    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification):
+    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification, bench_monte_carlo):
         figures.update(part())
     print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():

@@ -154,7 +154,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, "diagnosis")
     with building_folder(args.out, "diagnosis") as folder:
-        return run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}))
+        code = run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}))
+    print(f"written {Path(args.out) / 'diagnosis.json'}")
+    return code
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -307,6 +309,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--holdout", nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
     p.add_argument("--repeat", help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
     p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
+    p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "
+                                            "only on joints whose measured efforts leave the parameters' band")
+    p.add_argument("--jobs", type=int, default=2, help="re-simulations run side by side")
+    _executor_options(p)
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     p.set_defaults(func=cmd_diagnose)

@@ -47,3 +47,24 @@ def test_a_failed_campaign_run_is_named_and_the_others_land_on_ray(tmp_path):
     summary = run_campaign([good, bad], tmp_path, jobs=2, executor="ray")
     assert summary["ran"] == [config_name(good)] and list(summary["failures"]) == [config_name(bad)]
     assert "duration 100.0 s outside" in summary["failures"][config_name(bad)]
+
+
+def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():
+    import numpy as np
+
+    from dvrk_dart.diagnosis.batch import BatchSimulate
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.replay import simulate_efforts
+    from dvrk_dart.sim.config import SimConfig
+
+    arm = load_arm()
+    state = process(load_run(resolve_run("two"))).head(500)  # 2.5 s
+    configs = [SimConfig(), SimConfig(friction=True, offsets=True)]
+    batch = BatchSimulate(arm, "local", jobs=2)
+    batch.prefetch([(c, state) for c in configs])
+    assert len(batch._done) == 2
+    for config in configs:
+        assert np.array_equal(batch(config, state), simulate_efforts(arm, config, state))
+    assert not np.allclose(batch(configs[0], state), batch(configs[1], state))  # the two configs really differ

@@ -65,3 +65,42 @@ def test_uncertainty_bad_input_is_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and message in err[0]
     assert not (tmp_path / "mc").exists()
+
+
+def _band_folder(tmp_path, inside):
+    folder = tmp_path / "band"
+    folder.mkdir()
+    (folder / "uncertainty.json").write_text(json.dumps({
+        "config": {"measured": "two"}, "parameters": "relative std 0.05", "measured_inside_band_fraction": inside,
+        "rms_measured_outside_band": [0.0] * 7}))
+    return folder
+
+
+def _diagnosis_result(runs=("two_results",)):  # a run is named by its file
+    effect = {"selected": True, "explained_fraction": {}}
+    return {"train_runs": list(runs), "holdout_runs": [], "effects": [
+        {**effect, "name": "friction q2", "joints": ["q2"]},
+        {**effect, "name": "offset q3", "joints": ["q3"]},
+        {**effect, "name": "payload", "joints": ["q1", "q2", "q3"], "selected": False}]}
+
+
+def test_an_effect_is_unmodelled_only_where_the_run_leaves_the_parameter_band(tmp_path):
+    from dvrk_dart.diagnosis.parameter_band import BAND_COVERAGE, apply_band, load_band
+
+    inside = [0.99, 0.98, BAND_COVERAGE - 0.01, 0.5, 0.95, 0.95, 0.95]
+    result = apply_band(_diagnosis_result(), load_band(_band_folder(tmp_path, inside)))
+    band = result["parameter_band"]
+    assert band["joints_outside_band"] == ["q3", "q4"]
+    assert band["unmodelled_effects"] == ["offset q3"] and band["within_parameter_uncertainty"] == ["friction q2"]
+    assert result["effects"][2]["beyond_parameter_uncertainty"]  # not selected, still marked
+
+
+def test_a_band_of_another_run_is_refused(tmp_path):
+    from dvrk_dart.diagnosis.parameter_band import apply_band, load_band
+    from dvrk_dart.errors import DvrkDartError
+
+    band = load_band(_band_folder(tmp_path, [1.0] * 7))
+    with pytest.raises(DvrkDartError, match="is of run 'two_results', not one of the diagnosed runs"):
+        apply_band(_diagnosis_result(runs=("one_results",)), band)
+    with pytest.raises(DvrkDartError, match="not an output folder of `dvrk-dart uncertainty`"):
+        load_band(tmp_path)

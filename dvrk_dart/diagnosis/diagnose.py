@@ -40,7 +40,13 @@ from dvrk_dart.diagnosis.payload_report import (
     mass_profile,
 )
 from dvrk_dart.diagnosis.regimes import plot_residuals, residual_regimes
-from dvrk_dart.diagnosis.runs import DiagnosisRun, Simulate, prepare_run, run_features
+from dvrk_dart.diagnosis.runs import (
+    DiagnosisRun,
+    Simulate,
+    loaded_states,
+    prepare_run,
+    run_features,
+)
 from dvrk_dart.diagnosis.selection import (
     BOOTSTRAP_RESAMPLES,
     CV_FOLDS,
@@ -149,6 +155,8 @@ def diagnose(
             return prepare_run(spec[0], arm, simulate, base_config, baseline=spec[1])
         return prepare_run(spec, arm, simulate, base_config)
 
+    if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
+        simulate.prefetch([(base_config, state) for state in loaded_states([baseline, *measured_list, *(train or []), *(holdout or [])])])
     baseline_run = prepare_run(baseline, arm, simulate, base_config) if baseline is not None else None
     train_runs = [prepare_run(m, arm, simulate, base_config, baseline=baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
@@ -247,6 +255,8 @@ def diagnose(
             after = simulated_after(run, with_withheld=run.role != "baseline")
         return after - after.mean(axis=0) if nuisance else after
 
+    if hasattr(simulate, "prefetch"):  # the replays after the effects, side by side
+        simulate.prefetch([pair for r in train_runs + holdout_runs for pair in _after_replays(r, sim_config, shared_config)])
     train_after = [after_residual(r, c) for r, c in zip(train_runs, train_columns)]
     holdout_after = [after_residual(r, c) for r, c in zip(holdout_runs, holdout_columns)]
     nuisance_report = None
@@ -332,6 +342,14 @@ def diagnose(
     if out_dir is not None:
         _write_outputs(Path(out_dir), result, train_runs[0], train_after[0], figures)
     return result
+
+
+def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimConfig) -> list[tuple[SimConfig, object]]:
+    """The (config, state) replays `simulated_after` asks for a run: a baseline
+    run gets only the effects all runs share (no withheld payload)."""
+    if run.role == "difference":
+        return [(sim_config, run.state), (shared_config, run.baseline.state)]
+    return [(shared_config if run.role == "baseline" else sim_config, run.state)]
 
 
 def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool) -> None:

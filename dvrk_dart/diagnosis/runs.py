@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
@@ -84,8 +85,28 @@ RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 def _load_state(spec) -> tuple[str, ProcessedRun]:
     if isinstance(spec, ProcessedRun):
         return "run", spec
-    path = resolve_run(spec)
+    path = Path(resolve_run(spec))
+    stat = path.stat()
+    return _load_processed(str(path), stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=8)
+def _load_processed(path: str, mtime_ns: int, size: int) -> tuple[str, ProcessedRun]:
+    """One processing per file version: the batch re-simulation prefetches the
+    states that prepare_run then meets again (keyed by the file's version)."""
     return Path(path).stem, process(load_run(path))
+
+
+def loaded_states(specs) -> list[ProcessedRun]:
+    """The processed states of run specs not yet simulated (names, paths,
+    ProcessedRun, (run, baseline) pairs), for a batch of replays."""
+    states = []
+    for spec in specs:
+        if isinstance(spec, tuple):
+            states += loaded_states(spec)
+        elif spec is not None and not isinstance(spec, DiagnosisRun):
+            states.append(_load_state(spec)[1])
+    return states
 
 
 def simulated_efforts(arm: Arm, state: ProcessedRun, simulate: Simulate | None, config: SimConfig) -> np.ndarray:

@@ -16,7 +16,6 @@ import json
 import shutil
 import time
 import tomllib
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointOffset,
     JointStiffness,
 )
+from dvrk_dart.diagnosis.parameter_band import apply_band, band_sentence, load_band
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
@@ -43,11 +43,12 @@ WITHHELD_FILE = PIPELINES_DIR / "withheld.toml"
 IMAGE_SUFFIXES = (".png", ".svg")
 
 
-def simulation_hook(arm: Arm):
-    """The diagnosis's `simulate(config, processed) -> efforts`: the DART replay."""
-    from dvrk_dart.runs.replay import simulate_efforts
+def simulation_hook(arm: Arm, executor: str = "local", jobs: int = 2, ray_address: str | None = None):
+    """The diagnosis's `simulate(config, processed) -> efforts`: the DART
+    replay, its independent replays run side by side on the executor."""
+    from dvrk_dart.diagnosis.batch import BatchSimulate
 
-    return partial(simulate_efforts, arm)
+    return BatchSimulate(arm, executor, jobs, ray_address)
 
 
 def _sim_config_of(result: dict) -> SimConfig:
@@ -117,6 +118,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
                           fmt(frac.get("train")), fmt(frac.get("holdout")), params]))
     parts.append("</table>")
     parts += _split_and_nuisance_html(result)
+    parts += _band_html(result)
     payload = result.get("payload")
     if payload and payload.get("words"):  # the identifiable quantity first (first_moment payload)
         parts.append("<p>" + " ".join(e(w) for w in payload["words"]) + "</p>")
@@ -158,15 +160,34 @@ def _split_and_nuisance_html(result: dict) -> list[str]:
     return parts
 
 
-def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None) -> dict:
+def _band_html(result: dict) -> list[str]:
+    """Per joint: is the measured run inside the parameters' uncertainty band?"""
+    band = result.get("parameter_band")
+    if band is None:
+        return []
+    e = html.escape
+    rows = "".join(f"<tr><td>{j} ({e(effort_unit(j))})</td><td>{band['measured_inside_band_fraction'][j]:.3f}</td>"
+                   f"<td>{band['rms_measured_outside_band'][j]:.4f}</td><td>{'outside' if j in band['joints_outside_band'] else 'inside'}</td></tr>"
+                   for j in JOINT_NAMES[:3])
+    return [f"<p>{e(band_sentence(result))}. Rule: {e(band['rule'])}. Parameters: {e(str(band['parameters']))}.</p>",
+            "<table><tr><th>joint</th><th>measured inside the 5-95 % band</th><th>RMS outside the band</th><th>verdict</th></tr>",
+            rows, "</table>"]
+
+
+def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
+                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs
-    (of the first measured run)."""
+    (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
+    folder of one of the runs: effects are unmodelled only outside its band."""
     from dvrk_dart.diagnosis.diagnose import diagnose
 
     start = time.perf_counter()
+    band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
-                      simulate=simulation_hook(arm), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at)
+                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at)
+    if band is not None:
+        apply_band(result, band)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
@@ -181,13 +202,17 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     arm = load_arm(params_file=args.params)
     measured = args.measured[0] if len(args.measured) == 1 else args.measured
     result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
-                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None))
+                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
+                           parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
+                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
                 print(f"{key} ({split}): {np.array2string(np.asarray(values), precision=4)}")
     selected = [e["name"] for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
+    if band_sentence(result):
+        print(band_sentence(result))
     if result.get("payload"):
         p = result["payload"]
         print(f"payload: {p['mass_kg']:.3f} kg on {p['link']} ({p['group']})")
@@ -200,7 +225,6 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
                   f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
-    print(f"written {Path(args.out) / 'diagnosis.json'}")
     return 0
 
 
@@ -236,9 +260,9 @@ def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
     return validate_real_payload(arm, spec, out_dir, "105 g insertion-stage base")
 
 
-def validate_holdout(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
+def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
     train, *others = spec["train"]
-    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"))
+    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band)
     # the bar: the full identified model on the held-out run
     identified = []
     for name in spec["holdout"]:
@@ -289,8 +313,9 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
     return summary, verdicts
 
 
-def validate_withheld(out_dir: Path, arm: Arm | None = None) -> list[dict]:
-    """All withheld-effect validations; writes out_dir/verdicts.json and returns the verdicts."""
+def validate_withheld(out_dir: Path, arm: Arm | None = None, parameter_band: Path | None = None) -> list[dict]:
+    """All withheld-effect validations; writes out_dir/verdicts.json and returns the verdicts.
+    parameter_band: the uncertainty folder of the held-out run, used by the held-out diagnosis."""
     arm = arm or load_arm()
     spec = tomllib.loads(WITHHELD_FILE.read_text())
     verdicts: list[dict] = []
@@ -300,7 +325,8 @@ def validate_withheld(out_dir: Path, arm: Arm | None = None) -> list[dict]:
              ("out_of_library", validate_out_of_library))
     for name, step in steps:
         start = time.perf_counter()
-        _, found = step(arm, spec[name], out_dir / name)
+        extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
+        _, found = step(arm, spec[name], out_dir / name, **extra)
         for v in found:
             v["group"] = f"diagnosis: {name}"
         verdicts += found
@@ -346,9 +372,9 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     return ("Sim-to-real gap diagnosis", "\n".join(body), files)
 
 
-def validation_section(out_dir: Path) -> tuple[str, str, list[Path]]:
+def validation_section(out_dir: Path, parameter_band: Path | None = None) -> tuple[str, str, list[Path]]:
     """Run the withheld-effect validation and return the report section."""
-    verdicts = validate_withheld(out_dir)
+    verdicts = validate_withheld(out_dir, parameter_band=parameter_band)
     return report_section(out_dir, verdicts)
 
 

@@ -1,0 +1,79 @@
+"""Is a gap inside what the parameters' uncertainty allows?
+
+`dvrk-dart uncertainty` replays a run with parameter sets drawn from the
+identified parameters' uncertainty and writes the 5-95 % band of the simulated
+efforts. Where the measured efforts of that run stay inside the band, the
+identified model with its uncertain parameters already explains them: an
+effect the diagnosis selects on such a joint is reported as "within the
+parameters' uncertainty", not as an unmodelled effect. Only joints whose
+measured efforts leave the band more often than the band's own coverage allows
+make an effect unmodelled.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import resolve_run
+from dvrk_dart.model.joints import JOINT_NAMES
+
+#: a 5-95 % band holds 90 % of the efforts the uncertain parameters produce: a
+#: run inside it less often than that is not explained by them alone
+BAND_COVERAGE = 0.90
+
+
+def load_band(folder: str | Path) -> dict:
+    """The summary (uncertainty.json) of a `dvrk-dart uncertainty` output folder."""
+    path = Path(folder) / "uncertainty.json"
+    if not path.is_file():
+        raise DvrkDartError(f"--parameter-band: {folder} is not an output folder of `dvrk-dart uncertainty` (no uncertainty.json)")
+    try:
+        band = json.loads(path.read_text(encoding="utf-8"))
+        fractions = [float(v) for v in band["measured_inside_band_fraction"]]
+        measured = band["config"]["measured"]
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise DvrkDartError(f"{path}: not a readable uncertainty summary ({exc})") from None
+    if len(fractions) != len(JOINT_NAMES):
+        raise DvrkDartError(f"{path}: {len(fractions)} joints in measured_inside_band_fraction, expected {len(JOINT_NAMES)}")
+    return {**band, "folder": str(folder), "run": Path(resolve_run(measured)).stem}
+
+
+def apply_band(result: dict, band: dict) -> dict:
+    """Mark each effect of a diagnosis result as beyond the parameters'
+    uncertainty or within it, and add the per-joint band summary."""
+    diagnosed = result["train_runs"] + result["holdout_runs"]
+    if band["run"] not in diagnosed:
+        raise DvrkDartError(f"--parameter-band: the band of {band['folder']} is of run '{band['run']}', "
+                            f"not one of the diagnosed runs ({', '.join(diagnosed)})")
+    inside = band["measured_inside_band_fraction"]
+    outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction < BAND_COVERAGE}
+    for effect in result["effects"]:
+        effect["beyond_parameter_uncertainty"] = bool(outside.intersection(effect["joints"]))
+    selected = [e for e in result["effects"] if e["selected"]]
+    result["parameter_band"] = {
+        "folder": band["folder"],
+        "run": band["run"],
+        "parameters": band.get("parameters"),
+        "rule": f"an effect is unmodelled only on a joint whose measured efforts are inside the band less than "
+                f"{BAND_COVERAGE:.0%} of the time (the band's own coverage)",
+        "measured_inside_band_fraction": dict(zip(JOINT_NAMES, inside)),
+        "rms_measured_outside_band": dict(zip(JOINT_NAMES, band["rms_measured_outside_band"])),
+        "joints_outside_band": [j for j in JOINT_NAMES if j in outside],
+        "unmodelled_effects": [e["name"] for e in selected if e["beyond_parameter_uncertainty"]],
+        "within_parameter_uncertainty": [e["name"] for e in selected if not e["beyond_parameter_uncertainty"]],
+    }
+    return result
+
+
+def band_sentence(result: dict) -> str | None:
+    """One sentence for the CLI and the HTML, or None without a band."""
+    band = result.get("parameter_band")
+    if band is None:
+        return None
+    unmodelled = ", ".join(band["unmodelled_effects"]) or "none"
+    within = ", ".join(band["within_parameter_uncertainty"]) or "none"
+    outside = ", ".join(band["joints_outside_band"]) or "no joint"
+    return (f"parameter band of '{band['run']}': measured efforts outside it on {outside}; "
+            f"unmodelled effects: {unmodelled}; within the parameters' uncertainty: {within}")
