@@ -203,9 +203,14 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
     from dvrk_dart.io.signal import MIN_ROWS
     from dvrk_dart.model.description import load_model
 
+    from dvrk_dart.io.reference_data import sample_rate_hz
+
     path = Path(path)
     topics = topics or current_topics()
     rate = topics.rate
+    if rate != sample_rate_hz():
+        # upstream's filter, trim and first period are defined in samples at that rate
+        raise DvrkDartError(f"--rate {rate:g}: measured runs are processed at {sample_rate_hz():g} Hz (the identification's processing); resample at that rate")
     arm, jaw = read_topics(path, topics)
     for samples in (arm, jaw):
         _check_times(path, samples)
@@ -337,3 +342,30 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
     finally:
         shutil.rmtree(building, ignore_errors=True)
     return out
+
+
+def export_run(run_dir: Path, out: Path, arm: str = DEFAULT_ARM, storage: str = "mcap") -> Path:
+    """A simulated run folder -> a bag with the topics and types a real PSM
+    publishes: measured_js (position, velocity, the *simulated* effort) and
+    jaw/measured_js, stamped with the simulated time."""
+    from dvrk_dart.io.mcap_log import read_mcap
+
+    log = Path(run_dir) / "run.mcap"
+    if not log.is_file():
+        raise DvrkDartError(f"{run_dir}: no run.mcap (not a run folder)")
+    try:
+        record = read_mcap(log)
+    except DvrkDartError:
+        raise
+    except Exception as exc:
+        raise DvrkDartError(f"{log}: not a readable run log ({_first_line(exc)})") from None
+    if not len(record):
+        raise DvrkDartError(f"{log}: the run has no samples")
+    for label, values in (("q", record.q), ("dq", record.dq), ("effort_sim", record.effort_sim)):
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
+    if storage == "ros1" and out.suffix != ".bag":
+        raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
+    return write_bag(out, psm_joint_states(arm, record.t, record.q, record.dq, record.effort_sim), storage)

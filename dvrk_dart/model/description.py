@@ -116,6 +116,7 @@ class PsmModel:
     joint_lower: np.ndarray
     joint_upper: np.ndarray
     dvrk_wrist_matrix: np.ndarray
+    dvrk_velocity_limits: np.ndarray | None = None  # (7,) rad/s, m/s, dVRK joints ([dvrk_velocity_limits])
     inertia_tolerance: float = 0.0  # kg m^2, see [parameter_checks]
     max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
     max_com_distance_m: float = float("inf")
@@ -299,6 +300,7 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         joint_lower=np.array(limits["lower"], dtype=float),
         joint_upper=np.array(limits["upper"], dtype=float),
         dvrk_wrist_matrix=np.array(wrist["matrix"], dtype=float),
+        dvrk_velocity_limits=np.array(raw["dvrk_velocity_limits"]["upper"], dtype=float) if "dvrk_velocity_limits" in raw else None,
         inertia_tolerance=float(raw.get("parameter_checks", {}).get("inertia_tolerance_kg_m2", 0.0)),
         max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),
