@@ -24,6 +24,7 @@ TARGETS = {
     "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
     "identify_s": (60.0, "lower", "s", "identification from one 30 s run, outputs written (dvrk-dart identify --runs one)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
+    "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
 }
 
 
@@ -83,13 +84,26 @@ def bench_identification() -> dict:
         return {"identify_s": time.perf_counter() - start}
 
 
+def bench_bag_import() -> dict:
+    """A 30 s, 200 Hz bag of the two PSM topics (made from run "two"), read back."""
+    import tempfile
+
+    from dvrk_dart.io.bags import load_bag_run, psm_joint_states, write_bag
+
+    run = load_run(resolve_run("two"))
+    with tempfile.TemporaryDirectory() as folder:
+        bag = write_bag(Path(folder) / "two", psm_joint_states("PSM1", run.t, run.q, run.dq, run.tau))
+        seconds = best_time(lambda: load_bag_run(bag), repeat=3, number=1)
+    return {"bag_import_s": seconds}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="out/bench.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
     figures = {}
-    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification):
+    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification, bench_bag_import):
         figures.update(part())
     print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():

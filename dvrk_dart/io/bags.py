@@ -145,6 +145,7 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
     connections = [c for c in reader.connections if c.topic == topic]
     stamps, received, rows = [], [], {"position": [], "velocity": [], "effort": []}
     order, order_key = None, None
+    bag_start = reader.start_time
     for connection, receive_ns, raw in reader.messages(connections=connections):
         msg = reader.deserialize(raw, connection.msgtype)
         stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
@@ -153,19 +154,19 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
         if key != order_key:  # joints are matched by name, not by position in the message
             missing = [n for n in names if n not in key]
             if missing:
-                raise DvrkDartError(f"{path}: topic {topic}: joint {missing[0]} missing from the message at t = {receive_ns / NS:.3f} s (names: {', '.join(key) or 'none'})")
+                raise DvrkDartError(f"{path}: topic {topic}: joint {missing[0]} missing from the message at t = {(receive_ns - bag_start) / NS:.3f} s into the bag (names: {', '.join(key) or 'none'})")
             order, order_key = [key.index(n) for n in names], key
         for field in rows:
             values = np.asarray(getattr(msg, field), dtype=float)
             if len(values) != len(key):
-                raise DvrkDartError(f"{path}: topic {topic}: {field} has {len(values)} values for {len(key)} joint names at t = {receive_ns / NS:.3f} s")
+                raise DvrkDartError(f"{path}: topic {topic}: {field} has {len(values)} values for {len(key)} joint names at t = {(receive_ns - bag_start) / NS:.3f} s into the bag")
             rows[field].append(values[order])
     arrays = {field: np.array(values, dtype=float).reshape(len(stamps), len(names)) for field, values in rows.items()}
     for field, values in arrays.items():
         bad = ~np.isfinite(values)
         if bad.any():
             k, j = np.argwhere(bad)[0]
-            raise DvrkDartError(f"{path}: topic {topic}: {field} of {names[j]} is {values[k, j]} at t = {received[k] / NS:.3f} s")
+            raise DvrkDartError(f"{path}: topic {topic}: {field} of {names[j]} is {values[k, j]} at t = {(received[k] - bag_start) / NS:.3f} s into the bag")
     stamps_ns = np.array(stamps, dtype=np.int64)
     receive_time = not stamps_ns.any()
     if receive_time:
@@ -223,7 +224,7 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
     n = int(np.floor(span_s * rate + 1e-9)) + 1 if end_ns >= start_ns else 0
     if n < MIN_ROWS:
         raise DvrkDartError(
-            f"{path}: topics {arm.topic} and {jaw.topic} overlap for {max(span_s, 0.0):.3f} s from t = {start_ns / NS:.3f} s: "
+            f"{path}: topics {arm.topic} and {jaw.topic} overlap for {max(span_s, 0.0):.3f} s: "
             f"{max(n, 0)} samples at {rate:g} Hz, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)"
         )
     grid_s = np.arange(n) / rate

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -137,7 +138,7 @@ def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
         if k < steps - 1:
             driver.advance(k, None)
     source = {"kind": "Cartesian scenario, kinematic mode (Eq. 5 controller, RK4)", "scenario": str(scenario.source), "integration_step_s": dt}
-    return Excitation(name, np.arange(samples) / rate_hz, q, dq, source)
+    return Excitation(scenario.name, np.arange(samples) / rate_hz, q, dq, source)
 
 
 def build_excitation(name: str, rate_hz: float) -> Excitation:
@@ -178,6 +179,8 @@ def write_excitation(excitation: Excitation, folder, arm: str) -> dict:
     from dvrk_dart.io.bags import psm_joint_states, write_bag
     from dvrk_dart.model.description import load_model
 
+    if Path(excitation.name).name != excitation.name or excitation.name in ("", ".", ".."):
+        raise DvrkDartError(f"excitation name '{excitation.name}' cannot name a file")
     dvrk = load_model().motor_map.positions_to_dvrk(excitation.q)
     header = ",".join(["time", *DVRK_JOINT_NAMES])
     rows = "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.column_stack([excitation.t, dvrk]))
