@@ -152,6 +152,11 @@ def test_replay_of_a_bag(tmp_path, simulated_run, capsys):
     assert main(["replay", "--measured", str(bag), "--duration", "0.1", "--out", str(out)]) == 0
     config = json.loads((out / "config.json").read_text())
     assert str(bag) in json.dumps(config)
+    # a scenario file of kind replay takes a bag too
+    scenario = tmp_path / "my-arm.toml"
+    scenario.write_text(f'name = "my-arm"\nkind = "replay"\nmeasured = "{bag}"\nmodes = ["velocity"]\ncounterweights = ["on"]\n')
+    assert main(["run", str(scenario), "--duration", "0.1", "--out", str(tmp_path / "scenario")]) == 0
+    assert (tmp_path / "scenario" / "run.mcap").is_file()
 
 
 def test_export_refusals(tmp_path, simulated_run, capsys):

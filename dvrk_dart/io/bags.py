@@ -27,7 +27,10 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import DVRK_ARM_JOINT_NAMES, DVRK_JAW_JOINT_NAME, column_names
+from dvrk_dart.model.joints import (
+    DVRK_ARM_JOINT_NAMES,
+    DVRK_JAW_JOINT_NAME,
+)
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DEFAULT_ARM = "PSM1"
@@ -200,11 +203,14 @@ def _resample(samples: TopicSamples, start_ns: int, grid_s: np.ndarray) -> np.nd
 
 def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
     """A bag -> MeasuredRun (model coordinates, uniform grid), with one-line errors."""
-    from dvrk_dart.io.reference_data import CSV_COLUMNS, MeasuredRun, check_joint_ranges
+    from dvrk_dart.io.reference_data import (
+        CSV_COLUMNS,
+        MeasuredRun,
+        check_joint_ranges,
+        sample_rate_hz,
+    )
     from dvrk_dart.io.signal import MIN_ROWS
     from dvrk_dart.model.description import load_model
-
-    from dvrk_dart.io.reference_data import sample_rate_hz
 
     path = Path(path)
     topics = topics or current_topics()
@@ -308,7 +314,8 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
     `out` must not exist (a bag is never replaced). `stamps_ns` overrides the
     header stamps per topic (receive times stay t)."""
     from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
     from rosbags.typesys import Stores, get_typestore
 
     out = Path(out)

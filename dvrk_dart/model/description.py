@@ -18,7 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, WRIST_COLUMNS, MotorCoordinateMap
+from dvrk_dart.model.joints import (
+    JOINT_NAMES,
+    N_JOINTS,
+    WRIST_COLUMNS,
+    MotorCoordinateMap,
+)
 from dvrk_dart.paths import MODELS_DIR
 
 DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
