@@ -105,6 +105,20 @@ def test_joints_are_matched_by_name(tmp_path, run_two):
     np.testing.assert_array_equal(a.data.to_numpy(), b.data.to_numpy())
 
 
+def test_jaw_in_the_arm_message(tmp_path, run_two):
+    topics, stamps = jittered_topics(run_two, rows=slice(0, 600))
+    arm, jaw = topics
+    merged = type(arm)(
+        arm.topic, (*arm.names, *jaw.names), arm.t,
+        *(np.hstack([getattr(arm, f), getattr(jaw, f)]) for f in ("position", "velocity", "effort")),
+    )
+    one = load_bag_run(write_bag(tmp_path / "one", [merged], stamps_ns=stamps), BagTopics(jaw_topic=arm.topic))
+    # the same as a bag whose jaw topic has the arm's stamps
+    both = load_bag_run(write_bag(tmp_path / "two", [arm, type(jaw)(jaw.topic, jaw.names, arm.t, jaw.position, jaw.velocity, jaw.effort)],
+                                  stamps_ns={arm.topic: stamps[arm.topic], jaw.topic: stamps[arm.topic]}))
+    np.testing.assert_array_equal(one.data.to_numpy(), both.data.to_numpy())
+
+
 def test_missing_header_stamps_fall_back_to_receive_times(tmp_path, capsys, run_two):
     topics, _ = jittered_topics(run_two, rows=slice(0, 600))
     zero = {s.topic: np.zeros(len(s.t), dtype=np.int64) for s in topics}

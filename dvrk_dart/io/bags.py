@@ -127,8 +127,9 @@ def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, TopicSampl
     try:
         with AnyReader([path], default_typestore=_typestore(path)) as reader:
             present = reader.topics
-            wanted = {topics.joint_topic: DVRK_ARM_JOINT_NAMES, topics.jaw: (DVRK_JAW_JOINT_NAME,)}
-            for topic in wanted:
+            # (the two may be one topic: a recorder that puts the jaw in the arm's message)
+            wanted = [(topics.joint_topic, DVRK_ARM_JOINT_NAMES), (topics.jaw, (DVRK_JAW_JOINT_NAME,))]
+            for topic in dict(wanted):
                 if topic not in present:
                     listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
                     raise DvrkDartError(f"{path}: no topic {topic} (topics in the bag: {listed}); see --arm, --topic, --jaw-topic")
@@ -137,7 +138,7 @@ def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, TopicSampl
                     raise DvrkDartError(f"{path}: topic {topic} has messages of type {msgtype}, expected {JOINT_STATE}")
                 if present[topic].msgcount == 0:
                     raise DvrkDartError(f"{path}: topic {topic} has no messages")
-            return tuple(_read_topic(reader, path, topic, names) for topic, names in wanted.items())
+            return tuple(_read_topic(reader, path, topic, names) for topic, names in wanted)
     except DvrkDartError:
         raise
     except Exception as exc:  # rosbags, mcap, sqlite3 and yaml each raise their own: one line for the user
