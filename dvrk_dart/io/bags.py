@@ -224,8 +224,12 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
         _check_times(path, samples)
     # the grid: multiples of the period on the bag's clock, so that a bag stamped
     # on a regular grid is sampled at its own stamps (no interpolation at all)
-    period_ns = NS / rate
-    start_ns = int(np.ceil(max(int(arm.stamps_ns[0]), int(jaw.stamps_ns[0])) / period_ns - 1e-6) * period_ns)
+    first_ns = max(int(arm.stamps_ns[0]), int(jaw.stamps_ns[0]))
+    if float(NS / rate).is_integer():  # integers: epoch stamps (~1.7e18 ns) are beyond float64's ns resolution
+        period_ns = NS // int(rate)
+        start_ns = -(-first_ns // period_ns) * period_ns
+    else:
+        start_ns = int(np.ceil(first_ns * rate / NS - 1e-9) * NS / rate)
     end_ns = min(int(arm.stamps_ns[-1]), int(jaw.stamps_ns[-1]))
     span_s = (end_ns - start_ns) / NS
     n = int(np.floor(span_s * rate + 1e-9)) + 1 if end_ns >= start_ns else 0
