@@ -26,6 +26,7 @@ TARGETS = {
     "mc_runs_per_s": (1.0, "higher", "1/s", "Monte Carlo replays of a 5 s run per second (dvrk-dart uncertainty, local executor, 2 workers)"),
     "mc_runs_per_s_ray": (1.0, "higher", "1/s", "the same on a local Ray instance started with 2 CPUs (start-up included)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
+    "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
 }
 
 
@@ -101,13 +102,27 @@ def bench_monte_carlo(samples: int = 8) -> dict:
     return figures
 
 
+def bench_bag_import() -> dict:
+    """A 30 s, 200 Hz bag of the two PSM topics (made from run "two"), read back."""
+    import tempfile
+
+    from dvrk_dart.io.bags import load_bag_run, psm_joint_states, write_bag
+
+    run = load_run(resolve_run("two"))
+    with tempfile.TemporaryDirectory() as folder:
+        bag = write_bag(Path(folder) / "two", psm_joint_states("PSM1", run.t, run.q, run.dq, run.tau))
+        seconds = best_time(lambda: load_bag_run(bag), repeat=3, number=1)
+    return {"bag_import_s": seconds}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="out/bench.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
     figures = {}
-    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification, bench_monte_carlo):
+    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification, bench_monte_carlo,
+                 bench_bag_import):
         figures.update(part())
     print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():

@@ -21,6 +21,67 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", help="identified parameters file (default: upstream params.json, resolved at run time)")
 
 
+def _add_bag_options(p: argparse.ArgumentParser) -> None:
+    """Where a measured run that is a ROS bag keeps the PSM's joint states."""
+    g = p.add_argument_group("measured runs that are ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
+    g.add_argument("--arm", default="PSM1", help="the arm's namespace (default PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js)")
+    g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
+    g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
+    g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
+
+
+def _bag_topics(args: argparse.Namespace):
+    from dvrk_dart.io.bags import BagTopics
+
+    return BagTopics(args.arm, args.topic, args.jaw_topic, args.rate)
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
+    from dvrk_dart.io.atomic import atomic_path
+    from dvrk_dart.io.bags import is_bag, load_bag_run
+    from dvrk_dart.io.reference_data import sample_rate_hz
+
+    topics = _bag_topics(args)
+    if topics.rate != sample_rate_hz():
+        raise DvrkDartError(f"--rate: the 21-column CSV has no time column and is read at {sample_rate_hz():g} Hz; import at that rate")
+    if not is_bag(args.bag):
+        raise DvrkDartError(f"{args.bag}: not a ROS bag (a rosbag2 folder with metadata.yaml, an .mcap/.db3 file or a ROS 1 .bag)")
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
+    run = load_bag_run(args.bag, topics)
+    values = np.hstack([run.q, run.dq, run.tau])
+    with atomic_path(out) as tmp:
+        np.savetxt(tmp, values, delimiter=",", fmt="%.17g")
+    print(f"{args.bag}: {len(run)} samples ({run.t[-1]:.2f} s at {topics.rate:g} Hz) -> {out}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
+    from dvrk_dart.io.bags import export_run
+
+    out = export_run(Path(args.run_dir), Path(args.bag), args.arm, args.storage)
+    print(f"{args.run_dir} -> {out}")
+    return 0
+
+
+def cmd_excitation(args: argparse.Namespace) -> int:
+    """An excitation to play on a real dVRK: CSV + ROS 2 bag of servo_jp commands."""
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
+    from dvrk_dart.io.reference_data import sample_rate_hz
+    from dvrk_dart.runs.excitation import build_excitation, write_excitation
+
+    check_output_folder(args.out, "excitation")
+    excitation = build_excitation(args.name, args.rate if args.rate is not None else sample_rate_hz())
+    with building_folder(args.out, "excitation") as folder:
+        summary = write_excitation(excitation, folder, args.arm)
+    print(f"excitation {args.name}: {summary['samples']} samples, {summary['duration_s']:.2f} s -> {args.out}/{summary['csv']}, {args.out}/{summary['bag']}")
+    print("  start pose (move there first, e.g. with move_jp): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["start_pose"].items()))
+    return 0
+
+
 def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
     from dvrk_dart.io.reference_data import load_run, resolve_run
@@ -218,11 +279,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
-    p.add_argument("--measured", required=True, help="measured run: path, or one|two|one-no-weight|one-105g")
+    p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
     p.add_argument("--first-period", action="store_true", help="only the first base period (1111 samples), as upstream")
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)
+    _add_bag_options(p)
     p.set_defaults(func=cmd_model_errors)
 
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
@@ -240,6 +302,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     p.set_defaults(func=cmd_identify)
+
+    p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
+    p.add_argument("bag", help="rosbag2 folder, .mcap or .db3 file, or ROS 1 .bag")
+    p.add_argument("--out", required=True, help="the CSV to write (21 columns, model coordinates, 200 Hz)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    _add_bag_options(p)
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("export", help="a simulated run -> a ROS 2 bag (MCAP) like a real PSM's recording")
+    p.add_argument("run_dir", help="a run folder (run.mcap)")
+    p.add_argument("--bag", required=True, help="the bag to write (a rosbag2 folder; a .bag file with --storage ros1)")
+    p.add_argument("--arm", default="PSM1", help="the arm's namespace of the topics (default PSM1)")
+    p.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3", "ros1"), help="rosbag2 storage, or a ROS 1 bag")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("excitation", help="a trajectory to play on a dVRK: CSV + ROS 2 bag of servo_jp")
+    p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--arm", default="PSM1", help="the arm's namespace of the servo_jp topics (default PSM1)")
+    p.add_argument("--rate", type=float, default=None, help="command rate (Hz, default 200)")
+    p.set_defaults(func=cmd_excitation)
 
     p = sub.add_parser("model-check", help="parameter oddities and model facts")
     _add_arm_options(p)
@@ -264,7 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name in ("replay", *REPLAY_SHORTHANDS):
         p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
         if name == "replay":
-            p.add_argument("--measured", required=True, help="measured run: path, or one|two|one-no-weight|one-105g")
+            p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+            _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
         sim_options(p)
@@ -315,6 +399,7 @@ def build_parser() -> argparse.ArgumentParser:
     _executor_options(p)
     p.add_argument("--out", required=True)
     _add_arm_options(p)
+    _add_bag_options(p)
     p.set_defaults(func=cmd_diagnose)
     return parser
 
@@ -331,6 +416,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
+        if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
+            from dvrk_dart.io.bags import bag_topics
+
+            with bag_topics(_bag_topics(args)):
+                return args.func(args)
         return args.func(args)
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)

@@ -24,6 +24,7 @@ KNOWN_ENTRIES = {
     "run": {"config.json", "metrics.json", "run.mcap", "run.rrd", "inputs.sha256"},
     "report": {"index.html", "analysis", "figures"},
     "uncertainty": {"uncertainty.json", "band.csv", "params", "figures"},
+    "excitation": {"excitation.json"},
     "diagnosis": {"diagnosis.json", "diagnosis.html", "figures", "replay_before", "replay_after", "where.csv"},
     "identification": {"params.json", "params_covariance.json", "identification.json", "identification.html"},
 }

@@ -49,10 +49,16 @@ def sample_rate_hz() -> float:
 
 
 def sha256_of(path: Path) -> str:
+    """sha256 of a file; of a folder (a rosbag2 bag): of its files' relative names and contents."""
     digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            digest.update(chunk)
+    path = Path(path)
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for file in files:
+        if path.is_dir():
+            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
+        with open(file, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                digest.update(chunk)
     return digest.hexdigest()
 
 
@@ -109,12 +115,19 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
 
 
 def resolve_run(name_or_path: str | Path) -> Path:
-    """A measured run by shorthand ('two'), manifest name or path."""
+    """A measured run by shorthand ('two'), manifest name or path (a CSV or a
+    ROS bag: a rosbag2 folder, an .mcap/.db3 file or a ROS 1 .bag)."""
+    from dvrk_dart.io.bags import is_bag
+
     text = str(name_or_path)
     if text in RUNS:
         return resolve(RUNS[text])
     if text in manifest()["files"]:
         return resolve(text)
+    if is_bag(text):
+        return Path(text)
+    if Path(text).is_dir():
+        raise DvrkDartError(f"{text}: a folder without metadata.yaml, not a rosbag2 bag")
     return resolve(text, explicit=text)
 
 
@@ -171,8 +184,13 @@ def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_run(path: Path | str) -> MeasuredRun:
-    """Load a measured run in the upstream CSV format, with one-line errors."""
+    """Load a measured run (the upstream CSV format, or a ROS bag read with the
+    command's topics: io/bags.py), with one-line errors."""
+    from dvrk_dart.io.bags import is_bag, load_bag_run
+
     path = Path(path)
+    if is_bag(path):
+        return load_bag_run(path)
     if not path.is_file():
         raise DvrkDartError(f"{path}: file not found")
     try:

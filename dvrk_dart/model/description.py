@@ -18,7 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.joints import (
+    JOINT_NAMES,
+    N_JOINTS,
+    WRIST_COLUMNS,
+    MotorCoordinateMap,
+)
 from dvrk_dart.paths import MODELS_DIR
 
 DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
@@ -116,6 +121,7 @@ class PsmModel:
     joint_lower: np.ndarray
     joint_upper: np.ndarray
     dvrk_wrist_matrix: np.ndarray
+    dvrk_velocity_limits: np.ndarray | None = None  # (7,) rad/s, m/s, dVRK joints ([dvrk_velocity_limits])
     inertia_tolerance: float = 0.0  # kg m^2, see [parameter_checks]
     max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
     max_com_distance_m: float = float("inf")
@@ -151,12 +157,21 @@ class PsmModel:
         """R_i(q = 0): the frame in which params.json expresses r and I."""
         return {k: T[:3, :3] for k, T in self.forward_kinematics(np.zeros(N_JOINTS)).items()}
 
+    @cached_property
+    def motor_map(self) -> MotorCoordinateMap:
+        """dVRK joint values <-> the model's coordinates (joints.py owns the map)."""
+        return MotorCoordinateMap(self.dvrk_wrist_matrix)
+
     def dvrk_to_motor(self, dvrk_wrist: np.ndarray) -> np.ndarray:
         """(wrist pitch, wrist yaw, jaw) -> motor coordinates q5..q7 (last axis)."""
-        return np.asarray(dvrk_wrist) @ np.linalg.inv(self.dvrk_wrist_matrix).T
+        full = np.zeros((*np.shape(dvrk_wrist)[:-1], N_JOINTS))
+        full[..., WRIST_COLUMNS] = dvrk_wrist
+        return self.motor_map.positions_to_model(full)[..., WRIST_COLUMNS]
 
     def motor_to_dvrk(self, motor: np.ndarray) -> np.ndarray:
-        return np.asarray(motor) @ self.dvrk_wrist_matrix.T
+        full = np.zeros((*np.shape(motor)[:-1], N_JOINTS))
+        full[..., WRIST_COLUMNS] = motor
+        return self.motor_map.positions_to_dvrk(full)[..., WRIST_COLUMNS]
 
 
 def dh_transform(a: float, alpha: float, d: float, theta: float) -> np.ndarray:
@@ -290,6 +305,7 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         joint_lower=np.array(limits["lower"], dtype=float),
         joint_upper=np.array(limits["upper"], dtype=float),
         dvrk_wrist_matrix=np.array(wrist["matrix"], dtype=float),
+        dvrk_velocity_limits=np.array(raw["dvrk_velocity_limits"]["upper"], dtype=float) if "dvrk_velocity_limits" in raw else None,
         inertia_tolerance=float(raw.get("parameter_checks", {}).get("inertia_tolerance_kg_m2", 0.0)),
         max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),

@@ -41,8 +41,8 @@ class KinematicController:
 
     def __post_init__(self):
         # dq_motor = T dtheta, theta = (q1..q4, wrist pitch, wrist yaw, jaw)
-        self._dvrk_to_motor = np.eye(N_JOINTS)
-        self._dvrk_to_motor[4:, 4:] = np.linalg.inv(self.arm.model.dvrk_wrist_matrix)
+        # (the map as a matrix: its images of the unit vectors, as columns)
+        self._dvrk_to_motor = self.arm.model.motor_map.positions_to_model(np.eye(N_JOINTS)).T
 
     def joint_velocity(self, q: np.ndarray, pose_desired: np.ndarray, twist_desired: np.ndarray) -> np.ndarray:
         pose = self.arm.identified.tool_tip_pose(q)

@@ -1,0 +1,384 @@
+"""ROS bags in and out (rosbags: ROS 2 bags in MCAP or sqlite3 storage, ROS 1
+bags; no ROS installation needed).
+
+In: a bag of a dVRK PSM is a measured run. The arm's `measured_js` and the jaw's
+`jaw/measured_js` (sensor_msgs/JointState, dVRK joint names and units) are read
+by joint name, put on a uniform time grid by cubic interpolation of their header
+stamps, and mapped to the identification model's coordinates (joints.py owns
+the map). Out: joint trajectories (a simulated run, an excitation) as the same
+topics and message types a real PSM publishes or accepts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import heapq
+import os
+import shutil
+import sys
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.interpolate import CubicSpline
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import (
+    DVRK_ARM_JOINT_NAMES,
+    DVRK_JAW_JOINT_NAME,
+)
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+DEFAULT_ARM = "PSM1"
+#: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,
+#: and the excitation moves up to ~0.08 rad in 50 ms, which no interpolation recovers
+MAX_GAP_S = 0.05
+#: file suffixes of bags that are single files (a rosbag2 folder has metadata.yaml)
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+#: storage of the bags we write: rosbag2's default, and what Foxglove opens
+STORAGES = ("mcap", "sqlite3", "ros1")
+NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class BagTopics:
+    """Where a PSM's joint states are in a bag, and the grid they are put on."""
+
+    arm: str = DEFAULT_ARM
+    topic: str | None = None  # default /<arm>/measured_js
+    jaw_topic: str | None = None  # default /<arm>/jaw/measured_js
+    rate_hz: float | None = None  # default: the reference data's rate (200 Hz)
+
+    @property
+    def joint_topic(self) -> str:
+        return self.topic or f"/{self.arm}/measured_js"
+
+    @property
+    def jaw(self) -> str:
+        return self.jaw_topic or f"/{self.arm}/jaw/measured_js"
+
+    @property
+    def rate(self) -> float:
+        from dvrk_dart.io.reference_data import sample_rate_hz
+
+        rate = sample_rate_hz() if self.rate_hz is None else float(self.rate_hz)
+        if not np.isfinite(rate) or rate <= 0:
+            raise DvrkDartError(f"--rate: {self.rate_hz!r} is not a positive rate (Hz)")
+        return rate
+
+
+#: the topics of the command being run (the CLI sets them: --arm, --topic, ...);
+#: every measured run that is a bag is read with them
+_current_topics: contextvars.ContextVar[BagTopics] = contextvars.ContextVar("bag_topics", default=BagTopics())
+
+
+@contextlib.contextmanager
+def bag_topics(topics: BagTopics) -> Iterator[None]:
+    token = _current_topics.set(topics)
+    try:
+        yield
+    finally:
+        _current_topics.reset(token)
+
+
+def current_topics() -> BagTopics:
+    return _current_topics.get()
+
+
+def is_bag(path: str | os.PathLike) -> bool:
+    """A rosbag2 folder (metadata.yaml), or an .mcap/.db3/.bag file."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix in BAG_SUFFIXES and path.is_file()
+
+
+def _typestore(path: Path):
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS1_NOETIC if path.suffix == ".bag" else Stores.ROS2_HUMBLE)
+
+
+@dataclass
+class TopicSamples:
+    """One topic's messages: times (ns) and the named joints' values."""
+
+    topic: str
+    stamps_ns: np.ndarray
+    position: np.ndarray  # (N, joints), dVRK units
+    velocity: np.ndarray
+    effort: np.ndarray
+    receive_time: bool  # stamps are the bag's receive times (no header stamps)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, TopicSamples]:
+    """The arm's and the jaw's joint states, checked; one-line errors."""
+    from rosbags.highlevel import AnyReader
+
+    try:
+        with AnyReader([path], default_typestore=_typestore(path)) as reader:
+            present = reader.topics
+            # (the two may be one topic: a recorder that puts the jaw in the arm's message)
+            wanted = [(topics.joint_topic, DVRK_ARM_JOINT_NAMES), (topics.jaw, (DVRK_JAW_JOINT_NAME,))]
+            for topic in dict(wanted):
+                if topic not in present:
+                    listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
+                    raise DvrkDartError(f"{path}: no topic {topic} (topics in the bag: {listed}); see --arm, --topic, --jaw-topic")
+                msgtype = present[topic].msgtype
+                if msgtype != JOINT_STATE:
+                    raise DvrkDartError(f"{path}: topic {topic} has messages of type {msgtype}, expected {JOINT_STATE}")
+                if present[topic].msgcount == 0:
+                    raise DvrkDartError(f"{path}: topic {topic} has no messages")
+            return tuple(_read_topic(reader, path, topic, names) for topic, names in wanted)
+    except DvrkDartError:
+        raise
+    except Exception as exc:  # rosbags, mcap, sqlite3 and yaml each raise their own: one line for the user
+        raise DvrkDartError(f"{path}: not a readable bag ({_first_line(exc)})") from None
+
+
+def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> TopicSamples:
+    connections = [c for c in reader.connections if c.topic == topic]
+    stamps, received, rows = [], [], {"position": [], "velocity": [], "effort": []}
+    order, order_key = None, None
+    bag_start = reader.start_time
+    for connection, receive_ns, raw in reader.messages(connections=connections):
+        msg = reader.deserialize(raw, connection.msgtype)
+        stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
+        received.append(receive_ns)
+        key = tuple(msg.name)
+        if key != order_key:  # joints are matched by name, not by position in the message
+            missing = [n for n in names if n not in key]
+            if missing:
+                raise DvrkDartError(f"{path}: topic {topic}: joint {missing[0]} missing from the message at t = {(receive_ns - bag_start) / NS:.3f} s into the bag (names: {', '.join(key) or 'none'})")
+            order, order_key = [key.index(n) for n in names], key
+        for field in rows:
+            values = np.asarray(getattr(msg, field), dtype=float)
+            if len(values) != len(key):
+                raise DvrkDartError(f"{path}: topic {topic}: {field} has {len(values)} values for {len(key)} joint names at t = {(receive_ns - bag_start) / NS:.3f} s into the bag")
+            rows[field].append(values[order])
+    arrays = {field: np.array(values, dtype=float).reshape(len(stamps), len(names)) for field, values in rows.items()}
+    for field, values in arrays.items():
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            raise DvrkDartError(f"{path}: topic {topic}: {field} of {names[j]} is {values[k, j]} at t = {(received[k] - bag_start) / NS:.3f} s into the bag")
+    stamps_ns = np.array(stamps, dtype=np.int64)
+    receive_time = not stamps_ns.any()
+    if receive_time:
+        # a recorder that leaves header stamps empty: the bag's receive times are all there is
+        print(f"dvrk-dart: note: {path}: topic {topic} has no header stamps; using the bag's receive times", file=sys.stderr)
+        stamps_ns = np.array(received, dtype=np.int64)
+    return TopicSamples(topic, stamps_ns, arrays["position"], arrays["velocity"], arrays["effort"], receive_time)
+
+
+def _check_times(path: Path, samples: TopicSamples) -> None:
+    seconds = (samples.stamps_ns - samples.stamps_ns[0]) / NS
+    steps = np.diff(seconds)
+    if (steps <= 0).any():
+        k = int(np.argmax(steps <= 0))
+        raise DvrkDartError(f"{path}: topic {samples.topic}: stamps go backwards (or repeat) at t = {seconds[k + 1]:.4f} s from its first message")
+    if (steps > MAX_GAP_S).any():
+        k = int(np.argmax(steps > MAX_GAP_S))
+        raise DvrkDartError(
+            f"{path}: topic {samples.topic}: gap of {steps[k] * 1e3:.0f} ms at t = {seconds[k]:.4f} s from its first message "
+            f"(more than {MAX_GAP_S * 1e3:.0f} ms is missing data)"
+        )
+
+
+def _resample(samples: TopicSamples, start_ns: int, grid_s: np.ndarray) -> np.ndarray:
+    """(len(grid), 3 * joints): position, velocity, effort on the grid (cubic)."""
+    t = (samples.stamps_ns - start_ns) / NS
+    values = np.hstack([samples.position, samples.velocity, samples.effort])
+    # cubic: stamp jitter of +-1 ms moves the published errors by < 5e-4 (linear: 1.4e-3 on J4)
+    return CubicSpline(t, values, axis=0)(grid_s)
+
+
+def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
+    """A bag -> MeasuredRun (model coordinates, uniform grid), with one-line errors."""
+    from dvrk_dart.io.reference_data import (
+        CSV_COLUMNS,
+        MeasuredRun,
+        check_joint_ranges,
+        sample_rate_hz,
+    )
+    from dvrk_dart.io.signal import MIN_ROWS
+    from dvrk_dart.model.description import load_model
+
+    path = Path(path)
+    topics = topics or current_topics()
+    rate = topics.rate
+    if rate != sample_rate_hz():
+        # upstream's filter, trim and first period are defined in samples at that rate
+        raise DvrkDartError(f"--rate {rate:g}: measured runs are processed at {sample_rate_hz():g} Hz (the identification's processing); resample at that rate")
+    arm, jaw = read_topics(path, topics)
+    for samples in (arm, jaw):
+        _check_times(path, samples)
+    # the grid: multiples of the period on the bag's clock, so that a bag stamped
+    # on a regular grid is sampled at its own stamps (no interpolation at all)
+    first_ns = max(int(arm.stamps_ns[0]), int(jaw.stamps_ns[0]))
+    if float(NS / rate).is_integer():  # integers: epoch stamps (~1.7e18 ns) are beyond float64's ns resolution
+        period_ns = NS // int(rate)
+        start_ns = -(-first_ns // period_ns) * period_ns
+    else:
+        start_ns = int(np.ceil(first_ns * rate / NS - 1e-9) * NS / rate)
+    end_ns = min(int(arm.stamps_ns[-1]), int(jaw.stamps_ns[-1]))
+    span_s = (end_ns - start_ns) / NS
+    n = int(np.floor(span_s * rate + 1e-9)) + 1 if end_ns >= start_ns else 0
+    if n < MIN_ROWS:
+        raise DvrkDartError(
+            f"{path}: topics {arm.topic} and {jaw.topic} overlap for {max(span_s, 0.0):.3f} s: "
+            f"{max(n, 0)} samples at {rate:g} Hz, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)"
+        )
+    grid_s = np.arange(n) / rate
+    arm_values, jaw_values = _resample(arm, start_ns, grid_s), _resample(jaw, start_ns, grid_s)
+    k = len(DVRK_ARM_JOINT_NAMES)
+    dvrk = {
+        field: np.hstack([arm_values[:, i * k : (i + 1) * k], jaw_values[:, i : i + 1]])
+        for i, field in enumerate(("position", "velocity", "effort"))
+    }
+    motor_map = load_model().motor_map
+    q = motor_map.positions_to_model(dvrk["position"])
+    dq = motor_map.positions_to_model(dvrk["velocity"])
+    tau = motor_map.efforts_to_model(dvrk["effort"])
+    check_joint_ranges(q, path)
+    data = pd.DataFrame(np.hstack([q, dq, tau]), columns=CSV_COLUMNS)
+    data.insert(0, "t", grid_s)
+    return MeasuredRun(path=path, data=data)
+
+
+# --- writing ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class JointStates:
+    """One topic of joint states to write: names, times (s) and values (dVRK units);
+    velocity and effort may be None (commands carry positions only)."""
+
+    topic: str
+    names: tuple[str, ...]
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray | None = None
+    effort: np.ndarray | None = None
+
+
+def psm_joint_states(arm: str, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
+    """The topics of a PSM (the arm's joints, then the jaw on its own topic) from
+    model-coordinate arrays (N, 7): mapped to the dVRK's joint values."""
+    from dvrk_dart.model.description import load_model
+
+    motor_map = load_model().motor_map
+    position = motor_map.positions_to_dvrk(q)
+    velocity = None if dq is None else motor_map.positions_to_dvrk(dq)
+    effort = None if tau is None else motor_map.efforts_to_dvrk(tau)
+    k = len(DVRK_ARM_JOINT_NAMES)
+
+    def part(cols):
+        return [None if a is None else a[:, cols] for a in (position, velocity, effort)]
+
+    return [
+        JointStates(f"/{arm}/{suffix}", DVRK_ARM_JOINT_NAMES, np.asarray(t, dtype=float), *part(slice(0, k))),
+        JointStates(f"/{arm}/jaw/{suffix}", (DVRK_JAW_JOINT_NAME,), np.asarray(t, dtype=float), *part(slice(k, k + 1))),
+    ]
+
+
+def _messages(typestore, states: JointStates, stamps_ns: np.ndarray, ros1: bool):
+    types = typestore.types
+    Time, Header, JointState = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"], types[JOINT_STATE]
+    empty = np.zeros(0)
+    for i, stamp in enumerate(stamps_ns):
+        stamp = int(stamp)
+        time = Time(sec=stamp // NS, nanosec=stamp % NS)
+        header = Header(seq=i, stamp=time, frame_id="") if ros1 else Header(stamp=time, frame_id="")
+        yield stamp, JointState(
+            header=header,
+            name=list(states.names),
+            position=np.ascontiguousarray(states.position[i], dtype=np.float64),
+            velocity=empty if states.velocity is None else np.ascontiguousarray(states.velocity[i], dtype=np.float64),
+            effort=empty if states.effort is None else np.ascontiguousarray(states.effort[i], dtype=np.float64),
+        )
+
+
+def _stream(order: int, connection, receive_ns: np.ndarray, messages) -> Iterator[tuple]:
+    for received, (_, msg) in zip(receive_ns, messages):
+        yield int(received), order, connection, msg
+
+
+def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = "mcap", stamps_ns: dict[str, np.ndarray] | None = None) -> Path:
+    """Write joint-state topics as a bag: a ROS 2 folder (mcap or sqlite3
+    storage) or a ROS 1 .bag file. Built beside `out` and moved there whole;
+    `out` must not exist (a bag is never replaced). `stamps_ns` overrides the
+    header stamps per topic (receive times stay t)."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    out = Path(out)
+    if storage not in STORAGES:
+        raise DvrkDartError(f"bag storage must be one of {', '.join(STORAGES)}, not '{storage}'")
+    if out.exists() or out.is_symlink():
+        raise DvrkDartError(f"{out}: exists; a bag is never overwritten (choose a new name or remove it)")
+    ros1 = storage == "ros1"
+    typestore = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    building = out.parent / f".{out.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    building.mkdir()
+    try:
+        target = building / out.name
+        if ros1:
+            writer = Writer1(target)
+        else:
+            plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+            writer = Writer2(target, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
+        serialize = typestore.serialize_ros1 if ros1 else typestore.serialize_cdr
+        with writer:
+            streams = []
+            for order, states in enumerate(topics):
+                connection = writer.add_connection(states.topic, JOINT_STATE, typestore=typestore)
+                receive_ns = np.round(np.asarray(states.t) * NS).astype(np.int64)
+                header_ns = receive_ns if stamps_ns is None or states.topic not in stamps_ns else stamps_ns[states.topic]
+                streams.append(_stream(order, connection, receive_ns, _messages(typestore, states, header_ns, ros1)))
+            # in time order across topics, as a recorder writes them (players replay in file order)
+            for received, _, connection, msg in heapq.merge(*streams, key=lambda item: (item[0], item[1])):
+                writer.write(connection, received, serialize(msg, JOINT_STATE))
+        os.replace(target, out)
+    finally:
+        shutil.rmtree(building, ignore_errors=True)
+    return out
+
+
+def export_run(run_dir: Path, out: Path, arm: str = DEFAULT_ARM, storage: str = "mcap") -> Path:
+    """A simulated run folder -> a bag with the topics and types a real PSM
+    publishes: measured_js (position, velocity, the *simulated* effort) and
+    jaw/measured_js, stamped with the simulated time."""
+    from dvrk_dart.io.mcap_log import read_mcap
+
+    log = Path(run_dir) / "run.mcap"
+    if not log.is_file():
+        raise DvrkDartError(f"{run_dir}: no run.mcap (not a run folder)")
+    try:
+        record = read_mcap(log)
+    except DvrkDartError:
+        raise
+    except Exception as exc:
+        raise DvrkDartError(f"{log}: not a readable run log ({_first_line(exc)})") from None
+    if not len(record):
+        raise DvrkDartError(f"{log}: the run has no samples")
+    for label, values in (("q", record.q), ("dq", record.dq), ("effort_sim", record.effort_sim)):
+        bad = ~np.isfinite(values)
+        if bad.any():
+            k, j = np.argwhere(bad)[0]
+            raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
+    if storage == "ros1" and out.suffix != ".bag":
+        raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
+    return write_bag(out, psm_joint_states(arm, record.t, record.q, record.dq, record.effort_sim), storage)

@@ -1,0 +1,204 @@
+"""Trajectories for a real dVRK to play: the identification's excitations
+("one", "two") and the Cartesian scenarios' joint trajectories, in the dVRK's
+joints and units, checked against the joint and velocity limits.
+
+The excitations are periodic Fourier series of 6 harmonics (data README).
+Upstream's optimised coefficients are binary pickles that this project does not
+fetch, so the series are *fitted* here to the measured runs: for a base
+frequency, linear least squares of each joint's measured position (dVRK
+coordinates) on a constant and the sines and cosines of the 6 harmonics over the
+whole run; the base frequency is the one whose fit leaves the smallest residual.
+It is 0.1543 Hz in the data's time (rows at 200 Hz: a period of 1296 rows), not
+the nominal 0.18 Hz (1111 rows), with which no 6-harmonic series fits (residuals
+of 0.2-0.8 rad). The fit's residuals (position and velocity against the
+measured ones) and both frequencies are recorded in excitation.json.
+
+The Cartesian scenarios' joint trajectories are those of their kinematic mode:
+the Eq. 5 controller integrated with RK4 (runs/cartesian.py), no simulation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import DVRK_JOINT_NAMES
+
+#: the identification's excitation (data README): nominal base frequency and harmonics
+EXCITATION_BASE_HZ = 0.18
+EXCITATION_HARMONICS = 6
+#: where the fitted base frequency is searched (Hz): wide around the nominal one,
+#: on a grid finer than the fit's sharpness (its residual doubles within 2e-4 Hz)
+BASE_SEARCH_HZ = (0.10, 0.25)
+BASE_SEARCH_STEP_HZ = 1e-4
+SEARCH_DECIMATION = 10
+#: the measured runs whose excitations can be played
+EXCITATIONS = ("one", "two")
+#: integration step of the Cartesian scenarios' kinematic controller: the
+#: simulator's default step, with which the kinematic runs track to ~1e-15 m
+MAX_KINEMATIC_STEP_S = 1e-3
+
+
+@dataclass
+class Excitation:
+    """A joint trajectory in the model's coordinates (q1..q7), on a uniform grid."""
+
+    name: str
+    t: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    source: dict = field(default_factory=dict)  # how it was made (recorded in excitation.json)
+
+
+def fourier_basis(t: np.ndarray, base_hz: float = EXCITATION_BASE_HZ, harmonics: int = EXCITATION_HARMONICS) -> tuple[np.ndarray, np.ndarray]:
+    """(position basis, velocity basis), each (len(t), 1 + 2 * harmonics):
+    columns 1, sin(l w t), cos(l w t) for l = 1..harmonics and their derivatives."""
+    w = 2 * math.pi * base_hz
+    lw = w * np.arange(1, harmonics + 1)
+    phase = np.outer(t, lw)
+    position = np.hstack([np.ones((len(t), 1)), np.sin(phase), np.cos(phase)])
+    velocity = np.hstack([np.zeros((len(t), 1)), lw * np.cos(phase), -lw * np.sin(phase)])
+    return position, velocity
+
+
+def _fit_residual(t: np.ndarray, q: np.ndarray, base_hz: float) -> float:
+    basis, _ = fourier_basis(t, base_hz)
+    coefficients, *_ = np.linalg.lstsq(basis, q, rcond=None)
+    return float(np.sqrt(np.mean((basis @ coefficients - q) ** 2)))
+
+
+def fitted_base_frequency(t: np.ndarray, q: np.ndarray) -> float:
+    """The base frequency whose 6-harmonic series fits q(t) best (grid, then refined)."""
+    from scipy.optimize import minimize_scalar
+
+    grid = np.arange(BASE_SEARCH_HZ[0], BASE_SEARCH_HZ[1], BASE_SEARCH_STEP_HZ)
+    # the grid on every SEARCH_DECIMATION-th sample (20 Hz still resolves the 6th
+    # harmonic, 0.9 Hz), the refinement on all of them
+    coarse_t, coarse_q = t[::SEARCH_DECIMATION], q[::SEARCH_DECIMATION]
+    best = grid[int(np.argmin([_fit_residual(coarse_t, coarse_q, f) for f in grid]))]
+    refined = minimize_scalar(lambda f: _fit_residual(t, q, f), bounds=(best - BASE_SEARCH_STEP_HZ, best + BASE_SEARCH_STEP_HZ), method="bounded")
+    return float(refined.x)
+
+
+def fitted_excitation(name: str, rate_hz: float) -> Excitation:
+    """The Fourier series fitted to the measured run `name`, sampled at rate_hz."""
+    from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
+    from dvrk_dart.model.description import load_model
+
+    if name not in EXCITATIONS:
+        raise DvrkDartError(f"unknown excitation '{name}' (known: {', '.join(EXCITATIONS)})")
+    run = load_run(resolve_run(name))
+    motor_map = load_model().motor_map
+    q_dvrk, dq_dvrk = motor_map.positions_to_dvrk(run.q), motor_map.positions_to_dvrk(run.dq)
+    base_hz = fitted_base_frequency(run.t, q_dvrk)
+    basis, dbasis = fourier_basis(run.t, base_hz)
+    coefficients, *_ = np.linalg.lstsq(basis, q_dvrk, rcond=None)
+    t = np.arange(int(math.floor(run.t[-1] * rate_hz + 1e-9)) + 1) / rate_hz
+    position, velocity = fourier_basis(t, base_hz)
+    q = motor_map.positions_to_model(position @ coefficients)
+    dq = motor_map.positions_to_model(velocity @ coefficients)
+    source = {
+        "kind": "fourier series fitted to a measured run",
+        "measured": RUNS[name],
+        "base_frequency_hz": base_hz,
+        "nominal_base_frequency_hz": EXCITATION_BASE_HZ,
+        "harmonics": EXCITATION_HARMONICS,
+        "joints": list(DVRK_JOINT_NAMES),
+        # rows: constant, sin(l w t) for l = 1..6, cos(l w t) for l = 1..6; columns: dVRK joints
+        "coefficients": coefficients.tolist(),
+        "fit_rms_position": np.sqrt(np.mean((basis @ coefficients - q_dvrk) ** 2, axis=0)).tolist(),
+        "fit_rms_velocity": np.sqrt(np.mean((dbasis @ coefficients - dq_dvrk) ** 2, axis=0)).tolist(),
+    }
+    return Excitation(name, t, q, dq, source)
+
+
+def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
+    """A Cartesian scenario's joint trajectory (its kinematic mode), at rate_hz."""
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.cartesian import CartesianDriver
+    from dvrk_dart.runs.scenarios import load_scenario
+
+    scenario = load_scenario(name)
+    if scenario.kind != "cartesian":
+        raise DvrkDartError(f"'{name}' is a {scenario.kind} scenario: an excitation is {', '.join(EXCITATIONS)} or a Cartesian scenario")
+    substeps = max(1, math.ceil(1.0 / (rate_hz * MAX_KINEMATIC_STEP_S) - 1e-9))
+    dt = 1.0 / (rate_hz * substeps)
+    samples = int(math.floor(scenario.duration_s * rate_hz + 1e-9)) + 1
+    steps = (samples - 1) * substeps + 1
+    driver = CartesianDriver(load_arm(), scenario, "kinematic", dt, steps)
+    q, dq = np.empty((samples, len(DVRK_JOINT_NAMES))), np.empty((samples, len(DVRK_JOINT_NAMES)))
+    for k in range(steps):
+        if k % substeps == 0:
+            q[k // substeps] = driver.q_kin
+            dq[k // substeps] = driver.closed_loop_velocity(k * dt, driver.q_kin)
+        if k < steps - 1:
+            driver.advance(k, None)
+    source = {"kind": "Cartesian scenario, kinematic mode (Eq. 5 controller, RK4)", "scenario": str(scenario.source), "integration_step_s": dt}
+    return Excitation(scenario.name, np.arange(samples) / rate_hz, q, dq, source)
+
+
+def build_excitation(name: str, rate_hz: float) -> Excitation:
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise DvrkDartError(f"--rate: {rate_hz!r} is not a positive rate (Hz)")
+    excitation = fitted_excitation(name, rate_hz) if name in EXCITATIONS else cartesian_excitation(name, rate_hz)
+    check_limits(excitation)
+    return excitation
+
+
+def check_limits(excitation: Excitation) -> None:
+    """Joint limits (the model's ranges, as for every measured run) and the dVRK's
+    velocity limits ([dvrk_velocity_limits] of the model): one-line refusal."""
+    from dvrk_dart.io.reference_data import check_joint_ranges
+    from dvrk_dart.model.description import load_model
+
+    model = load_model()
+    if not (np.isfinite(excitation.q).all() and np.isfinite(excitation.dq).all()):
+        raise DvrkDartError(f"excitation {excitation.name}: the trajectory has non-finite values")
+    check_joint_ranges(excitation.q, f"excitation {excitation.name}")
+    if model.dvrk_velocity_limits is None:
+        raise DvrkDartError(f"{model.source}: no [dvrk_velocity_limits]: cannot check the excitation's velocities")
+    speed = np.abs(model.motor_map.positions_to_dvrk(excitation.dq))
+    over = speed > model.dvrk_velocity_limits
+    if over.any():
+        k, j = np.argwhere(over)[0]
+        unit = "m/s" if DVRK_JOINT_NAMES[j] == "outer_insertion" else "rad/s"
+        raise DvrkDartError(
+            f"excitation {excitation.name}: {DVRK_JOINT_NAMES[j]} moves at {speed[k, j]:.3f} {unit} at t = {excitation.t[k]:.3f} s, "
+            f"over the velocity limit {model.dvrk_velocity_limits[j]:g} {unit} ({model.source.name}, [dvrk_velocity_limits])"
+        )
+
+
+def write_excitation(excitation: Excitation, folder, arm: str) -> dict:
+    """NAME.csv (time + dVRK joint names, dVRK units), NAME_servo_jp (a ROS 2 bag
+    of servo_jp commands, the jaw on jaw/servo_jp) and excitation.json, in `folder`."""
+    from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+    from dvrk_dart.io.bags import psm_joint_states, write_bag
+    from dvrk_dart.model.description import load_model
+
+    if Path(excitation.name).name != excitation.name or excitation.name in ("", ".", ".."):
+        raise DvrkDartError(f"excitation name '{excitation.name}' cannot name a file")
+    dvrk = load_model().motor_map.positions_to_dvrk(excitation.q)
+    header = ",".join(["time", *DVRK_JOINT_NAMES])
+    rows = "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.column_stack([excitation.t, dvrk]))
+    csv = folder / f"{excitation.name}.csv"
+    write_text_atomic(csv, header + "\n" + rows + "\n")
+    bag = folder / f"{excitation.name}_servo_jp"
+    write_bag(bag, psm_joint_states(arm, excitation.t, excitation.q, suffix="servo_jp"))
+    summary = {
+        "name": excitation.name,
+        "samples": len(excitation.t),
+        "duration_s": float(excitation.t[-1]),
+        "rate_hz": float(1.0 / (excitation.t[1] - excitation.t[0])),
+        "csv": csv.name,
+        "bag": bag.name,
+        "topics": [f"/{arm}/servo_jp", f"/{arm}/jaw/servo_jp"],
+        "start_pose": dict(zip(DVRK_JOINT_NAMES, dvrk[0].tolist())),
+        "max_speed": dict(zip(DVRK_JOINT_NAMES, np.abs(load_model().motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
+        "source": excitation.source,
+    }
+    write_json_atomic(folder / "excitation.json", summary)
+    return summary

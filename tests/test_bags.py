@@ -1,0 +1,271 @@
+"""ROS bags in and out: a bag is a measured run (ROS 2 MCAP/sqlite3, ROS 1),
+a simulated run exports as a bag, and every bad bag is a one-line refusal.
+Bags are made here with rosbags' writers (no ROS installation)."""
+
+import json
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+from scipy.interpolate import CubicSpline
+
+from dvrk_dart.cli import main
+from dvrk_dart.io.bags import NS, BagTopics, load_bag_run, psm_joint_states, write_bag
+from dvrk_dart.io.mcap_log import read_mcap
+from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.model.joints import DVRK_ARM_JOINT_NAMES, MotorCoordinateMap
+
+#: upstream's published relative errors (data README), trajectory "two", first period
+PUBLISHED_RELATIVE_ERRORS = np.array([0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642])
+#: the issue's bound: a bag of the same run reproduces them to this
+BAG_TOLERANCE = 5e-4
+#: a stamp jitter of a real recorder (the robot's samples are stamped when taken)
+JITTER_S = 1e-3
+#: a fixed epoch for the stamps of test bags (ROS 1 times are unsigned)
+EPOCH_S = 1_700_000_000
+
+
+@pytest.fixture(scope="module")
+def run_two():
+    return load_run(resolve_run("two"))
+
+
+def jittered_topics(run, seed=0, arm="PSM1", rows=slice(None)):
+    """The run's PSM topics, each stamped on its own jittered 200 Hz clock; the
+    values are the run's at the stamps (a cubic interpolation of the CSV)."""
+    rng = np.random.default_rng(seed)
+    t0 = run.t[rows]
+    truth = CubicSpline(run.t, np.hstack([run.q, run.dq, run.tau]), axis=0)
+    topics, stamps = [], {}
+    for which in range(2):
+        t = t0 + rng.uniform(-JITTER_S, JITTER_S, len(t0))
+        v = truth(t)
+        states = psm_joint_states(arm, EPOCH_S + t, v[:, :7], v[:, 7:14], v[:, 14:])[which]
+        topics.append(states)
+        stamps[states.topic] = np.round(t * NS).astype(np.int64) + EPOCH_S * NS
+    return topics, stamps
+
+
+def model_errors(bag, capsys, *extra):
+    assert main(["model-errors", "--measured", str(bag), "--first-period", "--json", *extra]) == 0
+    return np.array(json.loads(capsys.readouterr().out)["relative_error"])
+
+
+def test_motor_coordinate_map_round_trip():
+    from dvrk_dart.model.description import load_model
+
+    motor_map = load_model().motor_map
+    x = np.random.default_rng(1).normal(size=(50, 7))
+    for there, back in ((motor_map.positions_to_dvrk, motor_map.positions_to_model), (motor_map.efforts_to_dvrk, motor_map.efforts_to_model)):
+        np.testing.assert_allclose(back(there(x)), x, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(there(x)[:, :4], x[:, :4])
+    # power is the same in both coordinates
+    q, tau = x[:, :7], x[::-1]
+    np.testing.assert_allclose(np.sum(motor_map.positions_to_dvrk(q) * motor_map.efforts_to_dvrk(tau), axis=1), np.sum(q * tau, axis=1), atol=1e-12)
+    with pytest.raises(ValueError):
+        MotorCoordinateMap(np.eye(2))
+
+
+@pytest.mark.parametrize("storage", ["mcap", "ros1"])
+def test_bag_of_two_gives_the_published_errors(tmp_path, capsys, run_two, storage):
+    topics, stamps = jittered_topics(run_two)
+    bag = write_bag(tmp_path / ("two.bag" if storage == "ros1" else "two"), topics, storage, stamps_ns=stamps)
+    errors = model_errors(bag, capsys)
+    print(storage, "relative errors", errors.round(5), "max |diff|", np.abs(errors - PUBLISHED_RELATIVE_ERRORS).max())
+    np.testing.assert_allclose(errors, PUBLISHED_RELATIVE_ERRORS, rtol=0, atol=BAG_TOLERANCE)
+
+
+def test_single_mcap_file_sqlite3_and_other_arm(tmp_path, capsys, run_two):
+    topics, stamps = jittered_topics(run_two, seed=2, arm="PSM2", rows=slice(0, 1600))
+    sqlite = write_bag(tmp_path / "sqlite", topics, "sqlite3", stamps_ns=stamps)
+    mcap_dir = write_bag(tmp_path / "mcap", topics, "mcap", stamps_ns=stamps)
+    mcap_file = next(mcap_dir.glob("*.mcap"))
+    a = load_bag_run(sqlite, BagTopics(arm="PSM2"))
+    b = load_bag_run(mcap_file, BagTopics(topic="/PSM2/measured_js", jaw_topic="/PSM2/jaw/measured_js"))
+    np.testing.assert_array_equal(a.data.to_numpy(), b.data.to_numpy())
+    # on the data's own grid the resampled values are the run's: the cubic through
+    # jittered samples errs by much less than a sample step's motion (up to ~8e-3 rad)
+    # (the grid starts at the first 200 Hz tick both topics cover: row 0 or 1)
+    n = 1500
+    assert min(np.abs(a.q[:n] - run_two.q[k : n + k]).max() for k in (0, 1)) < 5e-4
+    # the CLI's --arm reaches the loader
+    assert main(["model-errors", "--measured", str(sqlite), "--arm", "PSM2", "--json"]) == 0
+    capsys.readouterr()
+
+
+def test_joints_are_matched_by_name(tmp_path, run_two):
+    topics, _ = jittered_topics(run_two, rows=slice(0, 600))
+    arm = topics[0]
+    order = [3, 0, 5, 1, 4, 2]
+    shuffled = type(arm)(arm.topic, tuple(arm.names[i] for i in order), arm.t, arm.position[:, order], arm.velocity[:, order], arm.effort[:, order])
+    a = load_bag_run(write_bag(tmp_path / "a", topics))
+    b = load_bag_run(write_bag(tmp_path / "b", [shuffled, topics[1]]))
+    np.testing.assert_array_equal(a.data.to_numpy(), b.data.to_numpy())
+
+
+def test_jaw_in_the_arm_message(tmp_path, run_two):
+    topics, stamps = jittered_topics(run_two, rows=slice(0, 600))
+    arm, jaw = topics
+    merged = type(arm)(
+        arm.topic, (*arm.names, *jaw.names), arm.t,
+        *(np.hstack([getattr(arm, f), getattr(jaw, f)]) for f in ("position", "velocity", "effort")),
+    )
+    one = load_bag_run(write_bag(tmp_path / "one", [merged], stamps_ns=stamps), BagTopics(jaw_topic=arm.topic))
+    # the same as a bag whose jaw topic has the arm's stamps
+    both = load_bag_run(write_bag(tmp_path / "two", [arm, type(jaw)(jaw.topic, jaw.names, arm.t, jaw.position, jaw.velocity, jaw.effort)],
+                                  stamps_ns={arm.topic: stamps[arm.topic], jaw.topic: stamps[arm.topic]}))
+    np.testing.assert_array_equal(one.data.to_numpy(), both.data.to_numpy())
+
+
+def test_missing_header_stamps_fall_back_to_receive_times(tmp_path, capsys, run_two):
+    topics, _ = jittered_topics(run_two, rows=slice(0, 600))
+    zero = {s.topic: np.zeros(len(s.t), dtype=np.int64) for s in topics}
+    run = load_bag_run(write_bag(tmp_path / "b", topics, stamps_ns=zero))
+    assert len(run) >= 590
+    assert "no header stamps; using the bag's receive times" in capsys.readouterr().err
+
+
+# --- export -> import ----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def simulated_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim") / "run"
+    assert main(["replay", "--measured", "two", "--duration", "2.2", "--out", str(out)]) == 0
+    return out
+
+
+def test_export_import_round_trip(tmp_path, simulated_run, capsys):
+    bag, csv = tmp_path / "sim", tmp_path / "sim.csv"
+    assert main(["export", str(simulated_run), "--bag", str(bag)]) == 0
+    assert main(["import", str(bag), "--out", str(csv)]) == 0
+    record = read_mcap(simulated_run / "run.mcap")
+    values = np.loadtxt(csv, delimiter=",")
+    assert values.shape == (len(record), 21)
+    for got, expected in ((values[:, :7], record.q), (values[:, 7:14], record.dq), (values[:, 14:], record.effort_sim)):
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+    # what a real PSM publishes: the topics, the type, the dVRK's joint names, stamps of simulated time
+    with AnyReader([bag]) as reader:
+        assert {t: i.msgtype for t, i in reader.topics.items()} == {
+            "/PSM1/measured_js": "sensor_msgs/msg/JointState",
+            "/PSM1/jaw/measured_js": "sensor_msgs/msg/JointState",
+        }
+        first = next(reader.messages())
+        msg = reader.deserialize(first[2], first[0].msgtype)
+        assert tuple(msg.name) == DVRK_ARM_JOINT_NAMES and len(msg.effort) == 6
+        assert msg.header.stamp.sec * NS + msg.header.stamp.nanosec == round(record.t[0] * NS)
+    assert any(p.suffix == ".mcap" for p in bag.iterdir())
+
+
+def test_replay_of_a_bag(tmp_path, simulated_run, capsys):
+    bag = tmp_path / "sim.bag"
+    assert main(["export", str(simulated_run), "--bag", str(bag), "--storage", "ros1"]) == 0
+    out = tmp_path / "replay"
+    assert main(["replay", "--measured", str(bag), "--duration", "0.1", "--out", str(out)]) == 0
+    config = json.loads((out / "config.json").read_text())
+    assert str(bag) in json.dumps(config)
+    # a scenario file of kind replay takes a bag too
+    scenario = tmp_path / "my-arm.toml"
+    scenario.write_text(f'name = "my-arm"\nkind = "replay"\nmeasured = "{bag}"\nmodes = ["velocity"]\ncounterweights = ["on"]\n')
+    assert main(["run", str(scenario), "--duration", "0.1", "--out", str(tmp_path / "scenario")]) == 0
+    assert (tmp_path / "scenario" / "run.mcap").is_file()
+
+
+def test_export_refusals(tmp_path, simulated_run, capsys):
+    existing = tmp_path / "existing"
+    existing.mkdir()
+    (existing / "keep.txt").write_text("mine")
+    assert main(["export", str(simulated_run), "--bag", str(existing)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert [p.name for p in existing.iterdir()] == ["keep.txt"]
+    assert main(["export", str(tmp_path / "nothing"), "--bag", str(tmp_path / "b")]) == 2
+    assert "no run.mcap" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["existing"]
+
+
+# --- bad input: exit 2, one line naming the problem, nothing written ------------
+
+
+def _write_raw(path, topic_msgs, typestore=None):
+    """A ROS 2 MCAP bag of arbitrary messages: {topic: (msgtype, [(t_ns, msg)])}."""
+    typestore = typestore or get_typestore(Stores.ROS2_HUMBLE)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        for topic, (msgtype, msgs) in topic_msgs.items():
+            connection = writer.add_connection(topic, msgtype, typestore=typestore)
+            for t_ns, msg in msgs:
+                writer.write(connection, t_ns, typestore.serialize_cdr(msg, msgtype))
+    return path
+
+
+def _modified(run, rows=slice(0, 600), **changes):
+    topics, stamps = jittered_topics(run, rows=rows)
+    arm = topics[0]
+    fields = {"topic": arm.topic, "names": arm.names, "t": arm.t, "position": arm.position.copy(), "velocity": arm.velocity, "effort": arm.effort}
+    fields.update(changes)
+    return [type(arm)(**fields), topics[1]], stamps
+
+
+def _bad_bags(tmp_path, run):
+    """name -> (bag path, expected words of the message)"""
+    bags = {}
+    topics, stamps = jittered_topics(run, arm="PSM2", rows=slice(0, 600))
+    bags["missing topic"] = (write_bag(tmp_path / "psm2", topics, stamps_ns=stamps), ["no topic /PSM1/measured_js", "/PSM2/measured_js (sensor_msgs/msg/JointState)"])
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    String = typestore.types["std_msgs/msg/String"]
+    topics, _ = jittered_topics(run, rows=slice(0, 600))
+    jaw = topics[1]
+    bags["wrong type"] = (
+        _write_raw(tmp_path / "type", {"/PSM1/measured_js": ("std_msgs/msg/String", [(k, String(data="x")) for k in range(3)])}),
+        ["/PSM1/measured_js", "std_msgs/msg/String", "expected sensor_msgs/msg/JointState"],
+    )
+    names = tuple("outer_roll_x" if n == "outer_roll" else n for n in DVRK_ARM_JOINT_NAMES)
+    t, s = _modified(run, names=names)
+    bags["missing joint"] = (write_bag(tmp_path / "names", t, stamps_ns=s), ["/PSM1/measured_js", "joint outer_roll missing"])
+    t, s = _modified(run)
+    t[0].position[300, 2] = np.nan
+    bags["NaN"] = (write_bag(tmp_path / "nan", t, stamps_ns=s), ["/PSM1/measured_js", "position of outer_insertion is nan", "t = "])
+    bags["empty"] = (_write_raw(tmp_path / "empty", {"/PSM1/measured_js": ("sensor_msgs/msg/JointState", []), jaw.topic: ("sensor_msgs/msg/JointState", [])}), ["has no messages"])
+    good_topics, good_stamps = jittered_topics(run, rows=slice(0, 600))
+    mcap = next(write_bag(tmp_path / "good", good_topics, stamps_ns=good_stamps).glob("*.mcap"))
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    bags["truncated mcap"] = (truncated, ["truncated.mcap", "not a readable bag"])
+    ros1 = write_bag(tmp_path / "good.bag", good_topics, "ros1", stamps_ns=good_stamps)
+    cut = tmp_path / "truncated.bag"
+    cut.write_bytes(ros1.read_bytes()[: ros1.stat().st_size // 2])
+    bags["truncated ros1"] = (cut, ["truncated.bag", "not a readable bag"])
+    keep = np.r_[0:200, 215:600]  # 15 messages (75 ms) lost
+    topics, stamps = jittered_topics(run, rows=slice(0, 600))
+    arm = topics[0]
+    gap = type(arm)(arm.topic, arm.names, arm.t[keep], arm.position[keep], arm.velocity[keep], arm.effort[keep])
+    bags["gap"] = (write_bag(tmp_path / "gap", [gap, topics[1]], stamps_ns={arm.topic: stamps[arm.topic][keep], jaw.topic: stamps[jaw.topic]}), ["/PSM1/measured_js", "gap of", "ms at t = 0.9"])
+    back = dict(stamps)
+    back[arm.topic] = stamps[arm.topic].copy()
+    back[arm.topic][400] = back[arm.topic][398]
+    bags["backwards"] = (write_bag(tmp_path / "back", topics, stamps_ns=back), ["/PSM1/measured_js", "stamps go backwards", "t = 1.9"])
+    short = jittered_topics(run, rows=slice(0, 300))
+    bags["short"] = (write_bag(tmp_path / "short", short[0], stamps_ns=short[1]), ["/PSM1/measured_js", "/PSM1/jaw/measured_js", "at least 402 needed"])
+    return bags
+
+
+def test_bad_bags_are_refused_in_one_line(tmp_path, run_two, capsys):
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    bags = _bad_bags(inputs, run_two)
+    for case, (bag, words) in bags.items():
+        out = tmp_path / "out" / f"{bag.stem}.csv"
+        code = main(["import", str(bag), "--out", str(out)])
+        err = capsys.readouterr().err.strip()
+        assert code == 2, case
+        assert len(err.splitlines()) == 1 and err.startswith("dvrk-dart: "), (case, err)
+        for word in words:
+            assert word in err, (case, word, err)
+        assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir()), case
+    # the same errors reach every option that takes a measured run
+    assert main(["model-errors", "--measured", str(bags["NaN"][0])]) == 2
+    assert "position of outer_insertion is nan" in capsys.readouterr().err
+    assert main(["import", str(bags["short"][0]), "--out", str(tmp_path / "x.csv"), "--rate", "100"]) == 2
+    assert "--rate" in capsys.readouterr().err
+    assert not (tmp_path / "x.csv").exists()
