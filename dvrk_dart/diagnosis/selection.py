@@ -148,16 +148,19 @@ class Selector:
                 return False
         return True
 
-    def _parsimonious(self, trials: dict[int, CvResult]) -> int:
+    def _parsimonious(self, trials: dict[int, CvResult], current: CvResult) -> int:
         """The best-scoring candidate, unless one with fewer parameters is not
-        significantly worse (bootstrap): then the simplest of those (an offset
-        before a payload that mimics it over a small range of motion)."""
+        significantly worse (bootstrap) and itself worth adding (gain at least
+        MIN_HELDOUT_GAIN): then the simplest of those (an offset before a
+        payload that mimics it over a small range of motion). A simpler rival
+        below the bar must not stop the selection before a better candidate
+        that clears it (a payload behind a 1-parameter effect that adds less)."""
         best = max(trials, key=lambda i: trials[i].fraction)
         best_boot = self.bootstrap_fractions(trials[best].after)
         n_par = lambda i: self.design.effects[i].n_parameters
         rivals = []
         for i, t in trials.items():
-            if n_par(i) < n_par(best) and t.fraction > 0.0:
+            if n_par(i) < n_par(best) and t.fraction - current.fraction >= MIN_HELDOUT_GAIN:
                 worse = best_boot - self.bootstrap_fractions(t.after)
                 if np.mean(worse <= 0.0) > GAIN_FAILURE_QUANTILE:
                     rivals.append(i)
@@ -187,7 +190,7 @@ class Selector:
             refused = [self.design.effects[i].name for i in trials if i not in admissible and trials[i].fraction > current.fraction]
             if not admissible:
                 break
-            best = self._parsimonious(admissible)
+            best = self._parsimonious(admissible, current)
             added, trial, instead_of = [best], trials[best], None
             rival = self._offset_rival(selected, best, families, current)
             if rival is not None:
