@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 from typing import Sequence
 
@@ -55,7 +53,6 @@ from dvrk_dart.diagnosis.selection import (
     Selector,
 )
 from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
-from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
@@ -118,9 +115,9 @@ def diagnose(
     with the same baseline).
 
     baseline: the same trajectory without the effect under study (its gap is
-        subtracted sample by sample from a run of the same motion, and
-        predicted by a session model for a run at another speed:
-        `runs.session_model_gap`);
+        subtracted sample by sample from a run of the same motion; a run of
+        another motion, e.g. another speed, is fitted together with the
+        baseline run, which then carries the shared effects only);
     repeat: the same motion recorded in another session: the session-to-
         session floor per joint and each joint's gap split (`session_floor`);
     payload_at: 'LINK:x,y,z' or (link key, position in its frame): a selected
@@ -366,33 +363,3 @@ def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.nda
         paths += plot_residuals(run.state, after, out_dir / "figures", "residual_after")
         result["where"]["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     write_json_atomic(out_dir / "diagnosis.json", result)
-
-
-# ----------------------------------------------------------------------- CLI
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dvrk_dart.diagnosis.diagnose", description=__doc__.splitlines()[0])
-    parser.add_argument("--measured", required=True, help="run name ('one', 'two', 'one-105g' ...) or CSV path")
-    parser.add_argument("--baseline", help="same trajectory without the effect under study")
-    parser.add_argument("--train", nargs="*", default=[], help="further training runs")
-    parser.add_argument("--holdout", nargs="*", default=[], help="held-out runs (scored only)")
-    parser.add_argument("--out", required=True, help="output folder (diagnosis.json, where.csv, figures/)")
-    parser.add_argument("--no-figures", action="store_true")
-    args = parser.parse_args(argv)
-    try:
-        result = diagnose(args.measured, args.baseline, args.train, args.holdout, out_dir=args.out, figures=not args.no_figures)
-    except DvrkDartError as exc:
-        print(f"dvrk-dart: {exc}", file=sys.stderr)
-        return exc.exit_code
-    print(f"selected: {', '.join(result['selection']['selected']) or 'none'}")
-    for key in ("gap_before", "gap_after"):
-        for split, values in result[key].items():
-            if values is not None:
-                print(f"{key:>10} {split:>7}: " + " ".join(f"{v:.4f}" for v in values))
-    if result["payload"]:
-        p = result["payload"]
-        print(f"payload: {p['mass_kg']:.4f} kg on {p['link']} ({p['group']}) at {np.round(p['position_m'], 4).tolist()} m (link frame)")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
