@@ -64,10 +64,15 @@ def _verdict(verdicts, words):
 
 
 def test_insertion_base_weight_found_with_its_mass(insertion):
-    """105 g on the insertion stage's base: the right group, the mass from the data within 30 %."""
+    """105 g on the insertion stage's base: the right group, the mass from the
+    data (the best-fitting link, intermediate, translates: gravity sees m)
+    within 30 %. Links on which a payload fits as well (bootstrap) are listed,
+    and the mass is then not claimed as identified: the interval spans them."""
     result, verdicts = insertion
-    assert result["payload"]["group"] == "parallelogram"
-    assert result["payload"]["mass_identified"]  # its link translates: gravity sees m
+    payload = result["payload"]
+    assert payload["group"] == "parallelogram" and payload["link"] == "intermediate"
+    if payload.get("tied_links"):
+        assert not payload["mass_identified"] and payload["mass_kg_interval"][0] <= 0.105 <= payload["mass_kg_interval"][1]
     assert _verdict(verdicts, "mass from the data alone")["passed"], verdicts
     assert result["gap_after"]["train"][1] < 0.5 * result["gap_before"]["train"][1]
     assert result["session_floor"] is not None and len(result["gap_split"]["joints"]) == 7

@@ -18,7 +18,11 @@ from dvrk_dart.diagnosis.payload_report import (
     MASS_IDENTIFIED_RATIO,
     pitch_shaft_offsets,
 )
-from dvrk_dart.diagnosis.selection import INTERVAL_QUANTILES, Selector
+from dvrk_dart.diagnosis.selection import (
+    GAIN_FAILURE_QUANTILE,
+    INTERVAL_QUANTILES,
+    Selector,
+)
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
@@ -60,6 +64,30 @@ def _with_intervals(values: dict, folds: list[dict]) -> dict:
     return out
 
 
+def _mass_unseen(selector: Selector, index: int) -> bool:
+    column = selector.design.slices[index].start
+    return bool(selector.A_total[column, column] <= MASS_UNSEEN_FRACTION * np.max(np.diag(selector.A_total)))
+
+
+def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tuple[int, dict]]:
+    """Other links' first-moment payloads that explain the held-out residual
+    not significantly worse than the selected one (bootstrap, as the selection
+    decides), each swapped in for it: (index, its quantities with intervals
+    are built by the caller from these fits). The efforts cannot tell these
+    links apart, so what differs among them is not determined."""
+    current = selector.cross_validate(chosen)
+    reference = selector.bootstrap_fractions(current.after)
+    ties = []
+    for j, effect in enumerate(selector.design.effects):
+        if j == index or not isinstance(effect, FirstMomentPayload) or j in chosen:
+            continue
+        swapped = [j if i == index else i for i in chosen]
+        trial = selector.cross_validate(swapped)
+        if np.mean(reference - selector.bootstrap_fractions(trial.after) <= 0.0) > GAIN_FAILURE_QUANTILE:
+            ties.append((j, selector.fit_all(swapped).params[j]))
+    return ties
+
+
 def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
                         at_index: int | None = None) -> dict:
     """The payload as the efforts determine it: first moment (base frame, q = 0)
@@ -71,9 +99,22 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     p = fit_params[index]
     report = effect.describe(p)
     report.update(_with_intervals(_quantities(effect, p, gravity), [_quantities(effect, f[index], gravity) for f in fold_params if index in f]))
-    mass_column = selector.design.slices[index].start
-    if selector.A_total[mass_column, mass_column] <= MASS_UNSEEN_FRACTION * np.max(np.diag(selector.A_total)):
+    if _mass_unseen(selector, index):
         report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
+    ties = tied_payloads(selector, chosen, index)
+    if ties:  # the link is not determined: every interval spans the tied links' estimates
+        others = [(selector.design.effects[j], q) for j, q in ties]
+        report["tied_links"] = [e.link_name for e, _ in others]
+        if any(_mass_unseen(selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
+            report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
+        for e, q in others:
+            for key, v in _quantities(e, q, _gravity_at_zero(arm, e.link_key)).items():
+                interval = np.asarray(report[f"{key}_interval"], dtype=float)
+                v = np.asarray(v, dtype=float)
+                if interval.ndim == 1:
+                    report[f"{key}_interval"] = [float(min(interval[0], v)), float(max(interval[1], v))]
+                else:
+                    report[f"{key}_interval"] = np.stack([np.minimum(interval[:, 0], v), np.maximum(interval[:, 1], v)], axis=1).tolist()
     lo, hi = report["mass_kg_interval"]
     mass_identified = bool(lo > 0.0 and hi / lo <= MASS_IDENTIFIED_RATIO)
     report["mass_identified"] = mass_identified
@@ -82,12 +123,17 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     units = [effort_unit(j) for j in JOINT_NAMES]
     moment = np.asarray(report["first_moment_base_at_q0_kg_m"])
     words = [
-        f"The efforts determine the payload's first moment m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "
+        ("The best-fitting payload's first moment" if ties else "The efforts determine the payload's first moment") + f" m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "
         f"(base frame, q = 0; pitch shaft centre at the base origin, shaft along base x, +y towards the remote centre of motion, +z up) "
         f"and its gravity efforts at q = 0: " + ", ".join(f"{j} {v:+.3f} {u}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units)) + ".",
-        f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts."
-        if effect.equivalent_links else f"The link ({effect.link_name}) is the only one whose payload gives these efforts.",
     ]
+    if effect.equivalent_links:
+        words.append(f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts.")
+    elif not ties:
+        words.append(f"The link ({effect.link_name}) is the only one whose payload gives these efforts.")
+    if ties:
+        words.append(f"Payloads on {', '.join(report['tied_links'])} explain the efforts as well (held-out scores within the bootstrap noise): "
+                     "the link is not determined, and every interval spans their estimates too.")
     if mass_identified:
         words.append(f"The mass is identified: {p[0]:.3f} kg (interval {lo:.3f}-{hi:.3f} kg), seen through the link's translation or the inertia at several speeds.")
     else:
