@@ -54,7 +54,7 @@ def bench_model() -> dict:
 
 
 def bench_simulation() -> dict:
-    from dvrk_dart.sim.simulator import measure_realtime_factor
+    from dvrk_dart.sim.realtime import measure_realtime_factor
 
     return {"sim_realtime_factor": measure_realtime_factor()}
 

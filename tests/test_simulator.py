@@ -21,7 +21,8 @@ from dvrk_dart.sim.builder import (
     physical_inertia,
 )
 from dvrk_dart.sim.config import Payload, SimConfig
-from dvrk_dart.sim.simulator import PsmSimulator, measure_realtime_factor
+from dvrk_dart.sim.realtime import measure_realtime_factor
+from dvrk_dart.sim.simulator import PsmSimulator
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""The DART simulator of the PSM: the closed-chain arm of `dart_builder.py`
+"""The DART simulator of the PSM: the closed-chain arm of `builder.py`
 driven in one of three modes, with the efforts read cleanly.
 
 Modes
@@ -37,50 +37,23 @@ Counterweight variants (SimConfig.counterweight)
          q3 and the force it needs is applied to J3 with the opposite sign (the
          tendon's reaction).
 
-Identified non-inertial terms (SimConfig flags, JointEffects extras)
-    - viscous friction, Coulomb friction and the J4 spring act on the DART
-      joints whose own variable is the link's variable (yaw, pitch, carriage,
-      tool roll, wrist pitch, jaws): the mapping is exact.  Coulomb friction is
-      DART's joint friction (an LCP row bounded by Fc).  Viscous friction and
-      the spring are NOT DART's joint damping/stiffness: DART applies those
-      implicitly in its forward dynamics but its constraint impulses (the
-      Coulomb rows) see the inertia without them, which on the near-massless
-      tool dofs is off by orders of magnitude (measured: Coulomb + viscous on
-      the tool roll gave a 0.5 N·m error, each alone was exact).  They are
-      applied here the same implicit way (at the end-of-step velocity and
-      position, acceleration solved with DART's closed-chain inertia plus
-      dt·D + dt²·K), which is consistent with every constraint.  Against the
-      model evaluated at the start-of-step state they differ by Fv·dt·ddq.
-    - a smooth Coulomb reversal (JointEffects.coulomb_reversal_velocity > 0:
-      Fc tanh(dq / v_r), the pre-sliding of a cable transmission found by the
-      diagnosis) has no LCP row: it is a joint effort computed each step from
-      the simulated velocity, like the terms below.
-    - friction of the motor-side pseudo links (14, 15, 16: no DART body),
-      the offsets Fo and every JointEffects term on the motor coordinates q5..q7
-      (not a DART joint variable) are explicit model-based efforts computed from
-      the state at the start of each step and applied as joint forces mapped with
-      A^-T (A: the actuated dofs as functions of q; W^T for the wrist).
-    - motor inertia: DART 6.20 has no joint armature (no API), and the identified
-      Im are partly negative.  Both are applied as the model-based effort
-      -I_a·ddq, with ddq of the step solved implicitly from DART's closed-chain
-      inertia (M_c + I_a) ddq = tau - b: exactly an armature (and the identified
-      negative values too).
+Identified non-inertial terms (SimConfig flags, JointEffects extras): where
+each acts (a DART joint, the implicit damping and springs applied here, or an
+explicit model-based effort) is decided in `effects.py`; its docstring says why.
+Frames, closure residuals and divergence checks: `readout.py`.
 """
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import dataclass
-
 import numpy as np
 
-from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.joints import INSERTION, N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim.builder import DartPsm, build
 from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.effects import place_effects
+from dvrk_dart.sim.readout import ClosedChainReadout
 
 #: position feedback of the velocity servo when a reference position is given:
 #: the target velocity is dq_des + (q_des - q) / tau_pos. The measured dq is not
@@ -88,10 +61,6 @@ from dvrk_dart.sim.config import SimConfig
 #: over a run): 1 s removes the drift without turning that mismatch into
 #: acceleration noise (at 50 ms it cost 0.05 N·m of replay noise).
 POSITION_FEEDBACK_TIME_CONSTANT_S = 1.0
-
-#: the loop-closure residual is checked for divergence every this many steps
-#: (10 ms at 1 ms); NaN and joint ranges are checked every step
-CLOSURE_CHECK_EVERY_STEPS = 10
 
 COUNTERWEIGHT_NOTES = """Why the tendon is not DART's mimic joint with coupler
 constraint (Joint.setProperties(..., MIMIC, leader = J3, 1, 0) +
@@ -103,20 +72,7 @@ correction).  The same test with the constraint solved here: 6e-13 m.  Under the
 deadbeat velocity servo the coupler oscillated and diverged within 12 steps."""
 
 
-@dataclass(frozen=True)
-class _Explicit:
-    """Per-coordinate explicit terms (q coordinates, 7 each)."""
-
-    coulomb: np.ndarray
-    viscous: np.ndarray
-    stiffness: np.ndarray
-    offset: np.ndarray
-    armature: np.ndarray
-    smooth_coulomb: np.ndarray  # Fc of the joints with a smooth reversal
-    reversal_velocity: np.ndarray  # their velocity scale (1 where unused)
-
-
-class PsmSimulator:
+class PsmSimulator(ClosedChainReadout):
     """The closed-chain PSM in DART.
 
     Coordinates are the identification model's (q1..q7, joints.py); efforts
@@ -143,10 +99,11 @@ class PsmSimulator:
         for i, dof in enumerate(self._free_dofs):
             Gz[dof, N_JOINTS + i] = 1.0
         self._Gz = Gz
-        self._implicit_damping = np.zeros(n)
-        self._implicit_stiffness = np.zeros(n)
-        self._coulomb_x = np.zeros(n)
-        self._explicit = self._setup_effects()
+        effects = place_effects(model, params, config, self.psm)
+        self._implicit_damping = effects.damping
+        self._implicit_stiffness = effects.stiffness
+        self._coulomb_x = effects.coulomb
+        self._explicit = effects.explicit
         self._pid_integral = 0.0
         self._state: tuple[np.ndarray, np.ndarray] | None = None  # (x, v) after the last step
         self._feedback_q: np.ndarray | None = None
@@ -162,80 +119,12 @@ class PsmSimulator:
         e = self._explicit
         self._has_armature = bool(np.any(e.armature))
         self._has_coulomb = bool(np.any(self._coulomb_x))
-        self._has_explicit = bool(
-            np.any(e.coulomb) or np.any(e.viscous) or np.any(e.stiffness) or np.any(e.offset) or np.any(e.smooth_coulomb) or self._explicit_friction_links
-        )
+        self._has_explicit = e.any_effort
         self.step_index = 0
         self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
         self.last_counterweight_force = 0.0
         self.reset(np.zeros(N_JOINTS))
-
-    # ----------------------------------------------------------------- setup
-    def _setup_effects(self) -> _Explicit:
-        """Put the selected physical effects on DART joints where the mapping is
-        exact; return the rest as explicit per-coordinate terms."""
-        cfg, model, params = self.config, self.model, self.params
-        coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
-        dof_of = {key: i for i, key in enumerate(self.psm.dof_links)}
-        self._explicit_friction_links = []  # motor-side links: explicit, on their variable's rate
-        for link in model.links.values():
-            p = params[link.key]
-            dof = dof_of.get(link.key)
-            on_own_dof = dof is not None and dof in set(self.psm.actuated_dofs)
-            if cfg.friction and link.friction and (p.coulomb or p.viscous):
-                if on_own_dof:
-                    self._set_damping(dof, p.viscous)
-                    self._set_coulomb(dof, p.coulomb)
-                else:
-                    self._explicit_friction_links.append(link)
-            if cfg.offsets and link.friction and p.offset:
-                offset += p.offset * link.variable.coeffs
-            if cfg.spring and link.spring and p.spring:
-                if not on_own_dof:
-                    raise DvrkDartError(f"link {link.key}: a spring on a variable without its own joint is not supported")
-                self._set_stiffness(dof, p.spring)
-            if cfg.motor_inertia and link.motor_inertia and p.motor_inertia:
-                j = int(np.flatnonzero(link.variable.coeffs)[0])
-                armature[j] += p.motor_inertia * link.variable.coeffs[j]
-        extra = cfg.extra
-        extra_arm = np.asarray(extra.armature, dtype=float)
-        if np.any(extra_arm < 0.0):
-            raise DvrkDartError("SimConfig.extra.armature must be >= 0 (a physical armature)")
-        armature += extra_arm
-        offset += np.asarray(extra.offset, dtype=float)
-        # extras on q1..q4 are DART joint physics (the actuated dof is the coordinate);
-        # on the motor coordinates q5..q7 they are explicit.
-        reversal = np.asarray(extra.coulomb_reversal_velocity, dtype=float)
-        if np.any(reversal < 0.0):
-            raise DvrkDartError("SimConfig.extra.coulomb_reversal_velocity must be >= 0")
-        smooth = reversal > 0.0
-        smooth_coulomb = np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0)
-        for j in range(N_JOINTS):
-            dof = self.psm.actuated_dofs[j]
-            direct = np.count_nonzero(self.psm.A[j]) == 1 and self.psm.A[j, j] == 1.0
-            sharp_coulomb = 0.0 if smooth[j] else extra.coulomb[j]  # a smooth reversal has no LCP row
-            if direct:
-                self._set_damping(dof, self._implicit_damping[dof] + extra.viscous[j])
-                self._set_coulomb(dof, self._coulomb_x[dof] + sharp_coulomb)
-                self._set_stiffness(dof, self._implicit_stiffness[dof] + extra.stiffness[j])
-            else:
-                coulomb[j] += sharp_coulomb
-                viscous[j] += extra.viscous[j]
-                stiffness[j] += extra.stiffness[j]
-        return _Explicit(coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0))
-
-    def _set_damping(self, dof: int, value: float) -> None:
-        # not DART's joint damping: see the module docstring (implicit, applied in _step)
-        self._implicit_damping[dof] = value
-
-    def _set_coulomb(self, dof: int, value: float) -> None:
-        self._coulomb_x[dof] = value
-        self.skeleton.getDof(dof).setCoulombFriction(value)
-
-    def _set_stiffness(self, dof: int, value: float) -> None:
-        # not DART's joint spring: see the module docstring (implicit, rest at 0, applied in _step)
-        self._implicit_stiffness[dof] = value
 
     # ------------------------------------------------------------- state
     def _x_of(self, q: np.ndarray) -> np.ndarray:
@@ -295,17 +184,6 @@ class PsmSimulator:
         Gz = self._Gz
         return Gz.T @ M @ Gz, Gz.T @ h
 
-    def _explicit_effort(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """Model-based efforts the actuators must supply beyond DART's physics (q space)."""
-        e = self._explicit
-        effort = e.offset + e.viscous * dq + e.coulomb * np.sign(dq) + e.stiffness * q
-        effort = effort + e.smooth_coulomb * np.tanh(dq / e.reversal_velocity)
-        for link in self._explicit_friction_links:
-            p = self.params[link.key]
-            rate = float(dq @ link.variable.coeffs)
-            effort = effort + (p.coulomb * np.sign(rate) + p.viscous * rate) * link.variable.coeffs
-        return effort
-
     def _counterweight_pid(self, q: np.ndarray, dq: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
         kp, ki, kd = self.config.counterweight_pid
         cw = self.psm.counterweight_dof
@@ -330,7 +208,7 @@ class PsmSimulator:
         Ia = self._explicit.armature
         if self._has_armature:
             Mz[self._diag_q] += Ia
-        explicit = self._explicit_effort(q, dq) if self._has_explicit else self._zeros
+        explicit = self._explicit.effort(q, dq) if self._has_explicit else self._zeros
         ratio = self.model.counterweight_ratio
         has_cw = bool(self._free_dofs)
         lam = 0.0
@@ -439,98 +317,3 @@ class PsmSimulator:
             self._step(np.asarray(tau, dtype=float), None)
         finally:
             self._held = ()
-
-    # ---------------------------------------------------------- checks
-    def closure_residuals_m(self) -> dict[str, float]:
-        out = {}
-        for c in self.psm.closures:
-            Ta = self.psm.bodies[c.link].getWorldTransform().matrix()
-            Tb = self.psm.bodies[c.other].getWorldTransform().matrix()
-            pa = Ta[:3, :3] @ c.point_in_link + Ta[:3, 3]
-            pb = Tb[:3, :3] @ c.point_in_other + Tb[:3, 3]
-            out[c.name] = float(np.linalg.norm(pa - pb))
-        return out
-
-    def closure_residual_m(self) -> float:
-        """Largest loop-closure gap (m) over the loops."""
-        return max(self.closure_residuals_m().values(), default=0.0)
-
-    def passive_joint_errors(self) -> dict[str, float]:
-        """Passive dof (and coupled counterweight) minus the model's linear relation (rad, m)."""
-        x = self.skeleton.getPositions()
-        expected = self.psm.G @ self.q
-        dofs = list(self.psm.passive_dofs)
-        if self.psm.counterweight_dof is not None:
-            dofs.append(self.psm.counterweight_dof)
-            expected[self.psm.counterweight_dof] = self.q[INSERTION] * self.model.counterweight_ratio
-        return {self.model.links[self.psm.dof_links[d]].name: float(x[d] - expected[d]) for d in dofs}
-
-    def counterweight_error_m(self) -> float | None:
-        """Counterweight position minus ratio·q3 (the transmission's exactness)."""
-        cw = self.counterweight_position_m
-        return None if cw is None else cw - self.model.counterweight_ratio * float(self.q[INSERTION])
-
-    def _check(self, x: np.ndarray, v: np.ndarray) -> None:
-        """Divergence checks: NaN and joint range every step, loop closure every
-        CLOSURE_CHECK_EVERY_STEPS steps (its frame queries cost more than a step)."""
-        q = self._A_inv @ x[self._act]
-        lower, upper = self.model.joint_lower, self.model.joint_upper
-        finite = math.isfinite(x.sum() + v.sum())
-        in_range = finite and bool((np.abs(q - self._range_mid) <= self._range_half).all())
-        check_loops = self.step_index % CLOSURE_CHECK_EVERY_STEPS == 0
-        if in_range and not check_loops:
-            return
-        where = f"step {self.step_index} (t = {self.time_s:.3f} s)"
-        if not finite:
-            bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0])
-            raise SimulationDiverged(f"{where}: joint {self.skeleton.getDof(bad).getName()} is not finite")
-        outside = np.flatnonzero((q < lower) | (q > upper))
-        if outside.size:
-            j = int(outside[0])
-            # repr: the shortest text that is the exact value, so the violation shows
-            raise SimulationDiverged(f"{where}: joint {JOINT_NAMES[j]} at {float(q[j])!r} outside its range [{float(lower[j])!r}, {float(upper[j])!r}]")
-        residuals = self.closure_residuals_m()
-        name, worst = max(residuals.items(), key=lambda kv: kv[1], default=("", 0.0))
-        if worst > self.config.closure_residual_limit_m:
-            raise SimulationDiverged(f"{where}: loop {name} open by {worst:.3g} m (limit {self.config.closure_residual_limit_m:g} m)")
-
-    # ------------------------------------------------------------ frames
-    def link_transform(self, key: int) -> np.ndarray:
-        """4x4 base-frame transform of a link frame (DART bodies and fixed frames)."""
-        if key in self.psm.bodies:
-            return self.psm.bodies[key].getWorldTransform().matrix()
-        if key in self.psm.fixed_frames:
-            parent, offset = self.psm.fixed_frames[key]
-            return (self.link_transform(parent) if parent else np.eye(4)) @ offset
-        raise DvrkDartError(f"link {key} has no frame in this simulation")
-
-    def tool_tip_pose(self) -> np.ndarray:
-        tip = self.model.tool_tip
-        return self.link_transform(tip.parent) @ tip.transform(self.q)
-
-    def body_positions(self) -> dict[str, np.ndarray]:
-        """Link name -> frame origin (base frame, m) of every simulated link frame."""
-        keys = list(self.psm.fixed_frames) + list(self.psm.bodies)
-        return {self.model.links[k].name: self.link_transform(k)[:3, 3].copy() for k in sorted(keys)}
-
-
-def measure_realtime_factor(seconds: float = 5.0, config: SimConfig = SimConfig()) -> float:
-    """Simulated seconds per wall second of the full arm (velocity servo on a
-    smooth multi-joint motion), for the benchmark."""
-    from dvrk_dart.io.reference_data import resolve
-    from dvrk_dart.model.description import load_model
-    from dvrk_dart.model.parameters import load_parameters
-
-    model = load_model()
-    params = load_parameters(resolve(model.default_parameters), model)
-    sim = PsmSimulator(model, params, config)
-    centre = 0.5 * (model.joint_lower + model.joint_upper)
-    amplitude = 0.2 * (model.joint_upper - model.joint_lower)
-    sim.reset(centre)
-    steps = int(round(seconds / sim.dt))
-    omega = 2.0 * np.pi * 0.5  # rad/s, a motion of the kind of the excitation trajectories
-    start = time.perf_counter()
-    for k in range(steps):
-        t = (k + 1) * sim.dt
-        sim.step_velocity(amplitude * omega * np.cos(omega * t))
-    return seconds / (time.perf_counter() - start)

@@ -1,0 +1,161 @@
+"""Where each identified non-inertial effect of a SimConfig acts in the DART
+arm: on a DART joint where the mapping is exact, else as an explicit
+model-based effort the simulator applies each step (`simulator.py`).
+
+Identified non-inertial terms (SimConfig flags, JointEffects extras)
+    - viscous friction, Coulomb friction and the J4 spring act on the DART
+      joints whose own variable is the link's variable (yaw, pitch, carriage,
+      tool roll, wrist pitch, jaws): the mapping is exact.  Coulomb friction is
+      DART's joint friction (an LCP row bounded by Fc).  Viscous friction and
+      the spring are NOT DART's joint damping/stiffness: DART applies those
+      implicitly in its forward dynamics but its constraint impulses (the
+      Coulomb rows) see the inertia without them, which on the near-massless
+      tool dofs is off by orders of magnitude (measured: Coulomb + viscous on
+      the tool roll gave a 0.5 N·m error, each alone was exact).  They are
+      applied here the same implicit way (at the end-of-step velocity and
+      position, acceleration solved with DART's closed-chain inertia plus
+      dt·D + dt²·K), which is consistent with every constraint.  Against the
+      model evaluated at the start-of-step state they differ by Fv·dt·ddq.
+    - a smooth Coulomb reversal (JointEffects.coulomb_reversal_velocity > 0:
+      Fc tanh(dq / v_r), the pre-sliding of a cable transmission found by the
+      diagnosis) has no LCP row: it is a joint effort computed each step from
+      the simulated velocity, like the terms below.
+    - friction of the motor-side pseudo links (14, 15, 16: no DART body),
+      the offsets Fo and every JointEffects term on the motor coordinates q5..q7
+      (not a DART joint variable) are explicit model-based efforts computed from
+      the state at the start of each step and applied as joint forces mapped with
+      A^-T (A: the actuated dofs as functions of q; W^T for the wrist).
+    - motor inertia: DART 6.20 has no joint armature (no API), and the identified
+      Im are partly negative.  Both are applied as the model-based effort
+      -I_a·ddq, with ddq of the step solved implicitly from DART's closed-chain
+      inertia (M_c + I_a) ddq = tau - b: exactly an armature (and the identified
+      negative values too).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import Link, PsmModel
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.sim.builder import DartPsm
+from dvrk_dart.sim.config import SimConfig
+
+
+@dataclass(frozen=True)
+class ExplicitEffects:
+    """Per-coordinate explicit terms (q coordinates, 7 each), and the motor-side
+    links whose friction acts on their variable's rate."""
+
+    coulomb: np.ndarray
+    viscous: np.ndarray
+    stiffness: np.ndarray
+    offset: np.ndarray
+    armature: np.ndarray
+    smooth_coulomb: np.ndarray  # Fc of the joints with a smooth reversal
+    reversal_velocity: np.ndarray  # their velocity scale (1 where unused)
+    friction_links: tuple[Link, ...]
+    params: IdentifiedParameters
+
+    @property
+    def any_effort(self) -> bool:
+        """Whether `effort` can be non-zero (the armature is applied apart)."""
+        return bool(
+            np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
+            or np.any(self.smooth_coulomb) or self.friction_links
+        )
+
+    def effort(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """Model-based efforts the actuators must supply beyond DART's physics (q space)."""
+        effort = self.offset + self.viscous * dq + self.coulomb * np.sign(dq) + self.stiffness * q
+        effort = effort + self.smooth_coulomb * np.tanh(dq / self.reversal_velocity)
+        for link in self.friction_links:
+            p = self.params[link.key]
+            rate = float(dq @ link.variable.coeffs)
+            effort = effort + (p.coulomb * np.sign(rate) + p.viscous * rate) * link.variable.coeffs
+        return effort
+
+
+@dataclass(frozen=True)
+class EffectsPlacement:
+    """The effects of one SimConfig, placed: per DART dof (implicit damping and
+    stiffness applied by the simulator, Coulomb rows set on DART's joints) and
+    the explicit rest."""
+
+    damping: np.ndarray  # per dof, N·m s/rad or N s/m, applied implicitly
+    stiffness: np.ndarray  # per dof, rest at 0, applied implicitly
+    coulomb: np.ndarray  # per dof: DART's joint Coulomb friction (set by place_effects)
+    explicit: ExplicitEffects
+
+
+def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConfig, psm: DartPsm) -> EffectsPlacement:
+    """Put the selected physical effects on DART joints where the mapping is
+    exact (Coulomb friction is set on `psm`'s skeleton here); return the rest
+    as explicit per-coordinate terms."""
+    n = psm.n_dofs
+    damping, stiffness_x, coulomb_x = np.zeros(n), np.zeros(n), np.zeros(n)
+    coulomb_dofs: list[int] = []
+
+    def set_coulomb(dof: int, value: float) -> None:
+        coulomb_x[dof] = value
+        coulomb_dofs.append(dof)
+
+    coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
+    dof_of = {key: i for i, key in enumerate(psm.dof_links)}
+    friction_links = []  # motor-side links: explicit, on their variable's rate
+    for link in model.links.values():
+        p = params[link.key]
+        dof = dof_of.get(link.key)
+        on_own_dof = dof is not None and dof in set(psm.actuated_dofs)
+        if config.friction and link.friction and (p.coulomb or p.viscous):
+            if on_own_dof:
+                # not DART's joint damping: see the module docstring (implicit, applied by the simulator)
+                damping[dof] = p.viscous
+                set_coulomb(dof, p.coulomb)
+            else:
+                friction_links.append(link)
+        if config.offsets and link.friction and p.offset:
+            offset += p.offset * link.variable.coeffs
+        if config.spring and link.spring and p.spring:
+            if not on_own_dof:
+                raise DvrkDartError(f"link {link.key}: a spring on a variable without its own joint is not supported")
+            # not DART's joint spring: see the module docstring (implicit, rest at 0)
+            stiffness_x[dof] = p.spring
+        if config.motor_inertia and link.motor_inertia and p.motor_inertia:
+            j = int(np.flatnonzero(link.variable.coeffs)[0])
+            armature[j] += p.motor_inertia * link.variable.coeffs[j]
+    extra = config.extra
+    extra_arm = np.asarray(extra.armature, dtype=float)
+    if np.any(extra_arm < 0.0):
+        raise DvrkDartError("SimConfig.extra.armature must be >= 0 (a physical armature)")
+    armature += extra_arm
+    offset += np.asarray(extra.offset, dtype=float)
+    # extras on q1..q4 are DART joint physics (the actuated dof is the coordinate);
+    # on the motor coordinates q5..q7 they are explicit.
+    reversal = np.asarray(extra.coulomb_reversal_velocity, dtype=float)
+    if np.any(reversal < 0.0):
+        raise DvrkDartError("SimConfig.extra.coulomb_reversal_velocity must be >= 0")
+    smooth = reversal > 0.0
+    smooth_coulomb = np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0)
+    for j in range(N_JOINTS):
+        dof = psm.actuated_dofs[j]
+        direct = np.count_nonzero(psm.A[j]) == 1 and psm.A[j, j] == 1.0
+        sharp_coulomb = 0.0 if smooth[j] else extra.coulomb[j]  # a smooth reversal has no LCP row
+        if direct:
+            damping[dof] = damping[dof] + extra.viscous[j]
+            set_coulomb(dof, coulomb_x[dof] + sharp_coulomb)
+            stiffness_x[dof] = stiffness_x[dof] + extra.stiffness[j]
+        else:
+            coulomb[j] += sharp_coulomb
+            viscous[j] += extra.viscous[j]
+            stiffness[j] += extra.stiffness[j]
+    for dof in dict.fromkeys(coulomb_dofs):
+        psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
+    explicit = ExplicitEffects(
+        coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params
+    )
+    return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)
