@@ -139,7 +139,7 @@ def _log_arm(rec: rr.RecordingStream, record: RunRecord, model: PsmModel | None)
         rec.send_columns(
             f"world/arm/links/{group}",
             indexes=[times],
-            columns=rr.LineStrips3D.columns(strips=list(strips.reshape(-1, 2, 3))).partition(np.full(n, len(segments))),
+            columns=rr.LineStrips3D.columns(strips=strips.reshape(-1, 2, 3)).partition(np.full(n, len(segments))),  # one array: rerun's numpy path
             strict=True,
         )
 
