@@ -4,8 +4,12 @@ passive joints' and the counterweight's errors against the model's relations,
 and the divergence checks of each step.
 
 `ClosedChainReadout` is a mixin of `PsmSimulator` (simulator.py): it reads the
-DART arm (`self.psm`, `self.skeleton`), the model, `self.q` and
-`self.step_index`.
+DART arm (`self.psm`, `self.skeleton`), the model, the simulator's current
+state (`_positions`, `_coordinates`) and `self.step_index`. A DART world
+transform costs more to query than a step's arithmetic, and the loop, the
+divergence check and the logs ask for the same frames of one state: they are
+fetched once per state (`_frame`), the cache being dropped whenever the state
+changes (`_state_changed`).
 """
 
 from __future__ import annotations
@@ -25,40 +29,65 @@ CLOSURE_CHECK_EVERY_STEPS = 10
 class ClosedChainReadout:
     """Frames, closure residuals, relation errors and divergence checks."""
 
+    # ------------------------------------------------------------ state
+    def _state_changed(self) -> None:
+        """DART's state changed (step, reset, imposed pose): forget what was read."""
+        self._frames: dict[int, np.ndarray] = {}
+        self._closures: dict[str, float] | None = None
+
+    def _frame(self, key: int) -> np.ndarray:
+        """Base-frame transform of a link frame at the current state (shared: do not modify)."""
+        T = self._frames.get(key)
+        if T is None:
+            if key in self.psm.bodies:
+                T = self.psm.bodies[key].getWorldTransform().matrix()
+            elif key in self.psm.fixed_frames:
+                parent, offset = self.psm.fixed_frames[key]
+                T = (self._frame(parent) if parent else np.eye(4)) @ offset
+            else:
+                raise DvrkDartError(f"link {key} has no frame in this simulation")
+            self._frames[key] = T
+        return T
+
     # ---------------------------------------------------------- checks
     def closure_residuals_m(self) -> dict[str, float]:
-        out = {}
-        for c in self.psm.closures:
-            Ta = self.psm.bodies[c.link].getWorldTransform().matrix()
-            Tb = self.psm.bodies[c.other].getWorldTransform().matrix()
-            pa = Ta[:3, :3] @ c.point_in_link + Ta[:3, 3]
-            pb = Tb[:3, :3] @ c.point_in_other + Tb[:3, 3]
-            out[c.name] = float(np.linalg.norm(pa - pb))
-        return out
+        if self._closures is None:
+            out = {}
+            for c in self.psm.closures:
+                Ta = self._frame(c.link)
+                Tb = self._frame(c.other)
+                pa = Ta[:3, :3] @ c.point_in_link + Ta[:3, 3]
+                pb = Tb[:3, :3] @ c.point_in_other + Tb[:3, 3]
+                out[c.name] = float(np.linalg.norm(pa - pb))
+            self._closures = out
+        return dict(self._closures)
 
     def closure_residual_m(self) -> float:
         """Largest loop-closure gap (m) over the loops."""
-        return max(self.closure_residuals_m().values(), default=0.0)
+        self.closure_residuals_m()
+        return max(self._closures.values(), default=0.0)
 
     def passive_joint_errors(self) -> dict[str, float]:
         """Passive dof (and coupled counterweight) minus the model's linear relation (rad, m)."""
-        x = self.skeleton.getPositions()
-        expected = self.psm.G @ self.q
-        dofs = list(self.psm.passive_dofs)
+        x = self._positions()
+        q = self._coordinates()
+        expected = self.psm.G @ q
+        dofs = self._passive_and_counterweight
         if self.psm.counterweight_dof is not None:
-            dofs.append(self.psm.counterweight_dof)
-            expected[self.psm.counterweight_dof] = self.q[INSERTION] * self.model.counterweight_ratio
-        return {self.model.links[self.psm.dof_links[d]].name: float(x[d] - expected[d]) for d in dofs}
+            expected[self.psm.counterweight_dof] = q[INSERTION] * self.model.counterweight_ratio
+        return {name: float(x[d] - expected[d]) for name, d in zip(self._passive_names, dofs)}
 
     def counterweight_error_m(self) -> float | None:
         """Counterweight position minus ratio·q3 (the transmission's exactness)."""
-        cw = self.counterweight_position_m
-        return None if cw is None else cw - self.model.counterweight_ratio * float(self.q[INSERTION])
+        cw = self.psm.counterweight_dof
+        if cw is None:
+            return None
+        return float(self._positions()[cw]) - self.model.counterweight_ratio * float(self._coordinates()[INSERTION])
 
-    def _check(self, x: np.ndarray, v: np.ndarray) -> None:
-        """Divergence checks: NaN and joint range every step, loop closure every
+    def _check(self, x: np.ndarray, v: np.ndarray, q: np.ndarray) -> None:
+        """Divergence checks at the state (x, v) after a step (q: its coordinates):
+        NaN and joint range every step, loop closure every
         CLOSURE_CHECK_EVERY_STEPS steps (its frame queries cost more than a step)."""
-        q = self._A_inv @ x[self._act]
         lower, upper = self.model.joint_lower, self.model.joint_upper
         finite = math.isfinite(x.sum() + v.sum())
         in_range = finite and bool((np.abs(q - self._range_mid) <= self._range_half).all())
@@ -82,18 +111,23 @@ class ClosedChainReadout:
     # ------------------------------------------------------------ frames
     def link_transform(self, key: int) -> np.ndarray:
         """4x4 base-frame transform of a link frame (DART bodies and fixed frames)."""
-        if key in self.psm.bodies:
-            return self.psm.bodies[key].getWorldTransform().matrix()
-        if key in self.psm.fixed_frames:
-            parent, offset = self.psm.fixed_frames[key]
-            return (self.link_transform(parent) if parent else np.eye(4)) @ offset
-        raise DvrkDartError(f"link {key} has no frame in this simulation")
+        return self._frame(key).copy()
 
     def tool_tip_pose(self) -> np.ndarray:
         tip = self.model.tool_tip
-        return self.link_transform(tip.parent) @ tip.transform(self.q)
+        return self._frame(tip.parent) @ tip.transform(self._coordinates())
 
     def body_positions(self) -> dict[str, np.ndarray]:
         """Link name -> frame origin (base frame, m) of every simulated link frame."""
-        keys = list(self.psm.fixed_frames) + list(self.psm.bodies)
-        return {self.model.links[k].name: self.link_transform(k)[:3, 3].copy() for k in sorted(keys)}
+        return {name: self._frame(k)[:3, 3].copy() for name, k in self._body_frames}
+
+    def _setup_readout(self) -> None:
+        """Names and orders fixed by the built arm (called once by the simulator)."""
+        keys = sorted(list(self.psm.fixed_frames) + list(self.psm.bodies))
+        self._body_frames = [(self.model.links[k].name, k) for k in keys]
+        dofs = list(self.psm.passive_dofs)
+        if self.psm.counterweight_dof is not None:
+            dofs.append(self.psm.counterweight_dof)
+        self._passive_and_counterweight = dofs
+        self._passive_names = [self.model.links[self.psm.dof_links[d]].name for d in dofs]
+        self._state_changed()

@@ -105,7 +105,6 @@ class PsmSimulator(ClosedChainReadout):
         self._coulomb_x = effects.coulomb
         self._explicit = effects.explicit
         self._pid_integral = 0.0
-        self._state: tuple[np.ndarray, np.ndarray] | None = None  # (x, v) after the last step
         self._feedback_q: np.ndarray | None = None
         self._act = self.psm.actuated_dofs
         self._implicit_diag = self.dt * self._implicit_damping + self.dt**2 * self._implicit_stiffness
@@ -124,6 +123,7 @@ class PsmSimulator(ClosedChainReadout):
         self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
         self.last_counterweight_force = 0.0
+        self._setup_readout()
         self.reset(np.zeros(N_JOINTS))
 
     # ------------------------------------------------------------- state
@@ -150,7 +150,7 @@ class PsmSimulator(ClosedChainReadout):
         dq = np.zeros(N_JOINTS) if dq is None else np.asarray(dq, dtype=float)
         self.skeleton.setPositions(self._x_of(q))
         self.skeleton.setVelocities(self._x_of(dq))
-        self._state = None
+        self._state_changed()
         self.last_effort = np.full(N_JOINTS, np.nan)
 
     @property
@@ -160,16 +160,42 @@ class PsmSimulator(ClosedChainReadout):
     @property
     def q(self) -> np.ndarray:
         """The 7 coordinates, from DART's actuated joints."""
-        return self._A_inv @ self.skeleton.getPositions()[self.psm.actuated_dofs]
+        return self._coordinates().copy()
 
     @property
     def dq(self) -> np.ndarray:
-        return self._A_inv @ self.skeleton.getVelocities()[self.psm.actuated_dofs]
+        return self._coordinate_rates().copy()
 
     @property
     def counterweight_position_m(self) -> float | None:
         cw = self.psm.counterweight_dof
-        return None if cw is None else float(self.skeleton.getPosition(cw))
+        return None if cw is None else float(self._positions()[cw])
+
+    # DART's state (dofs x, v) and the coordinates (q, dq), read once per state:
+    # DART's state only changes in a step, reset or set_kinematic (_state_changed)
+    def _state_changed(self) -> None:
+        super()._state_changed()
+        self._x = self._v = self._q = self._dq = None
+
+    def _positions(self) -> np.ndarray:
+        if self._x is None:
+            self._x = self.skeleton.getPositions()
+        return self._x
+
+    def _velocities(self) -> np.ndarray:
+        if self._v is None:
+            self._v = self.skeleton.getVelocities()
+        return self._v
+
+    def _coordinates(self) -> np.ndarray:
+        if self._q is None:
+            self._q = self._A_inv @ self._positions()[self._act]
+        return self._q
+
+    def _coordinate_rates(self) -> np.ndarray:
+        if self._dq is None:
+            self._dq = self._A_inv @ self._velocities()[self._act]
+        return self._dq
 
     # ---------------------------------------------------------- dynamics
     def _reduced_dynamics(self, x: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -200,9 +226,8 @@ class PsmSimulator(ClosedChainReadout):
             Mz ddz + bz = [tau - e_q - ratio·lam·e3 ; lam]
         with e_q the explicit (environment) efforts the actuators must overcome
         and lam the tendon force on the counterweight."""
-        x, v = self._state if self._state is not None else (self.skeleton.getPositions(), self.skeleton.getVelocities())
-        q = self._A_inv @ x[self._act]
-        dq = self._A_inv @ v[self._act]
+        x, v = self._positions(), self._velocities()
+        q, dq = self._coordinates(), self._coordinate_rates()
         Mz, bz = self._reduced_dynamics(x, v)
         n = N_JOINTS
         Ia = self._explicit.armature
@@ -284,13 +309,11 @@ class PsmSimulator(ClosedChainReadout):
         self.skeleton.setForces(forces)
         self.world.step()
         self.step_index += 1
-        x_next = self.skeleton.getPositions()
-        v_next = self.skeleton.getVelocities()
-        self._state = (x_next, v_next)  # DART's state only changes in step/reset/set_kinematic
-        self.last_ddq = (self._A_inv @ v_next[self._act] - dq) / self.dt
+        self._state_changed()
+        self.last_ddq = (self._coordinate_rates() - dq) / self.dt
         self.last_effort = tau if dq_target is not None else tau.copy()
         self.last_counterweight_force = lam
-        self._check(x_next, v_next)
+        self._check(self._positions(), self._velocities(), self._coordinates())
 
     def _counterweight_acceleration(self, ddq: np.ndarray, q, dq, x, v) -> float:
         """Counterweight acceleration of the ideal tendon for a given ddq:
