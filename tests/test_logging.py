@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from dvrk_dart.io import mcap_bulk
 from dvrk_dart.io import mcap_log as log_mcap
 from dvrk_dart.io.mcap_log import read_mcap, write_mcap
 from dvrk_dart.io.rerun_log import write_rrd
@@ -100,7 +101,7 @@ def assert_same_record(back: RunRecord, record: RunRecord) -> None:
         assert (a is None) == (b is None), name
         if b is not None:
             assert a.dtype == np.float64 and a.shape == b.shape, name
-            np.testing.assert_array_equal(a, b, err_msg=name)  # exact: JSON floats are repr
+            np.testing.assert_array_equal(a, b, err_msg=name)  # exact: JSON floats are shortest round-trip text
     assert list(back.effort_model) == list(record.effort_model)
     for term, effort in record.effort_model.items():
         np.testing.assert_array_equal(back.effort_model[term], effort)
@@ -185,16 +186,16 @@ def test_interrupted_mcap_write_leaves_no_file(tmp_path: Path, monkeypatch, exis
     path = tmp_path / "run.mcap"
     if existing:
         path.write_bytes(b"previous run")
-    original = log_mcap.Writer.add_message
+    original = mcap_bulk._File.chunk
     calls = {"n": 0}
 
-    def failing_add_message(self, *args, **kwargs):
+    def failing_chunk(self, *args, **kwargs):  # the first chunk is on disk when the second fails
         calls["n"] += 1
-        if calls["n"] == 1000:
+        if calls["n"] == 2:
             raise RuntimeError("simulated crash while writing")
         return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(log_mcap.Writer, "add_message", failing_add_message)
+    monkeypatch.setattr(mcap_bulk._File, "chunk", failing_chunk)
     with pytest.raises(RuntimeError, match="simulated crash"):
         write_mcap(full_record(), path)
     assert [p.name for p in tmp_path.iterdir()] == (["run.mcap"] if existing else [])

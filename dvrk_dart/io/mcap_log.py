@@ -4,9 +4,12 @@ analysis stage needs (it runs elsewhere, from the logs alone).
 `write_mcap` stores every array of a `RunRecord` as JSON messages, one message per
 sample and channel, stamped with the sample's simulation time (ns); config,
 metrics, markers and software versions go into MCAP metadata records.
-`read_mcap` rebuilds the RunRecord. JSON floats are written with `repr`, so the
-arrays come back bit-identical; non-finite values are written as `null` (valid
-JSON for Foxglove) and read back as NaN.
+`read_mcap` rebuilds the RunRecord. JSON floats are written in their shortest
+round-trip form (Arrow's, like `repr`; -0.0 keeps its sign), so the arrays come
+back bit-identical; non-finite values are written as `null` (valid JSON for
+Foxglove) and read back as NaN. Messages are built column-wise with Arrow and
+written in bulk (`mcap_bulk.py`: the file mcap's Writer would write), so a
+long run costs no Python call per message.
 
 Channels (all JSON, schema encoding jsonschema; `timestamp` = {sec, nsec}):
 
@@ -35,17 +38,18 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
-from mcap.writer import Writer
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path as atomic_output
 from dvrk_dart.io.atomic import strict_json
+from dvrk_dart.io.mcap_bulk import BulkChannel, write_bulk
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
 from dvrk_dart.runs.record import RunRecord
@@ -153,15 +157,20 @@ _JOINT_CHANNEL_METADATA = {
 _SLOT = "\x00slot\x00"  # placeholder for a per-sample number in a message skeleton
 
 
-def _json_numbers(values: np.ndarray) -> list[str]:
-    """JSON text of each value: repr for floats (exact round trip), null if not finite."""
+def _json_numbers(values: np.ndarray) -> pa.Array:
+    """JSON text of each value (an Arrow string array): the shortest text that
+    reads back as the same float64, null if not finite."""
     values = np.asarray(values)
     if values.dtype.kind in "iu":
-        return list(map(str, values.tolist()))
+        return pc.cast(pa.array(values.astype(np.int64)), pa.string())
     values = values.astype(float, copy=False)
-    text = list(map(float.__repr__, values.tolist()))
-    for i in np.flatnonzero(~np.isfinite(values)):
-        text[i] = "null"  # NaN/Infinity are not JSON; Foxglove would reject the message
+    text = pc.cast(pa.array(values), pa.string())
+    finite = np.isfinite(values)
+    if not finite.all():  # NaN/Infinity are not JSON; Foxglove would reject the message
+        text = pc.if_else(pa.array(finite), text, "null")
+    negative_zero = (values == 0.0) & np.signbit(values)
+    if negative_zero.any():  # Arrow writes "-0", which JSON readers take for the integer 0
+        text = pc.if_else(pa.array(negative_zero), "-0.0", text)
     return text
 
 
@@ -169,14 +178,14 @@ class _Messages:
     """Messages of one channel: a skeleton laid out once, numbers filled per sample.
 
     `slot(column)` stands for a per-sample number in the skeleton (an (N,) column);
-    `encode(skeleton)` dumps the skeleton once and fills its slots with one
-    %-format per sample, which is several times faster than json.dumps of N dicts.
-    Slots are filled in the order they were created, which is the order json.dumps
-    writes them, because both follow the order in which the skeleton is written.
+    `encode(skeleton)` dumps the skeleton once and joins its pieces with the
+    columns' texts element-wise (Arrow), all samples at once. Slots are filled in
+    the order they were created, which is the order json.dumps writes them,
+    because both follow the order in which the skeleton is written.
     """
 
     def __init__(self, ns: np.ndarray):
-        self.columns: list[list[str]] = []
+        self.columns: list[pa.Array] = []
         sec, nsec = np.divmod(ns, 1_000_000_000)
         self.timestamp = {"sec": self.slot(sec), "nsec": self.slot(nsec)}
 
@@ -184,13 +193,17 @@ class _Messages:
         self.columns.append(_json_numbers(column))
         return _SLOT
 
-    def encode(self, skeleton: dict) -> Iterator[bytes]:
-        template = _dumps(skeleton).replace("%", "%%").replace(_dumps(_SLOT), "%s")
-        for row in zip(*self.columns):
-            yield (template % row).encode()
+    def encode(self, skeleton: dict) -> pa.Array:
+        pieces = _dumps(skeleton).split(_dumps(_SLOT))
+        if len(pieces) != len(self.columns) + 1:
+            raise AssertionError("message skeleton and its columns differ")
+        parts = [pieces[0]]
+        for column, piece in zip(self.columns, pieces[1:]):
+            parts += [column, piece]
+        return pc.binary_join_element_wise(*parts, "")
 
 
-def _joint_states(ns: np.ndarray, fields: dict[str, np.ndarray], t_s: np.ndarray | None = None) -> Iterator[bytes]:
+def _joint_states(ns: np.ndarray, fields: dict[str, np.ndarray], t_s: np.ndarray | None = None) -> pa.Array:
     """foxglove.JointStates; `fields` maps a JointState field (position, ...) to (N, 7)."""
     m = _Messages(ns)
     head = {"timestamp": m.timestamp} | ({} if t_s is None else {"t_s": m.slot(t_s)})
@@ -198,24 +211,24 @@ def _joint_states(ns: np.ndarray, fields: dict[str, np.ndarray], t_s: np.ndarray
     return m.encode(head | {"joints": joints})
 
 
-def _efforts(ns: np.ndarray, effort: np.ndarray) -> Iterator[bytes]:
+def _efforts(ns: np.ndarray, effort: np.ndarray) -> pa.Array:
     m = _Messages(ns)
     return m.encode({"timestamp": m.timestamp, "name": _JOINT_NAMES, "effort": [m.slot(e) for e in effort.T]})
 
 
-def _poses(ns: np.ndarray, pose: np.ndarray) -> Iterator[bytes]:
+def _poses(ns: np.ndarray, pose: np.ndarray) -> pa.Array:
     m = _Messages(ns)
     position = {k: m.slot(pose[:, i]) for i, k in enumerate("xyz")}
     orientation = {k: m.slot(pose[:, 3 + i]) for i, k in enumerate("xyzw")}
     return m.encode({"timestamp": m.timestamp, "frame_id": FRAME_ID, "pose": {"position": position, "orientation": orientation}})
 
 
-def _residuals(ns: np.ndarray, residual: np.ndarray) -> Iterator[bytes]:
+def _residuals(ns: np.ndarray, residual: np.ndarray) -> pa.Array:
     m = _Messages(ns)
     return m.encode({"timestamp": m.timestamp, "residual_m": m.slot(residual)})
 
 
-def _bodies(ns: np.ndarray, bodies: dict[str, np.ndarray]) -> Iterator[bytes]:
+def _bodies(ns: np.ndarray, bodies: dict[str, np.ndarray]) -> pa.Array:
     m = _Messages(ns)
     items = [{"name": name, "position": {k: m.slot(p[:, i]) for i, k in enumerate("xyz")}} for name, p in bodies.items()]
     return m.encode({"timestamp": m.timestamp, "frame_id": FRAME_ID, "bodies": items})
@@ -246,8 +259,8 @@ def _checked(name: str, array: np.ndarray | None, n: int, width: int | None) -> 
     return array
 
 
-def _channels(record: RunRecord, ns: np.ndarray) -> list[tuple[str, str, dict[str, str], Iterator[bytes]]]:
-    """(topic, schema name, channel metadata, message generator) for what the record holds."""
+def _channels(record: RunRecord, ns: np.ndarray) -> list[tuple[str, str, dict[str, str], pa.Array]]:
+    """(topic, schema name, channel metadata, messages) for what the record holds."""
     n = len(record)
     jm = _JOINT_CHANNEL_METADATA
     sim = {
@@ -309,36 +322,18 @@ def write_mcap(record: RunRecord, path: str | os.PathLike) -> None:
     short time ranges and Foxglove plays the file back without seeking.
     """
     ns = _stamps_ns(record.t)
-    channels = _channels(record, ns)
-    ns_list = ns.tolist()
+    channels = [BulkChannel(topic, schema, metadata, messages) for topic, schema, metadata, messages in _channels(record, ns)]
     versions = software_versions()
+    schemas = {name: (SchemaEncoding.JSONSchema, json.dumps(schema).encode()) for name, schema in SCHEMAS.items()}
+    metadata = [
+        (METADATA_RUN, {"name": record.name, "format": FORMAT, "joint_names": json.dumps(_JOINT_NAMES), "frame_id": FRAME_ID}),
+        (METADATA_CONFIG, _json_strings(record.config)),
+        (METADATA_METRICS, _json_strings(record.metrics)),
+        (METADATA_MARKERS, _json_strings(record.markers)),
+        (METADATA_VERSIONS, versions),
+    ]
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:
-        writer = Writer(stream)
-        writer.start(profile="", library=f"dvrk_dart {versions['dvrk_dart']}")
-        schema_ids = {
-            name: writer.register_schema(name, SchemaEncoding.JSONSchema, json.dumps(schema).encode())
-            for name, schema in SCHEMAS.items()
-        }
-        ids = [
-            writer.register_channel(topic, MessageEncoding.JSON, schema_ids[schema], metadata)
-            for topic, schema, metadata, _ in channels
-        ]
-        add = writer.add_message
-        for i, (stamp, *payloads) in enumerate(zip(ns_list, *(messages for *_, messages in channels))):
-            for channel_id, data in zip(ids, payloads):
-                add(channel_id, stamp, data, stamp, i)
-
-        writer.add_metadata(METADATA_RUN, {
-            "name": record.name,
-            "format": FORMAT,
-            "joint_names": json.dumps(_JOINT_NAMES),
-            "frame_id": FRAME_ID,
-        })
-        writer.add_metadata(METADATA_CONFIG, _json_strings(record.config))
-        writer.add_metadata(METADATA_METRICS, _json_strings(record.metrics))
-        writer.add_metadata(METADATA_MARKERS, _json_strings(record.markers))
-        writer.add_metadata(METADATA_VERSIONS, versions)
-        writer.finish()
+        write_bulk(stream, schemas, channels, MessageEncoding.JSON, ns, metadata, library=f"dvrk_dart {versions['dvrk_dart']}")
 
 
 # ---------------------------------------------------------------- reading
