@@ -40,7 +40,9 @@ class ClosedChainReadout:
         T = self._frames.get(key)
         if T is None:
             if key in self.psm.bodies:
-                T = self.psm.bodies[key].getWorldTransform().matrix()
+                # getTransform() is the world transform (DART's Frame::getTransform with respect to
+                # the world returns getWorldTransform()); dartpy answers it in half the time
+                T = self.psm.bodies[key].getTransform().matrix()
             elif key in self.psm.fixed_frames:
                 parent, offset = self.psm.fixed_frames[key]
                 T = (self._frame(parent) if parent else np.eye(4)) @ offset
@@ -89,8 +91,8 @@ class ClosedChainReadout:
         NaN and joint range every step, loop closure every
         CLOSURE_CHECK_EVERY_STEPS steps (its frame queries cost more than a step)."""
         lower, upper = self.model.joint_lower, self.model.joint_upper
-        finite = math.isfinite(x.sum() + v.sum())
-        in_range = finite and bool((np.abs(q - self._range_mid) <= self._range_half).all())
+        finite = math.isfinite(np.add.reduce(x) + np.add.reduce(v))  # ufuncs direct: this runs every step
+        in_range = finite and bool(np.logical_and.reduce(np.abs(q - self._range_mid) <= self._range_half))
         check_loops = self.step_index % CLOSURE_CHECK_EVERY_STEPS == 0
         if in_range and not check_loops:
             return

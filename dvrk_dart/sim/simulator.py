@@ -99,6 +99,7 @@ class PsmSimulator(ClosedChainReadout):
         for i, dof in enumerate(self._free_dofs):
             Gz[dof, N_JOINTS + i] = 1.0
         self._Gz = Gz
+        self._GzT = Gz.T
         effects = place_effects(model, params, config, self.psm)
         self._implicit_damping = effects.damping
         self._implicit_stiffness = effects.stiffness
@@ -207,8 +208,8 @@ class PsmSimulator(ClosedChainReadout):
             D, K = self._implicit_damping, self._implicit_stiffness
             M[self._diag] += self._implicit_diag
             h = h + D * v + K * (x + self.dt * v)  # DART's spring rest position is 0
-        Gz = self._Gz
-        return Gz.T @ M @ Gz, Gz.T @ h
+        GzT = self._GzT
+        return GzT @ M @ self._Gz, GzT @ h
 
     def _counterweight_pid(self, q: np.ndarray, dq: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
         kp, ki, kd = self.config.counterweight_pid
@@ -242,7 +243,9 @@ class PsmSimulator(ClosedChainReadout):
             if self._feedback_q is not None:  # position feedback: the target depends on q
                 dq_target = dq_target + (self._feedback_q - q) / POSITION_FEEDBACK_TIME_CONSTANT_S
             ddq = (dq_target - dq) / self.dt
-            tau = Mz[:n, :n] @ ddq + bz[:n] + explicit
+            tau = Mz[:n, :n] @ ddq + bz[:n]
+            if self._has_explicit:  # (else explicit is 0: adding it changes no number)
+                tau += explicit
             if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
                 tau += self.psm.G.T @ (self._coulomb_x * np.sign(self.psm.G @ dq_target))
             if has_cw:
@@ -291,7 +294,7 @@ class PsmSimulator(ClosedChainReadout):
             for j, effort in zip(self._held, multipliers):
                 tau[j] = effort  # the servo's effort on a held joint
         # generalized forces on the dofs: actuators, environment terms, armature, tendon
-        force_q = tau - explicit
+        force_q = tau - explicit if self._has_explicit else tau.copy()
         if self._has_armature:
             force_q = force_q - Ia * ddq
         force_q[INSERTION] -= ratio * lam
