@@ -40,7 +40,8 @@ class LoopLog:
     closure: list = field(default_factory=list)
     passive: list = field(default_factory=list)
     counterweight: list = field(default_factory=list)
-    bodies: dict[str, list] = field(default_factory=dict)
+    bodies: list = field(default_factory=list)  # (B, 3) link frame origins per row
+    body_names: list[str] = field(default_factory=list)
     steps_done: int = 0
     error: SimulationDiverged | None = None
 
@@ -58,11 +59,14 @@ class LoopLog:
         return np.column_stack([poses[:, :3, 3], Rotation.from_matrix(poses[:, :3, :3]).as_quat()])
 
     def body_positions(self) -> dict[str, np.ndarray]:
-        return {name: np.asarray(values) for name, values in self.bodies.items()}
+        if not self.bodies:
+            return {}
+        origins = np.asarray(self.bodies)  # (N, B, 3)
+        return {name: origins[:, i].copy() for i, name in enumerate(self.body_names)}
 
 
 def simulate(sim, driver: Driver, steps: int, log_every: int = 1) -> LoopLog:
-    log = LoopLog()
+    log = LoopLog(body_names=list(sim.body_names))
     nan = np.full(N_JOINTS, np.nan)
     try:
         for k in range(steps):
@@ -77,8 +81,7 @@ def simulate(sim, driver: Driver, steps: int, log_every: int = 1) -> LoopLog:
                 log.passive.append(max((abs(e) for n, e in sim.passive_joint_errors().items() if n != "counterweight"), default=0.0))
                 cw = sim.counterweight_error_m()
                 log.counterweight.append(np.nan if cw is None else cw)
-                for name, xyz in sim.body_positions().items():
-                    log.bodies.setdefault(name, []).append(xyz)
+                log.bodies.append(sim.body_origins())
             result = driver.advance(k, sim)
             log.steps_done = k + 1
             if logging:
@@ -88,8 +91,6 @@ def simulate(sim, driver: Driver, steps: int, log_every: int = 1) -> LoopLog:
     except SimulationDiverged as exc:
         log.error = exc
         if len(log.ddq) < len(log.steps):  # the diverged step's start state has no result
-            for name in ("steps", "q", "dq", "tool", "closure", "passive", "counterweight"):
+            for name in ("steps", "q", "dq", "tool", "closure", "passive", "counterweight", "bodies"):
                 getattr(log, name).pop()
-            for values in log.bodies.values():
-                values.pop()
     return log

@@ -122,12 +122,17 @@ class ClosedChainReadout:
 
     def body_positions(self) -> dict[str, np.ndarray]:
         """Link name -> frame origin (base frame, m) of every simulated link frame."""
-        return {name: self._frame(k)[:3, 3].copy() for name, k in self._body_frames}
+        return dict(zip(self.body_names, self.body_origins()))
+
+    def body_origins(self) -> np.ndarray:
+        """(B, 3) frame origins (base frame, m), in the order of `body_names`."""
+        frame = self._frame
+        return np.array([frame(k)[:3, 3] for k in self._body_keys])
 
     def _setup_readout(self) -> None:
         """Names and orders fixed by the built arm (called once by the simulator)."""
-        keys = sorted(list(self.psm.fixed_frames) + list(self.psm.bodies))
-        self._body_frames = [(self.model.links[k].name, k) for k in keys]
+        self._body_keys = sorted(list(self.psm.fixed_frames) + list(self.psm.bodies))
+        self.body_names = [self.model.links[k].name for k in self._body_keys]
         dofs = list(self.psm.passive_dofs)
         if self.psm.counterweight_dof is not None:
             dofs.append(self.psm.counterweight_dof)
