@@ -48,6 +48,33 @@ def test_dart_frames_follow_the_model_kinematics(model, identified, sim):
         np.testing.assert_allclose(sim.q, q, atol=1e-12)
 
 
+def test_batched_readout_equals_dart_frames_at_each_state(model, params):
+    """The logs read frames, closure gaps and passive errors of all logged states
+    at once from DART's dof positions: they must be DART's own, state by state,
+    also off the loop closures (perturbed passive dofs: gaps of millimetres)."""
+    sim = PsmSimulator(model, params, SimConfig())
+    rng = np.random.default_rng(1)
+    X, Q, expected = [], [], []
+    for _ in range(10):
+        q = rng.uniform(model.joint_lower, model.joint_upper)
+        sim.set_kinematic(q)
+        x = sim.dof_positions() + rng.normal(scale=0.01, size=sim.skeleton.getNumDofs())
+        sim.skeleton.setPositions(x)
+        sim._state_changed()
+        X.append(x)
+        Q.append(sim.q)
+        expected.append((sim.closure_residual_m(), max(abs(e) for n, e in sim.passive_joint_errors().items() if n != "counterweight"),
+                         sim.counterweight_error_m(), sim.body_origins(), sim.tool_tip_pose()))
+    out = sim.readout_at(np.array(X), np.array(Q))
+    assert min(e[0] for e in expected) > 1e-4  # the loops really are open
+    for i, (closure, passive, counterweight, bodies, tool) in enumerate(expected):
+        assert out["closure"][i] == pytest.approx(closure, abs=1e-14)
+        assert out["passive"][i] == pytest.approx(passive, abs=1e-14)
+        assert out["counterweight"][i] == pytest.approx(counterweight, abs=1e-14)
+        np.testing.assert_allclose(out["bodies"][i], bodies, atol=1e-14)
+        np.testing.assert_allclose(out["tool"][i], tool, atol=1e-14)
+
+
 def test_static_holding_efforts_equal_the_model_gravity(model, identified, processed_two, sim):
     """100 random static poses inside the range of the measured data."""
     rng = np.random.default_rng(1)

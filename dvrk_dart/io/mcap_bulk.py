@@ -18,6 +18,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import IO
 
@@ -41,6 +42,9 @@ from mcap.records import (
     SummaryOffset,
 )
 from mcap.writer import MCAP0_MAGIC
+
+#: chunks compressed at once (zstd frames are independent: the file is the same)
+COMPRESSION_THREADS = 2
 
 #: mcap.writer.Writer's default chunk size (bytes of uncompressed records)
 CHUNK_SIZE = 1024 * 1024
@@ -101,11 +105,11 @@ class _File:
         self.stream.write(data)
         self.offset += len(data)
 
-    def chunk(self, prefix: bytes, records: bytes, channel_ids: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> None:
-        """One chunk: `prefix` (schemas, channels) then the messages' `records`;
-        offsets: each message's record offset in `records`."""
-        data = prefix + records
-        compressed = zstandard.compress(data)
+    def chunk(self, data: bytes, compressed: bytes, prefix_length: int, channel_ids: np.ndarray, times: np.ndarray,
+              offsets: np.ndarray) -> None:
+        """One chunk: `data` is a prefix (schemas, channels) then the messages'
+        records, `compressed` its zstd frame; offsets: each message's record
+        offset after the prefix."""
         start, end = int(times.min()), max(0, int(times.max()))
         chunk = _records(Chunk(compression="zstd", data=compressed, message_start_time=start, message_end_time=end,
                                uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data)).write)
@@ -118,7 +122,7 @@ class _File:
         for channel_id in channel_ids[np.sort(first)].tolist():  # in order of first message, as mcap's ChunkBuilder
             mine = channel_ids == channel_id
             index_offsets[channel_id] = index_start + sum(map(len, indexes))
-            indexes.append(_message_index(channel_id, times[mine], len(prefix) + offsets[mine]))
+            indexes.append(_message_index(channel_id, times[mine], prefix_length + offsets[mine]))
         self.write(b"".join(indexes))
         self.chunk_indexes.append(ChunkIndex(
             message_start_time=start, message_end_time=end, chunk_start_offset=chunk_start, chunk_length=len(chunk),
@@ -171,18 +175,22 @@ def write_bulk(
         chunks.append((start, min(end, len(records)), first, end <= len(records)))
         start, first = end, False
 
-    def write_chunk(start: int, end: int, with_prefix: bool) -> None:
-        base = offsets[start]
-        out.chunk(prefix if with_prefix else b"", body[base:offsets[end]].to_pybytes(), channel_ids[start:end], times[start:end],
-                  offsets[start:end] - base)
+    datas = [(prefix if with_prefix else b"") + body[offsets[start]:offsets[end]].to_pybytes() for start, end, with_prefix, _ in chunks]
+    with ThreadPoolExecutor(max_workers=COMPRESSION_THREADS) as pool:  # zstd releases the GIL; the same bytes
+        compressed = list(pool.map(zstandard.compress, datas))
 
-    for start, end, with_prefix, closed in chunks:
+    def write_chunk(i: int) -> None:
+        start, end, with_prefix, _ = chunks[i]
+        out.chunk(datas[i], compressed[i], len(prefix) if with_prefix else 0, channel_ids[start:end], times[start:end],
+                  offsets[start:end] - offsets[start])
+
+    for i, (*_, closed) in enumerate(chunks):
         if closed:
-            write_chunk(start, end, with_prefix)
+            write_chunk(i)
     for name, data in metadata:
         out.metadata(name, data)
     if chunks and not chunks[-1][3]:
-        write_chunk(*chunks[-1][:3])
+        write_chunk(len(chunks) - 1)
     _finish(out, schema_records, channel_records, channels, log_times, len(metadata))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import platform
 import subprocess
@@ -28,8 +29,10 @@ def software_versions() -> dict[str, str]:
     return versions
 
 
+@functools.lru_cache(maxsize=1)
 def _git_state() -> tuple[str, str]:
-    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's tree."""
+    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's
+    tree, read once per process: the code a process runs is the code it loaded."""
     here = PACKAGE_DIR
 
     def git(*args: str) -> str | None:

@@ -85,6 +85,10 @@ class DHFrame:
     def transform(self, q: np.ndarray) -> np.ndarray:
         return dh_transform(float(self.a(q)), float(self.alpha(q)), float(self.d(q)), float(self.theta(q)))
 
+    def transforms(self, q: np.ndarray) -> np.ndarray:
+        """(N, 4, 4) transforms at a batch of configurations (N, 7)."""
+        return dh_transforms(self.a(q), self.alpha(q), self.d(q), self.theta(q))
+
 
 @dataclass(frozen=True)
 class Link(DHFrame):
@@ -185,6 +189,17 @@ def dh_transform(a: float, alpha: float, d: float, theta: float) -> np.ndarray:
             [0.0, 0.0, 0.0, 1.0],
         ]
     )
+
+
+def dh_transforms(a: np.ndarray, alpha: np.ndarray, d: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """`dh_transform` of arrays of parameters, (N, 4, 4)."""
+    ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
+    T = np.zeros((len(theta), 4, 4))
+    T[:, 0, 0], T[:, 0, 1], T[:, 0, 3] = ct, -st, a
+    T[:, 1, 0], T[:, 1, 1], T[:, 1, 2], T[:, 1, 3] = st * ca, ct * ca, -sa, -sa * d
+    T[:, 2, 0], T[:, 2, 1], T[:, 2, 2], T[:, 2, 3] = st * sa, ct * sa, ca, ca * d
+    T[:, 3, 3] = 1.0
+    return T
 
 
 class _ExpressionReader:

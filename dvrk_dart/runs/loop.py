@@ -5,6 +5,11 @@ step's start is logged (every `log_every` steps): that is where the identified
 model is evaluated; the driver advances the simulation and returns the step's
 acceleration and effort read from DART (None when the mode has no dynamics).
 A divergence stops the loop and keeps everything logged before it.
+
+A logged state is DART's dof positions and the coordinates; the frames, the
+loop-closure gaps and the passive joints' errors of all logged states are read
+from them at the end, at once (`readout_at`: DART's tree kinematics, batched),
+which costs a fraction of querying DART's frames at every logged step.
 """
 
 from __future__ import annotations
@@ -34,14 +39,11 @@ class LoopLog:
     steps: list[int] = field(default_factory=list)
     q: list = field(default_factory=list)
     dq: list = field(default_factory=list)
+    x: list = field(default_factory=list)  # DART's dof positions
     ddq: list = field(default_factory=list)
     effort: list = field(default_factory=list)
-    tool: list = field(default_factory=list)  # 4x4 poses, converted once at the end
-    closure: list = field(default_factory=list)
-    passive: list = field(default_factory=list)
-    counterweight: list = field(default_factory=list)
-    bodies: list = field(default_factory=list)  # (B, 3) link frame origins per row
     body_names: list[str] = field(default_factory=list)
+    readout: dict[str, np.ndarray] = field(default_factory=dict)  # `readout_at` of the logged states
     steps_done: int = 0
     error: SimulationDiverged | None = None
 
@@ -51,17 +53,29 @@ class LoopLog:
     def array(self, name: str) -> np.ndarray:
         return np.asarray(getattr(self, name), dtype=float).reshape(len(self), N_JOINTS)
 
+    @property
+    def closure(self) -> np.ndarray:
+        return self.readout["closure"]
+
+    @property
+    def passive(self) -> np.ndarray:
+        return self.readout["passive"]
+
+    @property
+    def counterweight(self) -> np.ndarray:
+        return self.readout["counterweight"]
+
     def tool_pose(self) -> np.ndarray:
         """(N, 7) position (m) + quaternion (x, y, z, w), one batched conversion."""
-        if not self.tool:
+        poses = self.readout["tool"]
+        if not len(poses):
             return np.zeros((0, 7))
-        poses = np.asarray(self.tool)
         return np.column_stack([poses[:, :3, 3], Rotation.from_matrix(poses[:, :3, :3]).as_quat()])
 
     def body_positions(self) -> dict[str, np.ndarray]:
-        if not self.bodies:
+        if not len(self):
             return {}
-        origins = np.asarray(self.bodies)  # (N, B, 3)
+        origins = self.readout["bodies"]  # (N, B, 3)
         return {name: origins[:, i].copy() for i, name in enumerate(self.body_names)}
 
 
@@ -76,12 +90,7 @@ def simulate(sim, driver: Driver, steps: int, log_every: int = 1) -> LoopLog:
                 log.steps.append(k)
                 log.q.append(sim.q)
                 log.dq.append(sim.dq)
-                log.tool.append(sim.tool_tip_pose())
-                log.closure.append(sim.closure_residual_m())
-                log.passive.append(max((abs(e) for n, e in sim.passive_joint_errors().items() if n != "counterweight"), default=0.0))
-                cw = sim.counterweight_error_m()
-                log.counterweight.append(np.nan if cw is None else cw)
-                log.bodies.append(sim.body_origins())
+                log.x.append(sim.dof_positions())
             result = driver.advance(k, sim)
             log.steps_done = k + 1
             if logging:
@@ -91,6 +100,8 @@ def simulate(sim, driver: Driver, steps: int, log_every: int = 1) -> LoopLog:
     except SimulationDiverged as exc:
         log.error = exc
         if len(log.ddq) < len(log.steps):  # the diverged step's start state has no result
-            for name in ("steps", "q", "dq", "tool", "closure", "passive", "counterweight", "bodies"):
+            for name in ("steps", "q", "dq", "x"):
                 getattr(log, name).pop()
+    n_dofs = sim.skeleton.getNumDofs()
+    log.readout = sim.readout_at(np.reshape(log.x, (len(log), n_dofs)), log.array("q"))
     return log

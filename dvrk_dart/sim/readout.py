@@ -22,8 +22,10 @@ from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 
 #: the loop-closure residual is checked for divergence every this many steps
-#: (10 ms at 1 ms); NaN and joint ranges are checked every step
-CLOSURE_CHECK_EVERY_STEPS = 10
+#: (50 ms at 1 ms: a diverging closed chain opens by far more than the limit
+#: within that); NaN and joint ranges are checked every step, and the logs
+#: hold the residual of every logged state
+CLOSURE_CHECK_EVERY_STEPS = 50
 
 
 class ClosedChainReadout:
@@ -89,14 +91,15 @@ class ClosedChainReadout:
 
     def _check(self, x: np.ndarray, v: np.ndarray, q: np.ndarray) -> None:
         """Divergence checks at the state (x, v) after a step (q: its coordinates):
-        NaN and joint range every step, loop closure every
-        CLOSURE_CHECK_EVERY_STEPS steps (its frame queries cost more than a step)."""
+        NaN and range of the coordinates every step; NaN of every dof and the
+        loop closure every CLOSURE_CHECK_EVERY_STEPS steps (the frame queries cost
+        more than a step)."""
         lower, upper = self.model.joint_lower, self.model.joint_upper
-        finite = math.isfinite(np.add.reduce(x) + np.add.reduce(v))  # ufuncs direct: this runs every step
-        in_range = finite and bool(np.logical_and.reduce(np.abs(q - self._range_mid) <= self._range_half))
-        check_loops = self.step_index % CLOSURE_CHECK_EVERY_STEPS == 0
-        if in_range and not check_loops:
+        # every step, one reduction: False when a coordinate is NaN or out of its range
+        in_range = np.maximum.reduce(np.abs(q - self._range_mid) - self._range_half) <= 0.0
+        if in_range and self.step_index % CLOSURE_CHECK_EVERY_STEPS:
             return
+        finite = math.isfinite(np.add.reduce(x) + np.add.reduce(v))  # the passive dofs too
         where = f"step {self.step_index} (t = {self.time_s:.3f} s)"
         if not finite:
             bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0])
@@ -129,6 +132,53 @@ class ClosedChainReadout:
         frame = self._frame
         return np.array([frame(k)[:3, 3] for k in self._body_keys])
 
+    # ------------------------------------------------- batched readout
+    def frames_at(self, X: np.ndarray) -> dict[int, np.ndarray]:
+        """Base-frame transforms (N, 4, 4) of every link frame at logged dof
+        positions X (N, n_dofs): DART's tree kinematics (each joint's placement in
+        its parent as DART holds it, then its rotation or translation about z),
+        evaluated for a whole run at once; equal to DART's own frames at those
+        states to round-off (tests/test_simulator.py)."""
+        X = np.asarray(X, dtype=float)
+        frames: dict[int, np.ndarray] = {0: np.broadcast_to(np.eye(4), (len(X), 4, 4))}
+        for key, parent, placement, revolute, dof in self._tree:
+            motion = np.zeros((len(X), 4, 4))
+            motion[:] = np.eye(4)
+            if revolute:
+                c, s = np.cos(X[:, dof]), np.sin(X[:, dof])
+                motion[:, 0, 0], motion[:, 0, 1], motion[:, 1, 0], motion[:, 1, 1] = c, -s, s, c
+            else:
+                motion[:, 2, 3] = X[:, dof]
+            frames[key] = frames[parent] @ placement @ motion
+        for key, (parent, offset) in self.psm.fixed_frames.items():
+            frames[key] = frames[parent] @ offset
+        del frames[0]
+        return frames
+
+    def readout_at(self, X: np.ndarray, q: np.ndarray) -> dict[str, np.ndarray]:
+        """What the logs keep of each logged state, for a whole run: the largest
+        loop-closure gap (m), the largest passive-joint error (rad), the
+        counterweight's error (m, NaN without it), the link frame origins
+        (N, B, 3) and the tool tip poses (N, 4, 4)."""
+        X, q = np.asarray(X, dtype=float), np.asarray(q, dtype=float)
+        frames = self.frames_at(X)
+        gaps = [np.zeros(len(X))]
+        for c in self.psm.closures:
+            Ta, Tb = frames[c.link], frames[c.other]
+            pa = Ta[:, :3, :3] @ c.point_in_link + Ta[:, :3, 3]
+            pb = Tb[:, :3, :3] @ c.point_in_other + Tb[:, :3, 3]
+            gaps.append(np.linalg.norm(pa - pb, axis=1))
+        passive = np.abs(X[:, self._passive_only] - q @ self._G_passive.T)
+        cw = self.psm.counterweight_dof
+        tip = self.model.tool_tip
+        return {
+            "closure": np.max(gaps, axis=0),
+            "passive": passive.max(axis=1, initial=0.0),
+            "counterweight": np.full(len(X), np.nan) if cw is None else X[:, cw] - self.model.counterweight_ratio * q[:, INSERTION],
+            "bodies": np.stack([frames[k][:, :3, 3] for k in self._body_keys], axis=1),
+            "tool": frames[tip.parent] @ tip.transforms(q),
+        }
+
     def _setup_readout(self) -> None:
         """Names and orders fixed by the built arm (called once by the simulator)."""
         self._body_keys = sorted(list(self.psm.fixed_frames) + list(self.psm.bodies))
@@ -137,5 +187,16 @@ class ClosedChainReadout:
         if self.psm.counterweight_dof is not None:
             dofs.append(self.psm.counterweight_dof)
         self._passive_and_counterweight = dofs
+        self._passive_only = np.asarray(self.psm.passive_dofs, dtype=int)
+        self._G_passive = self.psm.G[self._passive_only]
+        key_of = {body.getName(): key for key, body in self.psm.bodies.items()}
+        self._tree = []  # bodies in creation order: a parent comes before its children
+        for key, body in self.psm.bodies.items():
+            joint, parent = body.getParentJoint(), body.getParentBodyNode()
+            if not np.allclose(joint.getTransformFromChildBodyNode().matrix(), np.eye(4)):
+                raise DvrkDartError(f"{joint.getName()}: a child-side joint offset is not supported by the batched readout")
+            placement = joint.getTransformFromParentBodyNode().matrix()
+            parent_key = 0 if parent is None else key_of[parent.getName()]
+            self._tree.append((key, parent_key, placement, joint.getType() == "RevoluteJoint", joint.getIndexInSkeleton(0)))
         self._passive_names = [self.model.links[self.psm.dof_links[d]].name for d in dofs]
         self._state_changed()

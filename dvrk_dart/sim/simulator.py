@@ -100,6 +100,20 @@ class PsmSimulator(ClosedChainReadout):
             Gz[dof, N_JOINTS + i] = 1.0
         self._Gz = Gz
         self._GzT = Gz.T
+        # velocity servo by DART's inverse dynamics F = M xdd + h (one recursive pass,
+        # cheaper than forming M): with the dofs' acceleration xdd = Gz ddz, the
+        # reduced efforts are Gz^T F, i.e. the actuator effort (the tendon's share
+        # ratio·F_cw added on J3) and the tendon force F_cw itself
+        G = self.psm.G
+        self._dof_accel = Gz[:, :N_JOINTS].copy()  # xdd = H ddq (+ the counterweight's own term)
+        self._effort_of_F = G.T.copy()  # tau = Q F
+        self._dof_forces_of_F = self._force_map @ G.T  # forces on the dofs = P F (+ coulomb)
+        if self.psm.counterweight_dof is not None:
+            cw = self.psm.counterweight_dof
+            self._dof_accel[cw, INSERTION] = model.counterweight_ratio
+            self._effort_of_F[INSERTION, cw] += model.counterweight_ratio
+            self._dof_forces_of_F[cw, cw] = 1.0
+        self._coordinates_of_x = self._A_inv @ np.eye(n)[self.psm.actuated_dofs]  # q = B x
         effects = place_effects(model, params, config, self.psm)
         self._implicit_damping = effects.damping
         self._implicit_stiffness = effects.stiffness
@@ -167,6 +181,10 @@ class PsmSimulator(ClosedChainReadout):
     def dq(self) -> np.ndarray:
         return self._coordinate_rates().copy()
 
+    def dof_positions(self) -> np.ndarray:
+        """DART's dof positions (shared: do not modify)."""
+        return self._positions()
+
     @property
     def counterweight_position_m(self) -> float | None:
         cw = self.psm.counterweight_dof
@@ -176,26 +194,21 @@ class PsmSimulator(ClosedChainReadout):
     # DART's state only changes in a step, reset or set_kinematic (_state_changed)
     def _state_changed(self) -> None:
         super()._state_changed()
-        self._x = self._v = self._q = self._dq = None
+        self._x = self.skeleton.getPositions()
+        self._v = self.skeleton.getVelocities()
+        self._q = self._coordinates_of_x @ self._x
+        self._dq = self._coordinates_of_x @ self._v
 
     def _positions(self) -> np.ndarray:
-        if self._x is None:
-            self._x = self.skeleton.getPositions()
         return self._x
 
     def _velocities(self) -> np.ndarray:
-        if self._v is None:
-            self._v = self.skeleton.getVelocities()
         return self._v
 
     def _coordinates(self) -> np.ndarray:
-        if self._q is None:
-            self._q = self._A_inv @ self._positions()[self._act]
         return self._q
 
     def _coordinate_rates(self) -> np.ndarray:
-        if self._dq is None:
-            self._dq = self._A_inv @ self._velocities()[self._act]
         return self._dq
 
     # ---------------------------------------------------------- dynamics
@@ -311,12 +324,7 @@ class PsmSimulator(ClosedChainReadout):
             forces -= self._implicit_damping * v_next + self._implicit_stiffness * (x + self.dt * v_next)
         self.skeleton.setForces(forces)
         self.world.step()
-        self.step_index += 1
-        self._state_changed()
-        self.last_ddq = (self._coordinate_rates() - dq) / self.dt
-        self.last_effort = tau if dq_target is not None else tau.copy()
-        self.last_counterweight_force = lam
-        self._check(self._positions(), self._velocities(), self._coordinates())
+        self._after_step(dq, tau if dq_target is not None else tau.copy(), lam)
 
     def _counterweight_acceleration(self, ddq: np.ndarray, q, dq, x, v) -> float:
         """Counterweight acceleration of the ideal tendon for a given ddq:
@@ -329,8 +337,51 @@ class PsmSimulator(ClosedChainReadout):
 
     def step_velocity(self, dq_des: np.ndarray, q_des: np.ndarray | None = None) -> None:
         """Velocity mode: reach dq_des in this step (position feedback to q_des if given)."""
-        self._feedback_q = None if q_des is None else np.asarray(q_des, dtype=float)
-        self._step(None, np.asarray(dq_des, dtype=float))
+        if self._free_dofs and not self._tendon_ideal:  # the PID tendon needs the reduced inertia
+            self._feedback_q = None if q_des is None else np.asarray(q_des, dtype=float)
+            self._step(None, np.asarray(dq_des, dtype=float))
+            return
+        x, v, q, dq = self._x, self._v, self._q, self._dq
+        dq_target = np.asarray(dq_des, dtype=float)
+        if q_des is not None:
+            dq_target = dq_target + (q_des - q) * (1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S)
+        ddq = (dq_target - dq) * (1.0 / self.dt)
+        xdd = self._dof_accel @ ddq
+        lam_free = 0.0
+        if self._free_dofs:  # the ideal tendon's deadbeat correction (see _counterweight_acceleration)
+            xdd[self._free_dofs[0]] = self._counterweight_acceleration(ddq, q, dq, x, v)
+        skeleton = self.skeleton
+        skeleton.setAccelerations(xdd)
+        skeleton.computeInverseDynamics(False, False, False)
+        F = skeleton.getForces()
+        if self._has_implicit:  # DART's implicit damping and springs at the end-of-step state
+            F += self._implicit_diag * xdd + self._implicit_damping * v + self._implicit_stiffness * (x + self.dt * v)
+        tau = self._effort_of_F @ F
+        forces = self._dof_forces_of_F @ F
+        if self._has_armature:
+            tau += self._explicit.armature * ddq
+        if self._has_explicit:
+            tau += self._explicit.effort(q, dq)
+        if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
+            coulomb = self.psm.G.T @ (self._coulomb_x * np.sign(self.psm.G @ dq_target))
+            tau += coulomb
+            forces += self._force_map @ coulomb
+        if self._has_implicit:
+            v_next = v + self.dt * xdd
+            forces -= self._implicit_damping * v_next + self._implicit_stiffness * (x + self.dt * v_next)
+        if self._free_dofs:
+            lam_free = float(F[self._free_dofs[0]])
+        skeleton.setForces(forces)
+        self.world.step()
+        self._after_step(dq, tau, lam_free)
+
+    def _after_step(self, dq_before: np.ndarray, effort: np.ndarray, counterweight_force: float) -> None:
+        self.step_index += 1
+        self._state_changed()
+        self.last_ddq = (self._dq - dq_before) * (1.0 / self.dt)
+        self.last_effort = effort
+        self.last_counterweight_force = counterweight_force
+        self._check(self._x, self._v, self._q)
 
     def step_torque(self, tau: np.ndarray, hold: tuple[int, ...] = ()) -> None:
         """Torque mode: the 7 actuator efforts (N·m, N for q3) for this step.
