@@ -183,16 +183,8 @@ def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
     return model.joint_lower, model.joint_upper
 
 
-def load_run(path: Path | str) -> MeasuredRun:
-    """Load a measured run (the upstream CSV format, or a ROS bag read with the
-    command's topics: io/bags.py), with one-line errors."""
-    from dvrk_dart.io.bags import is_bag, load_bag_run
-
-    path = Path(path)
-    if is_bag(path):
-        return load_bag_run(path)
-    if not path.is_file():
-        raise DvrkDartError(f"{path}: file not found")
+def _numbers_or_error(path: Path) -> np.ndarray:
+    """Read the CSV as text to name the first cell that is not a number."""
     try:
         raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True)
     except pd.errors.EmptyDataError:
@@ -206,7 +198,25 @@ def load_run(path: Path | str) -> MeasuredRun:
     if bad.to_numpy().any():
         row, col = np.argwhere(bad.to_numpy())[0]
         raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: '{raw.iat[row, col]}' is not a number")
-    values = numeric.to_numpy(dtype=float)
+    return numeric.to_numpy(dtype=float)
+
+
+def load_run(path: Path | str) -> MeasuredRun:
+    """Load a measured run (the upstream CSV format, or a ROS bag read with the
+    command's topics: io/bags.py), with one-line errors."""
+    from dvrk_dart.io.bags import is_bag, load_bag_run
+
+    path = Path(path)
+    if is_bag(path):
+        return load_bag_run(path)
+    if not path.is_file():
+        raise DvrkDartError(f"{path}: file not found")
+    try:
+        values = pd.read_csv(path, header=None, dtype=float, skip_blank_lines=True).to_numpy()
+    except (ValueError, pd.errors.ParserError, UnicodeDecodeError):  # a well-formed file reads as numbers at once
+        values = _numbers_or_error(path)
+    if values.shape[1] != len(CSV_COLUMNS):
+        raise DvrkDartError(f"{path}: {values.shape[1]} columns, expected {len(CSV_COLUMNS)} (q1..q7, dq1..dq7, tau1..tau7)")
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
         raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: missing, NaN or infinite value")

@@ -89,14 +89,14 @@ class ClosedChainReadout:
             return None
         return float(self._positions()[cw]) - self.model.counterweight_ratio * float(self._coordinates()[INSERTION])
 
-    def _check(self, x: np.ndarray, v: np.ndarray, q: np.ndarray) -> None:
+    def _check(self, x: np.ndarray, v: np.ndarray, q: np.ndarray, in_range: bool | None = None) -> None:
         """Divergence checks at the state (x, v) after a step (q: its coordinates):
         NaN and range of the coordinates every step; NaN of every dof and the
         loop closure every CLOSURE_CHECK_EVERY_STEPS steps (the frame queries cost
         more than a step)."""
         lower, upper = self.model.joint_lower, self.model.joint_upper
-        # every step, one reduction: False when a coordinate is NaN or out of its range
-        in_range = np.maximum.reduce(np.abs(q - self._range_mid) - self._range_half) <= 0.0
+        if in_range is None:  # (the servo's kernel tells it) False when a coordinate is NaN or out of its range
+            in_range = np.maximum.reduce(np.abs(q - self._range_mid) - self._range_half) <= 0.0
         if in_range and self.step_index % CLOSURE_CHECK_EVERY_STEPS:
             return
         finite = math.isfinite(np.add.reduce(x) + np.add.reduce(v))  # the passive dofs too

@@ -50,6 +50,7 @@ import numpy as np
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import INSERTION, N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.sim import kernels
 from dvrk_dart.sim.builder import DartPsm, build
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.effects import place_effects
@@ -114,6 +115,8 @@ class PsmSimulator(ClosedChainReadout):
             self._effort_of_F[INSERTION, cw] += model.counterweight_ratio
             self._dof_forces_of_F[cw, cw] = 1.0
         self._coordinates_of_x = self._A_inv @ np.eye(n)[self.psm.actuated_dofs]  # q = B x
+        self._counterweight_dof = -1 if self.psm.counterweight_dof is None else int(self.psm.counterweight_dof)
+        self._no_reference = np.zeros(0)
         effects = place_effects(model, params, config, self.psm)
         self._implicit_damping = effects.damping
         self._implicit_stiffness = effects.stiffness
@@ -327,13 +330,10 @@ class PsmSimulator(ClosedChainReadout):
         self._after_step(dq, tau if dq_target is not None else tau.copy(), lam)
 
     def _counterweight_acceleration(self, ddq: np.ndarray, q, dq, x, v) -> float:
-        """Counterweight acceleration of the ideal tendon for a given ddq:
-        ratio·ddq3 plus the deadbeat correction that makes the end-of-step
-        velocity and position (semi-implicit Euler) equal ratio·q3 exactly."""
-        cw, r = self._free_dofs[0], self.model.counterweight_ratio
-        dt = self.dt
-        # v_cw' = ratio dq3' + (ratio q3 - x_cw)/dt  =>  x_cw' = x_cw + dt v_cw' = ratio q3'
-        return r * ddq[INSERTION] + (r * dq[INSERTION] - v[cw]) / dt + (r * q[INSERTION] - x[cw]) / (dt * dt)
+        """Counterweight acceleration of the ideal tendon for a given ddq (kernels.py)."""
+        cw = self._counterweight_dof
+        return kernels.counterweight_acceleration(ddq[INSERTION], dq[INSERTION], q[INSERTION], v[cw], x[cw],
+                                                  self.model.counterweight_ratio, self.dt)
 
     def step_velocity(self, dq_des: np.ndarray, q_des: np.ndarray | None = None) -> None:
         """Velocity mode: reach dq_des in this step (position feedback to q_des if given)."""
@@ -342,22 +342,16 @@ class PsmSimulator(ClosedChainReadout):
             self._step(None, np.asarray(dq_des, dtype=float))
             return
         x, v, q, dq = self._x, self._v, self._q, self._dq
-        dq_target = np.asarray(dq_des, dtype=float)
-        if q_des is not None:
-            dq_target = dq_target + (q_des - q) * (1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S)
-        ddq = (dq_target - dq) * (1.0 / self.dt)
-        xdd = self._dof_accel @ ddq
-        lam_free = 0.0
-        if self._free_dofs:  # the ideal tendon's deadbeat correction (see _counterweight_acceleration)
-            xdd[self._free_dofs[0]] = self._counterweight_acceleration(ddq, q, dq, x, v)
+        dq_target, ddq, xdd = kernels.servo_accelerations(
+            x, v, q, dq, np.asarray(dq_des, dtype=float), self._no_reference if q_des is None else np.asarray(q_des, dtype=float),
+            1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S, self.dt, self._dof_accel, self._counterweight_dof, self.model.counterweight_ratio)
         skeleton = self.skeleton
         skeleton.setAccelerations(xdd)
         skeleton.computeInverseDynamics(False, False, False)
         F = skeleton.getForces()
         if self._has_implicit:  # DART's implicit damping and springs at the end-of-step state
             F += self._implicit_diag * xdd + self._implicit_damping * v + self._implicit_stiffness * (x + self.dt * v)
-        tau = self._effort_of_F @ F
-        forces = self._dof_forces_of_F @ F
+        tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
         if self._has_armature:
             tau += self._explicit.armature * ddq
         if self._has_explicit:
@@ -369,19 +363,20 @@ class PsmSimulator(ClosedChainReadout):
         if self._has_implicit:
             v_next = v + self.dt * xdd
             forces -= self._implicit_damping * v_next + self._implicit_stiffness * (x + self.dt * v_next)
-        if self._free_dofs:
-            lam_free = float(F[self._free_dofs[0]])
         skeleton.setForces(forces)
         self.world.step()
-        self._after_step(dq, tau, lam_free)
+        self._after_step(dq, tau, float(F[self._counterweight_dof]) if self._free_dofs else 0.0)
 
     def _after_step(self, dq_before: np.ndarray, effort: np.ndarray, counterweight_force: float) -> None:
         self.step_index += 1
-        self._state_changed()
-        self.last_ddq = (self._dq - dq_before) * (1.0 / self.dt)
+        self._frames, self._closures = {}, None
+        self._x = self.skeleton.getPositions()
+        self._v = self.skeleton.getVelocities()
+        self._q, self._dq, self.last_ddq, in_range = kernels.observe(
+            self._x, self._v, self._coordinates_of_x, dq_before, self.dt, self._range_mid, self._range_half)
         self.last_effort = effort
         self.last_counterweight_force = counterweight_force
-        self._check(self._x, self._v, self._q)
+        self._check(self._x, self._v, self._q, in_range)
 
     def step_torque(self, tau: np.ndarray, hold: tuple[int, ...] = ()) -> None:
         """Torque mode: the 7 actuator efforts (N·m, N for q3) for this step.
