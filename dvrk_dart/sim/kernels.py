@@ -16,6 +16,7 @@ from numba import njit
 
 from dvrk_dart.model.joints import INSERTION
 
+
 @njit(cache=True)
 def counterweight_acceleration(ddq3, dq3, q3, v_cw, x_cw, ratio, dt):
     """The ideal tendon's counterweight acceleration for a given ddq3: ratio·ddq3
