@@ -24,10 +24,15 @@ TARGETS = {
     "diagnose_s": (60.0, "lower", "s", "diagnosis of one 30 s run, re-simulation included"),
     "identify_s": (60.0, "lower", "s", "identification from one 30 s run, outputs written (dvrk-dart identify --runs one)"),
     "mc_runs_per_s": (1.0, "higher", "1/s", "Monte Carlo replays of a 5 s run per second (dvrk-dart uncertainty, local executor, 2 workers)"),
-    "mc_runs_per_s_ray": (1.0, "higher", "1/s", "the same on a local Ray instance started with 2 CPUs (start-up included)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
     "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
     "replay_realtime_factor": (20.0, "higher", "x", "dvrk-dart replay --measured two end to end (28 s, logs written), imports excluded"),
+}
+
+#: figures printed beside the targets, without one of their own
+BESIDE = {
+    "mc_runs_per_s_ray": ("1/s", "mc_runs_per_s on a local Ray instance started with 2 CPUs (its start-up included)"),
+    "replay_realtime_factor_cpu": ("x", "replay_realtime_factor per CPU second of this process"),
 }
 
 
@@ -147,8 +152,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     figures = {}
-    for part in (bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification, bench_monte_carlo,
-                 bench_bag_import, bench_replay):
+    # the end-to-end replay first: nothing else (Ray's daemons, worker pools) runs beside it yet
+    for part in (bench_replay, bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
+                 bench_monte_carlo, bench_bag_import):
         figures.update(part())
     print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():
@@ -160,6 +166,9 @@ def main(argv: list[str] | None = None) -> int:
         figures[f"{key}_target"] = target
         verdict = "ok" if ratio >= 1 else "MISSED"
         print(f"{key:<22} {value:10.3f} {target:>8g}  {ratio:6.2f}  {unit}: {meaning} [{verdict}]")
+    for key, (unit, meaning) in BESIDE.items():
+        if key in figures:
+            print(f"{key:<22} {figures[key]:10.3f} {'-':>8}  {'':>6}  {unit}: {meaning}")
     write_json_atomic(out, figures)
     print(f"written {out}")
     return 0
