@@ -26,13 +26,14 @@ TARGETS = {
     "mc_runs_per_s": (1.0, "higher", "1/s", "Monte Carlo replays of a 5 s run per second (dvrk-dart uncertainty, local executor, 2 workers)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
     "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
-    "replay_realtime_factor": (20.0, "higher", "x", "dvrk-dart replay --measured two end to end (28 s, logs written), imports excluded"),
+    "replay_realtime_factor": (20.0, "higher", "x", "dvrk-dart replay --measured two end to end (28 s, logs written), imports excluded, best of 3"),
 }
 
 #: figures printed beside the targets, without one of their own
 BESIDE = {
     "mc_runs_per_s_ray": ("1/s", "mc_runs_per_s on a local Ray instance started with 2 CPUs (its start-up included)"),
-    "replay_realtime_factor_cpu": ("x", "replay_realtime_factor per CPU second of this process"),
+    "replay_realtime_factor_median": ("x", "the median of the replays replay_realtime_factor is the best of"),
+    "replay_realtime_factor_cpu": ("x", "the best replay per CPU second of this process"),
 }
 
 
@@ -121,11 +122,13 @@ def bench_bag_import() -> dict:
     return {"bag_import_s": seconds}
 
 
-def bench_replay() -> dict:
+def bench_replay(repeat: int = 3) -> dict:
     """`dvrk-dart replay --measured two --out TMP` through the CLI's own entry point:
     run config, simulation, identified model, config.json, metrics.json, run.mcap and
     run.rrd. The modules it loads are imported first (a process pays that once).
-    Also recorded: the same per CPU second of this process (the machine is shared)."""
+    The best of `repeat` replays, as the other timings (this machine is shared: its
+    speed varies by a fifth from one second to the next); the median and the rate
+    per CPU second of the best are recorded beside it."""
     import contextlib
     import io
     import tempfile
@@ -135,15 +138,20 @@ def bench_replay() -> dict:
     import dvrk_dart.runs.replay  # noqa: F401
     from dvrk_dart import cli
 
+    rates = []
     with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stdout(io.StringIO()):
-        out = Path(folder) / "replay-two"
-        wall, cpu = time.perf_counter(), time.process_time()
-        code = cli.main(["replay", "--measured", "two", "--out", str(out)])
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        if code != 0 or not all((out / name).is_file() for name in ("run.mcap", "run.rrd", "config.json", "metrics.json")):
-            raise RuntimeError(f"bench: dvrk-dart replay --measured two failed (exit {code})")
-        simulated = json.loads((out / "metrics.json").read_text())["duration_s"]
-    return {"replay_realtime_factor": simulated / wall, "replay_realtime_factor_cpu": simulated / cpu}
+        for i in range(repeat):
+            out = Path(folder) / f"replay-two-{i}"
+            wall, cpu = time.perf_counter(), time.process_time()
+            code = cli.main(["replay", "--measured", "two", "--out", str(out)])
+            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+            if code != 0 or not all((out / name).is_file() for name in ("run.mcap", "run.rrd", "config.json", "metrics.json")):
+                raise RuntimeError(f"bench: dvrk-dart replay --measured two failed (exit {code})")
+            simulated = json.loads((out / "metrics.json").read_text())["duration_s"]
+            rates.append((simulated / wall, simulated / cpu))
+    best = max(rates)
+    return {"replay_realtime_factor": best[0], "replay_realtime_factor_cpu": best[1],
+            "replay_realtime_factor_median": float(np.median([r[0] for r in rates]))}
 
 
 def main(argv: list[str] | None = None) -> int:
