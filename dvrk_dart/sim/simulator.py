@@ -20,7 +20,9 @@ with M_c = G^T M G the closed-chain joint-space inertia built from DART's own
 tree inertia M (G: the dofs as linear functions of q, whose range the loop
 closure rows annihilate, so their forces drop out of G^T) and b = G^T h the
 bias.  It is what DART's VELOCITY actuator does with its constraint impulse,
-done as a force.  The loop closures are still enforced by DART's constraint
+done as a force.  Evaluated as G^T F, with F = M G ddq + h from DART's inverse
+dynamics (one recursive pass, cheaper than forming M); the per-step arithmetic
+is compiled (kernels.py).  The loop closures are still enforced by DART's constraint
 solver, and the acceleration logged is the one the step produced,
 (dq_{k+1} - dq_k) / dt, so "model at the simulated state vs commanded effort"
 checks DART's closed-chain dynamics, not the servo.
@@ -124,7 +126,6 @@ class PsmSimulator(ClosedChainReadout):
         self._explicit = effects.explicit
         self._pid_integral = 0.0
         self._feedback_q: np.ndarray | None = None
-        self._act = self.psm.actuated_dofs
         self._implicit_diag = self.dt * self._implicit_damping + self.dt**2 * self._implicit_stiffness
         self._has_implicit = bool(np.any(self._implicit_diag))
         self._diag = np.diag_indices(n)
@@ -369,7 +370,7 @@ class PsmSimulator(ClosedChainReadout):
 
     def _after_step(self, dq_before: np.ndarray, effort: np.ndarray, counterweight_force: float) -> None:
         self.step_index += 1
-        self._frames, self._closures = {}, None
+        ClosedChainReadout._state_changed(self)  # the frames of the previous state are gone
         self._x = self.skeleton.getPositions()
         self._v = self.skeleton.getVelocities()
         self._q, self._dq, self.last_ddq, in_range = kernels.observe(
