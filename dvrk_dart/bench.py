@@ -164,19 +164,19 @@ def main(argv: list[str] | None = None) -> int:
     for part in (bench_replay, bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
                  bench_monte_carlo, bench_bag_import):
         figures.update(part())
-    print(f"{'figure':<22} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
+    print(f"{'figure':<29} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():
         value = figures.get(key)
         if value is None:
-            print(f"{key:<22} {'-':>10} {target:>8g}  {'':>6}  {meaning} (not measured)")
+            print(f"{key:<29} {'-':>10} {target:>8g}  {'':>6}  {meaning} (not measured)")
             continue
         ratio = target / value if sense == "lower" else value / target
         figures[f"{key}_target"] = target
         verdict = "ok" if ratio >= 1 else "MISSED"
-        print(f"{key:<22} {value:10.3f} {target:>8g}  {ratio:6.2f}  {unit}: {meaning} [{verdict}]")
+        print(f"{key:<29} {value:10.3f} {target:>8g}  {ratio:6.2f}  {unit}: {meaning} [{verdict}]")
     for key, (unit, meaning) in BESIDE.items():
         if key in figures:
-            print(f"{key:<22} {figures[key]:10.3f} {'-':>8}  {'':>6}  {unit}: {meaning}")
+            print(f"{key:<29} {figures[key]:10.3f} {'-':>8}  {'':>6}  {unit}: {meaning}")
     write_json_atomic(out, figures)
     print(f"written {out}")
     return 0
