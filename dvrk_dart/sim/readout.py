@@ -142,8 +142,7 @@ class ClosedChainReadout:
         X = np.asarray(X, dtype=float)
         frames: dict[int, np.ndarray] = {0: np.broadcast_to(np.eye(4), (len(X), 4, 4))}
         for key, parent, placement, revolute, dof in self._tree:
-            motion = np.zeros((len(X), 4, 4))
-            motion[:] = np.eye(4)
+            motion = np.tile(np.eye(4), (len(X), 1, 1))
             if revolute:
                 c, s = np.cos(X[:, dof]), np.sin(X[:, dof])
                 motion[:, 0, 0], motion[:, 0, 1], motion[:, 1, 0], motion[:, 1, 1] = c, -s, s, c
