@@ -27,10 +27,10 @@ def counterweight_acceleration(ddq3, dq3, q3, v_cw, x_cw, ratio, dt):
 
 
 @njit(cache=True)
-def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, dof_accel, counterweight_dof, ratio):
+def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, G, counterweight_dof, ratio):
     """(dq_target, ddq, xdd) of the deadbeat servo: the coordinates' target velocity
     (with position feedback when q_des has entries), the acceleration that reaches
-    it in one step, and the dofs' accelerations (xdd = H ddq; the ideal tendon's
+    it in one step, and the dofs' accelerations (xdd = G ddq; the ideal tendon's
     counterweight row makes its next velocity and position ratio·q3 exactly)."""
     n = dq.shape[0]
     dq_target = np.empty(n)
@@ -38,7 +38,7 @@ def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, dof_a
     for i in range(n):
         dq_target[i] = dq_des[i] + (q_des[i] - q[i]) * inv_time_constant if q_des.shape[0] else dq_des[i]
         ddq[i] = (dq_target[i] - dq[i]) / dt
-    xdd = dof_accel @ ddq
+    xdd = G @ ddq
     if counterweight_dof >= 0:
         cw = counterweight_dof
         xdd[cw] = counterweight_acceleration(ddq[INSERTION], dq[INSERTION], q[INSERTION], v[cw], x[cw], ratio, dt)

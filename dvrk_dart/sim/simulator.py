@@ -108,12 +108,10 @@ class PsmSimulator(ClosedChainReadout):
         # reduced efforts are Gz^T F, i.e. the actuator effort (the tendon's share
         # ratio·F_cw added on J3) and the tendon force F_cw itself
         G = self.psm.G
-        self._dof_accel = Gz[:, :N_JOINTS].copy()  # xdd = H ddq (+ the counterweight's own term)
         self._effort_of_F = G.T.copy()  # tau = Q F
         self._dof_forces_of_F = self._force_map @ G.T  # forces on the dofs = P F (+ coulomb)
         if self.psm.counterweight_dof is not None:
             cw = self.psm.counterweight_dof
-            self._dof_accel[cw, INSERTION] = model.counterweight_ratio
             self._effort_of_F[INSERTION, cw] += model.counterweight_ratio
             self._dof_forces_of_F[cw, cw] = 1.0
         self._coordinates_of_x = self._A_inv @ np.eye(n)[self.psm.actuated_dofs]  # q = B x
@@ -125,7 +123,6 @@ class PsmSimulator(ClosedChainReadout):
         self._coulomb_x = effects.coulomb
         self._explicit = effects.explicit
         self._pid_integral = 0.0
-        self._feedback_q: np.ndarray | None = None
         self._implicit_diag = self.dt * self._implicit_damping + self.dt**2 * self._implicit_stiffness
         self._has_implicit = bool(np.any(self._implicit_diag))
         self._diag = np.diag_indices(n)
@@ -236,9 +233,9 @@ class PsmSimulator(ClosedChainReadout):
         self._pid_integral += error * self.dt
         return kp * error + ki * self._pid_integral + kd * (ratio * dq[INSERTION] - v[cw])
 
-    def _step(self, tau: np.ndarray | None, dq_target: np.ndarray | None) -> None:
-        """One step: either the actuator effort `tau` is given (torque mode) or
-        the velocity `dq_target` the servo must reach at the end of the step.
+    def _step_torque(self, tau: np.ndarray) -> None:
+        """One torque-mode step: the actuator effort `tau` is given (joints in
+        `self._held` are instead kept still by the velocity servo).
 
         Reduced dynamics in z = (q, x_cw):
             Mz ddz + bz = [tau - e_q - ratio·lam·e3 ; lam]
@@ -255,61 +252,41 @@ class PsmSimulator(ClosedChainReadout):
         ratio = self.model.counterweight_ratio
         has_cw = bool(self._free_dofs)
         lam = 0.0
-        ddf = 0.0
-        if dq_target is not None:
-            if self._feedback_q is not None:  # position feedback: the target depends on q
-                dq_target = dq_target + (self._feedback_q - q) / POSITION_FEEDBACK_TIME_CONSTANT_S
-            ddq = (dq_target - dq) / self.dt
-            tau = Mz[:n, :n] @ ddq + bz[:n]
-            if self._has_explicit:  # (else explicit is 0: adding it changes no number)
-                tau += explicit
-            if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
-                tau += self.psm.G.T @ (self._coulomb_x * np.sign(self.psm.G @ dq_target))
-            if has_cw:
-                if self._tendon_ideal:
-                    ddf = self._counterweight_acceleration(ddq, q, dq, x, v)
-                    lam = float(Mz[n, :n] @ ddq + Mz[n, n] * ddf + bz[n])  # the tension that produces ddf
-                else:
-                    lam = self._counterweight_pid(q, dq, x, v)
-                    ddf = (lam - bz[n] - Mz[n, :n] @ ddq) / Mz[n, n]
-                tau += Mz[:n, n] * ddf
-                tau[INSERTION] += ratio * lam
-        else:
-            tau = tau.copy()
-            rows, targets = [], []  # prescribed-acceleration rows c . ddz = d; their multipliers are forces c lam
-            if has_cw and self._tendon_ideal:
-                c = np.zeros(n + 1)
-                c[INSERTION], c[n] = -ratio, 1.0
-                rows.append(c)
-                targets.append(self._counterweight_acceleration(self._zeros, q, dq, x, v))
-            for j in self._held:  # joints held by the velocity servo: reach zero velocity in this step
-                c = np.zeros(Mz.shape[0])
-                c[j] = 1.0
-                rows.append(c)
-                targets.append(-dq[j] / self.dt)
-                tau[j] = 0.0
-            rhs = tau - explicit - bz[:n]
-            if has_cw and not self._tendon_ideal:
-                lam = self._counterweight_pid(q, dq, x, v)
-                rhs[INSERTION] -= ratio * lam
-                rhs = np.append(rhs, lam - bz[n])
-            elif has_cw:
-                rhs = np.append(rhs, -bz[n])
-            m = len(rows)
-            kkt = np.zeros((len(rhs) + m, len(rhs) + m))
-            kkt[: len(rhs), : len(rhs)] = Mz
-            if m:
-                C = np.array(rows)
-                kkt[: len(rhs), len(rhs) :] = -C.T
-                kkt[len(rhs) :, : len(rhs)] = C
-            sol = np.linalg.solve(kkt, np.concatenate([rhs, targets]))
-            ddq = sol[:n]
-            ddf = float(sol[n]) if has_cw else 0.0
-            multipliers = sol[len(rhs) :]
-            if has_cw and self._tendon_ideal:
-                lam, multipliers = float(multipliers[0]), multipliers[1:]
-            for j, effort in zip(self._held, multipliers):
-                tau[j] = effort  # the servo's effort on a held joint
+        tau = tau.copy()
+        rows, targets = [], []  # prescribed-acceleration rows c . ddz = d; their multipliers are forces c lam
+        if has_cw and self._tendon_ideal:
+            c = np.zeros(n + 1)
+            c[INSERTION], c[n] = -ratio, 1.0
+            rows.append(c)
+            targets.append(self._counterweight_acceleration(self._zeros, q, dq, x, v))
+        for j in self._held:  # joints held by the velocity servo: reach zero velocity in this step
+            c = np.zeros(Mz.shape[0])
+            c[j] = 1.0
+            rows.append(c)
+            targets.append(-dq[j] / self.dt)
+            tau[j] = 0.0
+        rhs = tau - explicit - bz[:n]
+        if has_cw and not self._tendon_ideal:
+            lam = self._counterweight_pid(q, dq, x, v)
+            rhs[INSERTION] -= ratio * lam
+            rhs = np.append(rhs, lam - bz[n])
+        elif has_cw:
+            rhs = np.append(rhs, -bz[n])
+        m = len(rows)
+        kkt = np.zeros((len(rhs) + m, len(rhs) + m))
+        kkt[: len(rhs), : len(rhs)] = Mz
+        if m:
+            C = np.array(rows)
+            kkt[: len(rhs), len(rhs) :] = -C.T
+            kkt[len(rhs) :, : len(rhs)] = C
+        sol = np.linalg.solve(kkt, np.concatenate([rhs, targets]))
+        ddq = sol[:n]
+        ddf = float(sol[n]) if has_cw else 0.0
+        multipliers = sol[len(rhs) :]
+        if has_cw and self._tendon_ideal:
+            lam, multipliers = float(multipliers[0]), multipliers[1:]
+        for j, effort in zip(self._held, multipliers):
+            tau[j] = effort  # the servo's effort on a held joint
         # generalized forces on the dofs: actuators, environment terms, armature, tendon
         force_q = tau - explicit if self._has_explicit else tau.copy()
         if self._has_armature:
@@ -328,7 +305,7 @@ class PsmSimulator(ClosedChainReadout):
             forces -= self._implicit_damping * v_next + self._implicit_stiffness * (x + self.dt * v_next)
         self.skeleton.setForces(forces)
         self.world.step()
-        self._after_step(dq, tau if dq_target is not None else tau.copy(), lam)
+        self._after_step(dq, tau, lam)
 
     def _counterweight_acceleration(self, ddq: np.ndarray, q, dq, x, v) -> float:
         """Counterweight acceleration of the ideal tendon for a given ddq (kernels.py)."""
@@ -337,21 +314,30 @@ class PsmSimulator(ClosedChainReadout):
                                                   self.model.counterweight_ratio, self.dt)
 
     def step_velocity(self, dq_des: np.ndarray, q_des: np.ndarray | None = None) -> None:
-        """Velocity mode: reach dq_des in this step (position feedback to q_des if given)."""
-        if self._free_dofs and not self._tendon_ideal:  # the PID tendon needs the reduced inertia
-            self._feedback_q = None if q_des is None else np.asarray(q_des, dtype=float)
-            self._step(None, np.asarray(dq_des, dtype=float))
-            return
+        """Velocity mode: reach dq_des in this step (position feedback to q_des if given).
+
+        The deadbeat servo of the module docstring, evaluated with DART's inverse
+        dynamics F = M xdd + h at the dofs' accelerations xdd = G ddq (+ the
+        counterweight's): tau = G^T F + ratio·F_cw on J3, F_cw being the tendon
+        force.  The ideal tendon sets the counterweight's acceleration; the PID
+        tendon sets its force, and the acceleration follows from M's column."""
         x, v, q, dq = self._x, self._v, self._q, self._dq
+        ideal_cw = self._counterweight_dof if self._tendon_ideal else -1
         dq_target, ddq, xdd = kernels.servo_accelerations(
             x, v, q, dq, np.asarray(dq_des, dtype=float), self._no_reference if q_des is None else np.asarray(q_des, dtype=float),
-            1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S, self.dt, self._dof_accel, self._counterweight_dof, self.model.counterweight_ratio)
+            1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S, self.dt, self.psm.G, ideal_cw, self.model.counterweight_ratio)
         skeleton = self.skeleton
         skeleton.setAccelerations(xdd)
         skeleton.computeInverseDynamics(False, False, False)
         F = skeleton.getForces()
         if self._has_implicit:  # DART's implicit damping and springs at the end-of-step state
             F += self._implicit_diag * xdd + self._implicit_damping * v + self._implicit_stiffness * (x + self.dt * v)
+        if self._free_dofs and not self._tendon_ideal:  # the PID's tension gives the counterweight's acceleration
+            cw = self._counterweight_dof
+            column = skeleton.getMassMatrix()[:, cw].copy()
+            column[cw] += self._implicit_diag[cw]
+            xdd[cw] = (self._counterweight_pid(q, dq, x, v) - F[cw]) / column[cw]
+            F += column * xdd[cw]
         tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
         if self._has_armature:
             tau += self._explicit.armature * ddq
@@ -387,6 +373,6 @@ class PsmSimulator(ClosedChainReadout):
         the efforts the servo needed."""
         self._held = tuple(hold)
         try:
-            self._step(np.asarray(tau, dtype=float), None)
+            self._step_torque(np.asarray(tau, dtype=float))
         finally:
             self._held = ()
