@@ -261,9 +261,16 @@ def diagnose(
         nuisance_report = {r.name: dict(zip(JOINT_NAMES, (r.residual.mean(0) - (c @ final.beta).mean(0)).tolist()))
                            for r, c in zip(train_runs + holdout_runs, train_columns + holdout_columns)}
     del train_columns, holdout_columns
-    floor = None
+    floor, session_fit, repeat_run = None, None, None
     if repeat is not None:  # two runs without the effect under study, of two sessions
-        floor = session_floor(baseline_run or train_runs[0], prepare_run(repeat, arm, simulate, base_config))
+        repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run)
+        floor = session_floor(baseline_run or train_runs[0], repeat_run)
+        if repeat_run.role == "difference":  # what the effects read from a session change alone
+            session = Grams.of_run(design, features_of(repeat_run), repeat_run.residual, 1, nuisance, columns_of(repeat_run))
+            A, g = np.einsum("bjpq,j->pq", session.A, w2), np.einsum("bjp,j->p", session.g, w2)
+
+            def session_fit(chosen: list[int]) -> dict[int, np.ndarray]:
+                return selector.fitter.fit(chosen, A, g, None, float((session.s @ w2).sum())).params
     split_source = (holdout_runs, holdout_after) if holdout_runs else (train_runs, train_after)
     split = gap_split(np.asarray(_gaps([r.residual for r in split_source[0]])), np.asarray(_gaps(split_source[1])), floor)
     if simulate is None:
@@ -276,7 +283,7 @@ def diagnose(
         for i in selected
         if isinstance(effects[i], PointPayload)
     ]
-    first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index)
+    first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index, session_fit)
                      for i in selected if isinstance(effects[i], FirstMomentPayload)]
     payload_candidates = sorted(
         (
@@ -301,7 +308,7 @@ def diagnose(
         "baseline_source": {r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},
         "nuisance_offsets": nuisance_report,
         "session_floor": floor.tolist() if floor is not None else None,
-        "repeat": (prepare_run(repeat, arm, simulate, base_config).name if not isinstance(repeat, (str, Path)) else Path(str(repeat)).stem) if repeat is not None else None,
+        "repeat": repeat_run.name if repeat_run is not None else None,
         "gap_split": {"runs": "holdout" if holdout_runs else "train", "joints": split},
         "baseline": train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         "train_runs": [r.name for r in train_runs],

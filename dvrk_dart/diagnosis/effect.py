@@ -115,6 +115,11 @@ class Effect(ABC):
         most one of a family is selected."""
         return self.name
 
+    @property
+    def selection_group(self) -> str:
+        """At most one effect of a group is selected: its family by default."""
+        return self.family
+
     def fully_simulated(self, p: np.ndarray) -> bool:
         """Whether the simulation produces all of this effect's effort."""
         return self.sim_contribution(np.asarray(p, dtype=float)) is not None

@@ -8,12 +8,24 @@ central INTERVAL_QUANTILES of a normal law.
 
 from __future__ import annotations
 
+import math
+from typing import Callable
+
 import numpy as np
 from scipy.stats import norm
 
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.first_moment import FirstMomentPayload, PayloadAtPosition
-from dvrk_dart.diagnosis.payload import point_mass_parameters
+from dvrk_dart.diagnosis.first_moment import (
+    FIRST_MOMENT_COLUMNS,
+    YAW_PATH_JOINT,
+    FirstMomentPayload,
+    PayloadAtPosition,
+)
+from dvrk_dart.diagnosis.payload import (
+    first_moment_map,
+    mass_seen_by_gravity,
+    point_mass_parameters,
+)
 from dvrk_dart.diagnosis.payload_report import (
     MASS_IDENTIFIED_RATIO,
     pitch_shaft_offsets,
@@ -27,9 +39,8 @@ from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
-#: a payload's mass column whose energy is below this fraction of the largest
-#: column's is not seen by the efforts (round-off of a zero column)
-MASS_UNSEEN_FRACTION = 1e-12
+#: fit(chosen effects) -> their parameters, on two sessions of the run without the weight
+SessionFit = Callable[[list[int]], dict[int, np.ndarray]]
 
 
 def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
@@ -50,9 +61,24 @@ def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
     return f.body_regressor[0][:, f.body_columns(link)]
 
 
-def _quantities(effect: FirstMomentPayload, p: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
-    return {"mass_kg": np.array(p[0]), "first_moment_base_at_q0_kg_m": effect.first_moment_base_at_zero(p),
-            "gravity_efforts_at_q0": gravity[:, :4] @ p}
+def _gravity_efforts(gravity: np.ndarray, body: np.ndarray, yaw_path: np.ndarray) -> np.ndarray:
+    """(7,) gravity efforts at q = 0 of a body's parameters, J1's from its own path's (m, m c)."""
+    efforts = gravity @ body
+    efforts[YAW_PATH_JOINT] = gravity[YAW_PATH_JOINT, :FIRST_MOMENT_COLUMNS] @ yaw_path
+    return efforts
+
+
+def reference_first_moment(arm: Arm, key: int, reference_key: int, body: np.ndarray) -> np.ndarray:
+    """m (p_origin + R c) in the base frame at q = 0 of the body on `reference_key`
+    whose gravity efforts are those of (m, m c) on `key`: what the efforts see."""
+    m_c = first_moment_map(arm, key, reference_key) @ np.asarray(body[:FIRST_MOMENT_COLUMNS], dtype=float)
+    T = arm.model.forward_kinematics(np.zeros(N_JOINTS))[reference_key]
+    return m_c[0] * T[:3, 3] + T[:3, :3] @ m_c[1:4]
+
+
+def _quantities(arm: Arm, effect: FirstMomentPayload, p: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
+    return {"mass_kg": np.array(p[0]), "first_moment_base_at_q0_kg_m": reference_first_moment(arm, effect.link_key, effect.reference_key, p),
+            "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :FIRST_MOMENT_COLUMNS], p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:])}
 
 
 def _with_intervals(values: dict, folds: list[dict]) -> dict:
@@ -64,9 +90,19 @@ def _with_intervals(values: dict, folds: list[dict]) -> dict:
     return out
 
 
-def _mass_unseen(selector: Selector, index: int) -> bool:
-    column = selector.design.slices[index].start
-    return bool(selector.A_total[column, column] <= MASS_UNSEEN_FRACTION * np.max(np.diag(selector.A_total)))
+def _widen(report: dict, key: str, spread) -> None:
+    """Add a spread to both sides of report[key]'s interval, in quadrature."""
+    value = np.asarray(report[key], dtype=float)
+    interval = np.asarray(report[f"{key}_interval"], dtype=float)
+    spread = np.abs(np.asarray(spread, dtype=float))
+    lo, hi = (interval[0], interval[1]) if interval.ndim == 1 else (interval[:, 0], interval[:, 1])
+    lo, hi = value - np.hypot(value - lo, spread), value + np.hypot(hi - value, spread)
+    report[f"{key}_interval"] = [float(lo), float(hi)] if interval.ndim == 1 else np.stack([lo, hi], axis=1).tolist()
+
+
+def _mass_unseen(arm: Arm, selector: Selector, index: int) -> bool:
+    """Whether the efforts see the payload's mass only through its (sub-noise) inertia."""
+    return not mass_seen_by_gravity(arm, selector.design.effects[index].link_key)
 
 
 def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tuple[int, dict]]:
@@ -89,26 +125,37 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
 
 
 def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
-                        at_index: int | None = None) -> dict:
+                        at_index: int | None = None, session_fit: SessionFit | None = None) -> dict:
     """The payload as the efforts determine it: first moment (base frame, q = 0)
     and gravity efforts at q = 0 per joint, each with its interval; the mass
     with its interval and whether it is identified; with a payload at a given
-    position (`at_index`, a PayloadAtPosition in the design), its mass."""
+    position (`at_index`, a PayloadAtPosition in the design), its mass.
+
+    session_fit: the same effects fitted on two sessions of the run without the
+    weight (`--repeat` against the baseline): what they read there, divided by
+    sqrt(2) (one session's share, as `session_floor`), is added to every
+    interval in quadrature; the time-segment folds of one session cannot see it."""
     effect: FirstMomentPayload = selector.design.effects[index]
     gravity = _gravity_at_zero(arm, effect.link_key)
     p = fit_params[index]
     report = effect.describe(p)
-    report.update(_with_intervals(_quantities(effect, p, gravity), [_quantities(effect, f[index], gravity) for f in fold_params if index in f]))
-    if _mass_unseen(selector, index):
+    report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
+    report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f]))
+    if session_fit is not None:
+        session = {key: np.abs(v) / math.sqrt(2.0) for key, v in _quantities(arm, effect, session_fit(chosen)[index], gravity).items()}
+        for key, spread in session.items():
+            _widen(report, key, spread)
+        report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
+    if _mass_unseen(arm, selector, index):
         report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
     ties = tied_payloads(selector, chosen, index)
     if ties:  # the link is not determined: every interval spans the tied links' estimates
         others = [(selector.design.effects[j], q) for j, q in ties]
         report["tied_links"] = [e.link_name for e, _ in others]
-        if any(_mass_unseen(selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
+        if any(_mass_unseen(arm, selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
             report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
         for e, q in others:
-            for key, v in _quantities(e, q, _gravity_at_zero(arm, e.link_key)).items():
+            for key, v in _quantities(arm, e, q, _gravity_at_zero(arm, e.link_key)).items():
                 interval = np.asarray(report[f"{key}_interval"], dtype=float)
                 v = np.asarray(v, dtype=float)
                 if interval.ndim == 1:
@@ -124,7 +171,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     moment = np.asarray(report["first_moment_base_at_q0_kg_m"])
     words = [
         ("The best-fitting payload's first moment" if ties else "The efforts determine the payload's first moment") + f" m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "
-        f"(base frame, q = 0; pitch shaft centre at the base origin, shaft along base x, +y towards the remote centre of motion, +z up) "
+        f"(base frame, q = 0, as a body on {report['first_moment_reference_link']}; pitch shaft centre at the base origin, shaft along base x, "
+        "+y towards the remote centre of motion, +z up) "
         f"and its gravity efforts at q = 0: " + ", ".join(f"{j} {v:+.3f} {u}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units)) + ".",
     ]
     if effect.equivalent_links:
@@ -139,16 +187,21 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     else:
         words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed axis sees m·c only, "
                      "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
-    words.append("In the model's base frame the yaw axis is horizontal (base -y), so gravity loads J1 through the first-moment components "
-                 "across it (x, and z as the arm yaws): an effort on J1 that scales with the weight but that the model's geometry does not "
-                 "predict (a yaw axis mounted otherwise, a coupling in the transmission) shows up in these components; they are not a placement.")
+    words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
+                 "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
+                 "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "
+                 "the first moment and the mass above are read from the other joints, where the model's geometry holds.")
     if at_index is not None:
         at: PayloadAtPosition = selector.design.effects[at_index]
         at_set = [at_index if i == index else i for i in chosen]
         at_cv = selector.cross_validate(at_set)
-        m = float(selector.fit_all(at_set).params[at_index][0])
+        at_p = selector.fit_all(at_set).params[at_index]
+        m = float(at_p[0])
         m_lo, m_hi = jackknife_interval(np.array(m), np.array([f[at_index][0] for f in at_cv.fold_params if at_index in f])).tolist()
-        at_gravity = _gravity_at_zero(arm, at.link_key) @ point_mass_parameters(m, at.position)
+        if session_fit is not None:
+            spread = abs(session_fit(at_set)[at_index][0]) / math.sqrt(2.0)
+            m_lo, m_hi = m - math.hypot(m - m_lo, spread), m + math.hypot(m_hi - m, spread)
+        at_gravity = _gravity_efforts(_gravity_at_zero(arm, at.link_key), point_mass_parameters(m, at.position), at_p[1:])
         report["payload_at"] = {"link": at.link_name, "position_m": at.position.tolist(), "mass_kg": m, "mass_kg_interval": [m_lo, m_hi],
                                 "gravity_efforts_at_q0": at_gravity.tolist(), "cross_validated_fraction": at_cv.fraction}
         report["position_m"] = at.position.tolist()

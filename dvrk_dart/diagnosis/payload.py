@@ -170,3 +170,30 @@ def equivalent_payload_links(arm: Arm) -> dict[int, tuple[int, ...]]:
         return bool(np.all(residual <= EQUIVALENCE_TOLERANCE * np.linalg.norm(Y, axis=0).max()))
 
     return {i: tuple(j for j in links if inside(regressors[j], spaces[i]) and inside(regressors[i], spaces[j])) for i in links}
+
+
+def _gravity_first_moment_columns(arm: Arm, key: int) -> np.ndarray:
+    """(states * 7, 4) gravity efforts per unit (m, m c) of a link's body over random states."""
+    rng = np.random.default_rng(EQUIVALENCE_SEED)
+    q = rng.uniform(arm.model.joint_lower, arm.model.joint_upper, size=(EQUIVALENCE_STATES, N_JOINTS))
+    zero = np.zeros_like(q)
+    features = TrajectoryFeatures(arm, q, zero, zero, zero, 1.0)
+    return features.body_regressor[:, :, features.body_columns(key)][:, :, :4].reshape(-1, 4)
+
+
+def mass_seen_by_gravity(arm: Arm, key: int) -> bool:
+    """Whether gravity sees a payload's mass on a link apart from its first
+    moment: not on a link turning about fixed axes, nor on one equivalent to
+    it (a parallelogram link); there the mass shows only in the inertia, a
+    few mN·m for 0.1 kg, below the noise."""
+    Y = _gravity_first_moment_columns(arm, key)
+    residual = Y[:, 0] - Y[:, 1:] @ np.linalg.lstsq(Y[:, 1:], Y[:, 0], rcond=RANK_CUT)[0]
+    return bool(np.linalg.norm(residual) > EQUIVALENCE_TOLERANCE * max(np.linalg.norm(Y, axis=0).max(), 1e-300))
+
+
+def first_moment_map(arm: Arm, from_key: int, to_key: int) -> np.ndarray:
+    """(4, 4) map of a body's (m, m c) on `from_key` to the (m, m c) on `to_key`
+    whose gravity efforts are the same (least squares over random states; exact
+    for equivalent links, whose base-frame first moments differ by what the
+    efforts do not see, e.g. the constant height of a link's origin)."""
+    return np.linalg.lstsq(_gravity_first_moment_columns(arm, to_key), _gravity_first_moment_columns(arm, from_key), rcond=RANK_CUT)[0]

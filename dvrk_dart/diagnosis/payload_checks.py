@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.identifiable import reference_first_moment
+from dvrk_dart.diagnosis.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
@@ -62,6 +64,9 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
                  "passed": bool(payload and payload["group"] == spec["expected_group"]),
                  "value": f"{payload['link']} ({payload['group']})" if payload else "no payload selected"}]
     hand_moment = m_true * hand_point_base(arm, spec)
+    if payload and payload.get("first_moment_reference_link"):  # as a body on the link the first moment is reported on
+        reference = arm.model.link_by_name(payload["first_moment_reference_link"]).key
+        hand_moment = reference_first_moment(arm, key, reference, point_mass_parameters(m_true, position))
     result["hand_check"] = {"hand_point_base_at_q0_m": hand_point_base(arm, spec).tolist(), "hand_position_link_m": position.tolist(),
                             "hand_link": spec["hand_link"], "hand_first_moment_base_at_q0_kg_m": hand_moment.tolist()}
     if payload and "first_moment_base_at_q0_kg_m_interval" in payload:

@@ -177,9 +177,9 @@ class Selector:
         steps = []
         while len(selected) < min(max_effects, n):
             trials = {}
-            families = {self.design.effects[i].family for i in selected}
+            families = {self.design.effects[i].selection_group for i in selected}
             for i in range(n):
-                if i in selected or self.design.effects[i].family in families or not getattr(self.design.effects[i], "candidate", True):
+                if i in selected or self.design.effects[i].selection_group in families or not getattr(self.design.effects[i], "candidate", True):
                     continue
                 warm = [dict(p) for p in current.fold_params]
                 trials[i] = self.cross_validate(selected + [i], warm)
@@ -230,7 +230,7 @@ class Selector:
             return None
         by_name = {e.name: i for i, e in enumerate(self.design.effects)}
         rival = [by_name[f"offset_{j}"] for j in effect.joints if f"offset_{j}" in by_name]
-        rival = [i for i in rival if i not in selected and self.design.effects[i].family not in families]
+        rival = [i for i in rival if i not in selected and self.design.effects[i].selection_group not in families]
         if not rival or sum(self.design.effects[i].n_parameters for i in rival) >= effect.n_parameters:
             return None
         trial = self.cross_validate(selected + rival, [dict(p) for p in current.fold_params])
