@@ -4,13 +4,11 @@ A point mass m at c on a link gives efforts linear in (m, m c) up to its small
 second moment m (|c|^2 I - c c^T) (inertia about the link origin: for 0.1 kg at
 0.2 m, 4e-3 kg·m², a few mN·m at the runs' accelerations, below the noise).
 `FirstMomentPayload` fits (m, m c) linearly, with no envelope on c: on a link
-turning about a fixed axis gravity sees m c only, and whatever reaches J1 with
-the weight (a yaw axis not quite where the model has it, a transmission
-coupling) is read by the model's geometry as first-moment components across
-the yaw axis (horizontal, base -y, in the model's base frame). It is therefore reported as the first moment *the efforts*
-determine, in the base frame at q = 0, with the gravity efforts it causes per
-joint; the mass only where its own column is seen (a translating link, or runs
-at several speeds), else an interval.
+turning about a fixed axis gravity sees m c only. It is reported as the first
+moment *the efforts* determine, in the base frame at q = 0 as a body on the
+reference link of its family of equivalent links, with the gravity efforts it
+causes per joint; the mass only where gravity sees it apart from m c (a link
+translating along q3), else an interval.
 
 `PayloadAtPosition` is a point mass at a given (hand-measured) position: its
 efforts are linear in m, so a first moment becomes a mass with an interval.
