@@ -74,6 +74,11 @@ class Effect(ABC):
         return self.n_parameters
 
     @property
+    def n_seen_parameters(self) -> int:
+        """Parameters the efforts can tell apart (the selection's parsimony counts these)."""
+        return self.n_parameters
+
+    @property
     def lower(self) -> np.ndarray:
         return np.array([p.lower for p in self.parameters])
 

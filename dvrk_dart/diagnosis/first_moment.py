@@ -82,7 +82,7 @@ class FirstMomentPayload(Effect):
     kind = "payload"
 
     def __init__(self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,
-                 equivalent_keys: tuple[int, ...] = ()):
+                 equivalent_keys: tuple[int, ...] = (), mass_seen: bool = True):
         link = _moving_body_link(model, key)
         self.model, self.link_key, self.link_name, self.group = model, key, link.name, link.group
         self.envelope = envelope if envelope is not None else link_envelope(model, key)
@@ -91,6 +91,8 @@ class FirstMomentPayload(Effect):
         #: the family's link its first moment is reported on (equivalent links
         #: give the same efforts, not the same base-frame first moment)
         self.reference_key = min((key,) + tuple(equivalent_keys))
+        #: whether gravity sees the mass apart from m c (`payload.mass_seen_by_gravity`)
+        self.mass_seen = mass_seen
         self.joints = joints_moving_link(model, key)
         # the largest first moment a plausible payload has: the heaviest mass at
         # the far end of the link's envelope, along each axis
@@ -105,6 +107,12 @@ class FirstMomentPayload(Effect):
     @property
     def family(self) -> str:
         return "payload_on_" + "|".join(sorted((self.link_name,) + self.equivalent_links))
+
+    @property
+    def n_seen_parameters(self) -> int:
+        """Without the mass where gravity sees m c only: between links that fit
+        as well, the payload the efforts pin with fewer numbers is chosen."""
+        return self.n_parameters - (0 if self.mass_seen else 1)
 
     @property
     def selection_group(self) -> str:

@@ -39,6 +39,8 @@ from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
+#: step of the central difference of J1's gravity effort in q1 (rad)
+YAW_SLOPE_STEP_RAD = 1e-4
 #: fit(chosen effects) -> their parameters, on two sessions of the run without the weight
 SessionFit = Callable[[list[int]], dict[int, np.ndarray]]
 
@@ -55,17 +57,27 @@ def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
 
 
 def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
-    """(7, 10) efforts at q = 0 at rest per unit dynamic parameter of a link's body."""
-    zero = np.zeros((1, N_JOINTS))
-    f = TrajectoryFeatures(arm, zero, zero, zero, zero, sample_rate_hz())
-    return f.body_regressor[0][:, f.body_columns(link)]
+    """(3, 7, 10) efforts at rest per unit dynamic parameter of a link's body,
+    at q = 0 and at q1 = +-YAW_SLOPE_STEP_RAD (for J1's slope)."""
+    q = np.zeros((3, N_JOINTS))
+    q[1:, YAW_PATH_JOINT] = (YAW_SLOPE_STEP_RAD, -YAW_SLOPE_STEP_RAD)
+    zero = np.zeros_like(q)
+    f = TrajectoryFeatures(arm, q, zero, zero, zero, sample_rate_hz())
+    return f.body_regressor[:, :, f.body_columns(link)]
 
 
 def _gravity_efforts(gravity: np.ndarray, body: np.ndarray, yaw_path: np.ndarray) -> np.ndarray:
     """(7,) gravity efforts at q = 0 of a body's parameters, J1's from its own path's (m, m c)."""
-    efforts = gravity @ body
-    efforts[YAW_PATH_JOINT] = gravity[YAW_PATH_JOINT, :FIRST_MOMENT_COLUMNS] @ yaw_path
+    efforts = gravity[0] @ body
+    efforts[YAW_PATH_JOINT] = gravity[0, YAW_PATH_JOINT, :FIRST_MOMENT_COLUMNS] @ yaw_path
     return efforts
+
+
+def _yaw_slope(gravity: np.ndarray, yaw_path: np.ndarray) -> np.ndarray:
+    """d(J1 gravity effort)/dq1 at q = 0 of the yaw path (N·m/rad): the J1 signature
+    that scales with the weight (per-run offsets take J1's value at q = 0 itself)."""
+    rows = gravity[1:, YAW_PATH_JOINT, :FIRST_MOMENT_COLUMNS] @ yaw_path
+    return np.array((rows[0] - rows[1]) / (2.0 * YAW_SLOPE_STEP_RAD))
 
 
 def reference_first_moment(arm: Arm, key: int, reference_key: int, body: np.ndarray) -> np.ndarray:
@@ -78,7 +90,8 @@ def reference_first_moment(arm: Arm, key: int, reference_key: int, body: np.ndar
 
 def _quantities(arm: Arm, effect: FirstMomentPayload, p: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
     return {"mass_kg": np.array(p[0]), "first_moment_base_at_q0_kg_m": reference_first_moment(arm, effect.link_key, effect.reference_key, p),
-            "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :FIRST_MOMENT_COLUMNS], p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:])}
+            "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :, :FIRST_MOMENT_COLUMNS], p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:]),
+            "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, p[FIRST_MOMENT_COLUMNS:])}
 
 
 def _with_intervals(values: dict, folds: list[dict]) -> dict:
@@ -175,6 +188,10 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
         "+y towards the remote centre of motion, +z up) "
         f"and its gravity efforts at q = 0: " + ", ".join(f"{j} {v:+.3f} {u}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units)) + ".",
     ]
+    slope, (slope_lo, slope_hi) = report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"]
+    words.append(f"J1's effort changes with q1 at {slope:+.3f} N·m/rad at q = 0 (interval {slope_lo:+.3f} to {slope_hi:+.3f}): the J1 signature "
+                 "that scales with the weight. J1's value at q = 0 is barely determined: each run's offset takes J1's constant, and over the "
+                 "runs' yaw range cos q1 hardly differs from one.")
     if effect.equivalent_links:
         words.append(f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts.")
     elif not ties:

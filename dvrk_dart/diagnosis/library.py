@@ -28,6 +28,7 @@ from dvrk_dart.diagnosis.joint_effects import (
 from dvrk_dart.diagnosis.payload import (
     PointPayload,
     equivalent_payload_links,
+    mass_seen_by_gravity,
     payload_links,
     point_mass_parameters,
 )
@@ -62,10 +63,11 @@ def candidate_effects(
     effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
     effects += [JointArmature(j) for j in JOINT_NAMES]
     equivalents = equivalent_payload_links(arm)
-    payload_class = PointPayload if payload_model == "point" else FirstMomentPayload
-    effects += [
-        payload_class(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)
-    ]
+    if payload_model == "point":
+        effects += [PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)]
+    else:
+        effects += [FirstMomentPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k],
+                                       mass_seen=mass_seen_by_gravity(arm, k)) for k in payload_links(arm.model)]
     effects += [GravityTilt(arm), TimeShift(), CounterweightTransmission(arm)]
     return effects
 

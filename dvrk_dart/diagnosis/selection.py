@@ -157,7 +157,7 @@ class Selector:
         that clears it (a payload behind a 1-parameter effect that adds less)."""
         best = max(trials, key=lambda i: trials[i].fraction)
         best_boot = self.bootstrap_fractions(trials[best].after)
-        n_par = lambda i: self.design.effects[i].n_parameters
+        n_par = lambda i: self.design.effects[i].n_seen_parameters
         rivals = []
         for i, t in trials.items():
             if n_par(i) < n_par(best) and t.fraction - current.fraction >= MIN_HELDOUT_GAIN:
