@@ -14,6 +14,8 @@ from dvrk_dart.model.joints import N_JOINTS
 #: coordinates of the 10 dynamic parameters of a body in Pinocchio's regressor
 #: (m, m cx, m cy, m cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz about the joint frame origin)
 BODY_PARAMETERS = 10
+#: (m, m cx, m cy, m cz): the first four of them, what gravity sees
+FIRST_MOMENT_COLUMNS = 4
 
 
 class TrajectoryFeatures:
@@ -48,6 +50,10 @@ class TrajectoryFeatures:
             raise DvrkDartError(f"link {key} has no joint of its own in the identified model tree")
         j = self._pin_joint_of_link[key]
         return slice(BODY_PARAMETERS * (j - 1), BODY_PARAMETERS * j)
+
+    def first_moment_columns(self, key: int) -> np.ndarray:
+        """(N, 7, 4) efforts per unit (m, m c) of a link's body."""
+        return self.body_regressor[:, :, self.body_columns(key)][:, :, :FIRST_MOMENT_COLUMNS]
 
     @cached_property
     def body_regressor(self) -> np.ndarray:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
 from dvrk_dart.diagnosis.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
 from dvrk_dart.errors import DvrkDartError
@@ -39,8 +39,6 @@ from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import Payload
 
-#: (m, m cx, m cy, m cz): the first four of a body's dynamic parameters
-FIRST_MOMENT_COLUMNS = 4
 #: the joint whose payload efforts get a first moment of their own (the yaw joint)
 YAW_PATH_JOINT = 0
 #: the Occam prior (design.PAYLOAD_MASS_PRIOR_PER_KG2 per kg^2) counts a first
@@ -48,11 +46,6 @@ YAW_PATH_JOINT = 0
 #: do not see (e.g. along the yaw axis of a link that only translates in the
 #: parallelogram), which would otherwise run to their bounds
 FIRST_MOMENT_PRIOR_LENGTH_M = 0.1
-
-
-def first_moment_columns(features: TrajectoryFeatures, key: int) -> np.ndarray:
-    """(N, 7, 4) efforts per unit (m, m c) of a link's body."""
-    return features.body_regressor[:, :, features.body_columns(key)][:, :, :FIRST_MOMENT_COLUMNS]
 
 
 def _yaw_path_parameters(max_mass_kg: float, reach: np.ndarray) -> tuple[Parameter, ...]:
@@ -65,7 +58,7 @@ def _with_yaw_path(features: TrajectoryFeatures, key: int, columns: np.ndarray) 
     """`columns` (N, 7, k) with their yaw row moved to the yaw path's four columns."""
     out = np.concatenate([columns, np.zeros(columns.shape[:2] + (FIRST_MOMENT_COLUMNS,))], axis=2)
     out[:, YAW_PATH_JOINT, :] = 0.0
-    out[:, YAW_PATH_JOINT, -FIRST_MOMENT_COLUMNS:] = first_moment_columns(features, key)[:, YAW_PATH_JOINT, :]
+    out[:, YAW_PATH_JOINT, -FIRST_MOMENT_COLUMNS:] = features.first_moment_columns(key)[:, YAW_PATH_JOINT, :]
     return out
 
 
@@ -120,7 +113,7 @@ class FirstMomentPayload(Effect):
         return self.kind
 
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
-        return _with_yaw_path(features, self.link_key, first_moment_columns(features, self.link_key))
+        return _with_yaw_path(features, self.link_key, features.first_moment_columns(self.link_key))
 
     def sim_contribution(self, p):
         return None  # a first moment without a position is not a body: added by regressor

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.features import BODY_PARAMETERS, TrajectoryFeatures
+from dvrk_dart.diagnosis.features import (
+    BODY_PARAMETERS,
+    FIRST_MOMENT_COLUMNS,
+    TrajectoryFeatures,
+)
 from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.arm import Arm
@@ -178,7 +182,7 @@ def _gravity_first_moment_columns(arm: Arm, key: int) -> np.ndarray:
     q = rng.uniform(arm.model.joint_lower, arm.model.joint_upper, size=(EQUIVALENCE_STATES, N_JOINTS))
     zero = np.zeros_like(q)
     features = TrajectoryFeatures(arm, q, zero, zero, zero, 1.0)
-    return features.body_regressor[:, :, features.body_columns(key)][:, :, :4].reshape(-1, 4)
+    return features.first_moment_columns(key).reshape(-1, FIRST_MOMENT_COLUMNS)
 
 
 def mass_seen_by_gravity(arm: Arm, key: int) -> bool:
