@@ -26,10 +26,15 @@ from dvrk_dart.diagnosis.library import (
     effects_to_sim_config,
 )
 from dvrk_dart.diagnosis.out_of_library import LEFTOVER_ENERGY_RATIO, injected_effort
-from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
+from dvrk_dart.diagnosis.payload import (
+    PointPayload,
+    equivalent_payload_links,
+    point_mass_parameters,
+)
 from dvrk_dart.diagnosis.payload_checks import hand_position_on_link
 from dvrk_dart.diagnosis.regimes import residual_regimes
 from dvrk_dart.diagnosis.runs import DiagnosisRun, prepare_run
+from dvrk_dart.diagnosis.session_floor import session_offset_joints
 from dvrk_dart.diagnosis.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
@@ -450,3 +455,40 @@ def test_time_scaled_run_is_the_same_path(segment):
     k = 400
     assert np.allclose(half.q[2 * k], segment.q[k]) and np.allclose(half.dq[2 * k], 0.5 * segment.dq[k])
     assert np.allclose(half.ddq[2 * k], 0.25 * segment.ddq[k])
+
+
+def test_session_offset_joints_are_those_whose_mean_moves():
+    """A constant shift far above a mean's standard error marks the joint; noise alone does not."""
+    rng = np.random.default_rng(5)
+    difference = 0.02 * rng.standard_normal((6000, len(JOINT_NAMES)))
+    difference -= difference.mean(axis=0)  # no session moves the constants ...
+    difference[:, 1] += 0.07  # ... but J2's  # J2: sessions move its constant (upstream: +0.073 N·m, 10 standard errors)
+    moved = session_offset_joints(difference, sample_rate_hz())
+    assert moved[1] and not moved[0]
+
+
+def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noise_rms):
+    """A weight off the pitch plane (6 cm sideways) gives J1 a gravity effort at
+    q = 0; J1's constant does not move between sessions (model card), so a run
+    minus its baseline determines it, while J2's session offset stays a
+    nuisance. Measured: J1 +0.095 vs +0.118 N·m; the first-moment model has no
+    payload inertia, whose centripetal efforts have a J1 mean (-0.02 N·m for
+    0.2 kg here, the same with the weight on the other side), proportional to
+    the mass like the gravity effort."""
+    key = arm.model.link_by_name("pitch").key
+    T = arm.model.forward_kinematics(np.zeros(len(JOINT_NAMES)))[key]
+    point_base = T[:3, 3] + np.array([0.06, PAYLOAD_HORIZONTAL_M, PAYLOAD_HEIGHT_M])
+    position = np.linalg.solve(T, np.r_[point_base, 1.0])[:3]
+    mass = 0.2
+    baseline = prepare_run(synthesize_measurement(arm, segment, [], noise_rms, seed=41), arm, name="no_weight")
+    injected = [(PointPayload(arm.model, key), np.r_[mass, position]), (JointOffset("q2"), np.array([0.1]))]
+    weighted = prepare_run(synthesize_measurement(arm, segment, injected, noise_rms, seed=42), arm, name="weighted")
+    result = diagnose(weighted, baseline=baseline, arm=arm, figures=False)
+    payload = result["payload"]
+    at_rest = TrajectoryFeatures(arm, *(np.zeros((1, len(JOINT_NAMES))),) * 4, sample_rate_hz())
+    expected = at_rest.body_regressor[0][:, at_rest.body_columns(key)] @ point_mass_parameters(mass, position)
+    j1, j2 = payload["gravity_efforts_at_q0"][:2]
+    assert j1 == pytest.approx(expected[0], rel=0.3) and j2 == pytest.approx(expected[1], rel=0.3)
+    lo, hi = payload["gravity_efforts_at_q0_interval"][0]
+    assert lo * hi > 0.0  # determined: the interval excludes zero
+    assert result["nuisance_offsets"]["weighted"]["q1"] == 0.0 and result["nuisance_offsets"]["weighted"]["q2"] > 0.0

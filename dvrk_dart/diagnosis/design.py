@@ -85,14 +85,17 @@ class Grams:
     fold: np.ndarray  # (n_blocks,) fold index
 
     @staticmethod
-    def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int, demean: bool = False, Phi: np.ndarray | None = None) -> "Grams":
-        """demean: a constant per joint is a nuisance term of this run; it is
-        projected out of the residual and of every column (Frisch-Waugh-Lovell:
-        the same fit as with the run's own offsets as free parameters)."""
+    def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int, demean: np.ndarray | None = None,
+               Phi: np.ndarray | None = None) -> "Grams":
+        """demean: per joint, whether a constant is a nuisance term of this run;
+        it is projected out of the residual and of every column on those joints
+        (Frisch-Waugh-Lovell: the same fit as with the run's own offsets as free
+        parameters)."""
         Phi = design.columns(features) if Phi is None else Phi  # (N, 7, P)
-        if demean:
-            Phi = Phi - Phi.mean(axis=0)
-            residual = residual - residual.mean(axis=0)
+        if demean is not None:
+            mask = np.asarray(demean, dtype=float)
+            Phi = Phi - mask[None, :, None] * Phi.mean(axis=0)
+            residual = residual - mask * residual.mean(axis=0)
         block = max(1, int(round(BLOCK_DURATION_S * features.sample_rate_hz)))
         n_blocks = max(1, len(residual) // block)
         edges = np.linspace(0, len(residual), n_blocks + 1).astype(int)

@@ -44,6 +44,7 @@ from dvrk_dart.diagnosis.runs import (
     loaded_states,
     prepare_run,
     run_features,
+    same_motion,
 )
 from dvrk_dart.diagnosis.selection import (
     BOOTSTRAP_RESAMPLES,
@@ -52,8 +53,13 @@ from dvrk_dart.diagnosis.selection import (
     MIN_HELDOUT_GAIN,
     Selector,
 )
-from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
+from dvrk_dart.diagnosis.session_floor import (
+    gap_split,
+    session_floor,
+    session_offset_joints,
+)
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
@@ -122,9 +128,11 @@ def diagnose(
         session floor per joint and each joint's gap split (`session_floor`);
     payload_at: 'LINK:x,y,z' or (link key, position in its frame): a selected
         payload's mass at that (hand-measured) position, with its interval;
-    nuisance_offsets: a constant per run and joint fitted as a nuisance term
-        and reported (default: with a baseline or several runs, where the
-        session's offsets dominate constant differences);
+    nuisance_offsets: a constant per run fitted as a nuisance term and
+        reported (default: with a baseline or several runs), on the joints
+        whose constant effort moves between sessions: measured on `repeat`
+        when given, else the model card's ([sessions]); a constant the same in
+        every session is an effect (`JointOffset`);
     payload_model: "first_moment" (default with a baseline: the identifiable
         quantity) or "point" (`library.candidate_effects`);
     train: further runs to fit on (each a run spec or a (run, baseline) pair);
@@ -140,7 +148,7 @@ def diagnose(
     several = baseline is not None or len(measured_list) > 1
     nuisance = several if nuisance_offsets is None else bool(nuisance_offsets)
     payload_model = payload_model or ("first_moment" if baseline is not None else "point")
-    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, offsets=not nuisance)
+    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model)
     at_index = None
     if payload_at is not None:
         key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
@@ -172,12 +180,33 @@ def diagnose(
     def columns_of(run: DiagnosisRun) -> np.ndarray:
         return design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None)
 
+    repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run) if repeat is not None else None
+    reference_run = baseline_run or train_runs[0]
+    offset_joints, offset_joints_source = None, None
+    if nuisance:
+        offset_joints, offset_joints_source = np.ones(N_JOINTS, dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"
+        if arm.model.session_offset_joints is not None:
+            offset_joints, offset_joints_source = np.isin(JOINT_NAMES, arm.model.session_offset_joints), "model card [sessions]"
+        if repeat_run is not None and same_motion(repeat_run.state, reference_run.state):
+            offset_joints = session_offset_joints(repeat_run.gap - reference_run.gap, sample_rate_hz())
+            offset_joints_source = f"measured: {repeat_run.name} vs {reference_run.name}"
+
     train_features = [features_of(r) for r in train_runs]
     holdout_features = [features_of(r) for r in holdout_runs]
     train_columns = [columns_of(r) for r in train_runs]
     holdout_columns = [columns_of(r) for r in holdout_runs]
-    train_parts = [Grams.of_run(design, f, r.residual, folds, nuisance, Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
-    holdout_grams = [Grams.of_run(design, f, r.residual, 1, nuisance, Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
+    def demean_of(run: DiagnosisRun) -> np.ndarray | None:
+        """The joints with a nuisance constant: a run minus its baseline (same
+        motion) changes its constant with the session only; a run of another
+        motion keeps one on every joint (the mean of its motion-dependent
+        errors, e.g. friction's asymmetry, is its own)."""
+        if not nuisance:
+            return None
+        return offset_joints if run.role == "difference" else np.ones(N_JOINTS, dtype=bool)
+
+    demean = {id(r): demean_of(r) for r in train_runs + holdout_runs}
+    train_parts = [Grams.of_run(design, f, r.residual, folds, demean[id(r)], Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
+    holdout_grams = [Grams.of_run(design, f, r.residual, 1, demean[id(r)], Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
     train_residuals = [r.residual for r in train_runs]
     w2 = _weights(np.vstack(train_residuals))
     run_weights = _run_weights(train_parts)
@@ -250,23 +279,22 @@ def diagnose(
             after = simulated_after(run) - simulated_after(run.baseline, with_withheld=False)
         else:
             after = simulated_after(run, with_withheld=run.role != "baseline")
-        return after - after.mean(axis=0) if nuisance else after
+        return after - demean[id(run)] * after.mean(axis=0) if nuisance else after
 
     if hasattr(simulate, "prefetch"):  # the replays after the effects, side by side
         simulate.prefetch([pair for r in train_runs + holdout_runs for pair in _after_replays(r, sim_config, shared_config)])
     train_after = [after_residual(r, c) for r, c in zip(train_runs, train_columns)]
     holdout_after = [after_residual(r, c) for r, c in zip(holdout_runs, holdout_columns)]
     nuisance_report = None
-    if nuisance:  # the run's own constants: the mean of what the effects leave (Frisch-Waugh-Lovell)
-        nuisance_report = {r.name: dict(zip(JOINT_NAMES, (r.residual.mean(0) - (c @ final.beta).mean(0)).tolist()))
+    if nuisance:  # the run's own constants: its share of the mean of what the effects leave
+        nuisance_report = {r.name: dict(zip(JOINT_NAMES, (demean[id(r)] * (r.residual.mean(0) - (c @ final.beta).mean(0))).tolist()))
                            for r, c in zip(train_runs + holdout_runs, train_columns + holdout_columns)}
     del train_columns, holdout_columns
-    floor, session_fit, repeat_run = None, None, None
-    if repeat is not None:  # two runs without the effect under study, of two sessions
-        repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run)
-        floor = session_floor(baseline_run or train_runs[0], repeat_run)
+    floor, session_fit = None, None
+    if repeat_run is not None:  # two runs without the effect under study, of two sessions
+        floor = session_floor(reference_run, repeat_run)
         if repeat_run.role == "difference":  # what the effects read from a session change alone
-            session = Grams.of_run(design, features_of(repeat_run), repeat_run.residual, 1, nuisance, columns_of(repeat_run))
+            session = Grams.of_run(design, features_of(repeat_run), repeat_run.residual, 1, demean_of(repeat_run), columns_of(repeat_run))
             A, g = np.einsum("bjpq,j->pq", session.A, w2), np.einsum("bjp,j->p", session.g, w2)
 
             def session_fit(chosen: list[int]) -> dict[int, np.ndarray]:
@@ -285,6 +313,8 @@ def diagnose(
     ]
     first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index, session_fit)
                      for i in selected if isinstance(effects[i], FirstMomentPayload)]
+    for report in first_moments:
+        report["words"].append(_j1_constant_sentence(offset_joints, offset_joints_source))
     payload_candidates = sorted(
         (
             {
@@ -307,6 +337,8 @@ def diagnose(
         "measured_runs": [r.name for r in train_runs[: len(measured_list)]],
         "baseline_source": {r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},
         "nuisance_offsets": nuisance_report,
+        "nuisance_offset_joints": None if offset_joints is None else {
+            "joints": [j for j, on in zip(JOINT_NAMES, offset_joints) if on], "source": offset_joints_source},
         "session_floor": floor.tolist() if floor is not None else None,
         "repeat": repeat_run.name if repeat_run is not None else None,
         "gap_split": {"runs": "holdout" if holdout_runs else "train", "joints": split},
@@ -314,7 +346,7 @@ def diagnose(
         "train_runs": [r.name for r in train_runs],
         "holdout_runs": [r.name for r in holdout_runs],
         "residual_definition": "measured - simulated" + (" - (baseline measured - baseline simulated)" if baseline is not None else "")
-        + (" - a constant per run and joint (nuisance)" if nuisance else ""),
+        + (" - a constant per run on the joints whose constant moves between sessions (nuisance)" if nuisance else ""),
         "simulated_source": "simulation" if simulate is not None else "identified model at the measured state (stand-in for the DART replay)",
         "gap_before": {"train": _gaps(train_residuals), "holdout": _gaps([r.residual for r in holdout_runs])},
         "gap_after": {"train": _gaps(train_after), "holdout": _gaps(holdout_after)},
@@ -346,6 +378,17 @@ def diagnose(
     if out_dir is not None:
         _write_outputs(Path(out_dir), result, train_runs[0], train_after[0], figures)
     return result
+
+
+def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) -> str:
+    """What determines the payload's J1 effort at q = 0: the constant change of
+    J1's effort, unless each run's offset takes it."""
+    if offset_joints is not None and offset_joints[0]:
+        return (f"J1's value at q = 0 is barely determined: sessions move J1's constant ({source}), so each run's offset takes it, "
+                "and over the runs' yaw range cos q1 hardly differs from one.")
+    return (f"J1's value at q = 0 is read from the constant change of J1's effort, which sessions do not move ({source}; runs get no "
+            "J1 offset); it includes the mean of the payload's own centripetal efforts, which the first moment does not model "
+            "(proportional to the mass, like the gravity effort).")
 
 
 def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimConfig) -> list[tuple[SimConfig, object]]:

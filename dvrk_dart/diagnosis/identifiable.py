@@ -75,7 +75,7 @@ def _gravity_efforts(gravity: np.ndarray, body: np.ndarray, yaw_path: np.ndarray
 
 def _yaw_slope(gravity: np.ndarray, yaw_path: np.ndarray) -> np.ndarray:
     """d(J1 gravity effort)/dq1 at q = 0 of the yaw path (N·m/rad): the J1 signature
-    that scales with the weight (per-run offsets take J1's value at q = 0 itself)."""
+    that scales with the weight, determined even where per-run offsets take J1's value at q = 0."""
     rows = gravity[1:, YAW_PATH_JOINT, :FIRST_MOMENT_COLUMNS] @ yaw_path
     return np.array((rows[0] - rows[1]) / (2.0 * YAW_SLOPE_STEP_RAD))
 
@@ -190,8 +190,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     ]
     slope, (slope_lo, slope_hi) = report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"]
     words.append(f"J1's effort changes with q1 at {slope:+.3f} N·m/rad at q = 0 (interval {slope_lo:+.3f} to {slope_hi:+.3f}): the J1 signature "
-                 "that scales with the weight. J1's value at q = 0 is barely determined: each run's offset takes J1's constant, and over the "
-                 "runs' yaw range cos q1 hardly differs from one.")
+                 "that scales with the weight.")
     if effect.equivalent_links:
         words.append(f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts.")
     elif not ties:

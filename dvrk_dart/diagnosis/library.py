@@ -44,13 +44,12 @@ PAYLOAD_MODELS = ("point", "first_moment")
 
 def candidate_effects(
     arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES,
-    payload_model: str = "point", offsets: bool = True,
+    payload_model: str = "point",
 ) -> list[Effect]:
     """The library of candidate effects, in a fixed order.
 
     payload_model: "point" (a point mass inside the link's envelope, simulated
-    as a body) or "first_moment" (what the efforts determine, `first_moment`);
-    offsets: False when constant efforts are per-run nuisance terms."""
+    as a body) or "first_moment" (what the efforts determine, `first_moment`)."""
     if payload_model not in PAYLOAD_MODELS:
         raise DvrkDartError(f"payload model '{payload_model}': expected one of {', '.join(PAYLOAD_MODELS)}")
     effects: list[Effect] = []
@@ -58,8 +57,7 @@ def candidate_effects(
     effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
     if stribeck:
         effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
-    if offsets:
-        effects += [JointOffset(j) for j in JOINT_NAMES]
+    effects += [JointOffset(j) for j in JOINT_NAMES]
     effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
     effects += [JointArmature(j) for j in JOINT_NAMES]
     equivalents = equivalent_payload_links(arm)

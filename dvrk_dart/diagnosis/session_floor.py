@@ -11,6 +11,12 @@ effect leaves of a run's gap.
 A joint's gap (RMS before) is split in energy: explained by the selected
 effects (before^2 - after^2), session-to-session (the part of after^2 up to
 s^2), and left over (the rest), each reported as an RMS-equivalent sqrt.
+
+The same pair tells on which joints a session moves the constant effort
+(`session_offset_joints`). On those, each run of a study has its own offset,
+a nuisance term; on the others (J1 of the upstream arm: 0.001 N·m between
+sessions) a constant change of the effort belongs to the effects: a payload's
+J1 effort at q = 0 is then determined.
 """
 
 from __future__ import annotations
@@ -19,10 +25,15 @@ import math
 
 import numpy as np
 
+from dvrk_dart.diagnosis.design import BLOCK_DURATION_S
 from dvrk_dart.diagnosis.runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+#: a joint's constant effort moves from session to session when two sessions'
+#: mean efforts differ by more than this many standard errors (~95 %)
+SESSION_OFFSET_STANDARD_ERRORS = 2.0
 
 
 def session_floor(a: DiagnosisRun, b: DiagnosisRun) -> np.ndarray:
@@ -30,6 +41,22 @@ def session_floor(a: DiagnosisRun, b: DiagnosisRun) -> np.ndarray:
     if not same_motion(a.state, b.state):
         raise DvrkDartError(f"--repeat {b.name}: not the same motion as {a.name} (a repeat is the same trajectory at the same speed)")
     return rms(a.gap - b.gap) / math.sqrt(2.0)
+
+
+def mean_standard_error(residual: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """Per joint, the standard error of a run's mean effort, from the spread of
+    its block means (the samples are correlated over ~0.05 s, blocks are not)."""
+    block = max(1, int(round(BLOCK_DURATION_S * sample_rate_hz)))
+    n_blocks = max(2, len(residual) // block)
+    means = np.array([part.mean(axis=0) for part in np.array_split(residual, n_blocks)])
+    return means.std(axis=0, ddof=1) / math.sqrt(n_blocks)
+
+
+def session_offset_joints(difference: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """Per joint, whether a session moves its constant effort: the mean gap
+    difference of two runs of the same motion in two sessions is more than
+    SESSION_OFFSET_STANDARD_ERRORS standard errors from zero."""
+    return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, sample_rate_hz)
 
 
 def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None) -> list[dict]:

@@ -130,6 +130,7 @@ class PsmModel:
     max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
     max_com_distance_m: float = float("inf")
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
+    session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
 
     @property
     def body_links(self) -> list[Link]:
@@ -325,4 +326,5 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),
         model_angles=dict(reader.model_angles),
+        session_offset_joints=tuple(raw["sessions"]["offset_joints"]) if "sessions" in raw else None,
     )
