@@ -12,6 +12,7 @@ import scipy.optimize
 
 from dvrk_dart.diagnosis.effect import Effect
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.first_moment import YAW_PATH_JOINT
 from dvrk_dart.diagnosis.payload import PointPayload
 from dvrk_dart.model.joints import N_JOINTS
 
@@ -54,16 +55,21 @@ class Design:
             mask[sl] = e.kind in WITHHELD_KINDS
         return mask
 
-    def run_columns(self, role: str, features: TrajectoryFeatures, baseline_features: TrajectoryFeatures | None = None) -> np.ndarray:
+    def run_columns(self, role: str, features: TrajectoryFeatures, baseline_features: TrajectoryFeatures | None = None,
+                    yaw_path: bool = True) -> np.ndarray:
         """(N, 7, P) columns of a run by its role (`runs.DiagnosisRun.role`): a
         run minus its baseline sample by sample has the shared effects'
-        columns minus the baseline's; a baseline run has no withheld effect."""
+        columns minus the baseline's; a baseline run has no withheld effect.
+        yaw_path=False: the withheld effects' J1 rows (a payload's own J1 path,
+        `first_moment`) are zero in this run."""
         Phi = self.columns(features)
         if role == "difference":
             shared = ~self.withheld
             Phi[:, :, shared] -= self.columns(baseline_features)[:, :, shared]
         elif role == "baseline":
             Phi[:, :, self.withheld] = 0.0
+        if not yaw_path:
+            Phi[:, YAW_PATH_JOINT, self.withheld] = 0.0
         return Phi
 
     def index(self, chosen: Sequence[int]) -> np.ndarray:

@@ -177,8 +177,15 @@ def diagnose(
             features_cache[id(run)] = run_features(arm, run)
         return features_cache[id(run)]
 
+    # A run of another motion than its baseline has no J1 reference: its raw J1
+    # gap is dominated by motion-dependent errors (0.36 N·m RMS on the half-speed
+    # 105 g run, the weight's J1 effort 0.1), which a payload's free J1 path
+    # would absorb; J1's payload is read from the runs minus their baseline.
+    yaw_path_from_differences = any(r.role == "difference" for r in train_runs)
+
     def columns_of(run: DiagnosisRun) -> np.ndarray:
-        return design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None)
+        return design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None,
+                                  yaw_path=not (yaw_path_from_differences and run.role == "joint"))
 
     repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run) if repeat is not None else None
     reference_run = baseline_run or train_runs[0]

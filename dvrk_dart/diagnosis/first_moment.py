@@ -94,8 +94,11 @@ class FirstMomentPayload(Effect):
             Parameter(f"first_moment_{a}_kg_m", "kg·m", -max_mass_kg * r, max_mass_kg * r) for a, r in zip("xyz", reach)
         ) + _yaw_path_parameters(max_mass_kg, reach)
 
-    #: scales of the Occam prior on (m, m c) and on the yaw path's (`design.Fitter`)
-    prior_scales = np.array(([1.0] + [FIRST_MOMENT_PRIOR_LENGTH_M] * 3) * 2)
+    #: scales of the Occam prior on (m, m c) (`design.Fitter`); none on the yaw
+    #: path: J1's data determine what J1 sees of it, and a prior relative to
+    #: all runs' residual energy would shrink J1's share (a run minus its
+    #: baseline holds a fraction of it): the rest does not reach any report
+    prior_scales = np.array([1.0] + [FIRST_MOMENT_PRIOR_LENGTH_M] * 3 + [np.inf] * FIRST_MOMENT_COLUMNS)
 
     @property
     def family(self) -> str:
@@ -149,8 +152,8 @@ class PayloadAtPosition(Effect):
         reach = np.maximum(np.abs(envelope.lower), np.abs(envelope.upper))
         self.parameters = (Parameter("mass_kg", "kg", 0.0, max_mass_kg),) + _yaw_path_parameters(max_mass_kg, reach)
 
-    #: the mass is what is asked: no prior on it; the yaw path's as the payload's
-    prior_scales = np.array([np.inf, 1.0] + [FIRST_MOMENT_PRIOR_LENGTH_M] * 3)
+    #: the mass is what is asked: no prior on it, nor on the yaw path (as the payload's)
+    prior_scales = np.full(1 + FIRST_MOMENT_COLUMNS, np.inf)
 
     def columns(self, features):
         body = features.body_regressor[:, :, features.body_columns(self.link_key)]

@@ -154,10 +154,18 @@ def _split_and_nuisance_html(result: dict) -> list[str]:
         for r in split[:3]:
             parts.append(f"<tr><td>{r['joint']} ({e(r['unit'])})</td>" + "".join(f"<td>{r[k]:.4f}</td>" for k in ("before", "explained", "session_to_session", "left_over", "after")) + "</tr>")
         parts.append("</table>")
+    if result.get("nuisance_offset_joints"):
+        parts.append(f"<p>{e(_offset_joints_sentence(result['nuisance_offset_joints']))}</p>")
     for run, offsets in (result.get("nuisance_offsets") or {}).items():
-        parts.append(f"<p>nuisance offsets of {e(run)} (a constant per run and joint, fitted, not an effect): "
+        parts.append(f"<p>nuisance offsets of {e(run)} (a constant per run, fitted, not an effect): "
                      + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]) + "</p>")
     return parts
+
+
+def _offset_joints_sentence(offset_joints: dict) -> str:
+    joints = ", ".join(offset_joints["joints"]) or "none"
+    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run minus its baseline "
+            "has a nuisance offset on these only; a run of another motion has one on every joint.")
 
 
 def _band_html(result: dict) -> list[str]:
@@ -218,6 +226,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         print(f"payload: {p['mass_kg']:.3f} kg on {p['link']} ({p['group']})")
         for sentence in p.get("words", []):
             print(f"  {sentence}")
+    if result.get("nuisance_offset_joints"):
+        print(_offset_joints_sentence(result["nuisance_offset_joints"]))
     if result.get("nuisance_offsets"):
         for run, offsets in result["nuisance_offsets"].items():
             print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
