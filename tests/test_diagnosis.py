@@ -34,7 +34,7 @@ from dvrk_dart.diagnosis.payload import (
 from dvrk_dart.diagnosis.payload_checks import hand_position_on_link
 from dvrk_dart.diagnosis.regimes import residual_regimes
 from dvrk_dart.diagnosis.runs import DiagnosisRun, prepare_run
-from dvrk_dart.diagnosis.session_floor import session_offset_joints
+from dvrk_dart.diagnosis.session_floor import moved_constants
 from dvrk_dart.diagnosis.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process, zero_phase_lowpass
@@ -488,7 +488,7 @@ def test_session_offset_joints_are_those_whose_mean_moves():
     difference = 0.02 * rng.standard_normal((6000, len(JOINT_NAMES)))
     difference -= difference.mean(axis=0)  # no session moves the constants ...
     difference[:, 1] += 0.07  # ... but J2's  # J2: sessions move its constant (upstream: +0.073 N·m, 10 standard errors)
-    moved = session_offset_joints(difference, sample_rate_hz())
+    moved = moved_constants(difference, sample_rate_hz())
     assert moved[1] and not moved[0]
 
 

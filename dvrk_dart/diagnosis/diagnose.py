@@ -44,7 +44,6 @@ from dvrk_dart.diagnosis.runs import (
     loaded_states,
     prepare_run,
     run_features,
-    same_motion,
 )
 from dvrk_dart.diagnosis.selection import (
     BOOTSTRAP_RESAMPLES,
@@ -59,7 +58,6 @@ from dvrk_dart.diagnosis.session_floor import (
     session_offset_joints,
 )
 from dvrk_dart.io.atomic import write_json_atomic
-from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
@@ -189,19 +187,13 @@ def diagnose(
 
     repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run) if repeat is not None else None
     reference_run = baseline_run or train_runs[0]
-    offset_joints, offset_joints_source = None, None
-    if nuisance:
-        offset_joints, offset_joints_source = np.ones(N_JOINTS, dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"
-        if arm.model.session_offset_joints is not None:
-            offset_joints, offset_joints_source = np.isin(JOINT_NAMES, arm.model.session_offset_joints), "model card [sessions]"
-        if repeat_run is not None and same_motion(repeat_run.state, reference_run.state):
-            offset_joints = session_offset_joints(repeat_run.gap - reference_run.gap, sample_rate_hz())
-            offset_joints_source = f"measured: {repeat_run.name} vs {reference_run.name}"
+    offset_joints, offset_joints_source = session_offset_joints(arm.model, repeat_run, reference_run) if nuisance else (None, None)
 
     train_features = [features_of(r) for r in train_runs]
     holdout_features = [features_of(r) for r in holdout_runs]
     train_columns = [columns_of(r) for r in train_runs]
     holdout_columns = [columns_of(r) for r in holdout_runs]
+
     def demean_of(run: DiagnosisRun) -> np.ndarray | None:
         """The joints with a nuisance constant: a run minus its baseline (same
         motion) changes its constant with the session only; a run of another

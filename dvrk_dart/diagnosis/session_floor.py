@@ -28,7 +28,9 @@ import numpy as np
 from dvrk_dart.diagnosis.design import BLOCK_DURATION_S
 from dvrk_dart.diagnosis.runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.metrics import rms
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 #: a joint's constant effort moves from session to session when two sessions'
@@ -52,11 +54,22 @@ def mean_standard_error(residual: np.ndarray, sample_rate_hz: float) -> np.ndarr
     return means.std(axis=0, ddof=1) / math.sqrt(n_blocks)
 
 
-def session_offset_joints(difference: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+def moved_constants(difference: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     """Per joint, whether a session moves its constant effort: the mean gap
     difference of two runs of the same motion in two sessions is more than
     SESSION_OFFSET_STANDARD_ERRORS standard errors from zero."""
     return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, sample_rate_hz)
+
+
+def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, reference: DiagnosisRun) -> tuple[np.ndarray, str]:
+    """(per-joint mask, where it comes from) of the joints whose constant effort
+    moves between sessions: measured on `repeat` against `reference` (the same
+    motion in another session), else the model card's [sessions], else all."""
+    if repeat is not None and same_motion(repeat.state, reference.state):
+        return moved_constants(repeat.gap - reference.gap, sample_rate_hz()), f"measured: {repeat.name} vs {reference.name}"
+    if model.session_offset_joints is not None:
+        return np.isin(JOINT_NAMES, model.session_offset_joints), "model card [sessions]"
+    return np.ones(len(JOINT_NAMES), dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"
 
 
 def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None) -> list[dict]:
