@@ -89,11 +89,10 @@ def test_insertion_base_mass_with_the_hand_position(insertion):
 def test_insertion_base_first_moment_across_the_rcm(insertion):
     """The insertion-base weight's first moment y (horizontal, from the RCM):
     the efforts say 8.3 cm, the hand 2.4 cm; measured 2026-11-23: hand y
-    +0.0025 kg·m inside [-0.0043, +0.0124]. The interval holds the session
-    spread (--repeat): the no-weight baseline differs from every other run of
-    trajectory one by about 0.25 (1 - cos q2) N·m on J2 (one_results.csv too,
-    without a weight), and read as this payload, that session change moves y
-    by ~0.006 kg·m."""
+    +0.0025 kg·m inside [-0.0043, +0.0124], whose lower end is a tied link's
+    estimate (pitch_top, counterweight tie). The no-weight baseline differs
+    from every other run of trajectory one by about 0.25 (1 - cos q2) N·m on
+    J2 (one_results.csv too, without a weight), as large as this gap."""
     _, verdicts = insertion
     assert _verdict(verdicts, "first moment y")["passed"], verdicts
 
