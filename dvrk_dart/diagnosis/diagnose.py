@@ -203,9 +203,8 @@ def diagnose(
             return None
         return offset_joints if run.role == "difference" else np.ones(N_JOINTS, dtype=bool)
 
-    demean = {id(r): demean_of(r) for r in train_runs + holdout_runs}
-    train_parts = [Grams.of_run(design, f, r.residual, folds, demean[id(r)], Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
-    holdout_grams = [Grams.of_run(design, f, r.residual, 1, demean[id(r)], Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
+    train_parts = [Grams.of_run(design, f, r.residual, folds, demean_of(r), Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
+    holdout_grams = [Grams.of_run(design, f, r.residual, 1, demean_of(r), Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
     train_residuals = [r.residual for r in train_runs]
     w2 = _weights(np.vstack(train_residuals))
     run_weights = _run_weights(train_parts)
@@ -278,7 +277,7 @@ def diagnose(
             after = simulated_after(run) - simulated_after(run.baseline, with_withheld=False)
         else:
             after = simulated_after(run, with_withheld=run.role != "baseline")
-        return after - demean[id(run)] * after.mean(axis=0) if nuisance else after
+        return after - demean_of(run) * after.mean(axis=0) if nuisance else after
 
     if hasattr(simulate, "prefetch"):  # the replays after the effects, side by side
         simulate.prefetch([pair for r in train_runs + holdout_runs for pair in _after_replays(r, sim_config, shared_config)])
@@ -286,7 +285,7 @@ def diagnose(
     holdout_after = [after_residual(r, c) for r, c in zip(holdout_runs, holdout_columns)]
     nuisance_report = None
     if nuisance:  # the run's own constants: its share of the mean of what the effects leave
-        nuisance_report = {r.name: dict(zip(JOINT_NAMES, (demean[id(r)] * (r.residual.mean(0) - (c @ final.beta).mean(0))).tolist()))
+        nuisance_report = {r.name: dict(zip(JOINT_NAMES, (demean_of(r) * (r.residual.mean(0) - (c @ final.beta).mean(0))).tolist()))
                            for r, c in zip(train_runs + holdout_runs, train_columns + holdout_columns)}
     del train_columns, holdout_columns
     floor, session_fit = None, None
