@@ -96,3 +96,12 @@ def test_malformed_model_file(tmp_path):
     bad.write_text("[constants]\nl = 1\n[[links]]\nkey = 1\nname='x'\nparent = 0\ngroup='yaw'\ntheta = { q9 = 1 }\n")
     with pytest.raises(DvrkDartError, match="unknown name 'q9'"):
         load_model(bad)
+
+
+def test_sessions_name_known_joints(tmp_path):
+    model = load_model()
+    assert model.session_offset_joints == ("q2", "q3", "q4")  # J1's constant does not move between sessions
+    bad = tmp_path / "psm.toml"
+    bad.write_text(model.source.read_text().replace('offset_joints = ["q2", "q3", "q4"]', 'offset_joints = ["q2", "yaw"]'))
+    with pytest.raises(DvrkDartError, match=r"\[sessions\] offset_joints: unknown joint\(s\) yaw"):
+        load_model(bad)

@@ -45,20 +45,20 @@ def session_floor(a: DiagnosisRun, b: DiagnosisRun) -> np.ndarray:
     return rms(a.gap - b.gap) / math.sqrt(2.0)
 
 
-def mean_standard_error(residual: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+def mean_standard_error(residual: np.ndarray, rate_hz: float) -> np.ndarray:
     """Per joint, the standard error of a run's mean effort, from the spread of
     its block means (the samples are correlated over ~0.05 s, blocks are not)."""
-    block = max(1, int(round(BLOCK_DURATION_S * sample_rate_hz)))
+    block = max(1, int(round(BLOCK_DURATION_S * rate_hz)))
     n_blocks = max(2, len(residual) // block)
     means = np.array([part.mean(axis=0) for part in np.array_split(residual, n_blocks)])
     return means.std(axis=0, ddof=1) / math.sqrt(n_blocks)
 
 
-def moved_constants(difference: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+def moved_constants(difference: np.ndarray, rate_hz: float) -> np.ndarray:
     """Per joint, whether a session moves its constant effort: the mean gap
     difference of two runs of the same motion in two sessions is more than
     SESSION_OFFSET_STANDARD_ERRORS standard errors from zero."""
-    return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, sample_rate_hz)
+    return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)
 
 
 def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, reference: DiagnosisRun) -> tuple[np.ndarray, str]:

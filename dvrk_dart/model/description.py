@@ -326,5 +326,16 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),
         model_angles=dict(reader.model_angles),
-        session_offset_joints=tuple(raw["sessions"]["offset_joints"]) if "sessions" in raw else None,
+        session_offset_joints=_session_offset_joints(raw, path),
     )
+
+
+def _session_offset_joints(raw: dict, path: Path) -> tuple[str, ...] | None:
+    """[sessions] offset_joints: joint names (q1..q7) whose constant effort moves between sessions."""
+    if "sessions" not in raw:
+        return None
+    names = tuple(raw["sessions"].get("offset_joints", ()))
+    unknown = [n for n in names if n not in JOINT_NAMES]
+    if unknown:
+        raise DvrkDartError(f"{path}: [sessions] offset_joints: unknown joint(s) {', '.join(map(str, unknown))} (known: {', '.join(JOINT_NAMES)})")
+    return names
