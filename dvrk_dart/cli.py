@@ -30,6 +30,12 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
 
 
+def _add_processing_option(p: argparse.ArgumentParser, default: str) -> None:
+    p.add_argument("--processing", default=default, choices=("upstream", "periodic"),
+                   help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
+                        f"excitation's harmonics, analytic derivatives, measured noise (default {default})")
+
+
 def _bag_topics(args: argparse.Namespace):
     from dvrk_dart.io.bags import BagTopics
 
@@ -85,27 +91,33 @@ def cmd_excitation(args: argparse.Namespace) -> int:
 def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
     from dvrk_dart.io.reference_data import load_run, resolve_run
-    from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
+    from dvrk_dart.io.signal import process
     from dvrk_dart.metrics import relative_error, rms
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.model.identified import parse_terms
 
     arm = load_arm(params_file=args.params)
     terms = parse_terms(args.terms)
-    processed = process(load_run(resolve_run(args.measured)))
+    processed = process(load_run(resolve_run(args.measured)), args.processing)
+    predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
+    measured = processed.tau
     if args.first_period:
-        processed = processed.head(FIRST_PERIOD_SAMPLES)
-    predicted = arm.identified.predict(processed.q, processed.dq, processed.ddq, terms)
+        n = processed.first_period_samples()
+        predicted, measured = predicted[:n], measured[:n]
     result = {
-        "relative_error": relative_error(predicted, processed.tau).tolist(),
-        "rms": rms(predicted - processed.tau).tolist(),
-        "samples": len(processed),
+        "relative_error": relative_error(predicted, measured).tolist(),
+        "rms": rms(predicted - measured).tolist(),
+        "samples": len(measured),
         "terms": args.terms,
+        **processed.summary(),
     }
     if args.json:
         print(json.dumps(result))
     else:
-        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples")
+        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {args.processing} processing")
+        if processed.periodic is not None:
+            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['harmonics']} harmonics, "
+                  f"{result['whole_periods']} whole periods")
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}")
         for name, rel, r in zip(JOINT_NAMES, result["relative_error"], result["rms"]):
             print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}")
@@ -280,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
     p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
-    p.add_argument("--first-period", action="store_true", help="only the first base period (1111 samples), as upstream")
+    p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
+    _add_processing_option(p, "upstream")
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)

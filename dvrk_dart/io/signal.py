@@ -7,16 +7,22 @@
 - to q, to the *measured* dq and to tau; ddq is the 5-point central difference
   of the measured dq, then filtered the same way;
 - 200 samples are cut from each end.
+
+`process(run, "periodic")` gives the same ProcessedRun through the periodic
+layer (io/periodic.py) instead: analytic q, dq, ddq and efforts projected on
+the excitation's harmonics, with `in_band` projecting a prediction likewise.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.signal
 
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.periodic import PeriodicAnalysis, analyse
 from dvrk_dart.io.reference_data import MeasuredRun, sample_rate_hz
 
 FILTER_ORDER = 6
@@ -26,6 +32,8 @@ CUT_SAMPLES = 200
 MIN_ROWS = 2 * CUT_SAMPLES + 2
 #: the excitation's base period at 200 Hz: 1 / 0.18 Hz = 5.56 s
 FIRST_PERIOD_SAMPLES = 1111
+#: the processings a measured run can go through
+PROCESSINGS = ("upstream", "periodic")
 
 
 @dataclass(frozen=True)
@@ -35,12 +43,36 @@ class ProcessedRun:
     dq: np.ndarray
     ddq: np.ndarray
     tau: np.ndarray
+    #: the periodic layer's findings (None: upstream processing)
+    periodic: PeriodicAnalysis | None = field(default=None, compare=False)
 
     def __len__(self) -> int:
         return len(self.t)
 
+    @property
+    def processing(self) -> str:
+        return "upstream" if self.periodic is None else "periodic"
+
+    def in_band(self, x: np.ndarray) -> np.ndarray:
+        """A prediction at this run's samples, in the band the measured efforts
+        were given (periodic: projected on the same harmonics; upstream: as it is)."""
+        return x if self.periodic is None else self.periodic.projector(x)
+
+    def first_period_samples(self) -> int:
+        """Upstream: its nominal 1111 samples; periodic: the fitted period's."""
+        if self.periodic is None:
+            return FIRST_PERIOD_SAMPLES
+        return int(round(self.periodic.period.period_s / (self.t[1] - self.t[0])))
+
     def head(self, n: int) -> "ProcessedRun":
+        """The first n samples (a periodic run's band no longer applies: project before)."""
         return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)))
+
+    def summary(self) -> dict:
+        """What every output records of the processing."""
+        if self.periodic is None:
+            return {"processing": "upstream", "period_s": None, "harmonics": None, "noise_rms": None}
+        return self.periodic.summary()
 
 
 def central_difference(x: np.ndarray, h: float) -> np.ndarray:
@@ -65,12 +97,15 @@ def zero_phase_lowpass(x: np.ndarray, h: float) -> np.ndarray:
     return y[::-1][edge - 1 : -edge + 1]
 
 
-def process(run: MeasuredRun) -> ProcessedRun:
-    """Filtered q, dq, ddq, tau of a measured run, trimmed like upstream."""
+def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | None = None) -> ProcessedRun:
+    """q, dq, ddq, tau of a measured run: filtered and trimmed like upstream, or
+    through the periodic layer (`harmonics` imposes its cutoff)."""
+    if processing == "periodic":
+        return process_periodic(run, harmonics)
+    if processing != "upstream":
+        raise DvrkDartError(f"--processing {processing}: one of {', '.join(PROCESSINGS)}")
     h = 1.0 / sample_rate_hz()
     if len(run) < MIN_ROWS:
-        from dvrk_dart.errors import DvrkDartError
-
         raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
     q = zero_phase_lowpass(run.q, h)
     dq = zero_phase_lowpass(run.dq, h)
@@ -78,3 +113,11 @@ def process(run: MeasuredRun) -> ProcessedRun:
     tau = zero_phase_lowpass(run.tau, h)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
     return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep])
+
+
+def process_periodic(run: MeasuredRun, harmonics: int | None = None) -> ProcessedRun:
+    """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
+    analysis = analyse(run.t, run.q, run.tau, sample_rate_hz(), f"{run.path}: --processing periodic", harmonics)
+    t = run.t - run.t[0]
+    q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
+    return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis)

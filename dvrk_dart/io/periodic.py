@@ -1,0 +1,321 @@
+"""The periodic signal layer: an excitation run as its harmonic series.
+
+The identification's excitations repeat a Fourier series; a run holds several
+periods of it. On such a run the classical practice of identification with
+periodic excitation (Swevers et al. 1997; Pintelon and Schoukens, noise from
+the scatter between periods) gives signals far cleaner than filtering and
+differentiating (io/signal.py, upstream's processing):
+
+- the base period is fitted from the positions (no nominal frequency: a lab's
+  excitation has its own), with a standard error;
+- positions and efforts are projected on the harmonics of that period up to a
+  cutoff read from the data; velocities and accelerations are the analytic
+  derivatives of the position series, so no noise is differentiated;
+- the noise is measured, not assumed: in the DFT of whole periods, the lines
+  between the harmonics hold only what does not repeat from one period to the
+  next (noise, drift), and their level around each harmonic is that
+  harmonic's noise;
+- a model's prediction is projected on the same harmonics (`ProcessedRun.in_band`),
+  so that both sides of a comparison see the same band.
+
+The cutoff: the efforts' harmonics stand above their noise up to some order,
+then sink into it. `cutoff` is the last harmonic before the first run of
+`CUTOFF_RUN` consecutive harmonics whose power is less than `CUTOFF_SNR` times
+the local noise power, on the joint where that comes first: every joint's
+efforts are then clearly above their noise in the kept band, and the analytic
+accelerations (which weigh harmonic k by k^2) carry little position noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.optimize
+
+from dvrk_dart.errors import DvrkDartError
+
+#: the fewest whole periods a run must hold (the noise is their scatter)
+MIN_PERIODS = 2
+#: a run is periodic when its positions' harmonic series at the fitted period
+#: explains at least this fraction of their variance (every joint pooled, each
+#: scaled to unit variance); trajectories "one" and "two": > 0.9999
+MIN_EXPLAINED_VARIANCE = 0.99
+#: harmonics of the positions in the coarse-to-fine period search (the
+#: identification's excitations are 6-harmonic series)
+SEARCH_HARMONICS = 6
+#: the cutoff rule (module docstring): power ratio and run length
+CUTOFF_SNR = 10.0
+CUTOFF_RUN = 3
+#: noise around a harmonic: the non-harmonic DFT lines within this many
+#: harmonics on either side
+NOISE_WINDOW_HARMONICS = 2
+#: the period fitted on each half of a run must agree within this many
+#: combined standard errors, else the run's period is called unstable
+STABLE_PERIOD_STANDARD_ERRORS = 5.0
+
+
+@dataclass(frozen=True)
+class Period:
+    """A fitted base period: value and standard error (s), and the whole periods in the run."""
+
+    period_s: float
+    standard_error_s: float
+    whole_periods: int
+
+    @property
+    def frequency_hz(self) -> float:
+        return 1.0 / self.period_s
+
+
+@dataclass(frozen=True)
+class Noise:
+    """What does not repeat from one period to the next, per joint (columns).
+
+    `per_sample_rms`: the noise of one raw sample; `projected_rms`: what of it
+    is left in the projection on the kept harmonics; `harmonic_variance[k]`:
+    the variance of harmonic k's cosine (or sine) coefficient as the whole run
+    estimates it (k = 0: the mean). Estimated from `whole_periods` periods.
+    """
+
+    per_sample_rms: np.ndarray
+    projected_rms: np.ndarray
+    harmonic_variance: np.ndarray
+    whole_periods: int
+
+
+def harmonic_design(t: np.ndarray, frequency_hz: float, harmonics: int, derivative: int = 0) -> np.ndarray:
+    """(N, 2K+1) columns [1, cos w t, sin w t, ..., cos K w t, sin K w t], or their time derivative."""
+    w = 2.0 * math.pi * frequency_hz * np.arange(1, harmonics + 1)
+    phase = np.outer(t, w)
+    cos, sin = np.cos(phase), np.sin(phase)
+    if derivative == 0:
+        pair, constant = (cos, sin), np.ones_like(t)
+    elif derivative == 1:
+        pair, constant = (-w * sin, w * cos), np.zeros_like(t)
+    elif derivative == 2:
+        pair, constant = (-(w**2) * cos, -(w**2) * sin), np.zeros_like(t)
+    else:
+        raise ValueError(f"derivative {derivative}: 0, 1 or 2")
+    columns = np.empty((len(t), 2 * harmonics + 1))
+    columns[:, 0] = constant
+    columns[:, 1::2], columns[:, 2::2] = pair
+    return columns
+
+
+def _unit_variance(x: np.ndarray) -> np.ndarray:
+    x = x - x.mean(axis=0)
+    scale = x.std(axis=0)
+    return x[:, scale > 0] / scale[scale > 0]
+
+
+def _coarse_period_samples(x: np.ndarray) -> int:
+    """The lag (samples) of the autocorrelation's highest peak, or of the
+    shortest lag that repeats as well (a peak at 2T is as high as at T)."""
+    n = len(x)
+    spectrum = np.fft.rfft(x, 2 * n, axis=0)
+    acf = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].sum(axis=1)
+    acf = acf / (acf[0] * (n - np.arange(n)) / n)  # unbiased: each lag over its overlap
+    usable = acf[: n // MIN_PERIODS + 1]
+    first_negative = np.flatnonzero(usable < 0)
+    if not len(first_negative):
+        raise DvrkDartError("its positions never decorrelate within half the run: not a periodic excitation of two periods or more")
+    start = first_negative[0]
+    peaks = start + np.flatnonzero((usable[start + 1 : -1] >= usable[start:-2]) & (usable[start + 1 : -1] >= usable[start + 2 :])) + 1
+    if not len(peaks):
+        raise DvrkDartError("its positions do not repeat within half the run: not a periodic excitation of two periods or more")
+    best = usable[peaks].max()
+    return int(peaks[usable[peaks] >= 0.95 * best][0])
+
+
+def _residual_energy(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: int) -> float:
+    A = harmonic_design(t, frequency_hz, harmonics)
+    coefficients, *_ = np.linalg.lstsq(A, x, rcond=None)
+    return float(np.sum((x - A @ coefficients) ** 2))
+
+
+def _frequency_standard_error(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: int) -> float:
+    """Gauss-Newton standard error of the base frequency, each joint weighted
+    by its residual variance, inflated by the residuals' correlation time."""
+    from dvrk_dart.identification.fit import integrated_autocorrelation_time
+
+    A = harmonic_design(t, frequency_hz, harmonics)
+    coefficients, *_ = np.linalg.lstsq(A, x, rcond=None)
+    residual = x - A @ coefficients
+    # d(series)/d(frequency) = t * d(series)/dt / frequency
+    sensitivity = (t[:, None] * (harmonic_design(t, frequency_hz, harmonics, 1) @ coefficients)) / frequency_hz
+    variance = residual.var(axis=0)
+    information = 0.0
+    for j in range(x.shape[1]):
+        if variance[j] <= 0:
+            continue
+        # the sensitivity's own component along the fitted columns is absorbed by the coefficients
+        s = sensitivity[:, j] - A @ np.linalg.lstsq(A, sensitivity[:, j], rcond=None)[0]
+        correlation = integrated_autocorrelation_time(residual[:, j])
+        information += float(s @ s) / (variance[j] * correlation)
+    return math.inf if information <= 0 else 1.0 / math.sqrt(information)
+
+
+def _fit_frequency(t: np.ndarray, x: np.ndarray, rate_hz: float) -> tuple[float, float]:
+    """(frequency, its standard error) from positions scaled to unit variance."""
+    lag = _coarse_period_samples(x)
+    coarse = rate_hz / lag
+    # the coarse lag is within a sample of the period
+    bounds = (rate_hz / (lag + 1), rate_hz / (lag - 1))
+    found = scipy.optimize.minimize_scalar(_residual_energy, bounds=bounds, args=(t, x, SEARCH_HARMONICS), method="bounded",
+                                           options={"xatol": coarse * 1e-9})
+    return float(found.x), _frequency_standard_error(float(found.x), t, x, SEARCH_HARMONICS)
+
+
+def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str) -> Period:
+    """The base period of a run's positions, checked: periodic, two whole periods or more, stable."""
+    x = _unit_variance(q)
+    if x.shape[1] == 0:
+        raise DvrkDartError(f"{where}: the arm does not move: not a periodic excitation")
+    try:
+        frequency, standard_error = _fit_frequency(t, x, rate_hz)
+    except DvrkDartError as exc:
+        raise DvrkDartError(f"{where}: {exc}") from None
+    whole = int(math.floor((t[-1] - t[0]) * frequency + 1e-9))
+    if whole < MIN_PERIODS:
+        raise DvrkDartError(f"{where}: {(t[-1] - t[0]) * frequency:.2f} periods of {1 / frequency:.3f} s, at least {MIN_PERIODS} needed")
+    explained = 1.0 - _residual_energy(frequency, t, x, SEARCH_HARMONICS) / float(np.sum(x**2))
+    if explained < MIN_EXPLAINED_VARIANCE:
+        raise DvrkDartError(f"{where}: a {SEARCH_HARMONICS}-harmonic series of period {1 / frequency:.3f} s explains "
+                            f"{explained:.1%} of the positions' variance (< {MIN_EXPLAINED_VARIANCE:.0%}): not a periodic excitation")
+    half = len(t) // 2
+    halves = [_fit_frequency(t[part], x[part], rate_hz) for part in (slice(0, half), slice(half, None))]
+    (f1, s1), (f2, s2) = halves
+    if abs(f1 - f2) > STABLE_PERIOD_STANDARD_ERRORS * math.hypot(s1, s2):
+        raise DvrkDartError(f"{where}: unstable period: {1 / f1:.4f} s in the first half, {1 / f2:.4f} s in the second "
+                            f"(standard errors {s1 / f1**2:.1e}, {s2 / f2**2:.1e} s)")
+    return Period(1.0 / frequency, standard_error / frequency**2, whole)
+
+
+@dataclass(frozen=True)
+class _Spectrum:
+    """Per joint: each harmonic's power and the local noise power (DFT of whole periods)."""
+
+    harmonic_power: np.ndarray  # (K_max + 1, n)
+    noise_power: np.ndarray  # (K_max + 1, n), per DFT line
+    per_sample_variance: np.ndarray  # (n,)
+
+
+def _spectrum(x: np.ndarray, period: Period, rate_hz: float) -> _Spectrum:
+    periods = period.whole_periods
+    span = int(round(periods * period.period_s * rate_hz))
+    lines = np.abs(np.fft.rfft(x[:span] - x[:span].mean(axis=0), axis=0)) ** 2 / span
+    index = np.arange(len(lines))
+    noise_line = (index % periods != 0) & (index > 0)
+    top = (len(lines) - 1) // periods
+    window = NOISE_WINDOW_HARMONICS * periods
+    noise = np.empty((top + 1, x.shape[1]))
+    for k in range(top + 1):
+        around = slice(max(1, k * periods - window), k * periods + window + 1)
+        noise[k] = lines[around][noise_line[around]].mean(axis=0)
+    return _Spectrum(lines[::periods][: top + 1], noise, lines[noise_line].mean(axis=0))
+
+
+def choose_cutoff(spectrum: _Spectrum, limit: int | None = None) -> int:
+    """The module docstring's cutoff rule on the efforts' spectrum."""
+    ratio = spectrum.harmonic_power[1:] / np.maximum(spectrum.noise_power[1:], np.finfo(float).tiny)
+    below = (ratio < CUTOFF_SNR).astype(int)
+    runs = np.apply_along_axis(lambda b: np.convolve(b, np.ones(CUTOFF_RUN, dtype=int), "valid"), 0, below)
+    cutoffs = []
+    for j in range(ratio.shape[1]):
+        sunk = np.flatnonzero(runs[:, j] >= CUTOFF_RUN)
+        cutoffs.append(int(sunk[0]) if len(sunk) else ratio.shape[0])
+    cutoff = max(1, min(cutoffs))
+    return cutoff if limit is None else min(cutoff, limit)
+
+
+def _noise(spectrum: _Spectrum, harmonics: int, samples: int, periods: int) -> Noise:
+    variance = 2.0 * spectrum.noise_power[: harmonics + 1] / samples
+    variance[0] /= 2.0  # the mean has one coefficient, not a cos/sin pair
+    projected = variance[0] + variance[1:].sum(axis=0)
+    return Noise(np.sqrt(spectrum.per_sample_variance), np.sqrt(projected), variance, periods)
+
+
+@dataclass(frozen=True)
+class HarmonicSeries:
+    """Columns as series of harmonics of one base frequency: coefficients (2K+1, n) of `harmonic_design`."""
+
+    frequency_hz: float
+    coefficients: np.ndarray
+
+    @property
+    def harmonics(self) -> int:
+        return (len(self.coefficients) - 1) // 2
+
+    def __call__(self, t: np.ndarray, derivative: int = 0) -> np.ndarray:
+        return harmonic_design(np.asarray(t, dtype=float), self.frequency_hz, self.harmonics, derivative) @ self.coefficients
+
+
+@dataclass(frozen=True)
+class Projector:
+    """Least-squares projection of columns sampled at `t` on the harmonics (what `in_band` applies)."""
+
+    t: np.ndarray
+    frequency_hz: float
+    harmonics: int
+    _design: np.ndarray = field(repr=False, compare=False, default=None)
+
+    def __post_init__(self):
+        object.__setattr__(self, "_design", harmonic_design(self.t, self.frequency_hz, self.harmonics))
+
+    def series(self, x: np.ndarray) -> HarmonicSeries:
+        coefficients, *_ = np.linalg.lstsq(self._design, np.asarray(x, dtype=float), rcond=None)
+        return HarmonicSeries(self.frequency_hz, coefficients)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        flat = x.reshape(len(x), -1)
+        return (self._design @ self.series(flat).coefficients).reshape(x.shape)
+
+
+@dataclass(frozen=True)
+class PeriodicAnalysis:
+    """What the periodic layer found in a run: period, cutoff, series and noise."""
+
+    period: Period
+    harmonics: int
+    positions: HarmonicSeries
+    efforts: HarmonicSeries
+    effort_noise: Noise
+    position_noise: Noise
+    projector: Projector
+
+    def summary(self) -> dict:
+        """The figures every output records."""
+        return {
+            "processing": "periodic",
+            "period_s": self.period.period_s,
+            "period_standard_error_s": self.period.standard_error_s,
+            "whole_periods": self.period.whole_periods,
+            "harmonics": self.harmonics,
+            "cutoff_rule": f"last harmonic before {CUTOFF_RUN} consecutive harmonics of a joint's efforts "
+                           f"below {CUTOFF_SNR:g} x their local noise power",
+            "noise_rms": self.effort_noise.projected_rms.tolist(),
+            "noise_per_sample_rms": self.effort_noise.per_sample_rms.tolist(),
+            "position_noise_per_sample_rms": self.position_noise.per_sample_rms.tolist(),
+            "noise_periods": self.effort_noise.whole_periods,
+        }
+
+
+def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where: str, harmonics: int | None = None) -> PeriodicAnalysis:
+    """The periodic layer on one run (raises a one-line DvrkDartError naming `where` if it is not periodic).
+    `harmonics` imposes the cutoff (runs compared with each other share the smaller one)."""
+    t = np.asarray(t, dtype=float) - float(t[0])
+    period = fit_period(t, q, rate_hz, where)
+    effort_spectrum = _spectrum(tau, period, rate_hz)
+    top = len(effort_spectrum.harmonic_power) - 1
+    cutoff = choose_cutoff(effort_spectrum) if harmonics is None else min(int(harmonics), top)
+    projector = Projector(t, period.frequency_hz, cutoff)
+    position_spectrum = _spectrum(q, period, rate_hz)
+    return PeriodicAnalysis(
+        period, cutoff, projector.series(q), projector.series(tau),
+        _noise(effort_spectrum, cutoff, len(t), period.whole_periods),
+        _noise(position_spectrum, cutoff, len(t), period.whole_periods),
+        projector,
+    )
