@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import threading
@@ -121,6 +122,49 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}")
         for name, rel, r in zip(JOINT_NAMES, result["relative_error"], result["rms"]):
             print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}")
+    return 0
+
+
+def _processed_pair(names: tuple[str, str], processing: str):
+    """Two runs through one processing; periodic ones on their common (smaller) harmonic cutoff."""
+    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+    from dvrk_dart.io.signal import process
+
+    paths = [resolve_run(name) for name in names]
+    if sha256_of(paths[0]) == sha256_of(paths[1]):
+        raise DvrkDartError(f"--repeat {names[1]}: the same recording as --measured {names[0]} (a floor needs two sessions)")
+    measured = [load_run(path) for path in paths]
+    runs = [process(run, processing) for run in measured]
+    if processing == "periodic":
+        harmonics = min(run.periodic.harmonics for run in runs)
+        runs = [process(run, processing, harmonics) for run in measured]
+    return runs
+
+
+def cmd_session_floor(args: argparse.Namespace) -> int:
+    """The floor of the identified model's residual: two recordings of one trajectory."""
+    from dvrk_dart.analysis.residual_floor import check_repeat, floor_table
+    from dvrk_dart.model.arm import load_arm
+
+    arm = load_arm(params_file=args.params)
+    a, b = _processed_pair((args.measured, args.repeat), args.processing)
+    try:
+        check_repeat(a, b)
+        table = floor_table(arm, a, b)
+    except DvrkDartError as exc:
+        raise DvrkDartError(f"--repeat {args.repeat}: {exc}") from None
+    result = {"measured": args.measured, "repeat": args.repeat, **table,
+              "runs": {args.measured: a.summary(), args.repeat: b.summary()}}
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"identified model's residual, {args.measured} vs {args.repeat} ({args.processing} processing)")
+    print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
+    noise = table["noise_predicted_rms"] or [math.nan] * len(JOINT_NAMES)
+    verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
+    for j, name in enumerate(JOINT_NAMES):
+        print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]:9.4f}  "
+              f"{effort_unit(name)}: {verdicts[j]}")
     return 0
 
 
@@ -299,6 +343,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_arm_options(p)
     _add_bag_options(p)
     p.set_defaults(func=cmd_model_errors)
+
+    p = sub.add_parser("session-floor", help="the floor of the identified model's residual from two recordings of one trajectory")
+    p.add_argument("--measured", required=True, help="a measured run: path (CSV or ROS bag), or one|two|one-no-weight|...")
+    p.add_argument("--repeat", required=True, help="the same trajectory recorded in another session")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    _add_processing_option(p, "periodic")
+    _add_arm_options(p)
+    _add_bag_options(p)
+    p.set_defaults(func=cmd_session_floor)
 
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
     p.add_argument("--runs", nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")

@@ -1,0 +1,152 @@
+"""The floor of a model's residual: two recordings of one trajectory in two sessions.
+
+What the identified model leaves of a run (measured - predicted) holds what
+any fixed effect could explain, plus what changes from one recording to the
+next. Two recordings of the same trajectory share the first: the difference
+of their residuals is the floor no fixed effect can remove, on the very
+signals a comparison uses (the same processing). Its parts:
+
+- noise: each run's measured efforts (the lines between the harmonics, io/
+  periodic.py) and the model's inputs (position noise through the model,
+  drawn from the positions' own harmonic noise); a difference of independent
+  noises adds in squares, so the two runs predict
+  sqrt(noise_a^2 + noise_b^2) of RMS difference;
+- a session effect: what the difference holds beyond that (a constant that
+  moves: `rms_difference_demeaned` takes it out; a shape that moves: left).
+
+In periodic processing the two residuals are compared over one period on a
+common phase (the second run shifted to where its positions best match the
+first's); in upstream processing sample by sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.optimize
+
+from dvrk_dart.diagnosis.runs import SAME_MOTION_POSITION_RMS, same_motion
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.periodic import HarmonicSeries
+from dvrk_dart.io.signal import ProcessedRun
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+#: draws of the positions' noise through the model (the spread of their RMS is ~1/sqrt(2 x draws x samples))
+PREDICTION_NOISE_DRAWS = 8
+#: the difference is "noise" when within this factor of what the noise predicts
+NOISE_AGREEMENT_FACTOR = 1.5
+#: two recordings of one trajectory have the same period to this fraction (the
+#: supplied recordings of "one": 1e-5)
+SAME_PERIOD_FRACTION = 1e-3
+#: phase samples of the one-period comparison, per second of period
+PHASE_SAMPLES_PER_S = 200.0
+
+
+def residual(arm: Arm, run: ProcessedRun) -> np.ndarray:
+    """measured - predicted, in the run's band (N, 7)."""
+    return run.tau - run.in_band(arm.identified.predict(run.q, run.dq, run.ddq))
+
+
+def prediction_noise(arm: Arm, run: ProcessedRun, seed: int = 0) -> np.ndarray:
+    """Per joint, the RMS of what the positions' noise moves the model's prediction by (periodic runs)."""
+    analysis = run.periodic
+    t = run.t - run.t[0]
+    nominal = run.in_band(arm.identified.predict(run.q, run.dq, run.ddq))
+    # each coefficient's standard deviation: the mean's, then each harmonic's cosine and sine
+    std = np.sqrt(np.repeat(analysis.position_noise.harmonic_variance, 2, axis=0)[1:])
+    rng = np.random.default_rng(seed)
+    moved = []
+    for _ in range(PREDICTION_NOISE_DRAWS):
+        drawn = HarmonicSeries(analysis.positions.frequency_hz, analysis.positions.coefficients + std * rng.standard_normal(std.shape))
+        moved.append(run.in_band(arm.identified.predict(*(drawn(t, d) for d in range(3)))) - nominal)
+    return rms(np.concatenate(moved))
+
+
+def residual_noise(arm: Arm, run: ProcessedRun) -> np.ndarray:
+    """Per joint, the noise of a periodic run's model residual: its efforts' and its inputs' in squares."""
+    return np.hypot(run.periodic.effort_noise.projected_rms, prediction_noise(arm, run))
+
+
+def _phase_shift(a: ProcessedRun, b: ProcessedRun, phase: np.ndarray) -> float:
+    """The fraction of a period by which b's positions lag a's (best match in
+    the least-squares sense); refused when they do not match there."""
+    qa = a.periodic.positions(phase * a.periodic.period.period_s)
+    scale = 1.0 / np.maximum(qa.std(axis=0), 1e-12)
+
+    def mismatch(shift: float) -> float:
+        qb = b.periodic.positions(((phase + shift) % 1.0) * b.periodic.period.period_s)
+        return float(np.sum(((qa - qb) * scale) ** 2))
+
+    coarse = phase[np.argmin([mismatch(s) for s in phase])]
+    step = phase[1] - phase[0]
+    found = scipy.optimize.minimize_scalar(mismatch, bounds=(coarse - step, coarse + step), method="bounded")
+    qb = b.periodic.positions(((phase + found.x) % 1.0) * b.periodic.period.period_s)
+    if float(np.sqrt(np.mean((qa - qb) ** 2))) > SAME_MOTION_POSITION_RMS:
+        raise DvrkDartError(f"the positions differ by {float(np.sqrt(np.mean((qa - qb) ** 2))):.3g} RMS at the best phase: not the same trajectory")
+    return float(found.x)
+
+
+def _one_period(arm: Arm, run: ProcessedRun, phase: np.ndarray) -> np.ndarray:
+    series = run.periodic.projector.series(residual(arm, run))
+    return series(phase * run.periodic.period.period_s)
+
+
+def residual_difference(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> np.ndarray:
+    """a's residual minus b's: over one period on a common phase (periodic), or sample by sample (upstream)."""
+    if a.periodic is None:
+        n = min(len(a), len(b))
+        return residual(arm, a)[:n] - residual(arm, b)[:n]
+    samples = int(math.ceil(a.periodic.period.period_s * PHASE_SAMPLES_PER_S))
+    phase = np.arange(samples) / samples
+    shift = _phase_shift(a, b, phase)
+    ra = _one_period(arm, a, phase)
+    rb = _one_period(arm, b, (phase + shift) % 1.0)
+    return ra - rb
+
+
+def floor_table(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> dict:
+    """Per joint: the RMS difference of the residuals, the same after each run's
+    mean, what the runs' noise predicts for it, and which it is."""
+    difference = residual_difference(arm, a, b)
+    result = {
+        "joints": list(JOINT_NAMES), "units": [effort_unit(j) for j in JOINT_NAMES],
+        "rms_difference": rms(difference).tolist(),
+        "rms_difference_demeaned": rms(difference - difference.mean(axis=0)).tolist(),
+        "noise_predicted_rms": None, "ratio_to_noise": None, "verdict": None,
+        "noise_reason": "upstream processing measures no noise (use --processing periodic)",
+    }
+    if a.periodic is None:
+        return result
+    predicted = np.hypot(residual_noise(arm, a), residual_noise(arm, b))
+    demeaned = np.asarray(result["rms_difference_demeaned"])
+    ratio = demeaned / np.maximum(predicted, np.finfo(float).tiny)
+    moved_constant = np.asarray(result["rms_difference"]) ** 2 - demeaned**2 > predicted**2
+    result.update({
+        "noise_predicted_rms": predicted.tolist(), "ratio_to_noise": ratio.tolist(),
+        "noise_reason": "each run's effort noise (lines between harmonics) and its positions' noise through the model, in squares",
+        "verdict": [_verdict(r, m) for r, m in zip(ratio, moved_constant)],
+    })
+    return result
+
+
+def _verdict(ratio: float, moved_constant: bool) -> str:
+    constant = "; the constant moves between sessions" if moved_constant else ""
+    if ratio <= NOISE_AGREEMENT_FACTOR:
+        return f"noise{constant}"
+    return f"a session effect beyond the noise ({ratio:.1f}x the noise after the means){constant}"
+
+
+def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
+    """Two recordings of one trajectory: the same period (periodic; the
+    positions are compared at the best phase later) or the same motion (upstream)."""
+    if a.periodic is not None:
+        pa, pb = a.periodic.period, b.periodic.period
+        if abs(pa.period_s - pb.period_s) > SAME_PERIOD_FRACTION * pa.period_s:
+            raise DvrkDartError(f"period {pb.period_s:.4f} s, not {pa.period_s:.4f} s: not the same trajectory")
+        return
+    n = min(len(a), len(b))
+    if not same_motion(a.head(n), b.head(n)):
+        raise DvrkDartError("not the same motion sample by sample")
