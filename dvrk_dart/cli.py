@@ -31,10 +31,11 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
 
 
-def _add_processing_option(p: argparse.ArgumentParser, default: str) -> None:
+def _add_processing_option(p: argparse.ArgumentParser, default: str | None) -> None:
+    said = default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
     p.add_argument("--processing", default=default, choices=("upstream", "periodic"),
                    help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
-                        f"excitation's harmonics, analytic derivatives, measured noise (default {default})")
+                        f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
 
 
 def _bag_topics(args: argparse.Namespace):
@@ -285,9 +286,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
-        prior=args.prior, seed=args.seed, solver=args.solver,
+        prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing,
     )
     result, data = identify_into_folder(config, args.out)
+    if result.processing_note:
+        print(f"note: {result.processing_note}")
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {', '.join(args.runs)}: "
           f"condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
     print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (relative error; fitted: {' '.join(data['fitted_joints'])})")
@@ -367,6 +370,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "'default' (the model's default params.json) or a params file")
     p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
+    _add_processing_option(p, None)
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")

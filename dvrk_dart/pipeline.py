@@ -21,18 +21,26 @@ def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str, execu
     return summary
 
 
+#: the identification's folder per processing (periodic: the default of `identify`)
+IDENTIFICATION_FOLDERS = {"periodic": "identification", "upstream": "identification-upstream"}
+
+
 def _identification_section(out_dir: Path) -> tuple[str, str]:
-    """The project's own identification on "one", scored on the held-out "two"."""
+    """The project's own identification on "one", scored on the held-out "two", in both processings."""
     from dvrk_dart.identification.identify import IdentificationConfig
     from dvrk_dart.identification.outputs import identify_into_folder, report_section
 
-    _, data = identify_into_folder(IdentificationConfig(runs=("one",), holdout=("two",)), out_dir / "identification")
-    own = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
-    published = data["reference"]["errors_first_period"].get("two", {}).get("relative_error")
-    print(f"identification: {data['n_base']} base parameters from one -> {out_dir / 'identification'}; "
-          f"held-out two {' '.join(f'{v:.4f}' for v in own)}"
-          + (f" (published parameters {' '.join(f'{v:.4f}' for v in published)})" if published else ""))
-    return report_section(data)
+    datas = []
+    for processing, folder in IDENTIFICATION_FOLDERS.items():
+        config = IdentificationConfig(runs=("one",), holdout=("two",), processing=processing)
+        _, data = identify_into_folder(config, out_dir / folder)
+        own = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
+        published = data["reference"]["errors_first_period"].get("two", {}).get("relative_error")
+        print(f"identification ({processing}): {data['n_base']} base parameters from one -> {out_dir / folder}; "
+              f"held-out two {' '.join(f'{v:.4f}' for v in own)}"
+              + (f" (published parameters {' '.join(f'{v:.4f}' for v in published)})" if published else ""))
+        datas.append(data)
+    return report_section(*datas)
 
 
 UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"

@@ -46,7 +46,8 @@ def regressor(model):
 
 @pytest.fixture(scope="module")
 def result():
-    return identify(IdentificationConfig(runs=("one",), holdout=("two",)))
+    """The upstream-processed identification (the published comparison)."""
+    return identify(IdentificationConfig(runs=("one",), holdout=("two",), processing="upstream"))
 
 
 def test_regressor_is_the_identified_model(regressor, identified, params, processed_two):
@@ -190,11 +191,13 @@ def test_report_section_compares_with_the_published_parameters(tmp_path):
     from dvrk_dart.pipeline import _identification_section
 
     title, body = _identification_section(tmp_path)
-    data = json.loads((tmp_path / "identification" / "identification.json").read_text())
-    assert (tmp_path / "identification" / ".dvrk-dart").read_text().strip() == "identification"
     assert "published" in title
-    for j, value in enumerate(data["errors"]["holdout"]["two"]["first_period"]["relative_error"]):
-        assert f'data-identification="relative_error_identified" data-joint="q{j + 1}" data-value="{value!r}"' in body
+    for folder, processing in (("identification", "periodic"), ("identification-upstream", "upstream")):
+        data = json.loads((tmp_path / folder / "identification.json").read_text())
+        assert (tmp_path / folder / ".dvrk-dart").read_text().strip() == "identification"
+        assert data["processing"]["processing"] == processing
+        for j, value in enumerate(data["errors"]["holdout"]["two"]["first_period"]["relative_error"]):
+            assert f'data-identification="relative_error_identified" data-run="two" data-joint="q{j + 1}" data-processing="{processing}" data-value="{value!r}"' in body
     published = data["reference"]["errors_first_period"]["two"]["relative_error"]
     assert np.allclose(published, PUBLISHED, atol=1e-4)  # the published file reproduces the published numbers
 
@@ -218,3 +221,82 @@ def test_model_errors_reads_the_identified_file(result, tmp_path, capsys):
     printed = json.loads(capsys.readouterr().out)
     expected = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
     assert np.allclose(printed["relative_error"], expected, rtol=1e-9)
+
+
+# ------------------------------------------------------------ periodic processing
+@pytest.fixture(scope="module")
+def periodic_result():
+    return identify(IdentificationConfig(runs=("one",), holdout=("two",), processing="periodic"))
+
+
+def test_periodic_identification_is_physical_and_records_its_processing(periodic_result, tmp_path):
+    """Every pseudo-inertia positive semidefinite; identification.json says
+    which processing, period, harmonics and noise each run had."""
+    result = periodic_result
+    layout = result.regressor.layout
+    from dvrk_dart.identification.regressor import body_of
+
+    for key in layout.inertial_links:
+        assert np.linalg.eigvalsh(pseudo_inertia(*body_of(result.theta, layout, key)))[0] >= -1e-9, key
+    data = write_outputs(result, tmp_path)
+    runs = data["processing"]["runs"]
+    assert data["processing"]["processing"] == "periodic" and set(runs) == {"one", "two"}
+    for summary in runs.values():
+        assert abs(summary["period_s"] - 6.48) < 0.01 * 6.48 and summary["harmonics"] >= 6
+        assert len(summary["noise_rms"]) == N_JOINTS
+
+
+def test_periodic_identification_on_the_held_out_run(periodic_result):
+    """Held-out "two", periodic on both sides: J1 well below the published
+    parameters' error; J2 and J3 within 5 % of them (measured: +3 %, +4 %: J3's
+    repeatable gap is not a linear friction, see the diagnosis)."""
+    result = periodic_result
+    from dvrk_dart.model.arm import load_arm
+
+    own = np.array(result.errors(result.holdout[0])["rms"][:3])
+    run = result.holdout[0].processed
+    published = load_arm().identified.predict(run.q, run.dq, run.ddq)
+    theirs = np.sqrt(np.mean((run.in_band(published) - run.tau) ** 2, axis=0))[:3]
+    assert own[0] < 0.95 * theirs[0], (own, theirs)
+    assert np.all(own[1:] < 1.05 * theirs[1:]), (own, theirs)
+
+
+def _simulated_periodic_run(path, truth_Y_theta, positions, t, noise_std, rng):
+    """A measured run (CSV) of the given efforts plus white noise of known std per joint."""
+    from dvrk_dart.io.reference_data import MeasuredRun
+
+    import pandas as pd
+
+    from dvrk_dart.io.reference_data import CSV_COLUMNS
+
+    values = np.hstack([positions[0], positions[1], truth_Y_theta + rng.normal(size=truth_Y_theta.shape) * noise_std])
+    data = pd.DataFrame(values, columns=CSV_COLUMNS)
+    data.insert(0, "t", t)
+    return MeasuredRun(path, data)
+
+
+def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_result, tmp_path):
+    """Simulated periodic runs (the identified parameters on the analytic motion
+    of "one", white effort noise of the measured size): over 20 noise draws the
+    base parameters scatter as the stated standard errors say, within a factor 1.5."""
+    from dvrk_dart.identification.identify import RunData, _weighted_fit
+
+    result = periodic_result
+    clean = result.train[0].processed
+    Y = result.regressor(clean.q, clean.dq, clean.ddq)
+    efforts = Y @ result.theta
+    noise_std = np.array(clean.periodic.effort_noise.per_sample_rms)
+    rng = np.random.default_rng(11)
+    betas, stated = [], []
+    for draw in range(20):
+        measured = _simulated_periodic_run(tmp_path / f"draw{draw}.csv", efforts, (clean.q, clean.dq), clean.t, noise_std, rng)
+        run = process(measured, "periodic", harmonics=clean.periodic.harmonics)
+        data = RunData("draw", measured.path, run, run.in_band(result.regressor(run.q, run.dq, run.ddq)))
+        wls = _weighted_fit([data], result.base, result.wls.joints, "draw")
+        betas.append(wls.beta)
+        stated.append(wls.standard_errors)
+    scatter = np.std(betas, axis=0, ddof=1)
+    ratio = scatter / np.mean(stated, axis=0)
+    # 20 draws: a standard deviation is known to ~16 %; the median over the 49 parameters to a few %
+    assert 1 / 1.5 < np.median(ratio) < 1.5, np.median(ratio)
+    assert np.mean((ratio > 1 / 1.5) & (ratio < 1.5)) > 0.9, np.sort(ratio)

@@ -7,6 +7,13 @@
    each joint's information divided by the integrated autocorrelation time of
    its residual (the filtered residual is coloured: ~10-50 samples are one
    independent observation), so the standard errors are not overconfident.
+   With periodic processing (`fit_weighted_periodic`) the fit is made on the
+   harmonic coefficients of the efforts and of the regressor's columns, each
+   row weighted by its measured noise variance (io/periodic.py: the lines
+   between the harmonics); the regressor is noise-free up to the positions'
+   own small noise (no differentiated accelerations in it), and the
+   covariance is (A^T W A)^-1 as it stands: the coefficients' noises are
+   independent, and the model's own error is not counted in it.
 2. The physically consistent estimate (`fit_consistent`): the same weighted
    least squares over the standard parameters, as a convex program (cvxpy,
    Clarabel), subject to
@@ -167,6 +174,32 @@ def fit_weighted(Yb: np.ndarray, tau: np.ndarray, joints: np.ndarray, what: str)
     information = sum((A[:, i, :].T @ A[:, i, :]) / (sigma[j] ** 2 * tau_int[j]) for i, j in enumerate(joints))
     covariance = np.linalg.inv(information)
     return WeightedFit(joints, beta0, sigma, tau_int, beta, 0.5 * (covariance + covariance.T), cond, R, y)
+
+
+def fit_weighted_periodic(coefficients_Y: np.ndarray, coefficients_tau: np.ndarray, variance: np.ndarray,
+                          joints: np.ndarray, what: str) -> WeightedFit:
+    """Rows are harmonic coefficients: coefficients_Y (R, 7, n_base), coefficients_tau
+    (R, 7), variance (R, 7) their measured noise variance. WLS with weights 1/variance."""
+    joints = np.asarray(joints)
+    A, b = coefficients_Y[:, joints, :], coefficients_tau[:, joints]
+    n_base = A.shape[2]
+    cond = condition_number(A.reshape(-1, n_base))
+    if not cond < MAX_CONDITION_NUMBER:
+        raise DvrkDartError(
+            f"{what}: the motion does not excite the base parameters (regressor condition number {cond:.3g}, "
+            f"at most {MAX_CONDITION_NUMBER:.0e} is usable): use an excitation trajectory"
+        )
+    beta0 = np.linalg.lstsq(A.reshape(-1, n_base), b.reshape(-1), rcond=None)[0]
+    weights = 1.0 / np.sqrt(np.maximum(variance[:, joints], np.finfo(float).tiny))
+    Aw = (A * weights[:, :, None]).reshape(-1, n_base)
+    Q, R = np.linalg.qr(Aw)
+    y = Q.T @ (b * weights).reshape(-1)
+    beta = np.linalg.solve(R, y)
+    R_inverse = np.linalg.inv(R)
+    covariance = R_inverse @ R_inverse.T
+    sigma = np.full(len(JOINT_NAMES), np.nan)
+    sigma[joints] = np.sqrt(variance[:, joints].mean(axis=0))
+    return WeightedFit(joints, beta0, sigma, np.ones(len(JOINT_NAMES)), beta, covariance, cond, R, y)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """`dvrk-dart identify`: measured runs in, physically consistent parameters out.
 
-Steps: load and process every run with the project's one upstream-compatible
-processing (`io/signal.py`); build the regressor from the identified model's
+Steps: load and process every run (`io/signal.py`: upstream's filters, or the
+periodic layer, where each run is read as its harmonic series); build the regressor from the identified model's
 Pinocchio tree; find the base parameters; weighted least squares; the convex
 program; predictions and errors on the training and held-out runs.
 """
@@ -22,11 +22,12 @@ from dvrk_dart.identification.fit import (
     WeightedFit,
     fit_consistent,
     fit_weighted,
+    fit_weighted_periodic,
     load_bounds,
 )
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_vector
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
-from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, ProcessedRun, process
+from dvrk_dart.io.signal import ProcessedRun, process_all
 from dvrk_dart.metrics import relative_error, rms
 from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -47,6 +48,8 @@ class IdentificationConfig:
     seed: int = 0
     solver: str = "CLARABEL"
     model_file: str = str(DEFAULT_MODEL_FILE)
+    #: upstream | periodic | None: periodic where every run is periodic, else upstream (noted)
+    processing: str | None = None
 
 
 @dataclass
@@ -54,7 +57,7 @@ class RunData:
     name: str
     path: Path
     processed: ProcessedRun
-    Y: np.ndarray  # (N, 7, n_standard)
+    Y: np.ndarray  # (N, 7, n_standard), in the run's band (periodic: projected on its harmonics)
 
 
 @dataclass
@@ -70,6 +73,7 @@ class IdentificationResult:
     prior_source: str
     train: list[RunData]
     holdout: list[RunData]
+    processing_note: str | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -80,7 +84,7 @@ class IdentificationResult:
         return run.Y @ (self.theta if theta is None else theta)
 
     def errors(self, run: RunData, first_period: bool = False, theta: np.ndarray | None = None) -> dict:
-        n = FIRST_PERIOD_SAMPLES if first_period else len(run.processed)
+        n = run.processed.first_period_samples() if first_period else len(run.processed)
         predicted, measured = self.predicted(run, theta)[:n], run.processed.tau[:n]
         return {
             "samples": int(len(measured)),
@@ -96,14 +100,29 @@ def _joint_indices(names: tuple[str, ...]) -> np.ndarray:
     return np.array(sorted({JOINT_NAMES.index(n) for n in names}))
 
 
-def _load_runs(names: tuple[str, ...], regressor: Regressor) -> list[RunData]:
-    out = []
-    for name in names:
-        path = resolve_run(name)
-        measured = load_run(path)
-        processed = process(measured)
-        out.append(RunData(str(name), path, processed, regressor(processed.q, processed.dq, processed.ddq)))
-    return out
+def _load_runs(names: tuple[str, ...], regressor: Regressor, processing: str | None) -> tuple[list[RunData], str | None]:
+    """Every run through one processing (and the note of io/signal.process_all)."""
+    paths = [resolve_run(name) for name in names]
+    processed, note = process_all([load_run(path) for path in paths], processing)
+    runs = [RunData(str(name), path, p, p.in_band(regressor(p.q, p.dq, p.ddq))) for name, path, p in zip(names, paths, processed)]
+    return runs, note
+
+
+def _weighted_fit(train: list[RunData], base: BaseParameters, joints: np.ndarray, what: str) -> WeightedFit:
+    """Upstream: on the samples, weights from a first fit's residual; periodic:
+    on the harmonic coefficients, weights from the measured noise."""
+    if train[0].processed.periodic is None:
+        Yb = np.concatenate([run.Y[:, :, base.independent] for run in train])
+        return fit_weighted(Yb, np.concatenate([run.processed.tau for run in train]), joints, what)
+    rows_Y, rows_tau, rows_variance = [], [], []
+    for run in train:
+        periodic = run.processed.periodic
+        Yb = run.Y[:, :, base.independent]
+        rows_Y.append(periodic.projector.series(Yb.reshape(len(Yb), -1)).coefficients.reshape(-1, *Yb.shape[1:]))
+        rows_tau.append(periodic.efforts.coefficients)
+        # the mean's variance, then each harmonic's for its cosine and its sine row
+        rows_variance.append(np.repeat(periodic.effort_noise.harmonic_variance, 2, axis=0)[1:])
+    return fit_weighted_periodic(np.concatenate(rows_Y), np.concatenate(rows_tau), np.concatenate(rows_variance), joints, what)
 
 
 def check_consistent_runs(runs: list[RunData]) -> None:
@@ -137,18 +156,15 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     bounds = load_bounds(config.bounds_file, model)
     regressor = Regressor(model, config.friction_law)
     prior, prior_source = _prior(config, model, regressor)
-    train = _load_runs(config.runs, regressor)
-    holdout = _load_runs(config.holdout, regressor)
+    loaded, note = _load_runs(config.runs + config.holdout, regressor, config.processing)
+    train, holdout = loaded[: len(config.runs)], loaded[len(config.runs):]
     check_consistent_runs(train + holdout)
     timings["load_and_regressor_s"] = time.perf_counter() - start
     base = find_base_parameters(regressor, seed=config.seed, joints=joints)
-    Yb = np.concatenate([run.Y[:, :, base.independent] for run in train])
-    tau = np.concatenate([run.processed.tau for run in train])
-    what = "--runs " + " ".join(config.runs)
-    wls = fit_weighted(Yb, tau, joints, what)
+    wls = _weighted_fit(train, base, joints, "--runs " + " ".join(config.runs))
     timings["base_and_wls_s"] = time.perf_counter() - start - timings["load_and_regressor_s"]
     t0 = time.perf_counter()
     consistent = fit_consistent(wls, base, regressor.layout, bounds, prior, solver=config.solver)
     timings["convex_program_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - start
-    return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, timings)
+    return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings)

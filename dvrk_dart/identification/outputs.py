@@ -48,7 +48,6 @@ from dvrk_dart.identification.identify import (
 from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import resolve, sha256_of
-from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
 from dvrk_dart.model.parameters import load_parameters
 from dvrk_dart.model.pseudo_inertia import pseudo_inertia
@@ -104,6 +103,20 @@ def _run_entry(run: RunData) -> dict:
     return {"name": run.name, "path": str(run.path), "sha256": sha256_of(run.path), "samples_after_processing": len(run.processed)}
 
 
+def _processing(result: IdentificationResult) -> dict:
+    """How the runs were processed, with each run's period, harmonics and noise (periodic)."""
+    runs = result.train + result.holdout
+    first = runs[0].processed
+    return {
+        "processing": first.processing,
+        "chosen_because": result.processing_note or (f"--processing {result.config.processing}" if result.config.processing
+                                                      else "every run is a periodic excitation"),
+        "first_period": f"the first {first.first_period_samples()} processed samples" if first.periodic is None
+                        else "the first fitted period of the run's projected signals",
+        "runs": {run.name: run.processed.summary() for run in runs},
+    }
+
+
 def summary(result: IdentificationResult) -> dict:
     layout, base, wls, cfg = result.regressor.layout, result.base, result.wls, result.config
     theta = result.theta
@@ -129,13 +142,17 @@ def summary(result: IdentificationResult) -> dict:
             "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": cfg.model_file,
         },
         "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
-        "processing": "io/signal.py (upstream-compatible); first period = the first %d processed samples" % FIRST_PERIOD_SAMPLES,
+        "processing": _processing(result),
         "definitions": {
             "relative_error": "||tau_predicted - tau_measured|| / ||tau_measured|| per joint (metrics.relative_error)",
             "rms": "root mean square of tau_predicted - tau_measured per joint, N·m (N for q3)",
             "condition_number": "of the training runs' base regressor with unit-norm columns",
-            "noise_sigma": "per-joint residual standard deviation of the first, unweighted fit (the weights)",
-            "residual_autocorrelation_samples": "integrated autocorrelation time of that residual: the covariance counts this many samples as one",
+            "noise_sigma": "upstream: per-joint residual standard deviation of the first, unweighted fit (the weights); "
+                           "periodic: per-joint RMS of the measured noise of the efforts' harmonic coefficients (the weights are per coefficient)",
+            "residual_autocorrelation_samples": "upstream: integrated autocorrelation time of that residual (the covariance counts this many "
+                                                "samples as one); periodic: 1 (the coefficients' noises are independent)",
+            "standard_error": "upstream: from the residual (model error included); periodic: from the measured noise alone "
+                              "(what repeating the run would scatter the estimate by; the model's own error is not in it)",
         },
         "errors": errors,
         "prior_errors_first_period": prior_errors,
@@ -197,7 +214,7 @@ def _figure_png(result: IdentificationResult, run: RunData, title: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = min(FIRST_PERIOD_SAMPLES, len(run.processed))
+    n = min(run.processed.first_period_samples(), len(run.processed))
     t = run.processed.t[:n] - run.processed.t[0]
     predicted = result.predicted(run)[:n]
     fig, axes = plt.subplots(len(JOINT_NAMES), 1, figsize=(10, 13), sharex=True)
@@ -288,36 +305,44 @@ def identify_into_folder(config: IdentificationConfig, out: str | Path) -> tuple
     return result, data
 
 
-def report_section(data: dict) -> tuple[str, str]:
+def report_section(*datas: dict) -> tuple[str, str]:
     """(title, html) of the validation report: the published parameters vs the
-    project's own identification on each held-out run, per joint. Cells carry
-    data-identification (not data-quantity: these are not analysis/metrics.csv
-    rows; identification.json holds them)."""
-    ref = data["reference"]
-    parts = [
-        f"<p>Parameters identified by <code>dvrk-dart identify</code> on {', '.join(data['config']['runs'])} "
-        f"({data['n_base']} base parameters, condition number {fmt(data['condition_number'])}, physically consistent: "
-        f"smallest pseudo-inertia eigenvalue {fmt(worst_eigenvalue(data))} kg m^2, against "
-        f"{fmt(ref['pseudo_inertia_smallest_eigenvalue_kg_m2'])} kg m^2 in the published file), scored on the held-out "
-        "runs like <code>model-errors --first-period</code>: relative error ||tau_model - tau_measured|| / ||tau_measured||.</p>"
-    ]
-    for run, own in data["errors"]["holdout"].items():
-        published = ref["errors_first_period"].get(run)
-        rows = []
-        for j, name in enumerate(JOINT_NAMES):
-            mine = own["first_period"]["relative_error"][j]
-            theirs = published["relative_error"][j] if published else None
-            ratio = mine / theirs if theirs else None
-            css = "" if ratio is None else ("better" if ratio <= 1.0 else "worse")
-            rows.append(
-                "<tr>" + text_cell(name) + num_cell(theirs, run=run, identification="relative_error_published_params", joint=name)
-                + num_cell(mine, css=css, run=run, identification="relative_error_identified", joint=name)
-                + num_cell(ratio, run=run, identification="ratio_identified_to_published", joint=name)
-                + num_cell(own["first_period"]["rms"][j], run=run, identification="rms_identified", joint=name) + text_cell(effort_unit(name)) + "</tr>"
-            )
-        parts.append(f"<h3>Held-out run {run} (first period)</h3>" + table(
-            ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows))
+    project's own identification on each held-out run, per joint, once per
+    processing (identification.json of each). Cells carry data-identification
+    (not data-quantity: these are not analysis/metrics.csv rows) and data-processing."""
+    parts = []
+    for data in datas:
+        processing = data["processing"]["processing"]
+        ref = data["reference"]
+        parts.append(
+            f"<h3>{processing.capitalize()} processing</h3>"
+            f"<p>Parameters identified by <code>dvrk-dart identify --processing {processing}</code> on {', '.join(data['config']['runs'])} "
+            f"({data['n_base']} base parameters, condition number {fmt(data['condition_number'])}, physically consistent: "
+            f"smallest pseudo-inertia eigenvalue {fmt(worst_eigenvalue(data))} kg m^2, against "
+            f"{fmt(ref['pseudo_inertia_smallest_eigenvalue_kg_m2'])} kg m^2 in the published file), scored on the held-out "
+            f"runs like <code>model-errors --first-period --processing {processing}</code>: relative error "
+            "||tau_model - tau_measured|| / ||tau_measured||.</p>"
+        )
+        parts += [_holdout_table(run, own, ref["errors_first_period"].get(run), processing) for run, own in data["errors"]["holdout"].items()]
     return "Own identification vs the published parameters", "".join(parts)
+
+
+def _holdout_table(run: str, own: dict, published: dict | None, processing: str) -> str:
+    rows = []
+    for j, name in enumerate(JOINT_NAMES):
+        mine = own["first_period"]["relative_error"][j]
+        theirs = published["relative_error"][j] if published else None
+        ratio = mine / theirs if theirs else None
+        css = "" if ratio is None else ("better" if ratio <= 1.0 else "worse")
+        cell = {"run": run, "joint": name, "processing": processing}
+        rows.append(
+            "<tr>" + text_cell(name) + num_cell(theirs, identification="relative_error_published_params", **cell)
+            + num_cell(mine, css=css, identification="relative_error_identified", **cell)
+            + num_cell(ratio, identification="ratio_identified_to_published", **cell)
+            + num_cell(own["first_period"]["rms"][j], identification="rms_identified", **cell) + text_cell(effort_unit(name)) + "</tr>"
+        )
+    return f"<h4>Held-out run {run} (first period, {processing})</h4>" + table(
+        ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows)
 
 
 def worst_eigenvalue(data: dict) -> float:

@@ -121,3 +121,15 @@ def process_periodic(run: MeasuredRun, harmonics: int | None = None) -> Processe
     t = run.t - run.t[0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
     return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis)
+
+
+def process_all(runs: list[MeasuredRun], processing: str | None) -> tuple[list[ProcessedRun], str | None]:
+    """Runs through one processing, and a note when the choice was not the user's:
+    `None` is periodic where every run is a periodic excitation, else upstream
+    (the note says which run is not periodic and why)."""
+    if processing is not None:
+        return [process(run, processing) for run in runs], None
+    try:
+        return [process_periodic(run) for run in runs], None
+    except DvrkDartError as exc:
+        return [process(run) for run in runs], f"upstream processing: {exc}"
