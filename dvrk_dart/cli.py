@@ -467,6 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
                                             "only on joints whose measured efforts leave the parameters' band")
     p.add_argument("--jobs", type=int, default=2, help="re-simulations run side by side")
     _executor_options(p)
+    _add_processing_option(p, "upstream")
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     _add_bag_options(p)

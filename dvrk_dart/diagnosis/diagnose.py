@@ -41,6 +41,7 @@ from dvrk_dart.diagnosis.regimes import plot_residuals, residual_regimes
 from dvrk_dart.diagnosis.runs import (
     DiagnosisRun,
     Simulate,
+    choose_processing,
     loaded_states,
     prepare_run,
     run_features,
@@ -112,6 +113,7 @@ def diagnose(
     payload_at: str | tuple[int, np.ndarray] | None = None,
     nuisance_offsets: bool | None = None,
     payload_model: str | None = None,
+    processing: str | None = "upstream",
 ) -> dict:
     """Diagnose the gap of `measured` (a run name such as 'two', a path, a
     ProcessedRun or a DiagnosisRun carrying its simulated efforts), or of
@@ -133,6 +135,9 @@ def diagnose(
         every session is an effect (`JointOffset`);
     payload_model: "first_moment" (default with a baseline: the identifiable
         quantity) or "point" (`library.candidate_effects`);
+    processing: "upstream", "periodic" (every run on the excitation's
+        harmonics, one cutoff for all; simulated efforts and effect columns
+        projected likewise), or None: periodic where every run is periodic;
     train: further runs to fit on (each a run spec or a (run, baseline) pair);
         `measured` is always a training run;
     holdout: runs never used for fitting nor selection, only scored;
@@ -153,15 +158,18 @@ def diagnose(
         effects.append(PayloadAtPosition(arm.model, key, position))
         at_index = len(effects) - 1
 
-    def as_run(spec):
+    all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
+    run_processing = choose_processing(all_specs, processing)
+
+    def as_run(spec, baseline=None):
         if isinstance(spec, tuple):
-            return prepare_run(spec[0], arm, simulate, base_config, baseline=spec[1])
-        return prepare_run(spec, arm, simulate, base_config)
+            spec, baseline = spec
+        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing)
 
     if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
-        simulate.prefetch([(base_config, state) for state in loaded_states([baseline, *measured_list, *(train or []), *(holdout or [])])])
-    baseline_run = prepare_run(baseline, arm, simulate, base_config) if baseline is not None else None
-    train_runs = [prepare_run(m, arm, simulate, base_config, baseline=baseline_run) for m in measured_list]
+        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], run_processing)])
+    baseline_run = as_run(baseline) if baseline is not None else None
+    train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
     holdout_runs = [as_run(s) for s in (holdout or [])]
     if baseline_run is not None and any(r.role == "joint" for r in train_runs):  # another motion: the baseline is fitted with them
@@ -182,10 +190,11 @@ def diagnose(
     yaw_path_from_differences = any(r.role == "difference" for r in train_runs)
 
     def columns_of(run: DiagnosisRun) -> np.ndarray:
-        return design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None,
-                                  yaw_path=not (yaw_path_from_differences and run.role == "joint"))
+        """The effects' columns in the band of the run's efforts."""
+        return run.state.in_band(design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None,
+                                                    yaw_path=not (yaw_path_from_differences and run.role == "joint")))
 
-    repeat_run = prepare_run(repeat, arm, simulate, base_config, baseline=baseline_run) if repeat is not None else None
+    repeat_run = as_run(repeat, baseline_run) if repeat is not None else None
     reference_run = baseline_run or train_runs[0]
     offset_joints, offset_joints_source = session_offset_joints(arm.model, repeat_run, reference_run) if nuisance else (None, None)
 
@@ -268,7 +277,8 @@ def diagnose(
     def simulated_after(run: DiagnosisRun, with_withheld: bool = True) -> np.ndarray:
         """(tau - the simulation with the effects) of a run, as its role asks."""
         config, extra = (sim_config, extra_by_regressor) if with_withheld else (shared_config, shared_extra)
-        return run.state.tau - np.asarray(simulate(config, run.state), dtype=float) - unsimulated_effort(extra, features_of(run))
+        simulated = np.asarray(simulate(config, run.state), dtype=float) + unsimulated_effort(extra, features_of(run))
+        return run.state.tau - run.state.in_band(simulated)
 
     def after_residual(run: DiagnosisRun, columns: np.ndarray) -> np.ndarray:
         if simulate is None:
@@ -343,6 +353,7 @@ def diagnose(
         "baseline": train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         "train_runs": [r.name for r in train_runs],
         "holdout_runs": [r.name for r in holdout_runs],
+        "processing": {**run_processing.summary(), "runs": {r.name: r.state.summary() for r in train_runs + holdout_runs}},
         "residual_definition": "measured - simulated" + (" - (baseline measured - baseline simulated)" if baseline is not None else "")
         + (" - a constant per run on the joints whose constant moves between sessions (nuisance)" if nuisance else ""),
         "simulated_source": "simulation" if simulate is not None else "identified model at the measured state (stand-in for the DART replay)",

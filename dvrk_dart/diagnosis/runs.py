@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
@@ -15,7 +15,7 @@ from dvrk_dart.diagnosis.library import (
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
-from dvrk_dart.io.signal import ProcessedRun, process
+from dvrk_dart.io.signal import ProcessedRun, process, process_periodic
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.sim.config import SimConfig
 
@@ -28,6 +28,45 @@ SAME_MOTION_VELOCITY_FRACTION = 0.1
 
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 """simulate(config, run) -> (N, 7) simulated efforts at the run's samples (DART replay)."""
+
+
+# ------------------------------------------------------------- the processing
+@dataclass(frozen=True)
+class RunProcessing:
+    """How every run of a diagnosis is processed: upstream, or periodic on
+    one common harmonic cutoff (runs subtracted or compared see one band)."""
+
+    name: str = "upstream"
+    harmonics: int | None = None
+    why: str = "--processing upstream"
+
+    def summary(self) -> dict:
+        return {"processing": self.name, "harmonics": self.harmonics, "chosen_because": self.why}
+
+
+def choose_processing(specs, processing: str | None) -> RunProcessing:
+    """`processing` None: periodic where every run (name or path) is a periodic
+    excitation, else upstream, with the reason; periodic: every run must be."""
+    if processing == "upstream":
+        return RunProcessing()
+    paths = [Path(resolve_run(s)) for s in _flat(specs) if isinstance(s, (str, Path))]
+    if not paths and processing is None:
+        return RunProcessing(why="no measured file among the runs")
+    try:
+        cutoffs = [process_periodic(load_run(path)).periodic.harmonics for path in paths]
+    except DvrkDartError as exc:
+        if processing == "periodic":
+            raise
+        return RunProcessing(why=f"upstream: {exc}")
+    why = "--processing periodic" if processing == "periodic" else "every run is a periodic excitation"
+    return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs")
+
+
+def _flat(specs) -> list:
+    out = []
+    for spec in specs:
+        out += _flat(spec) if isinstance(spec, (tuple, list)) else [spec] if spec is not None else []
+    return out
 
 
 # ------------------------------------------------------------------- the runs
@@ -82,51 +121,53 @@ class DiagnosisRun:
 RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 
 
-def _load_state(spec) -> tuple[str, ProcessedRun]:
+def _load_state(spec, processing: RunProcessing) -> tuple[str, ProcessedRun]:
     if isinstance(spec, ProcessedRun):
         return "run", spec
     path = Path(resolve_run(spec))
     stat = path.stat()
-    return _load_processed(str(path), stat.st_mtime_ns, stat.st_size)
+    return _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing)
 
 
 @lru_cache(maxsize=8)
-def _load_processed(path: str, mtime_ns: int, size: int) -> tuple[str, ProcessedRun]:
+def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing) -> tuple[str, ProcessedRun]:
     """One processing per file version: the batch re-simulation prefetches the
     states that prepare_run then meets again (keyed by the file's version)."""
-    return Path(path).stem, process(load_run(path))
+    return Path(path).stem, process(load_run(path), processing.name, processing.harmonics)
 
 
-def loaded_states(specs) -> list[ProcessedRun]:
+def loaded_states(specs, processing: RunProcessing = RunProcessing()) -> list[ProcessedRun]:
     """The processed states of run specs not yet simulated (names, paths,
     ProcessedRun, (run, baseline) pairs), for a batch of replays."""
     states = []
     for spec in specs:
         if isinstance(spec, tuple):
-            states += loaded_states(spec)
+            states += loaded_states(spec, processing)
         elif spec is not None and not isinstance(spec, DiagnosisRun):
-            states.append(_load_state(spec)[1])
+            states.append(_load_state(spec, processing)[1])
     return states
 
 
 def simulated_efforts(arm: Arm, state: ProcessedRun, simulate: Simulate | None, config: SimConfig) -> np.ndarray:
-    """Simulated efforts at the measured samples: the DART replay when given,
-    else the identified model evaluated at the measured state as a stand-in
-    (the replay reproduces it to < 0.01 N·m with `config`'s physics)."""
+    """Simulated efforts at the measured samples, in the band of the measured
+    efforts: the DART replay when given, else the identified model evaluated
+    at the measured state as a stand-in (the replay reproduces it to < 0.01
+    N·m with `config`'s physics)."""
     if simulate is not None:
-        return np.asarray(simulate(config, state), dtype=float)
-    return config_effort_by_formula(arm, config, state.q, state.dq, state.ddq)
+        return state.in_band(np.asarray(simulate(config, state), dtype=float))
+    return state.in_band(config_effort_by_formula(arm, config, state.q, state.dq, state.ddq))
 
 
-def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: SimConfig = SimConfig(), baseline=None, name: str | None = None) -> DiagnosisRun:
+def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: SimConfig = SimConfig(), baseline=None, name: str | None = None,
+                processing: RunProcessing = RunProcessing()) -> DiagnosisRun:
     """A DiagnosisRun from a run name ('two'), a path, a ProcessedRun or a DiagnosisRun."""
     if isinstance(spec, DiagnosisRun):
         run = spec
     else:
-        label, state = _load_state(spec)
+        label, state = _load_state(spec, processing)
         run = DiagnosisRun(name or label, state, simulated_efforts(arm, state, simulate, base_config))
     if baseline is not None:
-        base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config)
+        base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)
         if same_motion(run.state, base.state):
             return DiagnosisRun(run.name, run.state, run.simulated, base)
         return DiagnosisRun(run.name, run.state, run.simulated, None, role="joint")

@@ -183,7 +183,8 @@ def _band_html(result: dict) -> list[str]:
 
 
 def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
-                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
+                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
+                  processing: str | None = "upstream") -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs
     (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
     folder of one of the runs: effects are unmodelled only outside its band."""
@@ -193,7 +194,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
-                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at)
+                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
+                      processing=processing)
     if band is not None:
         apply_band(result, band)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
@@ -212,7 +214,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
                            repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
                            parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
-                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None))
+                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
+                           processing=getattr(args, "processing", "upstream"))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
