@@ -126,29 +126,13 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     return 0
 
 
-def _processed_pair(names: tuple[str, str], processing: str):
-    """Two runs through one processing; periodic ones on their common (smaller) harmonic cutoff."""
-    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
-    from dvrk_dart.io.signal import process
-
-    paths = [resolve_run(name) for name in names]
-    if sha256_of(paths[0]) == sha256_of(paths[1]):
-        raise DvrkDartError(f"--repeat {names[1]}: the same recording as --measured {names[0]} (a floor needs two sessions)")
-    measured = [load_run(path) for path in paths]
-    runs = [process(run, processing) for run in measured]
-    if processing == "periodic":
-        harmonics = min(run.periodic.harmonics for run in runs)
-        runs = [process(run, processing, harmonics) for run in measured]
-    return runs
-
-
 def cmd_session_floor(args: argparse.Namespace) -> int:
     """The floor of the identified model's residual: two recordings of one trajectory."""
-    from dvrk_dart.analysis.residual_floor import check_repeat, floor_table
+    from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
     from dvrk_dart.model.arm import load_arm
 
     arm = load_arm(params_file=args.params)
-    a, b = _processed_pair((args.measured, args.repeat), args.processing)
+    a, b = processed_pair((args.measured, args.repeat), args.processing)
     try:
         check_repeat(a, b)
         table = floor_table(arm, a, b)
@@ -196,7 +180,8 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
     from dvrk_dart.runs.scenarios import load_scenario
 
     dynamics = args.dynamics or load_scenario(scenario).dynamics
-    return RunConfig(scenario, mode, args.counterweight, dynamics, args.dt, args.duration, args.params, measured)
+    return RunConfig(scenario, mode, args.counterweight, dynamics, args.dt, args.duration, args.params, measured,
+                     getattr(args, "processing", "upstream"))
 
 
 def _run_and_write(config, out: Path | None) -> int:
@@ -314,11 +299,12 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     if args.params_cov is None and args.relative_std is None:
         args.relative_std = 0.05
     config = UncertaintyConfig(args.measured, args.samples, args.seed, None if args.params_cov else args.relative_std,
-                               args.params_cov, args.duration, executor=args.executor, jobs=args.jobs)
+                               args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing)
     if config.duration_s is not None and not config.duration_s > 0.0:
         raise DvrkDartError(f"--duration: {config.duration_s} s must be positive")
     summary = run_uncertainty(config, args.out, args.ray_address)
     print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays, {summary['wall_time_s']:.0f} s -> {args.out}")
+    print(f"processing: {summary['processing']['processing']} ({summary['processing']['chosen_because']})")
     print(f"{'joint':>6} {'inside':>7} {'outside rms':>12} {'model inside':>13}")
     for j, name in enumerate(JOINT_NAMES):
         print(f"{name:>6} {summary['measured_inside_band_fraction'][j]:7.3f} {summary['rms_measured_outside_band'][j]:12.4f} "
@@ -421,6 +407,7 @@ def build_parser() -> argparse.ArgumentParser:
             _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
+        _add_processing_option(p, "upstream")
         sim_options(p)
         p.set_defaults(func=cmd_replay)
 
@@ -445,6 +432,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the parameter draws")
     p.add_argument("--jobs", type=int, default=2, help="parallel workers")
     _executor_options(p)
+    _add_processing_option(p, None)
     p.set_defaults(func=cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")

@@ -43,6 +43,20 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
     return report_section(*datas)
 
 
+def _periodic_section(out_dir: Path, runs_dir: Path):
+    """Both processings side by side, the session floor and the repeatable gap (analysis/periodic_section.py)."""
+    from dvrk_dart.analysis.periodic_section import periodic_section
+    from dvrk_dart.model.arm import load_arm
+
+    section = periodic_section(load_arm(), out_dir / "periodic", runs_dir)
+    figures = json.loads((out_dir / "periodic" / "periodic.json").read_text())
+    print("periodic: model vs measured on two (J1..J3), upstream "
+          + " ".join(f"{v:.4f}" for v in figures["model_vs_measured_two"]["upstream"][:3]) + ", periodic "
+          + " ".join(f"{v:.4f}" for v in figures["model_vs_measured_two"]["periodic"][:3]) + "; session floor "
+          + " ".join(f"{v:.4f}" for v in figures["session_floor"]["rms_difference"][:3]))
+    return section
+
+
 UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"
 
 
@@ -80,13 +94,14 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     uncertainty = _uncertainty_section(out_dir, jobs, executor, ray_address)
     section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty")
     identification = _identification_section(out_dir)
+    periodic = _periodic_section(out_dir, runs_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)
     summary["ran"] += after["ran"]
     summary["skipped_up_to_date"] += after["skipped_up_to_date"]
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section, identification, uncertainty])
+    index = build_report(runs_dir, report_dir, extra_sections=[section, periodic, identification, uncertainty])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")

@@ -94,16 +94,20 @@ def _one_period(arm: Arm, run: ProcessedRun, phase: np.ndarray) -> np.ndarray:
     return series(phase * run.periodic.period.period_s)
 
 
+def aligned_residuals(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(phase, a's residual, b's residual) over one period of a, b shifted to where its positions match a's (periodic runs)."""
+    samples = int(math.ceil(a.periodic.period.period_s * PHASE_SAMPLES_PER_S))
+    phase = np.arange(samples) / samples
+    shift = _phase_shift(a, b, phase)
+    return phase, _one_period(arm, a, phase), _one_period(arm, b, (phase + shift) % 1.0)
+
+
 def residual_difference(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> np.ndarray:
     """a's residual minus b's: over one period on a common phase (periodic), or sample by sample (upstream)."""
     if a.periodic is None:
         n = min(len(a), len(b))
         return residual(arm, a)[:n] - residual(arm, b)[:n]
-    samples = int(math.ceil(a.periodic.period.period_s * PHASE_SAMPLES_PER_S))
-    phase = np.arange(samples) / samples
-    shift = _phase_shift(a, b, phase)
-    ra = _one_period(arm, a, phase)
-    rb = _one_period(arm, b, (phase + shift) % 1.0)
+    _, ra, rb = aligned_residuals(arm, a, b)
     return ra - rb
 
 
@@ -150,3 +154,20 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
     n = min(len(a), len(b))
     if not same_motion(a.head(n), b.head(n)):
         raise DvrkDartError("not the same motion sample by sample")
+
+
+def processed_pair(names: tuple[str, str], processing: str) -> list[ProcessedRun]:
+    """Two recordings through one processing; periodic ones on their common
+    (smaller) harmonic cutoff. The same file twice is refused."""
+    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+    from dvrk_dart.io.signal import process
+
+    paths = [resolve_run(name) for name in names]
+    if sha256_of(paths[0]) == sha256_of(paths[1]):
+        raise DvrkDartError(f"--repeat {names[1]}: the same recording as --measured {names[0]} (a floor needs two sessions)")
+    measured = [load_run(path) for path in paths]
+    runs = [process(run, processing) for run in measured]
+    if processing == "periodic":
+        harmonics = min(run.periodic.harmonics for run in runs)
+        runs = [process(run, processing, harmonics) for run in measured]
+    return runs

@@ -45,7 +45,7 @@ def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None,
         raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
     configs = []
     for entry in raw.get("runs", []):
-        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s", "dynamics"}
+        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s", "dynamics", "processing"}
         if unknown:
             raise DvrkDartError(f"{path}: unknown key(s) {', '.join(sorted(unknown))} in a [[runs]] entry")
         scenario = load_scenario(entry["scenario"])
@@ -55,7 +55,8 @@ def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None,
                     continue
                 dynamics = str(diagnosis_dir / dynamics[len(DIAGNOSIS_PREFIX):] / "diagnosis.json")
             for cw in entry.get("counterweights", ["on"]):
-                configs.append(RunConfig(scenario.name, entry["mode"], cw, dynamics, duration_s=entry.get("duration_s")))
+                configs.append(RunConfig(scenario.name, entry["mode"], cw, dynamics, duration_s=entry.get("duration_s"),
+                                         processing=entry.get("processing", "upstream")))
     return configs
 
 
@@ -66,7 +67,7 @@ def needs_diagnosis(config: RunConfig) -> bool:
 def config_name(config: RunConfig) -> str:
     from dvrk_dart.runs.runner import scenario_of
 
-    return run_name(scenario_of(config).name, config.mode, config.counterweight, config.dynamics_label)
+    return run_name(scenario_of(config).name, config.mode, config.counterweight, config.dynamics_label, config.processing)
 
 
 def code_fingerprint() -> str:

@@ -39,8 +39,13 @@ class RunConfig:
     duration_s: float | None = None  # None: the scenario's (or the whole measured run)
     params_file: str | None = None  # None: the upstream params.json, resolved at run time
     measured: str | None = None  # overrides a replay scenario's measured run
+    #: a replay's processing of the measured run (io/signal.py): its reference
+    #: for the servo and the band its efforts are compared in
+    processing: str = "upstream"
 
     def __post_init__(self) -> None:
+        if self.processing not in ("upstream", "periodic"):
+            raise DvrkDartError(f"--processing: '{self.processing}' is not upstream or periodic")
         if not (0.0 < self.dt_s <= MAX_STEP_S):
             raise DvrkDartError(f"--dt: {self.dt_s} s is outside (0, {MAX_STEP_S}] s")
         if self.duration_s is not None and not (0.0 < self.duration_s <= MAX_DURATION_S):
@@ -64,10 +69,11 @@ class RunConfig:
         return cls(**{k: v for k, v in raw.items() if k in names})
 
 
-def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial") -> str:
-    """The run folder's name; the paper's arm (inertial) keeps the historical name."""
+def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream") -> str:
+    """The run folder's name; the paper's arm (inertial) and processing (upstream) keep the historical name."""
     base = f"{scenario}_{mode}_cw-{counterweight}"
-    return base if dynamics_label == "inertial" else f"{base}_{dynamics_label}"
+    base = base if dynamics_label == "inertial" else f"{base}_{dynamics_label}"
+    return base if processing == "upstream" else f"{base}_{processing}"
 
 
 def sim_config_for(config: RunConfig) -> SimConfig:

@@ -1,7 +1,11 @@
 """Replay of a measured run in the simulator (the paper's Sect. IV-B test):
-the measured joint velocities, processed like upstream and interpolated onto the
-simulation grid, are the velocity servo's reference (with position feedback to
-the measured q), starting at the measured pose.  The result is a RunRecord with
+the measured joint velocities, processed like upstream (or, with the periodic
+processing, the analytic velocities of the excitation's harmonic series) and
+interpolated onto the simulation grid, are the velocity servo's reference
+(with position feedback to the measured q), starting at the measured pose.
+With the periodic processing the efforts are compared in the band of the
+excitation's harmonics: the simulated and model efforts at the measured
+samples are projected on them, like the measured efforts.  The result is a RunRecord with
 the simulated efforts, the identified model at the simulated state, the
 measured efforts at the logged times, and the metrics of metrics.json."""
 
@@ -43,6 +47,7 @@ def replay(
     log_every: int = 5,
     model: PsmModel | None = None,
     params: IdentifiedParameters | None = None,
+    processing: str = "upstream",
 ) -> RunRecord:
     """Replay a measured run ('two', a manifest name or a CSV path).
 
@@ -54,7 +59,7 @@ def replay(
         raise DvrkDartError("log_every must be >= 1")
     model = model or load_model()
     params = params or load_parameters(resolve(model.default_parameters), model)
-    processed = process(load_run(resolve_run(measured)))
+    processed = process(load_run(resolve_run(measured)), processing)
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 
@@ -178,10 +183,35 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
         "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(t) else 0.0,
     }
+    metrics |= processed.summary()
+    if processed.periodic is not None and dynamic:
+        metrics |= _in_band_metrics(processed, t, effort, full_model, in_window)
     if log.error is not None:
         metrics["error"] = str(log.error)
     record.metrics = metrics
     return record
+
+
+def in_band_at_samples(processed: ProcessedRun, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Logged values at the measured samples, in the measured efforts' band
+    (the log stops a step short of the last sample: its last value is held there)."""
+    t_meas = processed.t - processed.t[0]
+    return processed.in_band(np.column_stack([np.interp(t_meas, t, x[:, j]) for j in range(x.shape[1])]))
+
+
+def _in_band_metrics(processed: ProcessedRun, t: np.ndarray, effort: np.ndarray, full_model: np.ndarray, in_window: np.ndarray) -> dict:
+    """Periodic processing: simulated and model efforts at the measured samples,
+    projected on the excitation's harmonics like the measured efforts (a whole
+    run only: a part of it has no projection of its own)."""
+    t_meas = processed.t - processed.t[0]
+    if not in_window.all() or len(t) < 2:
+        return {"rms_sim_vs_measured": None, "rms_model_vs_measured": None,
+                "in_band_note": "a part of the run: the periodic comparison needs the whole run"}
+    return {
+        "rms_sim_vs_measured": rms(in_band_at_samples(processed, t, effort) - processed.tau).tolist(),
+        "rms_model_vs_measured": rms(processed.in_band(full_model) - processed.tau).tolist(),
+        "in_band_note": "simulated and model efforts at the measured samples, projected on the excitation's harmonics",
+    }
 
 
 def simulate_efforts(arm, config: SimConfig, processed: ProcessedRun) -> np.ndarray:

@@ -84,7 +84,8 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         from dvrk_dart.runs.replay import replay
 
         try:
-            record = replay(scenario.measured, mode=mode, config=sim_config, duration_s=duration, model=arm.model, params=arm.params)
+            record = replay(scenario.measured, mode=mode, config=sim_config, duration_s=duration, model=arm.model, params=arm.params,
+                            processing=config.processing)
         except SimulationDiverged as exc:  # keep what was logged up to the divergence
             record = exc.record
     else:
@@ -94,7 +95,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         if mode != "kinematic":
             add_model_efforts(arm, record)
         record.metrics.update(cartesian_metrics(record, mode, sim_config))
-    record.name = run_name(scenario.name, mode, counterweight, config.dynamics_label)
+    record.name = run_name(scenario.name, mode, counterweight, config.dynamics_label, config.processing)
     record.config = {
         "run_config": config.to_dict(),
         "scenario": scenario.to_dict(),

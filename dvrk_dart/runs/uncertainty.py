@@ -48,19 +48,45 @@ class UncertaintyConfig:
     dynamics: str = "identified"  # every identified term simulated: friction is uncertain too
     executor: str = "local"
     jobs: int = 2
+    #: upstream | periodic | None: periodic where the run is periodic (`processing_of`)
+    processing: str | None = None
 
 
-def _replay(task: tuple[str, str, float | None, float, str]) -> dict:
-    """Worker: the velocity replay with one parameter file -> its efforts."""
+def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
+    """(processing, why): with periodic processing the band, the measured and
+    the model efforts are compared at the measured samples, each projected on
+    the excitation's harmonics (a whole run only)."""
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process_all
+
+    if config.processing is not None:
+        return config.processing, f"--processing {config.processing}"
+    if config.duration_s is not None:
+        return "upstream", "upstream: --duration replays a part of the run, which has no projection of its own"
+    processed, note = process_all([load_run(resolve_run(config.measured))], None)
+    return processed[0].processing, note or "the run is a periodic excitation"
+
+
+def _replay(task: tuple[str, str, float | None, float, str, str]) -> dict:
+    """Worker: the velocity replay with one parameter file -> its efforts
+    (periodic: at the measured samples, in the measured efforts' band)."""
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process
     from dvrk_dart.runs.config import RunConfig
+    from dvrk_dart.runs.replay import in_band_at_samples
     from dvrk_dart.runs.runner import run
 
-    measured, params_file, duration, dt, dynamics = task
-    record = run(RunConfig("replay", "velocity", dynamics=dynamics, measured=measured, params_file=params_file, duration_s=duration, dt_s=dt))
+    measured, params_file, duration, dt, dynamics, processing = task
+    record = run(RunConfig("replay", "velocity", dynamics=dynamics, measured=measured, params_file=params_file, duration_s=duration, dt_s=dt,
+                           processing=processing))
     if "error" in record.metrics:
         raise DvrkDartError(record.metrics["error"])
-    return {"t": record.t, "sim": record.effort_sim, "measured": record.effort_measured,
-            "model": record.model_total(tuple(record.metrics["model_terms_compared"]))}
+    model = record.model_total(tuple(record.metrics["model_terms_compared"]))
+    if processing == "upstream":
+        return {"t": record.t, "sim": record.effort_sim, "measured": record.effort_measured, "model": model}
+    processed = process(load_run(resolve_run(measured)), processing)
+    return {"t": processed.t - processed.t[0], "sim": in_band_at_samples(processed, record.t, record.effort_sim),
+            "measured": processed.tau, "model": in_band_at_samples(processed, record.t, model)}
 
 
 def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -76,6 +102,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
 
     out = check_output_folder(out, "uncertainty")
     resolve_run(config.measured)  # a missing run is an error before any work
+    processing, processing_why = processing_of(config)
     start = time.perf_counter()
     drawn = sample_parameters(load_arm(), config.samples, config.seed, config.relative_std, config.params_cov)
     with building_folder(out, "uncertainty") as folder:
@@ -83,7 +110,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         paths = [folder / "params" / "nominal.json"] + [folder / "params" / f"sample_{i:04d}.json" for i in range(config.samples)]
         for path, params in zip(paths, [drawn.nominal, *drawn.samples]):
             path.write_text(json.dumps(params, indent=1))
-        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics) for p in paths]
+        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics, processing) for p in paths]
         results, failures = {}, {}
         for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
             if error is None:
@@ -101,6 +128,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         model_inside, _ = band_statistics(low, high, nominal["model"])
         summary = {
             "config": asdict(config),
+            "processing": {"processing": processing, "chosen_because": processing_why},
             "parameters": drawn.source,
             "projected_bodies": drawn.projected_bodies,
             "clipped_friction_coefficients": drawn.clipped_friction,
