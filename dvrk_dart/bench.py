@@ -26,6 +26,7 @@ TARGETS = {
     "mc_runs_per_s": (1.0, "higher", "1/s", "Monte Carlo replays of a 5 s run per second (dvrk-dart uncertainty, local executor, 2 workers)"),
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
     "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
+    "periodic_projection_s": (0.2, "lower", "s", "the periodic layer on one 30 s run: period, cutoff, projection of q and efforts, noise; best of 5"),
     "replay_realtime_factor": (20.0, "higher", "x", "dvrk-dart replay --measured two end to end (28 s, logs written), imports excluded, best of 3"),
 }
 
@@ -58,6 +59,14 @@ def bench_model() -> dict:
     ddq_all = central_difference(dq_all, 1.0 / sample_rate_hz())
     batch = best_time(lambda: arm.identified.predict(q_all, dq_all, ddq_all), repeat=3, number=1)
     return {"model_query_us": query * 1e6, "model_batch_ms": batch * 1e3, "model_batch_samples": len(run)}
+
+
+def bench_periodic(repeat: int = 5) -> dict:
+    from dvrk_dart.io.periodic import analyse
+
+    run = load_run(resolve_run("two"))
+    analyse(run.t, run.q, run.tau, sample_rate_hz(), "two")  # warm-up
+    return {"periodic_projection_s": best_time(lambda: analyse(run.t, run.q, run.tau, sample_rate_hz(), "two"), repeat=repeat, number=1)}
 
 
 def bench_simulation() -> dict:
@@ -161,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     figures = {}
     # the end-to-end replay first: nothing else (Ray's daemons, worker pools) runs beside it yet
-    for part in (bench_replay, bench_model, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
+    for part in (bench_replay, bench_model, bench_periodic, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
                  bench_monte_carlo, bench_bag_import):
         figures.update(part())
     print(f"{'figure':<29} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")

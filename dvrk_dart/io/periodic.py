@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
@@ -42,18 +43,32 @@ MIN_PERIODS = 2
 #: explains at least this fraction of their variance (every joint pooled, each
 #: scaled to unit variance); trajectories "one" and "two": > 0.9999
 MIN_EXPLAINED_VARIANCE = 0.99
+#: the positions repeat when their autocorrelation at the period's lag (each
+#: joint at unit variance) reaches this; trajectories "one" and "two": > 0.99
+MIN_REPEAT_CORRELATION = 0.8
 #: harmonics of the positions in the coarse-to-fine period search (the
 #: identification's excitations are 6-harmonic series)
 SEARCH_HARMONICS = 6
+#: harmonics of the positions in the final Gauss-Newton fit of the period (the
+#: measured positions of "one" and "two" stand above their noise up to ~30-60),
+#: and its iterations (it converges in two or three)
+REFINE_HARMONICS = 40
+REFINE_ITERATIONS = 5
 #: the cutoff rule (module docstring): power ratio and run length
 CUTOFF_SNR = 10.0
 CUTOFF_RUN = 3
+#: harmonics fitted before the noise is read (and the highest cutoff): the
+#: efforts of "one" and "two" sink into their noise at ~30-60
+NOISE_FIT_HARMONICS = 80
 #: noise around a harmonic: the non-harmonic DFT lines within this many
 #: harmonics on either side
 NOISE_WINDOW_HARMONICS = 2
-#: the period fitted on each half of a run must agree within this many
-#: combined standard errors, else the run's period is called unstable
+#: the period fitted on each half of a run is unstable when the halves differ
+#: by more than this many combined standard errors and by enough to drift the
+#: fundamental's phase by more than MAX_DRIFT_CYCLES over the run (harmonic k:
+#: k times that); the supplied runs drift by < 1e-4 cycle, a 1 % chirp by 0.02
 STABLE_PERIOD_STANDARD_ERRORS = 5.0
+MAX_DRIFT_CYCLES = 0.005
 
 
 @dataclass(frozen=True)
@@ -88,20 +103,23 @@ class Noise:
 def harmonic_design(t: np.ndarray, frequency_hz: float, harmonics: int, derivative: int = 0) -> np.ndarray:
     """(N, 2K+1) columns [1, cos w t, sin w t, ..., cos K w t, sin K w t], or their time derivative."""
     w = 2.0 * math.pi * frequency_hz * np.arange(1, harmonics + 1)
-    phase = np.outer(t, w)
-    cos, sin = np.cos(phase), np.sin(phase)
-    if derivative == 0:
-        pair, constant = (cos, sin), np.ones_like(t)
-    elif derivative == 1:
-        pair, constant = (-w * sin, w * cos), np.zeros_like(t)
-    elif derivative == 2:
-        pair, constant = (-(w**2) * cos, -(w**2) * sin), np.zeros_like(t)
-    else:
+    # e^{i k w1 t} as powers of e^{i w1 t}: far cheaper than K cosines and sines per sample
+    powers = np.cumprod(np.broadcast_to(np.exp(1j * w[0] * np.asarray(t, dtype=float))[:, None], (len(t), harmonics)), axis=1) \
+        if harmonics else np.zeros((len(t), 0), complex)
+    if derivative not in (0, 1, 2):
         raise ValueError(f"derivative {derivative}: 0, 1 or 2")
+    powers = powers * (1j * w) ** derivative
     columns = np.empty((len(t), 2 * harmonics + 1))
-    columns[:, 0] = constant
-    columns[:, 1::2], columns[:, 2::2] = pair
+    columns[:, 0] = 1.0 if derivative == 0 else 0.0
+    columns[:, 1::2], columns[:, 2::2] = powers.real, powers.imag
     return columns
+
+
+def least_squares(A: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """argmin ||A C - Y|| through the normal equations: harmonic columns over
+    two periods or more are nearly orthogonal, so A^T A is well conditioned."""
+    factor = scipy.linalg.cho_factor(A.T @ A)
+    return scipy.linalg.cho_solve(factor, A.T @ Y)
 
 
 def _unit_variance(x: np.ndarray) -> np.ndarray:
@@ -126,46 +144,63 @@ def _coarse_period_samples(x: np.ndarray) -> int:
     if not len(peaks):
         raise DvrkDartError("its positions do not repeat within half the run: not a periodic excitation of two periods or more")
     best = usable[peaks].max()
+    if best < MIN_REPEAT_CORRELATION:
+        raise DvrkDartError(f"its positions do not repeat within half the run (autocorrelation at most {best:.2f}): "
+                            "not a periodic excitation of two periods or more")
     return int(peaks[usable[peaks] >= 0.95 * best][0])
 
 
 def _residual_energy(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: int) -> float:
     A = harmonic_design(t, frequency_hz, harmonics)
-    coefficients, *_ = np.linalg.lstsq(A, x, rcond=None)
-    return float(np.sum((x - A @ coefficients) ** 2))
+    return float(np.sum((x - A @ least_squares(A, x)) ** 2))
 
 
-def _frequency_standard_error(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: int) -> float:
-    """Gauss-Newton standard error of the base frequency, each joint weighted
-    by its residual variance, inflated by the residuals' correlation time."""
+def _gauss_newton(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: int) -> tuple[float, float]:
+    """(step, standard error) of the base frequency at `frequency_hz`: one
+    Gauss-Newton step of the variable-projection problem (the coefficients
+    fitted at each frequency), each joint weighted by its residual variance,
+    the information divided by the residuals' correlation time."""
     from dvrk_dart.identification.fit import integrated_autocorrelation_time
 
     A = harmonic_design(t, frequency_hz, harmonics)
-    coefficients, *_ = np.linalg.lstsq(A, x, rcond=None)
+    factor = scipy.linalg.cho_factor(A.T @ A)
+    coefficients = scipy.linalg.cho_solve(factor, A.T @ x)
     residual = x - A @ coefficients
-    # d(series)/d(frequency) = t * d(series)/dt / frequency
+    # d(series)/d(frequency) = t * d(series)/dt / frequency, less what the coefficients absorb
     sensitivity = (t[:, None] * (harmonic_design(t, frequency_hz, harmonics, 1) @ coefficients)) / frequency_hz
+    sensitivity -= A @ scipy.linalg.cho_solve(factor, A.T @ sensitivity)
     variance = residual.var(axis=0)
-    information = 0.0
-    for j in range(x.shape[1]):
-        if variance[j] <= 0:
-            continue
-        # the sensitivity's own component along the fitted columns is absorbed by the coefficients
-        s = sensitivity[:, j] - A @ np.linalg.lstsq(A, sensitivity[:, j], rcond=None)[0]
-        correlation = integrated_autocorrelation_time(residual[:, j])
-        information += float(s @ s) / (variance[j] * correlation)
-    return math.inf if information <= 0 else 1.0 / math.sqrt(information)
+    used = variance > 0
+    weight = 1.0 / variance[used]
+    gradient = float(np.sum(weight * np.sum(sensitivity[:, used] * residual[:, used], axis=0)))
+    curvature = float(np.sum(weight * np.sum(sensitivity[:, used] ** 2, axis=0)))
+    correlation = np.array([integrated_autocorrelation_time(residual[:, j]) for j in np.flatnonzero(used)])
+    information = float(np.sum(weight * np.sum(sensitivity[:, used] ** 2, axis=0) / correlation))
+    if curvature <= 0 or information <= 0:
+        return 0.0, math.inf
+    return gradient / curvature, 1.0 / math.sqrt(information)
 
 
-def _fit_frequency(t: np.ndarray, x: np.ndarray, rate_hz: float) -> tuple[float, float]:
-    """(frequency, its standard error) from positions scaled to unit variance."""
-    lag = _coarse_period_samples(x)
-    coarse = rate_hz / lag
-    # the coarse lag is within a sample of the period
-    bounds = (rate_hz / (lag + 1), rate_hz / (lag - 1))
-    found = scipy.optimize.minimize_scalar(_residual_energy, bounds=bounds, args=(t, x, SEARCH_HARMONICS), method="bounded",
-                                           options={"xatol": coarse * 1e-9})
-    return float(found.x), _frequency_standard_error(float(found.x), t, x, SEARCH_HARMONICS)
+def _fit_frequency(t: np.ndarray, x: np.ndarray, rate_hz: float, start_hz: float | None = None) -> tuple[float, float]:
+    """(frequency, its standard error) from positions scaled to unit variance:
+    a bounded search with few harmonics around the autocorrelation's lag
+    (unless a start is given), then Gauss-Newton with many (the harmonics
+    left out would bias it on a span of a non-integer number of periods)."""
+    if start_hz is None:
+        lag = _coarse_period_samples(x)
+        # the coarse lag is within a sample of the period
+        bounds = (rate_hz / (lag + 1), rate_hz / (lag - 1))
+        found = scipy.optimize.minimize_scalar(_residual_energy, bounds=bounds, args=(t, x, SEARCH_HARMONICS), method="bounded",
+                                               options={"xatol": rate_hz / lag * 1e-9})
+        start_hz = float(found.x)
+    frequency = start_hz
+    harmonics = min(REFINE_HARMONICS, max(SEARCH_HARMONICS, int(rate_hz / frequency) // 2 - 1))
+    for _ in range(REFINE_ITERATIONS):
+        step, standard_error = _gauss_newton(frequency, t, x, harmonics)
+        frequency += step
+        if abs(step) < 0.01 * standard_error:
+            break
+    return frequency, standard_error
 
 
 def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str) -> Period:
@@ -185,9 +220,10 @@ def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str) -> Peri
         raise DvrkDartError(f"{where}: a {SEARCH_HARMONICS}-harmonic series of period {1 / frequency:.3f} s explains "
                             f"{explained:.1%} of the positions' variance (< {MIN_EXPLAINED_VARIANCE:.0%}): not a periodic excitation")
     half = len(t) // 2
-    halves = [_fit_frequency(t[part], x[part], rate_hz) for part in (slice(0, half), slice(half, None))]
+    halves = [_fit_frequency(t[part], x[part], rate_hz, frequency) for part in (slice(0, half), slice(half, None))]
     (f1, s1), (f2, s2) = halves
-    if abs(f1 - f2) > STABLE_PERIOD_STANDARD_ERRORS * math.hypot(s1, s2):
+    drift_cycles = abs(f1 - f2) * (t[-1] - t[0])
+    if abs(f1 - f2) > STABLE_PERIOD_STANDARD_ERRORS * math.hypot(s1, s2) and drift_cycles > MAX_DRIFT_CYCLES:
         raise DvrkDartError(f"{where}: unstable period: {1 / f1:.4f} s in the first half, {1 / f2:.4f} s in the second "
                             f"(standard errors {s1 / f1**2:.1e}, {s2 / f2**2:.1e} s)")
     return Period(1.0 / frequency, standard_error / frequency**2, whole)
@@ -202,19 +238,28 @@ class _Spectrum:
     per_sample_variance: np.ndarray  # (n,)
 
 
-def _spectrum(x: np.ndarray, period: Period, rate_hz: float) -> _Spectrum:
+def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _Spectrum:
+    """Harmonic powers from the least-squares series (the first NOISE_FIT_HARMONICS),
+    noise from the DFT lines between harmonics of what the series leaves over
+    whole periods (the series removed first: a span of a non-integer number of
+    samples per period would leak the strong harmonics into the noise lines)."""
     periods = period.whole_periods
     span = int(round(periods * period.period_s * rate_hz))
-    lines = np.abs(np.fft.rfft(x[:span] - x[:span].mean(axis=0), axis=0)) ** 2 / span
+    harmonics = min(NOISE_FIT_HARMONICS, int(period.period_s * rate_hz) // 2 - 1)
+    A = harmonic_design(t, period.frequency_hz, harmonics)
+    coefficients = least_squares(A, x)
+    left = (x - A @ coefficients)[:span]
+    lines = np.abs(np.fft.rfft(left - left.mean(axis=0), axis=0)) ** 2 / span
     index = np.arange(len(lines))
     noise_line = (index % periods != 0) & (index > 0)
-    top = (len(lines) - 1) // periods
     window = NOISE_WINDOW_HARMONICS * periods
-    noise = np.empty((top + 1, x.shape[1]))
-    for k in range(top + 1):
+    noise = np.empty((harmonics + 1, x.shape[1]))
+    for k in range(harmonics + 1):
         around = slice(max(1, k * periods - window), k * periods + window + 1)
         noise[k] = lines[around][noise_line[around]].mean(axis=0)
-    return _Spectrum(lines[::periods][: top + 1], noise, lines[noise_line].mean(axis=0))
+    # a harmonic's power in DFT-line units over the span: span (a^2 + b^2) / 4
+    power = np.vstack([np.zeros((1, x.shape[1])), span * (coefficients[1::2] ** 2 + coefficients[2::2] ** 2) / 4.0])
+    return _Spectrum(power, noise, lines[noise_line].mean(axis=0))
 
 
 def choose_cutoff(spectrum: _Spectrum, limit: int | None = None) -> int:
@@ -308,11 +353,11 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     `harmonics` imposes the cutoff (runs compared with each other share the smaller one)."""
     t = np.asarray(t, dtype=float) - float(t[0])
     period = fit_period(t, q, rate_hz, where)
-    effort_spectrum = _spectrum(tau, period, rate_hz)
+    effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
     cutoff = choose_cutoff(effort_spectrum) if harmonics is None else min(int(harmonics), top)
     projector = Projector(t, period.frequency_hz, cutoff)
-    position_spectrum = _spectrum(q, period, rate_hz)
+    position_spectrum = _spectrum(t, q, period, rate_hz)
     return PeriodicAnalysis(
         period, cutoff, projector.series(q), projector.series(tau),
         _noise(effort_spectrum, cutoff, len(t), period.whole_periods),
