@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
@@ -14,7 +14,7 @@ from dvrk_dart.diagnosis.library import (
     config_effort_by_formula,
 )
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
+from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process, process_periodic
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.sim.config import SimConfig
@@ -186,4 +186,4 @@ def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
 
 def run_features(arm: Arm, run: DiagnosisRun) -> TrajectoryFeatures:
     s = run.state
-    return TrajectoryFeatures(arm, s.q, s.dq, s.ddq, run.simulated, sample_rate_hz())
+    return TrajectoryFeatures(arm, s.q, s.dq, s.ddq, run.simulated, s.rate_hz)

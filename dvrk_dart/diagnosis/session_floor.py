@@ -28,7 +28,6 @@ import numpy as np
 from dvrk_dart.diagnosis.design import BLOCK_DURATION_S
 from dvrk_dart.diagnosis.runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
@@ -66,7 +65,7 @@ def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, referenc
     moves between sessions: measured on `repeat` against `reference` (the same
     motion in another session), else the model card's [sessions], else all."""
     if repeat is not None and same_motion(repeat.state, reference.state):
-        return moved_constants(repeat.gap - reference.gap, sample_rate_hz()), f"measured: {repeat.name} vs {reference.name}"
+        return moved_constants(repeat.gap - reference.gap, reference.state.rate_hz), f"measured: {repeat.name} vs {reference.name}"
     if model.session_offset_joints is not None:
         return np.isin(JOINT_NAMES, model.session_offset_joints), "model card [sessions]"
     return np.ones(len(JOINT_NAMES), dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"

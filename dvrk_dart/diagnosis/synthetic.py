@@ -14,7 +14,6 @@ from dvrk_dart.diagnosis.library import (
     unsimulated_effort,
 )
 from dvrk_dart.diagnosis.runs import Simulate, simulated_efforts
-from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.signal import ProcessedRun, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm
@@ -40,12 +39,12 @@ def synthesize_measurement(
     tau = simulated_efforts(arm, state, simulate, config)
     extra = not_simulated(list(injected))
     if extra:
-        features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), sample_rate_hz())
+        features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), state.rate_hz)
         tau = tau + unsimulated_effort(extra, features)
     if extra_effort is not None:
         tau = tau + np.asarray(extra_effort, dtype=float)
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(tau.shape), 1.0 / sample_rate_hz())
+    noise = zero_phase_lowpass(rng.standard_normal(tau.shape))
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)
     return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise)
 

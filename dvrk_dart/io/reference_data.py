@@ -1,6 +1,7 @@
 """Reference data: the manifest of upstream files, the resolver, and the one
 loader of measured runs (upstream CSV: no header, q1..q7, dq1..dq7, tau1..tau7
-sampled at 200 Hz)."""
+sampled at 200 Hz unless --rate or the manifest's entry of the file says
+otherwise; the velocity column is checked against the rate)."""
 
 from __future__ import annotations
 
@@ -45,7 +46,43 @@ def manifest() -> dict:
 
 
 def sample_rate_hz() -> float:
+    """The default rate of a measured run's rows (the reference data's, 200 Hz)."""
     return float(manifest()["sample_rate_hz"])
+
+
+#: a CSV's velocity column must match the finite differences of its positions
+#: at its rate to this fraction (the half-speed run read at 200 Hz: 1.0 off)
+RATE_TOLERANCE = 0.1
+
+
+def rate_of(path: Path) -> tuple[float, str]:
+    """(rows per second, where it comes from) of a CSV: --rate, else the
+    manifest's entry of that file name, else the reference data's default."""
+    from dvrk_dart.io.bags import current_topics
+
+    explicit = current_topics().rate_hz
+    if explicit is not None:
+        if not (np.isfinite(explicit) and explicit > 0):
+            raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
+        return float(explicit), "--rate"
+    entry = manifest()["files"].get(Path(path).name, {})
+    if "sample_rate_hz" in entry:
+        return float(entry["sample_rate_hz"]), f"{MANIFEST_FILE.name} [{Path(path).name}]"
+    return sample_rate_hz(), "the default rate"
+
+
+def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
+    """The velocity column against finite differences of the positions at the
+    rate: a mismatch names the rate that fits (least squares over all joints)."""
+    differences = np.gradient(q, 1.0 / rate_hz, axis=0)
+    energy = float(np.sum(dq**2))
+    if energy <= 0.0 or not np.any(differences):
+        return  # a still arm says nothing of its rate
+    scale = float(np.sum(differences * dq)) / energy
+    if abs(scale - 1.0) > RATE_TOLERANCE:
+        fits = rate_hz / scale if scale > 0 else float("nan")
+        raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
+                            f"column; the rate that fits is {fits:.4g} Hz (--rate {fits:.4g})")
 
 
 def sha256_of(path: Path) -> str:
@@ -147,6 +184,11 @@ class MeasuredRun:
         return self.data["t"].to_numpy()
 
     @property
+    def rate_hz(self) -> float:
+        """Rows per second (checked against the velocity column when loaded)."""
+        return float(1.0 / (self.data["t"].iat[1] - self.data["t"].iat[0]))
+
+    @property
     def q(self) -> np.ndarray:
         return self.data[column_names("q")].to_numpy()
 
@@ -227,7 +269,9 @@ def load_run(path: Path | str) -> MeasuredRun:
     if len(values) < MIN_ROWS:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
     check_joint_ranges(values[:, :N_JOINTS], path)
+    rate, source = rate_of(path)
+    check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
-    data.insert(0, "t", np.arange(len(data)) / sample_rate_hz())
+    data.insert(0, "t", np.arange(len(data)) / rate)
     assert data.shape[1] == 1 + 3 * N_JOINTS
     return MeasuredRun(path=path, data=data)

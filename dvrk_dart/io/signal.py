@@ -50,6 +50,10 @@ class ProcessedRun:
         return len(self.t)
 
     @property
+    def rate_hz(self) -> float:
+        return float(1.0 / (self.t[1] - self.t[0]))
+
+    @property
     def processing(self) -> str:
         return "upstream" if self.periodic is None else "periodic"
 
@@ -86,9 +90,12 @@ def central_difference(x: np.ndarray, h: float) -> np.ndarray:
     return d
 
 
-def zero_phase_lowpass(x: np.ndarray, h: float) -> np.ndarray:
-    """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0."""
-    b, a = scipy.signal.butter(FILTER_ORDER, CUTOFF_PARAMETER_HZ * 2 * math.pi * h)
+def zero_phase_lowpass(x: np.ndarray) -> np.ndarray:
+    """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0.
+    Its Wn is upstream's at the reference rate whatever the run's: a run at
+    another rate (the half-speed run's 100 Hz rows) keeps its cut-off at the
+    same multiple of its excitation's base frequency."""
+    b, a = scipy.signal.butter(FILTER_ORDER, CUTOFF_PARAMETER_HZ * 2 * math.pi / sample_rate_hz())
     edge = 3 * max(len(a), len(b))
     zi = scipy.signal.lfilter_zi(b, a)[:, None]
     s = np.concatenate([2 * x[0] - x[edge:1:-1], x, 2 * x[-1] - x[-1:-edge:-1]])
@@ -104,20 +111,20 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | Non
         return process_periodic(run, harmonics)
     if processing != "upstream":
         raise DvrkDartError(f"--processing {processing}: one of {', '.join(PROCESSINGS)}")
-    h = 1.0 / sample_rate_hz()
+    h = 1.0 / run.rate_hz
     if len(run) < MIN_ROWS:
         raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
-    q = zero_phase_lowpass(run.q, h)
-    dq = zero_phase_lowpass(run.dq, h)
-    ddq = zero_phase_lowpass(central_difference(run.dq, h), h)
-    tau = zero_phase_lowpass(run.tau, h)
+    q = zero_phase_lowpass(run.q)
+    dq = zero_phase_lowpass(run.dq)
+    ddq = zero_phase_lowpass(central_difference(run.dq, h))
+    tau = zero_phase_lowpass(run.tau)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
     return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep])
 
 
 def process_periodic(run: MeasuredRun, harmonics: int | None = None) -> ProcessedRun:
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
-    analysis = analyse(run.t, run.q, run.tau, sample_rate_hz(), f"{run.path}: --processing periodic", harmonics)
+    analysis = analyse(run.t, run.q, run.tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics)
     t = run.t - run.t[0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
     return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis)

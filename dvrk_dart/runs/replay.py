@@ -203,7 +203,6 @@ def _in_band_metrics(processed: ProcessedRun, t: np.ndarray, effort: np.ndarray,
     """Periodic processing: simulated and model efforts at the measured samples,
     projected on the excitation's harmonics like the measured efforts (a whole
     run only: a part of it has no projection of its own)."""
-    t_meas = processed.t - processed.t[0]
     if not in_window.all() or len(t) < 2:
         return {"rms_sim_vs_measured": None, "rms_model_vs_measured": None,
                 "in_band_note": "a part of the run: the periodic comparison needs the whole run"}
