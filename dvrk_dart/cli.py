@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import signal
 import sys
 import threading
@@ -18,6 +19,23 @@ from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 
+def arm_namespace(text: str) -> str:
+    """A ROS namespace of one name (PSM1, MTML): letters, digits, underscores, a letter first."""
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", text):
+        raise argparse.ArgumentTypeError(f"'{text}' is not an arm's namespace (a ROS name such as PSM1: letters, digits, _)")
+    return text
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: at least 1")
+    return value
+
+
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", help="identified parameters file (default: upstream params.json, resolved at run time)")
 
@@ -25,7 +43,7 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
 def _add_bag_options(p: argparse.ArgumentParser) -> None:
     """Where a measured run that is a ROS bag keeps the PSM's joint states."""
     g = p.add_argument_group("measured runs that are ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
-    g.add_argument("--arm", default="PSM1", help="the arm's namespace (default PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js)")
+    g.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace (default PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js)")
     g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
     g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
     g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
@@ -55,7 +73,11 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise DvrkDartError(f"--rate: the 21-column CSV has no time column and is read at {sample_rate_hz():g} Hz; import at that rate")
     if not is_bag(args.bag):
         raise DvrkDartError(f"{args.bag}: not a ROS bag (a rosbag2 folder with metadata.yaml, an .mcap/.db3 file or a ROS 1 .bag)")
-    out = Path(args.out)
+    out, bag = Path(args.out), Path(args.bag)
+    if out.resolve() == bag.resolve() or bag.resolve() in out.resolve().parents:
+        raise DvrkDartError(f"--out: {out} is the input bag {bag} or inside it: refusing to write over the input, even with --force")
+    if out.is_dir():
+        raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
     if out.exists() and not args.force:
         raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
     run = load_bag_run(args.bag, topics)
@@ -105,6 +127,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     measured = processed.tau
     if args.first_period:
         n = processed.first_period_samples()
+        if len(measured) < n:
+            raise DvrkDartError(f"--first-period: {args.measured} has {len(measured)} processed samples, fewer than one period ({n})")
         predicted, measured = predicted[:n], measured[:n]
     result = {
         "relative_error": relative_error(predicted, measured).tolist(),
@@ -298,6 +322,8 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
 
     if args.params_cov is None and args.relative_std is None:
         args.relative_std = 0.05
+    if args.samples < 2:
+        raise DvrkDartError(f"--samples: {args.samples}: a band needs at least 2 parameter sets")
     config = UncertaintyConfig(args.measured, args.samples, args.seed, None if args.params_cov else args.relative_std,
                                args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing)
     if config.duration_s is not None and not config.duration_s > 0.0:
@@ -319,8 +345,16 @@ def _executor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ray-address", default=None, help="an existing Ray cluster (default: start a local Ray instance with --jobs CPUs)")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as every other error: one line naming the option, exit 2."""
+
+    def error(self, message: str):
+        print(f"{self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dvrk-dart", description=__doc__)
+    parser = OneLineParser(prog="dvrk-dart", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
@@ -357,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     _add_processing_option(p, None)
+    _add_bag_options(p)
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
@@ -369,14 +404,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="a simulated run -> a ROS 2 bag (MCAP) like a real PSM's recording")
     p.add_argument("run_dir", help="a run folder (run.mcap)")
     p.add_argument("--bag", required=True, help="the bag to write (a rosbag2 folder; a .bag file with --storage ros1)")
-    p.add_argument("--arm", default="PSM1", help="the arm's namespace of the topics (default PSM1)")
+    p.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace of the topics (default PSM1)")
     p.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3", "ros1"), help="rosbag2 storage, or a ROS 1 bag")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("excitation", help="a trajectory to play on a dVRK: CSV + ROS 2 bag of servo_jp")
     p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--arm", default="PSM1", help="the arm's namespace of the servo_jp topics (default PSM1)")
+    p.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace of the servo_jp topics (default PSM1)")
     p.add_argument("--rate", type=float, default=None, help="command rate (Hz, default 200)")
     p.set_defaults(func=cmd_excitation)
 
@@ -414,7 +449,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
     p.add_argument("--out", default="out", help="output folder (runs in OUT/runs)")
     p.add_argument("--report", default="report", help="report folder")
-    p.add_argument("--jobs", type=int, default=2, help="parallel worker processes")
+    p.add_argument("--jobs", type=positive_int, default=2, help="parallel worker processes")
     p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
     p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                    help="the simulated arm of the campaign's runs that do not name one (default: their scenario's)")
@@ -423,23 +458,24 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
     p.add_argument("--measured", required=True, help="measured run: path, or one|two|...")
-    p.add_argument("--samples", type=int, default=64, help="parameter sets drawn")
+    p.add_argument("--samples", type=positive_int, default=64, help="parameter sets drawn")
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
     source.add_argument("--relative-std", type=float, help="fallback: relative std of every parameter (default 0.05)")
     p.add_argument("--duration", type=float, default=None, help="replay only the first seconds")
     p.add_argument("--seed", type=int, default=0, help="seed of the parameter draws")
-    p.add_argument("--jobs", type=int, default=2, help="parallel workers")
+    p.add_argument("--jobs", type=positive_int, default=2, help="parallel workers")
     _executor_options(p)
     _add_processing_option(p, None)
+    _add_bag_options(p)
     p.set_defaults(func=cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
     p.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap)")
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--extra", help="folder of extra sections (*.html fragments and images)")
-    p.add_argument("--jobs", type=int, default=None, help="parallel workers (default: the machine's cores)")
+    p.add_argument("--jobs", type=positive_int, default=None, help="parallel workers (default: the machine's cores)")
     p.add_argument("--allow-unreadable", action="store_true", help="exit 0 even when some run folders could not be read")
     p.set_defaults(func=cmd_report)
 
@@ -453,7 +489,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
     p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "
                                             "only on joints whose measured efforts leave the parameters' band")
-    p.add_argument("--jobs", type=int, default=2, help="re-simulations run side by side")
+    p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
     _add_processing_option(p, "upstream")
     p.add_argument("--out", required=True)
@@ -472,7 +508,10 @@ def _terminate(signum, frame) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, or a usage error already printed in one line
+        return int(exc.code or 0)
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
         if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags

@@ -194,7 +194,7 @@ def test_report_section_compares_with_the_published_parameters(tmp_path):
     assert "published" in title
     for folder, processing in (("identification", "periodic"), ("identification-upstream", "upstream")):
         data = json.loads((tmp_path / folder / "identification.json").read_text())
-        assert (tmp_path / folder / ".dvrk-dart").read_text().strip() == "identification"
+        assert json.loads((tmp_path / folder / ".dvrk-dart").read_text())["kind"] == "identification"
         assert data["processing"]["processing"] == processing
         for j, value in enumerate(data["errors"]["holdout"]["two"]["first_period"]["relative_error"]):
             assert f'data-identification="relative_error_identified" data-run="two" data-joint="q{j + 1}" data-processing="{processing}" data-value="{value!r}"' in body

@@ -364,12 +364,14 @@ def analyze(
             results = list(pool.map(_load_and_measure, map(str, folders)))
     else:
         results = [_load_and_measure(str(f)) for f in folders]
-    runs, tables, failures = {}, [], {}
+    runs, tables, failures, folder_of = {}, [], {}, {}
     for folder, (loaded, table, error) in zip(folders, results):
         if error is not None:
             failures[folder.name] = error
             continue
-        runs[loaded.name] = loaded
+        if loaded.name in runs:
+            raise DvrkDartError(f"--runs: {folder_of[loaded.name]} and {folder} hold the same run {loaded.name}: keep one of them")
+        runs[loaded.name], folder_of[loaded.name] = loaded, folder
         tables.append(table)
     metrics = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame(columns=METRICS_COLUMNS)
     metrics["value"] = metrics["value"].astype(float)

@@ -76,10 +76,12 @@ class Bounds:
 def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
     """The identification bounds file (default models/psm/identification.toml)."""
     path = Path(path) if path is not None else DEFAULT_BOUNDS_FILE
+    if path.is_dir():
+        raise DvrkDartError(f"--bounds: {path} is a folder, not a bounds file")
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise DvrkDartError(f"{path}: bounds file not found") from None
+        raise DvrkDartError(f"--bounds: {path}: bounds file not found") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DvrkDartError(f"{path}: not a valid TOML file ({exc})") from None
     masses: dict[int, tuple[float, float]] = {}

@@ -59,7 +59,13 @@ def project_body(p: np.ndarray) -> tuple[np.ndarray, bool]:
     return np.linalg.lstsq(_BASIS_MATRIX, J.reshape(16), rcond=None)[0], True
 
 
+#: a covariance is symmetric and positive semidefinite to rounding: this fraction of its largest entry
+COVARIANCE_TOLERANCE = 1e-9
+
+
 def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    if path.is_dir():
+        raise DvrkDartError(f"--params-cov: {path} is a folder, not a params_covariance.json")
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
         if raw.get("format") != COVARIANCE_FORMAT:
@@ -73,6 +79,12 @@ def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndar
         raise DvrkDartError(f"--params-cov: {path}: its parameters are not this model's {len(names)} standard parameters")
     if not (np.all(np.isfinite(nominal)) and np.all(np.isfinite(covariance))):
         raise DvrkDartError(f"--params-cov: {path}: not finite")
+    scale = max(float(np.max(np.abs(covariance))), np.finfo(float).tiny)
+    if np.max(np.abs(covariance - covariance.T)) > COVARIANCE_TOLERANCE * scale:
+        raise DvrkDartError(f"--params-cov: {path}: the covariance is not symmetric")
+    smallest = float(np.linalg.eigvalsh(covariance)[0])
+    if smallest < -COVARIANCE_TOLERANCE * scale:
+        raise DvrkDartError(f"--params-cov: {path}: the covariance is not positive semidefinite (eigenvalue {smallest:.3g})")
     return nominal, covariance
 
 
@@ -89,9 +101,10 @@ def perturbed(params: IdentifiedParameters, relative_std: float, rng: np.random.
     links = {}
     for key, p in params.links.items():
         spread, axes = np.linalg.eigh(0.5 * np.trace(p.inertia_com) * np.eye(3) - p.inertia_com)
-        sigma = (axes * scaled(spread)) @ axes.T
+        # a large relative std can draw a negative spread or mass: a real body has none
+        sigma = (axes * np.clip(scaled(spread), 0.0, None)) @ axes.T
         links[key] = replace(
-            p, mass=float(scaled(p.mass)), com=scaled(p.com), inertia_com=np.trace(sigma) * np.eye(3) - sigma,
+            p, mass=max(float(scaled(p.mass)), 0.0), com=scaled(p.com), inertia_com=np.trace(sigma) * np.eye(3) - sigma,
             coulomb=float(scaled(p.coulomb)), viscous=float(scaled(p.viscous)), offset=float(scaled(p.offset)),
             motor_inertia=float(scaled(p.motor_inertia)), spring=float(scaled(p.spring)),
         )

@@ -59,7 +59,11 @@ class BagTopics:
 
     @property
     def jaw(self) -> str:
-        return self.jaw_topic or f"/{self.arm}/jaw/measured_js"
+        """--jaw-topic, else the jaw of the arm's namespace (that of --topic when given)."""
+        if self.jaw_topic:
+            return self.jaw_topic
+        namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.arm}"
+        return f"{namespace}/jaw/measured_js"
 
     @property
     def rate(self) -> float:
@@ -220,6 +224,10 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
         # upstream's filter, trim and first period are defined in samples at that rate
         raise DvrkDartError(f"--rate {rate:g}: measured runs are processed at {sample_rate_hz():g} Hz (the identification's processing); resample at that rate")
     arm, jaw = read_topics(path, topics)
+    if arm.receive_time != jaw.receive_time:
+        stamped, received = (jaw, arm) if arm.receive_time else (arm, jaw)
+        raise DvrkDartError(f"{path}: {stamped.topic} has header stamps but {received.topic} only the bag's receive times: "
+                            "two clocks cannot be aligned (record both with header stamps)")
     for samples in (arm, jaw):
         _check_times(path, samples)
     # the grid: multiples of the period on the bag's clock, so that a bag stamped

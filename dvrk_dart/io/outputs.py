@@ -2,24 +2,29 @@
 swapped in whole at the end, and never replacing what the tool did not make.
 
 A folder the tool makes (a run, a report, a diagnosis) holds a marker file
-naming its kind. An existing `--out` may be replaced only when it is empty,
-holds that marker, or (folders written before markers existed) holds nothing
-but the files that kind of folder is made of.
+naming its kind and every file it wrote, with checksums. An existing `--out`
+may be replaced only when it is empty or holds that marker; replacing it
+replaces only what the marker lists: anything else a user put there (a plot in
+figures/, notes) is carried into the new folder as it is. Half-built folders
+of processes that no longer run are removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import uuid
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
 
 MARKER = ".dvrk-dart"
-#: what each kind of folder is made of (the legacy test, before markers)
+#: what each kind of folder is made of: the tool's files in a folder marked by
+#: an earlier version (a marker naming the kind, without the list of files)
 KNOWN_ENTRIES = {
     "run": {"config.json", "metrics.json", "run.mcap", "run.rrd", "inputs.sha256"},
     "report": {"index.html", "analysis", "figures"},
@@ -28,6 +33,57 @@ KNOWN_ENTRIES = {
     "diagnosis": {"diagnosis.json", "diagnosis.html", "figures", "replay_before", "replay_after", "where.csv"},
     "identification": {"params.json", "params_covariance.json", "identification.json", "identification.html"},
 }
+
+
+@dataclass(frozen=True)
+class Marker:
+    """What the tool wrote in a folder: its kind and every file (relative path ->
+    sha256); `files` None for a marker of an earlier version (kind only)."""
+
+    kind: str
+    files: dict[str, str] | None
+
+    def owns(self, relative: str) -> bool:
+        if self.files is None:
+            return relative.split("/")[0] in KNOWN_ENTRIES.get(self.kind, set())
+        return relative in self.files
+
+
+def read_marker(folder: Path) -> Marker | None:
+    path = folder / MARKER
+    if not path.is_file() or path.is_symlink():
+        return None
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    try:
+        raw = json.loads(text)
+    except json.JSONDecodeError:
+        return Marker(text.strip(), None) if "\n" not in text.strip() else None
+    if not isinstance(raw, dict) or not isinstance(raw.get("kind"), str) or not isinstance(raw.get("files"), dict):
+        return None
+    return Marker(raw["kind"], {str(k): str(v) for k, v in raw["files"].items()})
+
+
+def _files(folder: Path) -> list[str]:
+    """Relative paths of every file and symlink below `folder` (links not followed), the marker excluded."""
+    out = []
+    for root, dirs, files in os.walk(folder):
+        base = Path(root)
+        for name in files + [d for d in dirs if (base / d).is_symlink()]:
+            relative = (base / name).relative_to(folder).as_posix()
+            if relative != MARKER:
+                out.append(relative)
+    return sorted(out)
+
+
+def write_marker(folder: Path, kind: str) -> None:
+    """The marker of a folder the tool built: its kind and what it wrote, with checksums."""
+    from dvrk_dart.io.reference_data import sha256_of
+
+    files = {relative: sha256_of(folder / relative) for relative in _files(folder) if (folder / relative).is_file()}
+    (folder / MARKER).write_text(json.dumps({"kind": kind, "files": files}, indent=1) + "\n", encoding="utf-8")
 
 
 def _nearest_existing(path: Path) -> Path:
@@ -62,34 +118,66 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
 
 
 def replaceable(path: Path, kind: str) -> bool:
-    entries = {p.name for p in path.iterdir()}
-    if not entries:
+    """Empty, or marked by the tool as a `kind` folder."""
+    if not any(path.iterdir()):
         return True
-    if MARKER in entries:
-        try:
-            return (path / MARKER).read_text(encoding="utf-8").strip() == kind
-        except (OSError, UnicodeDecodeError):
-            return False
-    return entries <= KNOWN_ENTRIES[kind]
+    marker = read_marker(path)
+    return marker is not None and marker.kind == kind
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_building(target: Path) -> None:
+    """Half-built folders of `target` left by processes killed hard (they are hidden: .NAME.building-PID-*)."""
+    for candidate in target.parent.glob(f".{target.name}.building-*"):
+        pid = candidate.name[len(f".{target.name}.building-"):].split("-")[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _process_alive(int(pid)) and candidate.is_dir() and not candidate.is_symlink():
+            shutil.rmtree(candidate, ignore_errors=True)
 
 
 @contextlib.contextmanager
 def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
-    """Yield an empty folder beside `target`; on success it replaces `target` as
-    a whole (marked as `kind`); on any failure or interruption `target` is left
-    as it was and the partial folder is removed."""
+    """Yield an empty folder beside `target`; on success it replaces `target`
+    (marked as `kind`, with the user's own files of the old folder carried
+    over); on any failure or interruption `target` is left as it was and the
+    partial folder is removed."""
     target = Path(target)
     check_output_folder(target, kind)
     target.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_building(target)
     building = target.with_name(f".{target.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     building.mkdir()
     try:
         yield building
-        (building / MARKER).write_text(kind + "\n", encoding="utf-8")
+        write_marker(building, kind)
+        if target.is_dir():
+            _carry_user_files(target, building)
         swap_in(building, target)
     finally:
         if building.exists():
             shutil.rmtree(building, ignore_errors=True)
+
+
+def _carry_user_files(old: Path, new: Path) -> None:
+    """Move what the old folder's marker does not list into the new folder, at
+    the same relative path; refuse (old folder untouched) where the new one
+    wrote a file of the same name."""
+    marker = read_marker(old) or Marker("", {})
+    user = [relative for relative in _files(old) if not marker.owns(relative)]
+    clashes = [relative for relative in user if (new / relative).exists() or (new / relative).is_symlink()]
+    if clashes:
+        raise DvrkDartError(f"--out: {old / clashes[0]} is not dvrk-dart's but the new output writes that file: move it, then run again")
+    for relative in user:
+        (new / relative).parent.mkdir(parents=True, exist_ok=True)
+        os.replace(old / relative, new / relative)
 
 
 def swap_in(built: Path, target: Path) -> None:

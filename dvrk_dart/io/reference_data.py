@@ -73,12 +73,13 @@ def rate_of(path: Path) -> tuple[float, str]:
 
 def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
     """The velocity column against finite differences of the positions at the
-    rate: a mismatch names the rate that fits (least squares over all joints)."""
+    rate: a mismatch names the rate that fits (the median over the moving
+    joints of each joint's least-squares scale: one odd column is no clock)."""
     differences = np.gradient(q, 1.0 / rate_hz, axis=0)
-    energy = float(np.sum(dq**2))
-    if energy <= 0.0 or not np.any(differences):
+    moving = (np.sum(differences**2, axis=0) > 0) & (np.sum(dq**2, axis=0) > 0)
+    if not moving.any():
         return  # a still arm says nothing of its rate
-    scale = float(np.sum(differences * dq)) / energy
+    scale = float(np.median(np.sum(differences * dq, axis=0)[moving] / np.sum(dq**2, axis=0)[moving]))
     if abs(scale - 1.0) > RATE_TOLERANCE:
         fits = rate_hz / scale if scale > 0 else float("nan")
         raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "

@@ -1,0 +1,169 @@
+"""No user file is ever changed or removed by an output: property-based over
+random trees of user files (every command's folder goes through
+io/outputs.building_folder), plus the examples of each command."""
+
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dvrk_dart.cli import main
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.outputs import KNOWN_ENTRIES, MARKER, building_folder, read_marker
+
+NAME = st.text(alphabet="abcXYZ_- é0.", min_size=1, max_size=8).filter(lambda n: n not in (".", "..") and n != MARKER)
+TOOL_FILES = ("index.html", "figures/plot.png", "analysis/metrics.csv")
+
+
+@st.composite
+def user_trees(draw):
+    """{relative path: bytes}, nested up to three levels, some inside the tool's own sub-folders."""
+    files = {}
+    for _ in range(draw(st.integers(1, 6))):
+        parts = draw(st.lists(NAME, min_size=0, max_size=2))
+        if draw(st.booleans()):
+            parts = [draw(st.sampled_from(["figures", "analysis"])), *parts]
+        files["/".join([*parts, draw(NAME)])] = draw(st.binary(max_size=64))
+    # no file may be the folder of another
+    names = sorted(files)
+    return {n: files[n] for n in names if not any(other.startswith(n + "/") for other in names)}
+
+
+def _write_tree(folder: Path, tree: dict[str, bytes]) -> None:
+    for relative, content in tree.items():
+        (folder / relative).parent.mkdir(parents=True, exist_ok=True)
+        (folder / relative).write_bytes(content)
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file() and not p.is_symlink()}
+
+
+def _build(target: Path, version: bytes) -> None:
+    with building_folder(target, "report") as folder:
+        _write_tree(folder, {name: version for name in TOOL_FILES})
+
+
+settings_ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+@settings_
+@given(tree=user_trees())
+def test_an_unmarked_folder_is_refused_and_left_as_it_was(tmp_path_factory, tree):
+    target = tmp_path_factory.mktemp("out") / "site"
+    _write_tree(target, tree)
+    before = _snapshot(target)
+    with pytest.raises(DvrkDartError, match="not made by dvrk-dart"):
+        _build(target, b"new")
+    assert _snapshot(target) == before
+    assert not list(target.parent.glob(".site.*"))
+
+
+@settings_
+@given(tree=user_trees())
+def test_a_marked_folder_keeps_the_user_files_put_in_it(tmp_path_factory, tree):
+    """The tool's files are replaced, the user's kept byte for byte at their
+    place; where the user's file takes a name the tool writes, nothing changes."""
+    target = tmp_path_factory.mktemp("out") / "site"
+    _build(target, b"old")
+    clash = any(relative in TOOL_FILES for relative in tree) or any(
+        tool.startswith(relative + "/") or relative.startswith(tool + "/") for relative in tree for tool in TOOL_FILES)
+    for relative in list(tree):
+        if (target / relative).exists():
+            del tree[relative]  # the tool's own file: a user editing it is covered below
+    try:
+        _write_tree(target, tree)
+    except (NotADirectoryError, FileExistsError, IsADirectoryError):
+        return  # the tree cannot coexist with the tool's files
+    before = _snapshot(target)
+    if clash:
+        with pytest.raises(DvrkDartError):
+            _build(target, b"new")
+        assert _snapshot(target) == before
+        return
+    _build(target, b"new")
+    after = _snapshot(target)
+    for relative, content in tree.items():
+        assert after[relative] == content, relative
+    for name in TOOL_FILES:
+        assert after[name] == b"new"
+    assert set(read_marker(target).files) == set(TOOL_FILES)
+
+
+def test_a_symlink_the_user_put_in_a_marked_folder_is_kept(tmp_path):
+    target = tmp_path / "site"
+    _build(target, b"old")
+    outside = tmp_path / "precious.txt"
+    outside.write_text("keep")
+    os.symlink(outside, target / "link")
+    _build(target, b"new")
+    assert (target / "link").is_symlink() and (target / "link").read_text() == "keep"
+
+
+def test_half_built_folders_of_dead_processes_are_removed(tmp_path):
+    target = tmp_path / "site"
+    stale = tmp_path / ".site.building-999999999-deadbeef"
+    stale.mkdir()
+    (stale / "index.html").write_text("half")
+    live = tmp_path / f".site.building-{os.getppid()}-cafe"
+    live.mkdir()
+    _build(target, b"new")
+    assert not stale.exists() and live.exists()
+
+
+def test_a_folder_marked_by_an_earlier_version_replaces_only_its_known_files(tmp_path):
+    target = tmp_path / "id"
+    target.mkdir()
+    (target / MARKER).write_text("identification\n")
+    (target / "params.json").write_text("{}")
+    (target / "notes.txt").write_text("mine")
+    with building_folder(target, "identification") as folder:
+        (folder / "params.json").write_text('{"new": 1}')
+    assert (target / "notes.txt").read_text() == "mine" and "new" in (target / "params.json").read_text()
+    assert "params.json" in KNOWN_ENTRIES["identification"]
+
+
+@pytest.mark.parametrize("args, user_file", [
+    (["identify", "--runs", "one", "--processing", "upstream"], "params.json"),
+    (["diagnose", "--measured", "two"], "figures/my_plot.png"),
+    (["uncertainty", "--measured", "two", "--samples", "2", "--duration", "0.5"], "params/my.json"),
+    (["replay", "--measured", "two", "--duration", "0.2"], "config.json"),
+    (["excitation", "two"], "excitation.json"),
+])
+def test_every_command_refuses_a_user_folder(tmp_path, capsys, args, user_file):
+    out = tmp_path / "lab"
+    (out / user_file).parent.mkdir(parents=True, exist_ok=True)
+    (out / user_file).write_text("the user's")
+    capsys.readouterr()
+    assert main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not made by dvrk-dart" in err, err
+    assert _snapshot(out) == {user_file: b"the user's"}
+
+
+def test_report_refuses_a_user_site(tmp_path, capsys):
+    site = tmp_path / "site"
+    (site / "figures").mkdir(parents=True)
+    (site / "index.html").write_text("mine")
+    (site / "figures" / "photo.png").write_bytes(b"\x89PNG")
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    before = _snapshot(site)
+    assert main(["report", "--runs", str(runs), "--out", str(site)]) == 2
+    assert _snapshot(site) == before
+
+
+@pytest.mark.parametrize("where", ["the bag itself", "inside the bag"])
+def test_import_never_writes_over_its_input(tmp_path, capsys, where):
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    out = bag if where == "the bag itself" else bag / "metadata.yaml"
+    before = _snapshot(bag)
+    capsys.readouterr()
+    assert main(["import", str(bag), "--out", str(out), "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "input" in err, err
+    assert _snapshot(bag) == before
