@@ -211,13 +211,13 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
 def _run_and_write(config, out: Path | None) -> int:
     from dvrk_dart.io.outputs import check_output_folder
     from dvrk_dart.model.arm import load_arm
-    from dvrk_dart.runs.campaign import config_name, write_run_folder
+    from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
     from dvrk_dart.runs.runner import run
 
     out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
     arm = load_arm(params_file=config.params_file)
     record = run(config, arm)
-    write_run_folder(record, out_dir, arm.model)
+    write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
     for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position", "tracking_rms_orientation"):

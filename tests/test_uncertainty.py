@@ -68,18 +68,24 @@ def test_uncertainty_bad_input_is_one_line(tmp_path, capsys, argv, message):
     assert not (tmp_path / "mc").exists()
 
 
-def _band_folder(tmp_path, inside):
+def _sha(name):
+    from dvrk_dart.io.reference_data import resolve_run, sha256_of
+
+    return sha256_of(resolve_run(name))
+
+
+def _band_folder(tmp_path, inside, measured="two"):
     folder = tmp_path / "band"
     folder.mkdir()
     (folder / "uncertainty.json").write_text(json.dumps({
-        "config": {"measured": "two"}, "parameters": "relative std 0.05", "measured_inside_band_fraction": inside,
-        "rms_measured_outside_band": [0.0] * 7}))
+        "config": {"measured": measured}, "parameters": "relative std 0.05", "measured_inside_band_fraction": inside,
+        "rms_measured_outside_band": [0.0] * 7, "measured_file": {"sha256": _sha(measured), "replayed_s": 28.0}}))
     return folder
 
 
-def _diagnosis_result(runs=("two_results",)):  # a run is named by its file
+def _diagnosis_result(runs=("two",)):  # a run is known by its content
     effect = {"selected": True, "explained_fraction": {}}
-    return {"train_runs": list(runs), "holdout_runs": [], "effects": [
+    return {"inputs": {name: {"sha256": _sha(name)} for name in runs}, "train_runs": list(runs), "holdout_runs": [], "effects": [
         {**effect, "name": "friction q2", "joints": ["q2"]},
         {**effect, "name": "offset q3", "joints": ["q3"]},
         {**effect, "name": "payload", "joints": ["q1", "q2", "q3"], "selected": False}]}
@@ -101,7 +107,21 @@ def test_a_band_of_another_run_is_refused(tmp_path):
     from dvrk_dart.errors import DvrkDartError
 
     band = load_band(_band_folder(tmp_path, [1.0] * 7))
-    with pytest.raises(DvrkDartError, match="is of run 'two_results', not one of the diagnosed runs"):
-        apply_band(_diagnosis_result(runs=("one_results",)), band)
+    with pytest.raises(DvrkDartError, match="none of the diagnosed runs"):
+        apply_band(_diagnosis_result(runs=("one",)), band)
+    # a band of another recording that happens to have the same file name: refused by content
+    other = tmp_path / "other"
+    other.mkdir()
+    renamed = _band_folder(other, [1.0] * 7, measured="one")
+    data = json.loads((renamed / "uncertainty.json").read_text())
+    data["config"]["measured"] = "two"
+    (renamed / "uncertainty.json").write_text(json.dumps(data))
+    with pytest.raises(DvrkDartError, match="none of the diagnosed runs"):
+        apply_band(_diagnosis_result(runs=("two",)), load_band(renamed))
     with pytest.raises(DvrkDartError, match="not an output folder of `dvrk-dart uncertainty`"):
         load_band(tmp_path)
+    # a summary missing a key is refused when loaded, before any diagnosis
+    del data["rms_measured_outside_band"]
+    (renamed / "uncertainty.json").write_text(json.dumps(data))
+    with pytest.raises(DvrkDartError, match="rms_measured_outside_band"):
+        load_band(renamed)

@@ -22,6 +22,7 @@ from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.first_moment import (
     FirstMomentPayload,
     PayloadAtPosition,
+    check_mass_determinable,
     parse_payload_at,
 )
 from dvrk_dart.diagnosis.identifiable import first_moment_report
@@ -59,6 +60,7 @@ from dvrk_dart.diagnosis.session_floor import (
     session_offset_joints,
 )
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
@@ -155,10 +157,12 @@ def diagnose(
     at_index = None
     if payload_at is not None:
         key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
+        check_mass_determinable(arm, key, position, str(payload_at))
         effects.append(PayloadAtPosition(arm.model, key, position))
         at_index = len(effects) - 1
 
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
+    inputs = distinct_inputs(_roles(measured_list, baseline, train, holdout, repeat))
     run_processing = choose_processing(all_specs, processing)
 
     def as_run(spec, baseline=None):
@@ -353,6 +357,7 @@ def diagnose(
         "baseline": train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         "train_runs": [r.name for r in train_runs],
         "holdout_runs": [r.name for r in holdout_runs],
+        "inputs": inputs,
         "processing": {**run_processing.summary(), "runs": {r.name: r.state.summary() for r in train_runs + holdout_runs}},
         "residual_definition": "measured - simulated" + (" - (baseline measured - baseline simulated)" if baseline is not None else "")
         + (" - a constant per run on the joints whose constant moves between sessions (nuisance)" if nuisance else ""),
@@ -387,6 +392,17 @@ def diagnose(
     if out_dir is not None:
         _write_outputs(Path(out_dir), result, train_runs[0], train_after[0], figures)
     return result
+
+
+def _roles(measured_list, baseline, train, holdout, repeat) -> list[tuple[str, str]]:
+    """(option, run) of every run given by name or path (a run given as data has no file)."""
+    roles = [("--measured", m) for m in measured_list] + [("--baseline", baseline), ("--repeat", repeat)]
+    for option, specs in (("--train", train or []), ("--holdout", holdout or [])):
+        # a (run, baseline) pair: its baseline may serve several runs
+        roles += [(option, spec[0] if isinstance(spec, tuple) else spec) for spec in specs]
+    measured = {str(m) for m in measured_list}
+    return [(option, s) for option, s in roles if isinstance(s, (str, Path))
+            and not (option == "--train" and str(s) in measured)]  # --train may repeat the measured run (it always trains)
 
 
 def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) -> str:

@@ -32,7 +32,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
-from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
+from dvrk_dart.diagnosis.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
 from dvrk_dart.diagnosis.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
@@ -189,4 +189,28 @@ def parse_payload_at(text: str, model: PsmModel) -> tuple[int, np.ndarray]:
             raise DvrkDartError(f"--payload-at {text!r}: unknown link '{name}'") from None
     if key not in model.links:
         raise DvrkDartError(f"--payload-at {text!r}: unknown link {key}")
+    reach = arm_reach_m(model, key)
+    if float(np.linalg.norm(position)) > reach:
+        raise DvrkDartError(f"--payload-at {text!r}: ({', '.join(f'{v:g}' for v in position)}) m is {np.linalg.norm(position):.3g} m "
+                            f"from the link's origin, farther than any part of the arm ({reach:.2f} m): positions are in metres")
     return key, position
+
+
+#: 1 kg at the position must load some joint by at least this at some pose (N·m
+#: or N): else gravity cannot see its mass from there (a point on the axes that move the link)
+MIN_GRAVITY_EFFORT_PER_KG = 1e-3
+#: poses the check samples, spread over the joint ranges
+GRAVITY_CHECK_POSES = 64
+
+
+def check_mass_determinable(arm, key: int, position: np.ndarray, text: str) -> None:
+    """Refuse a --payload-at position from which gravity cannot see a mass."""
+    rng = np.random.default_rng(0)
+    q = rng.uniform(arm.model.joint_lower, arm.model.joint_upper, (GRAVITY_CHECK_POSES, N_JOINTS))
+    zero = np.zeros_like(q)
+    features = TrajectoryFeatures(arm, q, zero, zero, zero, 1.0)
+    body = features.body_regressor[:, :, features.body_columns(key)]
+    gravity = body @ point_mass_parameters(1.0, position)
+    if np.max(np.abs(gravity)) < MIN_GRAVITY_EFFORT_PER_KG:
+        raise DvrkDartError(f"--payload-at {text!r}: mass not determinable: gravity does not load any joint through a mass at "
+                            "that point (it lies on the axes that move the link)")

@@ -93,3 +93,20 @@ def joints_moving_link(model: PsmModel, key: int) -> tuple[str, ...]:
             coeffs = coeffs + np.abs(link.variable.coeffs)
         k = link.parent
     return tuple(JOINT_NAMES[j] for j in np.flatnonzero(coeffs))
+
+
+def arm_reach_m(model: PsmModel, key: int) -> float:
+    """How far from a link's origin any part of the arm reaches (m): the corners
+    of every link's envelope at q = 0, in the base frame. A user's payload
+    position farther than that is not on the arm (millimetres given as metres)."""
+    frames = model.forward_kinematics(np.zeros(N_JOINTS))
+    origin = frames[key][:3, 3]
+    reach = 0.0
+    for link in model.links.values():
+        if link.key not in frames or not link.body:
+            continue
+        envelope = link_envelope(model, link.key)
+        corners = np.array([[x, y, z, 1.0] for x in (envelope.lower[0], envelope.upper[0])
+                            for y in (envelope.lower[1], envelope.upper[1]) for z in (envelope.lower[2], envelope.upper[2])])
+        reach = max(reach, float(np.max(np.linalg.norm((corners @ frames[link.key].T)[:, :3] - origin, axis=1))))
+    return reach

@@ -16,7 +16,6 @@ import json
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import resolve_run
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: a 5-95 % band holds 90 % of the efforts the uncertain parameters produce: a
@@ -31,22 +30,26 @@ def load_band(folder: str | Path) -> dict:
         raise DvrkDartError(f"--parameter-band: {folder} is not an output folder of `dvrk-dart uncertainty` (no uncertainty.json)")
     try:
         band = json.loads(path.read_text(encoding="utf-8"))
-        fractions = [float(v) for v in band["measured_inside_band_fraction"]]
+        lengths = {key: len([float(v) for v in band[key]]) for key in ("measured_inside_band_fraction", "rms_measured_outside_band")}
         measured = band["config"]["measured"]
+        digest, replayed = str(band["measured_file"]["sha256"]), float(band["measured_file"]["replayed_s"])
     except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
-        raise DvrkDartError(f"{path}: not a readable uncertainty summary ({exc})") from None
-    if len(fractions) != len(JOINT_NAMES):
-        raise DvrkDartError(f"{path}: {len(fractions)} joints in measured_inside_band_fraction, expected {len(JOINT_NAMES)}")
-    return {**band, "folder": str(folder), "run": Path(resolve_run(measured)).stem}
+        raise DvrkDartError(f"--parameter-band: {path}: not an uncertainty summary of this version (missing or bad {exc}): "
+                            "run dvrk-dart uncertainty again") from None
+    for key, n in lengths.items():
+        if n != len(JOINT_NAMES):
+            raise DvrkDartError(f"--parameter-band: {path}: {n} joints in {key}, expected {len(JOINT_NAMES)}")
+    return {**band, "folder": str(folder), "run": Path(str(measured)).stem, "sha256": digest, "replayed_s": replayed}
 
 
 def apply_band(result: dict, band: dict) -> dict:
     """Mark each effect of a diagnosis result as beyond the parameters'
     uncertainty or within it, and add the per-joint band summary."""
-    diagnosed = result["train_runs"] + result["holdout_runs"]
-    if band["run"] not in diagnosed:
-        raise DvrkDartError(f"--parameter-band: the band of {band['folder']} is of run '{band['run']}', "
-                            f"not one of the diagnosed runs ({', '.join(diagnosed)})")
+    diagnosed = {entry["sha256"]: name for name, entry in result.get("inputs", {}).items()}
+    if band["sha256"] not in diagnosed:
+        raise DvrkDartError(f"--parameter-band: the band of {band['folder']} is of a recording ({band['run']}, sha256 "
+                            f"{band['sha256'][:12]}...) that is none of the diagnosed runs ({', '.join(diagnosed.values())})")
+    band["run"] = diagnosed[band["sha256"]]
     inside = band["measured_inside_band_fraction"]
     outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction < BAND_COVERAGE}
     for effect in result["effects"]:
@@ -55,6 +58,8 @@ def apply_band(result: dict, band: dict) -> dict:
     result["parameter_band"] = {
         "folder": band["folder"],
         "run": band["run"],
+        "sha256": band["sha256"],
+        "replayed_s": band["replayed_s"],
         "parameters": band.get("parameters"),
         "rule": f"an effect is unmodelled only on a joint whose measured efforts are inside the band less than "
                 f"{BAND_COVERAGE:.0%} of the time (the band's own coverage)",

@@ -25,6 +25,9 @@ from dvrk_dart.sim.config import SimConfig
 SAME_MOTION_POSITION_RMS = 0.01
 #: ... and their velocities by less than this fraction of the velocity RMS
 SAME_MOTION_VELOCITY_FRACTION = 0.1
+#: two recordings of one motion may start this far apart (s): the baseline is
+#: aligned on the run by whole samples within it, then both cut to their common span
+MAX_START_OFFSET_S = 1.0
 
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 """simulate(config, run) -> (N, 7) simulated efforts at the run's samples (DART replay)."""
@@ -84,6 +87,8 @@ class DiagnosisRun:
     #: others: its withheld-effect columns are zero), "joint" (a run whose
     #: baseline has another motion: its gap, fitted with the baseline run)
     role: str = "raw"
+    #: how a baseline of the same motion was put on the run's samples
+    alignment: str | None = None
 
     def __post_init__(self):
         self.simulated = np.asarray(self.simulated, dtype=float)
@@ -109,7 +114,8 @@ class DiagnosisRun:
 
     @property
     def baseline_source(self) -> str | None:
-        return {"difference": "subtracted sample by sample", "joint": "fitted together with the baseline run (another motion)",
+        difference = "subtracted sample by sample" + (f" ({self.alignment})" if self.alignment else "")
+        return {"difference": difference, "joint": "fitted together with the baseline run (another motion)",
                 "baseline": "the baseline itself (withheld effects absent)"}.get(self.role)
 
     @property
@@ -168,15 +174,45 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
         run = DiagnosisRun(name or label, state, simulated_efforts(arm, state, simulate, base_config))
     if baseline is not None:
         base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)
-        if same_motion(run.state, base.state):
+        offset = motion_offset(run.state, base.state)
+        if offset is None:
+            return DiagnosisRun(run.name, run.state, run.simulated, None, role="joint")
+        if offset == 0 and len(run) == len(base):
             return DiagnosisRun(run.name, run.state, run.simulated, base)
-        return DiagnosisRun(run.name, run.state, run.simulated, None, role="joint")
+        return _on_common_span(run, base, offset)
     return run
 
 
+def _on_common_span(run: DiagnosisRun, base: DiagnosisRun, offset: int) -> DiagnosisRun:
+    """The run minus its baseline on their common span, the baseline shifted by `offset` samples."""
+    start_run, start_base = max(0, -offset), max(0, offset)
+    n = min(len(run) - start_run, len(base) - start_base)
+    part_run, part_base = slice(start_run, start_run + n), slice(start_base, start_base + n)
+    shifted = DiagnosisRun(base.name, base.state.window(start_base, n), base.simulated[part_base])
+    note = f"common span of {n} samples: {run.name} from sample {start_run}, {base.name} from sample {start_base}"
+    return DiagnosisRun(run.name, run.state.window(start_run, n), run.simulated[part_run], shifted, alignment=note)
+
+
+def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
+    """The shift (samples) that puts b on a's samples when both record the same
+    motion (decided from the positions over their common span), else None."""
+    if abs(a.rate_hz - b.rate_hz) > 1e-6 * a.rate_hz:
+        return None
+    limit = int(round(MAX_START_OFFSET_S * a.rate_hz))
+    end = min(len(a), len(b)) - limit
+    if end <= 2 * limit:
+        return None
+    # a's positions inside its margins against b's shifted by k (every shift stays inside b)
+    errors = [np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in range(-limit, limit + 1)]
+    offset = int(np.argmin(errors)) - limit
+    start_a, start_b = max(0, -offset), max(0, offset)
+    span = min(len(a) - start_a, len(b) - start_b)
+    return offset if same_motion(a.window(start_a, span), b.window(start_b, span)) else None
+
+
 def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
-    """Whether two runs follow the same motion sample by sample (a baseline's
-    gap can then be subtracted as it is)."""
+    """Whether two runs of one length follow the same motion sample by sample
+    (a baseline's gap can then be subtracted as it is)."""
     if len(a) != len(b):
         return False
     position = float(np.sqrt(np.mean((a.q - b.q) ** 2)))

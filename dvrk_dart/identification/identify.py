@@ -26,7 +26,7 @@ from dvrk_dart.identification.fit import (
     load_bounds,
 )
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_vector
-from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
+from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_all
 from dvrk_dart.metrics import relative_error, rms
 from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
@@ -151,6 +151,7 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     start = time.perf_counter()
     if not config.runs:
         raise DvrkDartError("--runs: at least one training run is needed")
+    distinct_inputs([("--runs", r) for r in config.runs] + [("--holdout", r) for r in config.holdout])
     model = load_model(config.model_file)
     joints = _joint_indices(config.joints)
     bounds = load_bounds(config.bounds_file, model)

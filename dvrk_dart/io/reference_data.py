@@ -169,6 +169,24 @@ def resolve_run(name_or_path: str | Path) -> Path:
     return resolve(text, explicit=text)
 
 
+def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
+    """(option, run) pairs -> {run: {"role", "path", "sha256"}}; the same
+    recording (by path or content) in two roles, or twice in one, is refused
+    in one line naming both."""
+    seen: dict[str, tuple[str, str]] = {}
+    inputs = {}
+    for option, spec in roles:
+        path = Path(resolve_run(spec))
+        digest = sha256_of(path)
+        if digest in seen:
+            other_option, other = seen[digest]
+            raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} (same content): "
+                                "each role needs its own recording")
+        seen[digest] = (option, str(spec))
+        inputs[str(spec)] = {"role": option, "path": str(path), "sha256": digest}
+    return inputs
+
+
 @dataclass(frozen=True)
 class MeasuredRun:
     """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7."""

@@ -16,7 +16,7 @@ the excitation's harmonics, with `in_band` projecting a prediction likewise.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.signal
@@ -71,6 +71,16 @@ class ProcessedRun:
     def head(self, n: int) -> "ProcessedRun":
         """The first n samples (a periodic run's band no longer applies: project before)."""
         return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)))
+
+    def window(self, start: int, n: int) -> "ProcessedRun":
+        """Samples start..start+n; a periodic run's band is then that of the
+        same harmonics over the window (`in_band` projects on them there)."""
+        part = slice(start, start + n)
+        periodic = None
+        if self.periodic is not None:
+            projector = self.periodic.projector
+            periodic = replace(self.periodic, projector=type(projector)(projector.t[part], projector.frequency_hz, projector.harmonics))
+        return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic)
 
     def summary(self) -> dict:
         """What every output records of the processing."""

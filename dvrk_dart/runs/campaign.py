@@ -82,11 +82,11 @@ def code_fingerprint() -> str:
 
 
 def inputs_fingerprint(config: RunConfig, code: str) -> str:
-    from dvrk_dart.runs.runner import input_checksums, scenario_of
+    from dvrk_dart.runs.runner import inputs_used, scenario_of
 
     scenario = scenario_of(config)
     parts = [code, json.dumps(scenario.to_dict(), sort_keys=True), json.dumps(config.to_dict(), sort_keys=True)]
-    parts += [f"{k}={v}" for k, v in sorted(input_checksums(config, scenario).items())]
+    parts += [f"{k}={json.dumps(v, sort_keys=True)}" for k, v in sorted(inputs_used(config, scenario).items())]
     if config.params_file:
         parts.append(sha256_of(Path(config.params_file)))
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()

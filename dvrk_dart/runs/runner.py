@@ -107,7 +107,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         "model_file": str(arm.model.source.name),
         "params_file": str(arm.params.source),
         "params_sha256": sha256_of(arm.params.source),
-        "inputs_sha256": input_checksums(config, scenario),
+        "inputs": inputs_used(config, scenario),
     }
     record.markers.setdefault("rcm", rcm_position(arm))
     record.metrics.update(
@@ -127,15 +127,26 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     return record
 
 
-def input_checksums(config: RunConfig, scenario: Scenario) -> dict[str, str]:
-    """sha256 of the input files the run really used (measured run, diagnosis)."""
-    sums = {}
+def inputs_used(config: RunConfig, scenario: Scenario) -> dict[str, dict]:
+    """The input files the run really used (measured run, diagnosis): path,
+    sha256 and the options that selected data from them (a bag's topics, a
+    CSV's rate)."""
+    from dvrk_dart.io.bags import current_topics, is_bag
+    from dvrk_dart.io.reference_data import rate_of
+
+    inputs = {}
     if scenario.measured:
         path = resolve_run(scenario.measured)
-        sums[str(scenario.measured)] = sha256_of(path)
+        entry = {"path": str(path), "sha256": sha256_of(path)}
+        if is_bag(path):
+            topics = current_topics()
+            entry["bag_topics"] = {"arm": topics.arm, "topic": topics.joint_topic, "jaw_topic": topics.jaw, "rate_hz": topics.rate}
+        else:
+            entry["rate_hz"], entry["rate_from"] = rate_of(path)
+        inputs[str(scenario.measured)] = entry
     if config.dynamics.endswith(".json"):
-        sums[config.dynamics] = sha256_of(Path(config.dynamics))
-    return sums
+        inputs[config.dynamics] = {"path": str(Path(config.dynamics)), "sha256": sha256_of(Path(config.dynamics))}
+    return inputs
 
 
 def rcm_position(arm: Arm) -> np.ndarray:

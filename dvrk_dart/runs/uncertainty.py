@@ -97,7 +97,7 @@ def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndar
 
 def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
     from dvrk_dart.identification.sampling import sample_parameters
-    from dvrk_dart.io.reference_data import resolve_run
+    from dvrk_dart.io.reference_data import resolve_run, sha256_of
     from dvrk_dart.model.arm import load_arm
 
     out = check_output_folder(out, "uncertainty")
@@ -128,6 +128,8 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         model_inside, _ = band_statistics(low, high, nominal["model"])
         summary = {
             "config": asdict(config),
+            "measured_file": {"path": str(resolve_run(config.measured)), "sha256": sha256_of(resolve_run(config.measured)),
+                              "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
             "processing": {"processing": processing, "chosen_because": processing_why},
             "parameters": drawn.source,
             "projected_bodies": drawn.projected_bodies,

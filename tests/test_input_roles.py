@@ -1,0 +1,84 @@
+"""Inputs that look fine but are not: the same recording in two roles (under any
+name), a baseline of another length, a payload position in millimetres or on
+an axis, a band of another recording. Each is refused in one line, or the
+right method is chosen and said."""
+
+import os
+import shutil
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dvrk_dart.cli import main
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import distinct_inputs, resolve_run
+
+DIAGNOSE_ROLES = ("--measured", "--baseline", "--repeat", "--holdout", "--train")
+IDENTIFY_ROLES = ("--runs", "--holdout")
+NAMES = st.text(alphabet="abcdé _-0", min_size=1, max_size=10).map(lambda s: s.strip() or "x")
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(roles=st.sampled_from([DIAGNOSE_ROLES, IDENTIFY_ROLES]).flatmap(lambda r: st.lists(st.sampled_from(r), min_size=2, max_size=2)),
+       names=st.lists(NAMES, min_size=2, max_size=2, unique=True), link=st.booleans())
+def test_one_recording_in_two_roles_is_refused_whatever_its_names(tmp_path_factory, roles, names, link):
+    folder = tmp_path_factory.mktemp("runs")
+    source = resolve_run("two")
+    first = folder / f"{names[0]}.csv"
+    shutil.copy(source, first)
+    second = folder / f"{names[1]}.csv"
+    if link:
+        os.symlink(first, second)
+    else:
+        shutil.copy(source, second)
+    with pytest.raises(DvrkDartError, match="the same recording as"):
+        distinct_inputs([(roles[0], str(first)), (roles[1], str(second))])
+
+
+@pytest.mark.parametrize("argv", [
+    ["diagnose", "--measured", "one", "--baseline", "one"],
+    ["diagnose", "--measured", "one", "--repeat", "one"],
+    ["diagnose", "--measured", "one", "one"],
+    ["identify", "--runs", "one", "--holdout", "one"],
+])
+def test_the_cli_refuses_a_recording_in_two_roles(tmp_path, capsys, argv):
+    out = tmp_path / "out"
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the same recording as" in err[0]
+    assert not out.exists()
+
+
+def test_a_baseline_one_sample_longer_is_still_the_same_motion(arm, tmp_path):
+    """Real recordings never have equal lengths: the baseline is put on the
+    run's samples (common span) and subtracted, and the output says so."""
+    from dvrk_dart.diagnosis.runs import prepare_run
+
+    values = np.loadtxt(resolve_run("one-no-weight"), delimiter=",")
+    longer = tmp_path / "baseline_longer.csv"
+    np.savetxt(longer, np.vstack([values, values[-1:]]), delimiter=",")
+    shifted = tmp_path / "baseline_late.csv"
+    np.savetxt(shifted, values[7:], delimiter=",")
+    for baseline, expected in ((longer, "from sample 0"), (shifted, "baseline_late from sample 0")):
+        run = prepare_run("one-105g", arm, baseline=str(baseline))
+        assert run.role == "difference", baseline
+        assert expected in run.baseline_source and "common span" in run.baseline_source
+        assert len(run.baseline.state) == len(run.state)
+        # the shifted baseline lines up: its positions follow the run's to the recordings' own spread
+        assert np.sqrt(np.mean((run.state.q - run.baseline.state.q) ** 2)) < 0.01
+    other = prepare_run("one-105g", arm, baseline="two")
+    assert other.role == "joint"
+
+
+@pytest.mark.parametrize("position, words", [
+    ("pitch:-165,20,0", "positions are in metres"),
+    ("pitch:0,0,0", "not determinable"),
+])
+def test_a_payload_position_gravity_cannot_use_is_refused(tmp_path, capsys, position, words):
+    out = tmp_path / "d"
+    assert main(["diagnose", "--measured", "one-105g", "--baseline", "one-no-weight", "--payload-at", position, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+    assert not out.exists()
