@@ -512,6 +512,14 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
+    if getattr(args, "executor", None) == "ray":
+        from dvrk_dart.runs.executors import check_ray_address
+
+        try:
+            check_ray_address(args.ray_address)
+        except DvrkDartError as exc:
+            print(f"dvrk-dart: {exc}", file=sys.stderr)
+            return exc.exit_code
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
         if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags

@@ -68,3 +68,19 @@ def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():
     for config in configs:
         assert np.array_equal(batch(config, state), simulate_efforts(arm, config, state))
     assert not np.allclose(batch(configs[0], state), batch(configs[1], state))  # the two configs really differ
+
+
+def test_an_unreachable_ray_address_fails_in_seconds(tmp_path, capsys):
+    """Nothing listens on port 1: one line, exit 2, before any work (ray.init would retry for minutes)."""
+    import time
+
+    from dvrk_dart.cli import main
+
+    start = time.perf_counter()
+    for argv in (["uncertainty", "--measured", "two", "--samples", "2", "--out", str(tmp_path / "u")],
+                 ["validate", "--out", str(tmp_path / "v"), "--report", str(tmp_path / "r")]):
+        assert main([*argv, "--executor", "ray", "--ray-address", "127.0.0.1:1"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--ray-address" in err[0] and "no Ray head" in err[0]
+    assert time.perf_counter() - start < 30.0
+    assert not any(tmp_path.iterdir())

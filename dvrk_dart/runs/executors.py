@@ -19,6 +19,28 @@ from dvrk_dart.errors import DvrkDartError
 EXECUTORS = ("local", "ray")
 
 
+#: how long a Ray head may take to accept a connection before the address is called unreachable (s)
+RAY_CONNECT_TIMEOUT_S = 5.0
+
+
+def check_ray_address(address: str | None) -> None:
+    """A Ray head is listening at HOST:PORT (or ray://HOST:PORT): checked in
+    seconds, before any work (ray.init itself retries for minutes)."""
+    import socket
+
+    if not address or address == "auto":
+        return
+    target = address.split("://", 1)[-1]
+    host, _, port = target.rpartition(":")
+    if not host or not port.isdigit():
+        raise DvrkDartError(f"--ray-address {address!r}: expected HOST:PORT (e.g. 10.0.0.5:6379)")
+    try:
+        with socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        raise DvrkDartError(f"--ray-address {address!r}: no Ray head answers there ({exc.strerror or type(exc).__name__})") from None
+
+
 def error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".splitlines()[0]
 
@@ -31,6 +53,7 @@ def _ray(jobs: int, address: str | None):
         raise DvrkDartError("--executor ray: the ray package is not installed") from None
     started = not ray.is_initialized()
     if started:
+        check_ray_address(address)
         try:
             if address:
                 ray.init(address=address, log_to_driver=False)
