@@ -8,14 +8,14 @@ RUNS   ?= $(OUT)/runs
 REPORT ?= report
 JOBS   ?= 2
 
-.PHONY: validate test bench report check-report view clean setup
+.PHONY: validate test bench report check-report view clean setup docs
 
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e ".[test]"
 	touch $(STAMP)
 
 ## The main job: the whole validation campaign, then the report.
@@ -28,6 +28,11 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m dvrk_dart.bench --out $(OUT)/bench.json
 
+## the documentation site (docs/, mkdocs.yml) -> site/; figures from the last validation in $(OUT)
+docs: $(STAMP)
+	DVRK_DART_OUT=$(OUT) NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict -q
+	@echo "docs: site/index.html"
+
 report: $(STAMP)
 	$(BIN)/dvrk-dart report --runs $(RUNS) --out $(REPORT)
 
@@ -39,5 +44,5 @@ view: $(STAMP)
 	$(BIN)/rerun $(RUN)/run.rrd
 
 clean:
-	rm -rf $(OUT) $(REPORT) .pytest_cache
+	rm -rf $(OUT) $(REPORT) site .pytest_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
