@@ -112,3 +112,30 @@ def test_the_page_renders(report_dir, tmp_path):
     assert pixels.shape[0] > 500 and pixels.shape[1] > 500
     # a rendered page has text, tables and figures: far from a blank screen
     assert np.std(pixels[..., :3]) > 0.05
+
+
+def test_the_report_leads_to_the_documentation(tmp_path_factory, tmp_path, monkeypatch):
+    """The report's link to the docs opens the documentation site (built here with --strict)."""
+    import sys
+
+    site = tmp_path_factory.mktemp("site")
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "DVRK_DART_OUT": str(tmp_path / "no-out")}
+    built = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(site)],
+                           cwd=Path(__file__).resolve().parents[1], env=env, capture_output=True, text=True, timeout=300)
+    assert built.returncode == 0, built.stderr[-2000:]
+    monkeypatch.setenv("DVRK_DART_SITE", str(site))
+    runs = tmp_path / "runs"
+    write_run(synthetic_velocity_record(), runs)
+    report = tmp_path / "report"
+    build_report(runs, report, jobs=1)
+    dom = chromium(tmp_path, report / REPORT_FILE, "--dump-dom")
+    link = re.search(r'<a id="documentation" href="([^"]+)"', dom.stdout)
+    assert link, "no documentation link in the report"
+    target = (report / html.unescape(link.group(1))).resolve()
+    assert target == (site / "index.html").resolve()
+    docs = chromium(tmp_path, target, "--dump-dom")
+    assert docs.returncode == 0 and "<title>dvrk_dart</title>" in docs.stdout, docs.stdout[:500]
+    # two clicks from there: the page on bags of PSM2, and what payload.gravity_efforts_at_q0_interval means
+    assert "your-own-dvrk/" in docs.stdout and "outputs/" in docs.stdout
+    assert "--arm PSM2" in (site / "your-own-dvrk" / "index.html").read_text()
+    assert "gravity_efforts_at_q0_interval" in (site / "outputs" / "index.html").read_text()

@@ -69,6 +69,7 @@ from dvrk_dart.analysis.tables import (
     write_analysis,
 )
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.paths import PROJECT_DIR
 from dvrk_dart.io.outputs import building_folder, check_not_inside, check_output_folder
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -416,7 +417,8 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
             f"Generated {generated} from <code>{_e(runs_dir)}</code>: {len(analysis.runs)} run(s). "
             f"Tables as data: <a href='{ANALYSIS_DIR}/metrics.csv'>metrics.csv</a>, <a href='{ANALYSIS_DIR}/metrics.parquet'>metrics.parquet</a>, "
             f"<a href='{ANALYSIS_DIR}/checks.csv'>checks.csv</a>, <a href='{ANALYSIS_DIR}/comparison.csv'>comparison.csv</a>, "
-            f"<a href='{ANALYSIS_DIR}/summary.json'>summary.json</a>.</p>"
+            f"<a href='{ANALYSIS_DIR}/summary.json'>summary.json</a>. "
+            f"<a id='documentation' href='{_e(docs_link(out_dir))}'>Documentation</a> (what every figure means; <code>make docs</code> builds it).</p>"
             "<p class='note'>" + " · ".join(f"<a href='#{n}'>{n}</a>" for n in navigation) + "</p>"
         )
         sections = [
@@ -433,6 +435,16 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         ]
         (building / REPORT_FILE).write_text(_page(sections, "dvrk_dart validation report"))
     return out_dir / REPORT_FILE
+
+
+#: where `make docs` builds the documentation site ($DVRK_DART_SITE overrides)
+ENV_SITE = "DVRK_DART_SITE"
+
+
+def docs_link(report_dir: Path) -> str:
+    """The documentation's index, relative to the report's folder (both stay where they are built)."""
+    site = Path(os.environ.get(ENV_SITE, PROJECT_DIR / "site"))
+    return Path(os.path.relpath(site.resolve() / "index.html", Path(report_dir).resolve())).as_posix()
 
 
 def unreadable_runs(report_dir: str | os.PathLike) -> dict[str, str]:
