@@ -286,7 +286,11 @@ def write_outputs(result: IdentificationResult, folder: Path) -> dict:
     """Write the four files into `folder` (a folder being built); returns the summary."""
     folder = Path(folder)
     write_json_atomic(folder / PARAMS_FILE, params_json(result.theta, result.regressor.layout, result.model))
-    load_parameters(folder / PARAMS_FILE, result.model)  # the file every --params reader will see: its own checks
+    try:  # the file every --params reader will see: its own checks
+        load_parameters(folder / PARAMS_FILE, result.model)
+    except DvrkDartError as exc:  # name what the user asked for, not the folder being built
+        message = str(exc).replace(str(folder / PARAMS_FILE), f"the identified {PARAMS_FILE}")
+        raise DvrkDartError(f"identify: {message} (check --bounds and --prior)") from None
     data = summary(result)
     write_json_atomic(folder / COVARIANCE_FILE, covariance_document(result))
     write_text_atomic(folder / SUMMARY_FILE, json_text(data))
