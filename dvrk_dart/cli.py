@@ -37,7 +37,8 @@ def positive_int(text: str) -> int:
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--params", help="identified parameters file (default: upstream params.json, resolved at run time)")
+    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    p.add_argument("--params", help="identified parameters file (default: the arm's upstream params.json, resolved at run time)")
 
 
 def _add_bag_options(p: argparse.ArgumentParser) -> None:
@@ -522,12 +523,15 @@ def main(argv: list[str] | None = None) -> int:
             return exc.exit_code
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
-        if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
-            from dvrk_dart.io.bags import bag_topics
+        from dvrk_dart.model.description import resolve_arm_model, using_model
 
-            with bag_topics(_bag_topics(args)):
-                return args.func(args)
-        return args.func(args)
+        with using_model(resolve_arm_model(getattr(args, "arm_model", None) or "psm")):
+            if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
+                from dvrk_dart.io.bags import bag_topics
+
+                with bag_topics(_bag_topics(args)):
+                    return args.func(args)
+            return args.func(args)
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -387,7 +387,7 @@ SESSION_NOISE_FRACTION = 0.1
 
 def _session_noise(arm, state, noise_rms, seed):
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape), 1.0 / sample_rate_hz())
+    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape))
     return noise / rms(noise) * SESSION_NOISE_FRACTION * np.asarray(noise_rms)
 
 

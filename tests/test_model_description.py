@@ -7,14 +7,14 @@ import pytest
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.model.description import GROUPS, load_model
+from dvrk_dart.model.description import load_model
 from dvrk_dart.model.parameters import load_parameters
 
 
 def test_every_link_has_a_group_and_the_tree_is_ordered(arm):
     seen = {0}
     for key, link in arm.model.links.items():
-        assert link.group in GROUPS
+        assert link.group in arm.model.groups
         assert link.parent in seen
         seen.add(key)
 

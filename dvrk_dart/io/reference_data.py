@@ -23,7 +23,8 @@ from dvrk_dart.model.joints import N_JOINTS, column_names
 from dvrk_dart.paths import PROJECT_DIR
 
 MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
-SHARED_DIR = PROJECT_DIR.parent / "shared" / "reference_data" / "wpi"
+SHARED_ROOT = PROJECT_DIR.parent / "shared" / "reference_data"
+SHARED_DIR = SHARED_ROOT / "wpi"
 ENV_DATA_DIR = "DVRK_REFERENCE_DATA"
 ENV_CACHE_DIR = "DVRK_DART_CACHE"
 ENV_URL_TEMPLATE = "DVRK_REFERENCE_URL"  # override of the download URL (tests, mirrors)
@@ -36,6 +37,8 @@ RUNS = {
     "one-105g": "one_105_grams_parallel_results.csv",
     "one-105g-half": "one_105_grams_parallel_half_speed_results.csv",
     "one-105g-insertion": "one_105_grams_insertion_results.csv",
+    "mtm-one": "mtm/one_results.csv",
+    "mtm-two": "mtm/two_results.csv",
 }
 CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
 
@@ -145,10 +148,11 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
         if not folder.is_dir():  # a setting the user made must not be silently ignored
             raise DvrkDartError(f"{ENV_DATA_DIR}={folder}: not a folder")
         candidates.append(folder)
-    candidates += [SHARED_DIR, cache_dir()]
-    for folder in candidates:
-        if (folder / name).is_file():
-            return _checked(folder / name, name)
+    paths = [folder / name for folder in candidates]
+    paths += [SHARED_ROOT / manifest()["files"][name].get("local", f"wpi/{name}"), cache_dir() / name]
+    for path in paths:
+        if path.is_file():
+            return _checked(path, name)
     return _download(name)
 
 
@@ -235,12 +239,18 @@ def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
         )
 
 
-@functools.cache
 def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) joint ranges of the model description (rad, m)."""
+    """(lower, upper) joint ranges of the current arm's model description (rad, m)."""
+    from dvrk_dart.model.description import current_model_file
+
+    return _joint_ranges_of(current_model_file())
+
+
+@functools.cache
+def _joint_ranges_of(model_file: Path) -> tuple[np.ndarray, np.ndarray]:
     from dvrk_dart.model.description import load_model
 
-    model = load_model()
+    model = load_model(model_file)
     return model.joint_lower, model.joint_upper
 
 

@@ -45,6 +45,8 @@ class ProcessedRun:
     tau: np.ndarray
     #: the periodic layer's findings (None: upstream processing)
     periodic: PeriodicAnalysis | None = field(default=None, compare=False)
+    #: upstream's first period of this arm (samples)
+    upstream_first_period: int = field(default=FIRST_PERIOD_SAMPLES, compare=False)
 
     def __len__(self) -> int:
         return len(self.t)
@@ -65,12 +67,12 @@ class ProcessedRun:
     def first_period_samples(self) -> int:
         """Upstream: its nominal 1111 samples; periodic: the fitted period's."""
         if self.periodic is None:
-            return FIRST_PERIOD_SAMPLES
+            return self.upstream_first_period
         return int(round(self.periodic.period.period_s / (self.t[1] - self.t[0])))
 
     def head(self, n: int) -> "ProcessedRun":
         """The first n samples (a periodic run's band no longer applies: project before)."""
-        return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)))
+        return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), upstream_first_period=self.upstream_first_period)
 
     def window(self, start: int, n: int) -> "ProcessedRun":
         """Samples start..start+n; a periodic run's band is then that of the
@@ -80,7 +82,7 @@ class ProcessedRun:
         if self.periodic is not None:
             projector = self.periodic.projector
             periodic = replace(self.periodic, projector=type(projector)(projector.t[part], projector.frequency_hz, projector.harmonics))
-        return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic)
+        return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic, self.upstream_first_period)
 
     def summary(self) -> dict:
         """What every output records of the processing."""
@@ -100,12 +102,13 @@ def central_difference(x: np.ndarray, h: float) -> np.ndarray:
     return d
 
 
-def zero_phase_lowpass(x: np.ndarray) -> np.ndarray:
+def zero_phase_lowpass(x: np.ndarray, cutoff_parameter_hz: float = CUTOFF_PARAMETER_HZ) -> np.ndarray:
     """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0.
     Its Wn is upstream's at the reference rate whatever the run's: a run at
     another rate (the half-speed run's 100 Hz rows) keeps its cut-off at the
-    same multiple of its excitation's base frequency."""
-    b, a = scipy.signal.butter(FILTER_ORDER, CUTOFF_PARAMETER_HZ * 2 * math.pi / sample_rate_hz())
+    same multiple of its excitation's base frequency. `cutoff_parameter_hz`:
+    the arm's fc (the model card's [processing]; the PSM's 5.4)."""
+    b, a = scipy.signal.butter(FILTER_ORDER, cutoff_parameter_hz * 2 * math.pi / sample_rate_hz())
     edge = 3 * max(len(a), len(b))
     zi = scipy.signal.lfilter_zi(b, a)[:, None]
     s = np.concatenate([2 * x[0] - x[edge:1:-1], x, 2 * x[-1] - x[-1:-edge:-1]])
@@ -115,7 +118,8 @@ def zero_phase_lowpass(x: np.ndarray) -> np.ndarray:
 
 
 def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | None = None) -> ProcessedRun:
-    """q, dq, ddq, tau of a measured run: filtered and trimmed like upstream, or
+    """q, dq, ddq, tau of a measured run: filtered and trimmed like upstream (with
+    the current arm's fc and first period, its model card's [processing]), or
     through the periodic layer (`harmonics` imposes its cutoff)."""
     if processing == "periodic":
         return process_periodic(run, harmonics)
@@ -124,17 +128,25 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | Non
     h = 1.0 / run.rate_hz
     if len(run) < MIN_ROWS:
         raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
-    q = zero_phase_lowpass(run.q)
-    dq = zero_phase_lowpass(run.dq)
-    ddq = zero_phase_lowpass(central_difference(run.dq, h))
-    tau = zero_phase_lowpass(run.tau)
+    from dvrk_dart.model.description import load_model
+
+    model = load_model()
+    upstream = model.processing
+    fc = upstream.cutoff_parameter_hz
+    q = zero_phase_lowpass(run.q, fc)
+    dq = zero_phase_lowpass(run.dq, fc)
+    ddq = zero_phase_lowpass(central_difference(run.dq, h), fc)
+    tau = zero_phase_lowpass(run.tau - model.cable_efforts(run.q), fc)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
-    return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep])
+    return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep], upstream_first_period=upstream.first_period_samples)
 
 
 def process_periodic(run: MeasuredRun, harmonics: int | None = None) -> ProcessedRun:
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
-    analysis = analyse(run.t, run.q, run.tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics)
+    from dvrk_dart.model.description import load_model
+
+    tau = run.tau - load_model().cable_efforts(run.q)  # what the identification removed before fitting
+    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics)
     t = run.t - run.t[0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
     return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis)

@@ -1,4 +1,4 @@
-"""The PSM model description: `models/psm/psm.toml` read into typed objects.
+"""An arm's model description (`models/psm/psm.toml`, `models/mtm/mtm.toml`) read into typed objects.
 
 Every link's joint variable (theta or d of its modified-DH transform) is a
 linear function of the seven coordinates q1..q7; this module resolves the
@@ -9,8 +9,12 @@ the DART builder and the Pinocchio model are both built from `PsmModel`.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
 import math
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -21,14 +25,56 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.joints import (
     JOINT_NAMES,
     N_JOINTS,
-    WRIST_COLUMNS,
     MotorCoordinateMap,
 )
 from dvrk_dart.paths import MODELS_DIR
 
 DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
 
-GROUPS = ("yaw", "parallelogram", "insertion", "counterweight", "tool")
+#: the arm model of the command being run (`--arm-model`): every default load reads it
+_current_model_file: contextvars.ContextVar[Path] = contextvars.ContextVar("arm_model_file", default=DEFAULT_MODEL_FILE)
+
+
+@contextlib.contextmanager
+def using_model(path: str | Path) -> Iterator[None]:
+    token = _current_model_file.set(Path(path))
+    try:
+        yield
+    finally:
+        _current_model_file.reset(token)
+
+
+def current_model_file() -> Path:
+    return _current_model_file.get()
+
+
+@functools.cache
+def prismatic_coordinates_of(model_file: Path) -> tuple[str, ...]:
+    """Coordinates that a prismatic link of the model moves."""
+    model = load_model(model_file)
+    moved = np.zeros(N_JOINTS, dtype=bool)
+    for link in model.links.values():
+        if link.joint_type == "prismatic":
+            moved |= link.variable.coeffs != 0.0
+    return tuple(name for name, m in zip(JOINT_NAMES, moved) if m)
+
+
+def resolve_arm_model(text: str) -> Path:
+    """--arm-model: an arm of models/ by name (psm, mtm), a model folder
+    (models/mtm/: its one description .toml) or a description file."""
+    named = MODELS_DIR / text / f"{text}.toml"
+    if named.is_file():
+        return named
+    path = Path(text)
+    if path.is_dir():
+        found = sorted(p for p in path.glob("*.toml") if p.name != "identification.toml")
+        if len(found) != 1:
+            raise DvrkDartError(f"--arm-model {text}: a model folder holds one description .toml (found {len(found)})")
+        return found[0]
+    if path.is_file():
+        return path
+    known = ", ".join(sorted(p.name for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()))
+    raise DvrkDartError(f"--arm-model {text}: no such arm ({known}), model folder or file")
 
 
 @dataclass(frozen=True)
@@ -100,6 +146,18 @@ class Link(DHFrame):
     friction: bool = False
     motor_inertia: bool = False
     spring: bool = False
+    #: a spring acting through a linkage (the MTM's wrist pitch): its geometry, else a linear K q spring
+    spring_linkage: dict[str, float] | None = None
+    #: a known cable torque, a polynomial of the link's variable (highest power first), N·m
+    cable_polynomial: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class UpstreamProcessing:
+    """The identification's own filter and test window for this arm (io/signal.py)."""
+
+    cutoff_parameter_hz: float = 5.4
+    first_period_samples: int = 1111
 
 
 @dataclass(frozen=True)
@@ -120,17 +178,26 @@ class PsmModel:
     links: dict[int, Link]
     tool_tip: DHFrame
     loop_closures: tuple[LoopClosure, ...]
-    counterweight_link: int
+    counterweight_link: int | None
     counterweight_ratio: float
     joint_lower: np.ndarray
     joint_upper: np.ndarray
-    dvrk_wrist_matrix: np.ndarray
+    dvrk_coupling_matrix: np.ndarray
+    dvrk_coupling_columns: tuple[int, ...]
     dvrk_velocity_limits: np.ndarray | None = None  # (7,) rad/s, m/s, dVRK joints ([dvrk_velocity_limits])
     inertia_tolerance: float = 0.0  # kg m^2, see [parameter_checks]
     max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
     max_com_distance_m: float = float("inf")
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
+    groups: tuple[str, ...] = ()
+    processing: UpstreamProcessing = UpstreamProcessing()
+    project_unphysical_bodies: bool = False  # DART gets the nearest physical body of a non-physical identified one
+
+    @property
+    def folder(self) -> Path:
+        """The arm's model folder (models/<arm>/)."""
+        return self.source.parent
 
     @property
     def body_links(self) -> list[Link]:
@@ -153,6 +220,18 @@ class PsmModel:
             frames[key] = frames[link.parent] @ link.transform(q)
         return frames
 
+    def cable_efforts(self, q: np.ndarray) -> np.ndarray:
+        """The known cable torques (links with a `cable_polynomial`) at positions
+        q (N, 7): what the measured efforts hold besides the identified model.
+        The identification removed them from the measured efforts before fitting
+        (the MTM's joint 4), so every comparison does too (io/signal.process)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        out = np.zeros_like(q)
+        for link in self.links.values():
+            if link.cable_polynomial:
+                out += np.outer(np.polyval(link.cable_polynomial, q @ link.variable.coeffs), link.variable.coeffs)
+        return out
+
     def tool_tip_transform(self, q: np.ndarray, frames: dict[int, np.ndarray] | None = None) -> np.ndarray:
         frames = frames if frames is not None else self.forward_kinematics(q)
         return frames[self.tool_tip.parent] @ self.tool_tip.transform(q)
@@ -165,18 +244,7 @@ class PsmModel:
     @cached_property
     def motor_map(self) -> MotorCoordinateMap:
         """dVRK joint values <-> the model's coordinates (joints.py owns the map)."""
-        return MotorCoordinateMap(self.dvrk_wrist_matrix)
-
-    def dvrk_to_motor(self, dvrk_wrist: np.ndarray) -> np.ndarray:
-        """(wrist pitch, wrist yaw, jaw) -> motor coordinates q5..q7 (last axis)."""
-        full = np.zeros((*np.shape(dvrk_wrist)[:-1], N_JOINTS))
-        full[..., WRIST_COLUMNS] = dvrk_wrist
-        return self.motor_map.positions_to_model(full)[..., WRIST_COLUMNS]
-
-    def motor_to_dvrk(self, motor: np.ndarray) -> np.ndarray:
-        full = np.zeros((*np.shape(motor)[:-1], N_JOINTS))
-        full[..., WRIST_COLUMNS] = motor
-        return self.motor_map.positions_to_dvrk(full)[..., WRIST_COLUMNS]
+        return MotorCoordinateMap(self.dvrk_coupling_matrix, list(self.dvrk_coupling_columns))
 
 
 def dh_transform(a: float, alpha: float, d: float, theta: float) -> np.ndarray:
@@ -241,9 +309,9 @@ def _require(table: dict, key: str, path: Path, where: str):
     return table[key]
 
 
-def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
-    """Read and check a PSM model description file."""
-    path = Path(path)
+def load_model(path: Path | str | None = None) -> PsmModel:
+    """Read and check an arm's model description file (default: the current arm's, `using_model`)."""
+    path = Path(path) if path is not None else current_model_file()
     try:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -256,6 +324,7 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
     for name, table in raw.get("model_angles", {}).items():
         reader.model_angles[name] = reader.read(table, f"model_angles.{name}")
 
+    groups = tuple(_require(raw, "groups", path, "file"))
     links: dict[int, Link] = {}
     for entry in _require(raw, "links", path, "file"):
         key = int(_require(entry, "key", path, "a link"))
@@ -264,8 +333,8 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         if parent != 0 and parent not in links:
             raise DvrkDartError(f"{path}: {where} has parent {parent} not defined before it")
         group = _require(entry, "group", path, where)
-        if group not in GROUPS:
-            raise DvrkDartError(f"{path}: {where} has group '{group}', expected one of {GROUPS}")
+        if group not in groups:
+            raise DvrkDartError(f"{path}: {where} has group '{group}', expected one of {', '.join(groups)} (the file's groups)")
         link = Link(
             parent=parent,
             a=reader.read(entry.get("a", {}), f"{where}.a"),
@@ -280,6 +349,8 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
             friction=bool(entry.get("friction", False)),
             motor_inertia=bool(entry.get("motor_inertia", False)),
             spring=bool(entry.get("spring", False)),
+            spring_linkage={k: float(v) for k, v in entry["spring_linkage"].items()} if "spring_linkage" in entry else None,
+            cable_polynomial=tuple(float(c) for c in entry["cable_polynomial"]) if "cable_polynomial" in entry else None,
         )
         _ = link.joint_type  # raises on a link with two variables
         links[key] = link
@@ -304,9 +375,15 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         for k in (c.link, c.other):
             if k not in links:
                 raise DvrkDartError(f"{path}: loop closure '{c.name}' names unknown link {k}")
-    cw = _require(raw, "counterweight", path, "file")
+    cw = raw.get("counterweight")
+    if cw is not None and int(cw["link"]) not in links:
+        raise DvrkDartError(f"{path}: [counterweight] names unknown link {cw['link']}")
     limits = _require(raw, "joint_limits", path, "file")
-    wrist = _require(raw, "dvrk_wrist", path, "file")
+    coupling = _require(raw, "dvrk_coupling", path, "file")
+    columns = tuple(int(c) for c in _require(coupling, "columns", path, "[dvrk_coupling]"))
+    if any(not 0 <= c < N_JOINTS for c in columns):
+        raise DvrkDartError(f"{path}: [dvrk_coupling] columns must be 0..{N_JOINTS - 1} (0 is q1)")
+    checks = raw.get("parameter_checks", {})
     return PsmModel(
         name=raw.get("name", path.stem),
         source=path,
@@ -316,17 +393,21 @@ def load_model(path: Path | str = DEFAULT_MODEL_FILE) -> PsmModel:
         links=links,
         tool_tip=tool_tip,
         loop_closures=closures,
-        counterweight_link=int(cw["link"]),
-        counterweight_ratio=float(cw.get("ratio", 1.0)),
+        counterweight_link=int(cw["link"]) if cw is not None else None,
+        counterweight_ratio=float(cw.get("ratio", 1.0)) if cw is not None else 0.0,
         joint_lower=np.array(limits["lower"], dtype=float),
         joint_upper=np.array(limits["upper"], dtype=float),
-        dvrk_wrist_matrix=np.array(wrist["matrix"], dtype=float),
+        dvrk_coupling_matrix=np.array(_require(coupling, "matrix", path, "[dvrk_coupling]"), dtype=float),
+        dvrk_coupling_columns=columns,
         dvrk_velocity_limits=np.array(raw["dvrk_velocity_limits"]["upper"], dtype=float) if "dvrk_velocity_limits" in raw else None,
-        inertia_tolerance=float(raw.get("parameter_checks", {}).get("inertia_tolerance_kg_m2", 0.0)),
-        max_link_mass_kg=float(raw.get("parameter_checks", {}).get("max_link_mass_kg", float("inf"))),
-        max_com_distance_m=float(raw.get("parameter_checks", {}).get("max_com_distance_m", float("inf"))),
+        inertia_tolerance=float(checks.get("inertia_tolerance_kg_m2", 0.0)),
+        max_link_mass_kg=float(checks.get("max_link_mass_kg", float("inf"))),
+        max_com_distance_m=float(checks.get("max_com_distance_m", float("inf"))),
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
+        groups=groups,
+        processing=UpstreamProcessing(**raw.get("processing", {})),
+        project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
     )
 
 

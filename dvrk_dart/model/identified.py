@@ -48,6 +48,29 @@ def parse_terms(spec: str) -> tuple[str, ...]:
     return tuple(names)
 
 
+def spring_torque(stiffness: float, x: np.ndarray, linkage: dict[str, float] | None) -> np.ndarray:
+    """A spring's effort on its variable x: +K x (the PSM's J4, rest at x = 0),
+    or through a linkage (the MTM's wrist pitch, upstream main_mtm.ipynb): a
+    spring of rest length l_r between a crank of radius r_s and a point h_s
+    away, at angle pi + q_o - x: effort -K r_f (l - l_r), r_f its lever arm."""
+    if linkage is None:
+        return stiffness * x
+    r_s, h_s, rest = linkage["r_s"], linkage["h_s"], linkage["l_r"]
+    angle = np.pi + np.radians(linkage["q_o_deg"]) - x
+    length = np.sqrt(r_s**2 + h_s**2 - 2.0 * r_s * h_s * np.cos(angle))
+    lever = r_s * h_s * np.sin(angle) / length
+    return -stiffness * lever * (length - rest)
+
+
+def body_inertia(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> pin.Inertia:
+    """Pinocchio's inertia of a body as identified, physical or not: the
+    identified model is evaluated as published (the MTM's parameters have
+    inertias with negative eigenvalues, which pin.Inertia's constructor refuses)."""
+    inertia = pin.Inertia.Zero()
+    inertia.mass, inertia.lever, inertia.inertia = float(mass), np.asarray(com, float).copy(), np.asarray(inertia_com, float).copy()
+    return inertia
+
+
 def _se3(T: np.ndarray) -> pin.SE3:
     return pin.SE3(T[:3, :3].copy(), T[:3, 3].copy())
 
@@ -209,7 +232,10 @@ class IdentifiedModel:
             parent_joint, parent_offset = anchor[link.parent]
             placement = parent_offset @ _placement(link)
             if link is self.model.tool_tip:
-                # the tool tip turns with the wrist yaw (its own theta): a massless joint
+                if link.joint_type == "fixed":  # a frame on its parent (the MTM's gripper)
+                    pm.addFrame(pin.Frame(TOOL_TIP_FRAME, parent_joint, _se3(placement), pin.FrameType.OP_FRAME))
+                    continue
+                # the PSM's tool tip turns with the wrist yaw (its own theta): a massless joint
                 jid = pm.addJoint(parent_joint, pin.JointModelRZ(), _se3(placement), TOOL_TIP_FRAME)
                 pm.addJointFrame(jid, -1)
                 tree_links.append(link)
@@ -222,7 +248,7 @@ class IdentifiedModel:
                 continue
             joint = pin.JointModelRZ() if link.joint_type == "revolute" else pin.JointModelPZ()
             jid = pm.addJoint(parent_joint, joint, _se3(placement), f"link{link.key}_{link.name}")
-            pm.appendBodyToJoint(jid, pin.Inertia(p.mass, p.com.copy(), p.inertia_com.copy()), pin.SE3.Identity())
+            pm.appendBodyToJoint(jid, body_inertia(p.mass, p.com, p.inertia_com), pin.SE3.Identity())
             pm.addJointFrame(jid, -1)
             anchor[link.key] = (jid, np.eye(4))
             tree_links.append(link)
@@ -322,8 +348,9 @@ class IdentifiedModel:
             spring = np.zeros_like(q)
             for link in self._spring_links:
                 var = link.variable
-                deflection = q @ var.coeffs  # from the rest position q = 0
-                spring += np.outer(self.params[link.key].spring * deflection, var.coeffs)
+                stiffness = self.params[link.key].spring
+                torque = spring_torque(stiffness, q @ var.coeffs, link.spring_linkage)
+                spring += np.outer(torque, var.coeffs)
             out["spring"] = spring
         if "motor_inertia" in terms:
             out["motor_inertia"] = ddq @ self.motor_inertia_matrix().T

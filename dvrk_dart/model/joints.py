@@ -9,17 +9,24 @@ import numpy as np
 
 JOINT_NAMES = ("q1", "q2", "q3", "q4", "q5", "q6", "q7")
 N_JOINTS = len(JOINT_NAMES)
+#: the PSM's prismatic coordinate (its insertion): the PSM-only code (counterweight, insertion checks) names it
 PRISMATIC_JOINTS = ("q3",)
-#: index of the insertion joint (the only prismatic one)
 INSERTION = JOINT_NAMES.index("q3")
 
 
+def prismatic_coordinates() -> tuple[str, ...]:
+    """The coordinates of the current arm (`--arm-model`) that a prismatic link moves (the PSM's q3; none on the MTM)."""
+    from dvrk_dart.model.description import current_model_file, prismatic_coordinates_of
+
+    return prismatic_coordinates_of(current_model_file())
+
+
 def position_unit(name: str) -> str:
-    return "m" if name in PRISMATIC_JOINTS else "rad"
+    return "m" if name in prismatic_coordinates() else "rad"
 
 
 def effort_unit(name: str) -> str:
-    return "N" if name in PRISMATIC_JOINTS else "N·m"
+    return "N" if name in prismatic_coordinates() else "N·m"
 
 
 def column_names(prefix: str) -> list[str]:
@@ -42,22 +49,24 @@ WRIST_COLUMNS = slice(4, 7)
 
 class MotorCoordinateMap:
     """The map between the dVRK's joint values and the identification model's
-    coordinates (data README: dvrk = M . motor for positions and velocities of
-    the wrist pitch, wrist yaw and jaw; efforts map the other way, motor = M^T .
-    dvrk, so that power tau . dq is the same in both). q1..q4 are the same in
-    both. Arrays have the joints on their last axis (7 values); M comes from the
-    model description (models/psm/psm.toml, [dvrk_wrist])."""
+    coordinates (data READMEs: dvrk = M . q for positions and velocities of the
+    coupled columns; efforts map the other way, q-efforts = M^T . dvrk, so that
+    power tau . dq is the same in both). The other columns are the same in
+    both. Arrays have the joints on their last axis (7 values); M and its
+    columns come from the model description ([dvrk_coupling]: the PSM's wrist
+    pitch, wrist yaw and jaw, columns 5..7; the MTM's joints 2..4)."""
 
-    def __init__(self, matrix) -> None:
+    def __init__(self, matrix, columns=WRIST_COLUMNS) -> None:
         self.matrix = np.array(matrix, dtype=float)
-        if self.matrix.shape != (3, 3):
-            raise ValueError(f"the wrist map is 3x3, not {self.matrix.shape}")
+        self.columns = columns if isinstance(columns, slice) else np.asarray(columns, dtype=int)
+        width = len(range(N_JOINTS)[self.columns]) if isinstance(self.columns, slice) else len(self.columns)
+        if self.matrix.shape != (width, width):
+            raise ValueError(f"the coupling of {width} columns is {width}x{width}, not {self.matrix.shape}")
         self._inverse = np.linalg.inv(self.matrix)
 
-    @staticmethod
-    def _mapped(values, matrix):
+    def _mapped(self, values, matrix):
         out = np.array(values, dtype=float, copy=True)
-        out[..., WRIST_COLUMNS] = out[..., WRIST_COLUMNS] @ matrix.T
+        out[..., self.columns] = out[..., self.columns] @ matrix.T
         return out
 
     def positions_to_model(self, dvrk):

@@ -133,6 +133,7 @@ def physical_inertia(inertia: np.ndarray, margin: float = INERTIA_MARGIN_KG_M2) 
         return inertia
     values, vectors = np.linalg.eigh(inertia)  # ascending: a <= b <= c
     a, b, c = values
+    c = max(c, margin)  # every moment negative (the MTM's published link 7): the smallest body there is
     b = max(b, margin)
     a = max(a, c - b + margin, margin)
     return vectors @ np.diag([a, b, c]) @ vectors.T

@@ -3,6 +3,8 @@ arm: on a DART joint where the mapping is exact, else as an explicit
 model-based effort the simulator applies each step (`simulator.py`).
 
 Identified non-inertial terms (SimConfig flags, JointEffects extras)
+    - a spring through a linkage (the MTM's wrist pitch, nonlinear in its
+      angle) is an explicit model-based effort like the terms below.
     - viscous friction, Coulomb friction and the J4 spring act on the DART
       joints whose own variable is the link's variable (yaw, pitch, carriage,
       tool roll, wrist pitch, jaws): the mapping is exact.  Coulomb friction is
@@ -40,6 +42,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import Link, PsmModel
+from dvrk_dart.model.identified import spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim.builder import DartPsm
@@ -60,13 +63,15 @@ class ExplicitEffects:
     reversal_velocity: np.ndarray  # their velocity scale (1 where unused)
     friction_links: tuple[Link, ...]
     params: IdentifiedParameters
+    #: springs acting through a linkage (the MTM's wrist pitch): nonlinear, explicit
+    linkage_springs: tuple[Link, ...] = ()
 
     @property
     def any_effort(self) -> bool:
         """Whether `effort` can be non-zero (the armature is applied apart)."""
         return bool(
             np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
-            or np.any(self.smooth_coulomb) or self.friction_links
+            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs
         )
 
     def effort(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
@@ -77,6 +82,9 @@ class ExplicitEffects:
             p = self.params[link.key]
             rate = float(dq @ link.variable.coeffs)
             effort = effort + (p.coulomb * np.sign(rate) + p.viscous * rate) * link.variable.coeffs
+        for link in self.linkage_springs:
+            x = float(q @ link.variable.coeffs)
+            effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
         return effort
 
 
@@ -107,6 +115,7 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
     coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
     dof_of = {key: i for i, key in enumerate(psm.dof_links)}
     friction_links = []  # motor-side links: explicit, on their variable's rate
+    linkage_springs = []  # nonlinear springs: explicit, at the start-of-step position
     for link in model.links.values():
         p = params[link.key]
         dof = dof_of.get(link.key)
@@ -120,7 +129,9 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
                 friction_links.append(link)
         if config.offsets and link.friction and p.offset:
             offset += p.offset * link.variable.coeffs
-        if config.spring and link.spring and p.spring:
+        if config.spring and link.spring and p.spring and link.spring_linkage is not None:
+            linkage_springs.append(link)
+        elif config.spring and link.spring and p.spring:
             if not on_own_dof:
                 raise DvrkDartError(f"link {link.key}: a spring on a variable without its own joint is not supported")
             # not DART's joint spring: see the module docstring (implicit, rest at 0)
@@ -156,6 +167,7 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
     for dof in dict.fromkeys(coulomb_dofs):
         psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
     explicit = ExplicitEffects(
-        coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params
+        coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
+        tuple(linkage_springs),
     )
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)

@@ -1,0 +1,80 @@
+"""Every arm in models/ (the Menagerie habit): it loads, builds in Pinocchio and
+in DART, closes its loops, and its static efforts in DART equal g(q) from
+Pinocchio; each reproduces its identification's published test errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.model.arm import load_arm
+from dvrk_dart.model.description import using_model
+from dvrk_dart.paths import MODELS_DIR
+from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.simulator import PsmSimulator
+
+ARMS = sorted(p.name for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file())
+#: relative errors on "two", first period, of each arm's published parameters (its data README)
+PUBLISHED = {
+    "psm": ("two", [0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642]),
+    "mtm": ("mtm-two", [0.0769, 0.1485, 0.1695, 0.2232, 0.2800, 0.2342, 0.3395]),
+}
+
+
+@pytest.fixture(scope="module", params=ARMS)
+def arm_of(request):
+    with using_model(MODELS_DIR / request.param / f"{request.param}.toml"):
+        yield request.param, load_arm()
+
+
+def test_every_arm_folder_is_complete():
+    assert {"psm", "mtm"} <= set(ARMS)
+    for name in ARMS:
+        assert (MODELS_DIR / name / "README.md").is_file(), f"{name}: no model card"
+
+
+def test_every_arm_closes_its_loops_and_holds_its_gravity_in_dart(arm_of):
+    """Random poses: the closed chain in DART holds its loops to 1e-12 m, its
+    frames are the model's, and the efforts that hold it still are Pinocchio's g(q)."""
+    name, arm = arm_of
+    model = arm.model
+    sim = PsmSimulator(model, arm.params, SimConfig())
+    rng = np.random.default_rng(2)
+    for _ in range(10):
+        q = rng.uniform(model.joint_lower, model.joint_upper)
+        sim.set_kinematic(q)
+        assert sim.closure_residual_m() < 1e-12, name
+        frames = model.forward_kinematics(q)
+        for key in sim.psm.bodies:
+            np.testing.assert_allclose(sim.link_transform(key), frames[key], atol=1e-12)
+        sim.reset(q)
+        sim.step_velocity(np.zeros(len(q)), q)
+        g = arm.identified.gravity(sim.q)
+        np.testing.assert_allclose(sim.last_effort, g, atol=1e-3 * max(1.0, np.max(np.abs(g))))
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED))
+def test_every_arm_reproduces_its_published_errors(name, capsys):
+    run, published = PUBLISHED[name]
+    capsys.readouterr()
+    assert main(["model-errors", "--arm-model", name, "--measured", run, "--first-period", "--json"]) == 0
+    errors = json.loads(capsys.readouterr().out)["relative_error"]
+    np.testing.assert_allclose(errors, published, atol=1e-3)
+
+
+def test_the_mtm_replays_two_in_dart(tmp_path, capsys):
+    """The MTM's velocity replay of "two": the inertial arm (DART's physical
+    inertias) within 0.01 N·m of the model on J1..J3, its parallelogram closed
+    to 1e-9 m; the identified arm (friction, offsets, the linkage spring, motor
+    inertia as physics) as close to the measured efforts as the model, within 0.01."""
+    for dynamics in ("inertial", "identified"):
+        out = tmp_path / dynamics
+        assert main(["replay", "--arm-model", "mtm", "--measured", "mtm-two", "--dynamics", dynamics, "--out", str(out)]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["closure_residual_max_m"] < 1e-9
+        if dynamics == "inertial":
+            assert np.all(np.array(metrics["rms_sim_vs_model"][:3]) <= 0.01), metrics["rms_sim_vs_model"]
+        else:
+            gap = np.array(metrics["rms_sim_vs_measured"][:3]) - np.array(metrics["rms_model_vs_measured"][:3])
+            assert np.all(np.abs(gap) <= 0.01), gap
