@@ -93,7 +93,7 @@ def test_oddities_are_reported(arm):
 
 def test_malformed_model_file(tmp_path):
     bad = tmp_path / "psm.toml"
-    bad.write_text("[constants]\nl = 1\n[[links]]\nkey = 1\nname='x'\nparent = 0\ngroup='yaw'\ntheta = { q9 = 1 }\n")
+    bad.write_text("groups = ['yaw']\n[constants]\nl = 1\n[[links]]\nkey = 1\nname='x'\nparent = 0\ngroup='yaw'\ntheta = { q9 = 1 }\n")
     with pytest.raises(DvrkDartError, match="unknown name 'q9'"):
         load_model(bad)
 

@@ -87,7 +87,7 @@ def test_download_from_pinned_commit_with_checksum(tmp_path, monkeypatch):
     shutil.copy(resolve("params.json"), target)
     monkeypatch.setenv(reference_data.ENV_URL_TEMPLATE, f"file://{mirror}/{{path}}")
     monkeypatch.setenv(reference_data.ENV_CACHE_DIR, str(tmp_path / "cache"))
-    monkeypatch.setattr(reference_data, "SHARED_DIR", tmp_path / "absent")
+    monkeypatch.setattr(reference_data, "SHARED_ROOT", tmp_path / "absent")
     monkeypatch.delenv(reference_data.ENV_DATA_DIR, raising=False)
     path = resolve("params.json")
     assert path.parent.parent == tmp_path / "cache" and path.is_file()

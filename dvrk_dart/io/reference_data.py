@@ -24,7 +24,6 @@ from dvrk_dart.paths import PROJECT_DIR
 
 MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
 SHARED_ROOT = PROJECT_DIR.parent / "shared" / "reference_data"
-SHARED_DIR = SHARED_ROOT / "wpi"
 ENV_DATA_DIR = "DVRK_REFERENCE_DATA"
 ENV_CACHE_DIR = "DVRK_DART_CACHE"
 ENV_URL_TEMPLATE = "DVRK_REFERENCE_URL"  # override of the download URL (tests, mirrors)
