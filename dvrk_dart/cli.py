@@ -213,12 +213,13 @@ def _run_and_write(config, out: Path | None) -> int:
     from dvrk_dart.io.outputs import check_output_folder
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
-    from dvrk_dart.runs.runner import run
+    from dvrk_dart.runs.runner import arm_of_scenario, run
 
     out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
-    arm = load_arm(params_file=config.params_file)
-    record = run(config, arm)
-    write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
+    with arm_of_scenario(config):
+        arm = load_arm(params_file=config.params_file)
+        record = run(config, arm)
+        write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
     for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position", "tracking_rms_orientation"):
@@ -385,7 +386,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--friction-law", default="sign", choices=("sign", "tanh"),
                    help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
     p.add_argument("--reversal-velocity", type=float, default=None, help="velocity scale of the tanh law (rad/s or m/s)")
-    p.add_argument("--bounds", default=None, help="bounds and prior file (default models/psm/identification.toml)")
+    p.add_argument("--bounds", default=None, help="bounds and prior file (default: the arm's, models/<arm>/identification.toml)")
     p.add_argument("--prior", default="none",
                    help="prior of the parameters the data leave free: 'none' (about zero: minimum norm, the default), "
                         "'default' (the model's default params.json) or a params file")
@@ -393,6 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     _add_processing_option(p, None)
     _add_bag_options(p)
+    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")

@@ -46,7 +46,9 @@ from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.pseudo_inertia import PSEUDO_INERTIA_BASIS
 from dvrk_dart.paths import MODELS_DIR
 
-DEFAULT_BOUNDS_FILE = MODELS_DIR / "psm" / "identification.toml"
+#: the bounds and prior file of an arm: beside its description, in models/<arm>/
+BOUNDS_FILE_NAME = "identification.toml"
+DEFAULT_BOUNDS_FILE = MODELS_DIR / "psm" / BOUNDS_FILE_NAME
 #: a base regressor (unit-norm columns) worse conditioned than this does not
 #: excite the base parameters: the fit would be noise. The reference run
 #: "one" is at ~1e3; a constant pose is singular (infinite).
@@ -75,7 +77,7 @@ class Bounds:
 
 def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
     """The identification bounds file (default models/psm/identification.toml)."""
-    path = Path(path) if path is not None else DEFAULT_BOUNDS_FILE
+    path = Path(path) if path is not None else model.folder / BOUNDS_FILE_NAME
     if path.is_dir():
         raise DvrkDartError(f"--bounds: {path} is a folder, not a bounds file")
     try:

@@ -29,7 +29,7 @@ from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_
 from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_all
 from dvrk_dart.metrics import relative_error, rms
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
+from dvrk_dart.model.description import PsmModel, current_model_file, load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
 
@@ -47,7 +47,7 @@ class IdentificationConfig:
     prior: str = PRIOR_NONE
     seed: int = 0
     solver: str = "CLARABEL"
-    model_file: str = str(DEFAULT_MODEL_FILE)
+    model_file: str | None = None  # None: the current arm's (--arm-model)
     #: upstream | periodic | None: periodic where every run is periodic, else upstream (noted)
     processing: str | None = None
 
@@ -152,7 +152,7 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     if not config.runs:
         raise DvrkDartError("--runs: at least one training run is needed")
     distinct_inputs([("--runs", r) for r in config.runs] + [("--holdout", r) for r in config.holdout])
-    model = load_model(config.model_file)
+    model = load_model(config.model_file or current_model_file())
     joints = _joint_indices(config.joints)
     bounds = load_bounds(config.bounds_file, model)
     regressor = Regressor(model, config.friction_law)

@@ -139,7 +139,7 @@ def summary(result: IdentificationResult) -> dict:
         "config": {
             "runs": list(cfg.runs), "holdout": list(cfg.holdout), "joints": list(cfg.joints),
             "friction_law": result.regressor.friction_law.describe(), "bounds_file": str(result.bounds.source),
-            "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": cfg.model_file,
+            "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": str(result.model.source),
         },
         "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
         "processing": _processing(result),

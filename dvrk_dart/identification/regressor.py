@@ -29,7 +29,7 @@ import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.identified import IdentifiedModel
+from dvrk_dart.model.identified import IdentifiedModel, body_inertia, spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters, LinkParameters
 
@@ -116,7 +116,7 @@ def standard_vector(params: IdentifiedParameters, layout: ParameterLayout) -> np
     parts = []
     for key in layout.inertial_links:
         p = params[key]
-        parts.append(pin.Inertia(p.mass, p.com, p.inertia_com).toDynamicParameters())
+        parts.append(body_inertia(p.mass, p.com, p.inertia_com).toDynamicParameters())
     parts += [[params[k].coulomb, params[k].viscous, params[k].offset] for k in layout.friction_links]
     parts += [[params[k].motor_inertia] for k in layout.motor_links]
     parts += [[params[k].spring] for k in layout.spring_links]
@@ -197,8 +197,8 @@ class Regressor:
             j = int(np.flatnonzero(coeffs)[0])
             Y[:, j, c] = coeffs[j] * ddq[:, j]
             c += 1
-        for key in layout.spring_links:  # K times the deflection from q = 0, projected like a friction
+        for key in layout.spring_links:  # K times its law (q from rest, or a linkage's), projected like a friction
             coeffs = links[key].variable.coeffs
-            Y[:, :, c] = np.outer(q @ coeffs, coeffs)
+            Y[:, :, c] = np.outer(spring_torque(1.0, q @ coeffs, links[key].spring_linkage), coeffs)
             c += 1
         return Y

@@ -116,14 +116,15 @@ def _execute(task: tuple[RunConfig, str | None, str]):
     file system) it writes the run there and returns its metrics; without, it
     returns the record for the driver to write (Ray)."""
     from dvrk_dart.model.arm import load_arm
-    from dvrk_dart.runs.runner import run
+    from dvrk_dart.runs.runner import arm_of_scenario, run
 
     config, runs_dir, fingerprint = task
-    arm = load_arm(params_file=config.params_file)
-    record = run(config, arm)
-    if runs_dir is None:
-        return record
-    write_run_folder(record, Path(runs_dir) / record.name, arm.model, fingerprint)
+    with arm_of_scenario(config):
+        arm = load_arm(params_file=config.params_file)
+        record = run(config, arm)
+        if runs_dir is None:
+            return record
+        write_run_folder(record, Path(runs_dir) / record.name, arm.model, fingerprint)
     return record.metrics
 
 

@@ -61,13 +61,22 @@ def scenario_of(config: RunConfig) -> Scenario:
         if scenario.kind != "replay":
             raise DvrkDartError(f"--measured: scenario '{scenario.name}' is not a replay")
         scenario = Scenario(f"replay-{Path(config.measured).stem}", "replay", scenario.modes, scenario.counterweights,
-                            scenario.duration_s, measured=config.measured, dynamics=scenario.dynamics)
+                            scenario.duration_s, measured=config.measured, dynamics=scenario.dynamics, arm_model=scenario.arm_model)
     return scenario
+
+
+def arm_of_scenario(config: RunConfig):
+    """The context of the run's arm: its scenario's (`arm_model`), else the command's."""
+    from dvrk_dart.model.description import current_model_file, resolve_arm_model, using_model
+
+    arm_model = scenario_of(config).arm_model
+    return using_model(resolve_arm_model(arm_model) if arm_model else current_model_file())
 
 
 def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     """Run one configuration; the record carries its resolved config and metrics.
-    `arm` (model + parameters) must be the one config.params_file names."""
+    `arm` (model + parameters) must be the one config.params_file names, of the
+    scenario's arm (call inside `arm_of_scenario(config)`)."""
     arm = arm or load_arm(params_file=config.params_file)
     scenario = scenario_of(config)
     mode, counterweight = config.mode, config.counterweight

@@ -18,7 +18,7 @@ from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 SCENARIOS_DIR = PIPELINES_DIR / "scenarios"
 
-_TOP_KEYS = {"name", "kind", "duration_s", "modes", "counterweights", "start_pose", "path", "measured", "description", "dynamics"}
+_TOP_KEYS = {"name", "kind", "duration_s", "modes", "counterweights", "start_pose", "path", "measured", "description", "dynamics", "arm_model"}
 #: the simulated arms a scenario may ask for (runs.config.RunConfig.dynamics), or a diagnosis.json
 DYNAMICS_CHOICES = ("inertial", "identified")
 _PATH_KEYS = {
@@ -69,6 +69,7 @@ class Scenario:
     measured: str | None = None
     source: Path | None = None
     dynamics: str = "inertial"  # the simulated arm, unless a run overrides it
+    arm_model: str | None = None  # the arm (models/<arm>/), None: the command's (--arm-model)
 
     def cartesian_path(self, start_position: np.ndarray) -> CartesianPath:
         params = dict(self.path or {})
@@ -86,6 +87,7 @@ class Scenario:
             "path": self.path,
             "measured": self.measured,
             "dynamics": self.dynamics,
+            "arm_model": self.arm_model,
         }
 
 
@@ -153,7 +155,11 @@ def load_scenario_file(path: Path) -> Scenario:
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
         duration = _positive(path, raw, "duration_s", "") if "duration_s" in raw else None
-        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics)
+        arm_model = raw.get("arm_model")
+        if arm_model is not None and not isinstance(arm_model, str):
+            _fail(path, f"arm_model must be an arm's name (psm, mtm), got {arm_model!r}")
+        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics,
+                        arm_model=arm_model)
     duration = _positive(path, raw, "duration_s", "")
     start = _vector(path, raw, "start_pose", N_JOINTS)
     lower, upper = joint_ranges()
