@@ -307,6 +307,25 @@ class PsmSimulator(ClosedChainReadout):
         self.world.step()
         self._after_step(dq, tau, lam)
 
+    def joint_space_dynamics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, b, e) at the current state, in the coordinates q: DART's own
+        closed-chain inertia (with the armature, and the counterweight folded in
+        through the ideal tendon), its bias, and the explicit efforts, so that
+        tau = M ddq + b + e (the computed torque of a controller, the paper's Eq. 6-7)."""
+        x, v = self._positions(), self._velocities()
+        q, dq = self._coordinates(), self._coordinate_rates()
+        Mz, bz = self._reduced_dynamics(x, v)
+        n = N_JOINTS
+        if self._has_armature:
+            Mz[self._diag_q] += self._explicit.armature
+        explicit = self._explicit.effort(q, dq) if self._has_explicit else self._zeros
+        if self._free_dofs and self._tendon_ideal:  # the counterweight follows q3: x_cw = ratio q3
+            T = np.zeros((n + 1, n))
+            T[:n, :n] = np.eye(n)
+            T[n, INSERTION] = self.model.counterweight_ratio
+            return T.T @ Mz @ T, T.T @ bz, explicit
+        return Mz[:n, :n], bz[:n], explicit
+
     def _counterweight_acceleration(self, ddq: np.ndarray, q, dq, x, v) -> float:
         """Counterweight acceleration of the ideal tendon for a given ddq (kernels.py)."""
         cw = self._counterweight_dof
