@@ -122,11 +122,11 @@ def bench_bag_import() -> dict:
     """A 30 s, 200 Hz bag of the two PSM topics (made from run "two"), read back."""
     import tempfile
 
-    from dvrk_dart.io.bags import load_bag_run, psm_joint_states, write_bag
+    from dvrk_dart.io.bags import load_bag_run, arm_joint_states, write_bag
 
     run = load_run(resolve_run("two"))
     with tempfile.TemporaryDirectory() as folder:
-        bag = write_bag(Path(folder) / "two", psm_joint_states("PSM1", run.t, run.q, run.dq, run.tau))
+        bag = write_bag(Path(folder) / "two", arm_joint_states("PSM1", run.t, run.q, run.dq, run.tau))
         seconds = best_time(lambda: load_bag_run(bag), repeat=3, number=1)
     return {"bag_import_s": seconds}
 

@@ -44,7 +44,8 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
 def _add_bag_options(p: argparse.ArgumentParser) -> None:
     """Where a measured run that is a ROS bag keeps the PSM's joint states."""
     g = p.add_argument_group("measured runs that are ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
-    g.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace (default PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js)")
+    g.add_argument("--arm", default=None, type=arm_namespace,
+                   help="the arm's namespace (default: the arm model's, PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js; MTML: /MTML/measured_js)")
     g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
     g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
     g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
@@ -407,14 +408,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="a simulated run -> a ROS 2 bag (MCAP) like a real PSM's recording")
     p.add_argument("run_dir", help="a run folder (run.mcap)")
     p.add_argument("--bag", required=True, help="the bag to write (a rosbag2 folder; a .bag file with --storage ros1)")
-    p.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace of the topics (default PSM1)")
+    p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the topics (default: the arm model's, PSM1)")
     p.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3", "ros1"), help="rosbag2 storage, or a ROS 1 bag")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("excitation", help="a trajectory to play on a dVRK: CSV + ROS 2 bag of servo_jp")
     p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--arm", default="PSM1", type=arm_namespace, help="the arm's namespace of the servo_jp topics (default PSM1)")
+    p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the servo_jp topics (default: the arm model's, PSM1)")
     p.add_argument("--rate", type=float, default=None, help="command rate (Hz, default 200)")
     p.set_defaults(func=cmd_excitation)
 

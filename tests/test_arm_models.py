@@ -78,3 +78,20 @@ def test_the_mtm_replays_two_in_dart(tmp_path, capsys):
         else:
             gap = np.array(metrics["rms_sim_vs_measured"][:3]) - np.array(metrics["rms_model_vs_measured"][:3])
             assert np.all(np.abs(gap) <= 0.01), gap
+
+
+def test_an_mtm_bag_reads_like_its_csv(tmp_path, capsys):
+    """/MTML/measured_js (seven joints by the dVRK's names, no jaw topic) -> the
+    run's model coordinates: the published errors of "two" come back from the bag."""
+    from dvrk_dart.io.bags import arm_joint_states, write_bag
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+
+    with using_model(MODELS_DIR / "mtm" / "mtm.toml"):
+        run = load_run(resolve_run("mtm-two"))
+        states = arm_joint_states(None, 1.7e9 + run.t, run.q, run.dq, run.tau)
+        bag = write_bag(tmp_path / "mtm_two", states)
+    assert [s.topic for s in states] == ["/MTML/measured_js"] and len(states[0].names) == 7
+    capsys.readouterr()
+    assert main(["model-errors", "--arm-model", "mtm", "--measured", str(bag), "--first-period", "--json"]) == 0
+    errors = json.loads(capsys.readouterr().out)["relative_error"]
+    np.testing.assert_allclose(errors, PUBLISHED["mtm"][1], atol=1e-3)

@@ -11,11 +11,12 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 from scipy.interpolate import CubicSpline
 
+from dvrk_dart.model.description import load_model
 from dvrk_dart.cli import main
-from dvrk_dart.io.bags import NS, BagTopics, load_bag_run, psm_joint_states, write_bag
+from dvrk_dart.io.bags import NS, BagTopics, load_bag_run, arm_joint_states, write_bag
 from dvrk_dart.io.mcap_log import read_mcap
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.model.joints import DVRK_ARM_JOINT_NAMES, MotorCoordinateMap
+from dvrk_dart.model.joints import MotorCoordinateMap
 
 #: upstream's published relative errors (data README), trajectory "two", first period
 PUBLISHED_RELATIVE_ERRORS = np.array([0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642])
@@ -42,7 +43,7 @@ def jittered_topics(run, seed=0, arm="PSM1", rows=slice(None)):
     for which in range(2):
         t = t0 + rng.uniform(-JITTER_S, JITTER_S, len(t0))
         v = truth(t)
-        states = psm_joint_states(arm, EPOCH_S + t, v[:, :7], v[:, 7:14], v[:, 14:])[which]
+        states = arm_joint_states(arm, EPOCH_S + t, v[:, :7], v[:, 7:14], v[:, 14:])[which]
         topics.append(states)
         stamps[states.topic] = np.round(t * NS).astype(np.int64) + EPOCH_S * NS
     return topics, stamps
@@ -154,7 +155,7 @@ def test_export_import_round_trip(tmp_path, simulated_run, capsys):
         }
         first = next(reader.messages())
         msg = reader.deserialize(first[2], first[0].msgtype)
-        assert tuple(msg.name) == DVRK_ARM_JOINT_NAMES and len(msg.effort) == 6
+        assert tuple(msg.name) == load_model().dvrk_topics.arm_joints and len(msg.effort) == 6
         assert msg.header.stamp.sec * NS + msg.header.stamp.nanosec == round(record.t[0] * NS)
     assert any(p.suffix == ".mcap" for p in bag.iterdir())
 
@@ -220,7 +221,7 @@ def _bad_bags(tmp_path, run):
         _write_raw(tmp_path / "type", {"/PSM1/measured_js": ("std_msgs/msg/String", [(k, String(data="x")) for k in range(3)])}),
         ["/PSM1/measured_js", "std_msgs/msg/String", "expected sensor_msgs/msg/JointState"],
     )
-    names = tuple("outer_roll_x" if n == "outer_roll" else n for n in DVRK_ARM_JOINT_NAMES)
+    names = tuple("outer_roll_x" if n == "outer_roll" else n for n in load_model().dvrk_topics.arm_joints)
     t, s = _modified(run, names=names)
     bags["missing joint"] = (write_bag(tmp_path / "names", t, stamps_ns=s), ["/PSM1/measured_js", "joint outer_roll missing"])
     t, s = _modified(run)

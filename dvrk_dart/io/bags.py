@@ -1,8 +1,9 @@
 """ROS bags in and out (rosbags: ROS 2 bags in MCAP or sqlite3 storage, ROS 1
 bags; no ROS installation needed).
 
-In: a bag of a dVRK PSM is a measured run. The arm's `measured_js` and the jaw's
-`jaw/measured_js` (sensor_msgs/JointState, dVRK joint names and units) are read
+In: a bag of a dVRK arm is a measured run. The arm's `measured_js` and (a PSM)
+the jaw's `jaw/measured_js` (sensor_msgs/JointState, dVRK joint names and units,
+as the arm's model card lists them in [dvrk_topics]) are read
 by joint name, put on a uniform time grid by cubic interpolation of their header
 stamps, and mapped to the identification model's coordinates (joints.py owns
 the map). Out: joint trajectories (a simulated run, an excitation) as the same
@@ -27,13 +28,8 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import (
-    DVRK_ARM_JOINT_NAMES,
-    DVRK_JAW_JOINT_NAME,
-)
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
-DEFAULT_ARM = "PSM1"
 #: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,
 #: and the excitation moves up to ~0.08 rad in 50 ms, which no interpolation recovers
 MAX_GAP_S = 0.05
@@ -46,24 +42,33 @@ NS = 1_000_000_000
 
 @dataclass(frozen=True)
 class BagTopics:
-    """Where a PSM's joint states are in a bag, and the grid they are put on."""
+    """Where an arm's joint states are in a bag, and the grid they are put on."""
 
-    arm: str = DEFAULT_ARM
+    arm: str | None = None  # default: the arm model's namespace (PSM1, MTML)
     topic: str | None = None  # default /<arm>/measured_js
     jaw_topic: str | None = None  # default /<arm>/jaw/measured_js
     rate_hz: float | None = None  # default: the reference data's rate (200 Hz)
 
     @property
+    def namespace(self) -> str:
+        return self.arm or _card().namespace
+
+    @property
     def joint_topic(self) -> str:
-        return self.topic or f"/{self.arm}/measured_js"
+        return self.topic or f"/{self.namespace}/measured_js"
 
     @property
     def jaw(self) -> str:
         """--jaw-topic, else the jaw of the arm's namespace (that of --topic when given)."""
         if self.jaw_topic:
             return self.jaw_topic
-        namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.arm}"
+        namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.namespace}"
         return f"{namespace}/jaw/measured_js"
+
+    def wanted(self) -> list[tuple[str, tuple[str, ...]]]:
+        """(topic, joint names) to read, in the order of q1..q7 (before the coupling)."""
+        card = _card()
+        return [(self.joint_topic, card.arm_joints)] + ([(self.jaw, card.jaw_joints)] if card.jaw_joints else [])
 
     @property
     def rate(self) -> float:
@@ -91,6 +96,13 @@ def bag_topics(topics: BagTopics) -> Iterator[None]:
 
 def current_topics() -> BagTopics:
     return _current_topics.get()
+
+
+def _card():
+    """The current arm's [dvrk_topics] (models/<arm>/)."""
+    from dvrk_dart.model.description import load_model
+
+    return load_model().dvrk_topics
 
 
 def is_bag(path: str | os.PathLike) -> bool:
@@ -124,15 +136,15 @@ def _first_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
-def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, TopicSamples]:
-    """The arm's and the jaw's joint states, checked; one-line errors."""
+def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
+    """The arm's (and a PSM jaw's) joint states, checked; one-line errors."""
     from rosbags.highlevel import AnyReader
 
     try:
         with AnyReader([path], default_typestore=_typestore(path)) as reader:
             present = reader.topics
             # (the two may be one topic: a recorder that puts the jaw in the arm's message)
-            wanted = [(topics.joint_topic, DVRK_ARM_JOINT_NAMES), (topics.jaw, (DVRK_JAW_JOINT_NAME,))]
+            wanted = topics.wanted()
             for topic in dict(wanted):
                 if topic not in present:
                     listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
@@ -223,34 +235,34 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
     if rate != sample_rate_hz():
         # upstream's filter, trim and first period are defined in samples at that rate
         raise DvrkDartError(f"--rate {rate:g}: measured runs are processed at {sample_rate_hz():g} Hz (the identification's processing); resample at that rate")
-    arm, jaw = read_topics(path, topics)
-    if arm.receive_time != jaw.receive_time:
-        stamped, received = (jaw, arm) if arm.receive_time else (arm, jaw)
+    read = read_topics(path, topics)
+    if len({samples.receive_time for samples in read}) > 1:
+        stamped = next(s for s in read if not s.receive_time)
+        received = next(s for s in read if s.receive_time)
         raise DvrkDartError(f"{path}: {stamped.topic} has header stamps but {received.topic} only the bag's receive times: "
                             "two clocks cannot be aligned (record both with header stamps)")
-    for samples in (arm, jaw):
+    for samples in read:
         _check_times(path, samples)
     # the grid: multiples of the period on the bag's clock, so that a bag stamped
     # on a regular grid is sampled at its own stamps (no interpolation at all)
-    first_ns = max(int(arm.stamps_ns[0]), int(jaw.stamps_ns[0]))
+    first_ns = max(int(samples.stamps_ns[0]) for samples in read)
     if float(NS / rate).is_integer():  # integers: epoch stamps (~1.7e18 ns) are beyond float64's ns resolution
         period_ns = NS // int(rate)
         start_ns = -(-first_ns // period_ns) * period_ns
     else:
         start_ns = int(np.ceil(first_ns * rate / NS - 1e-9) * NS / rate)
-    end_ns = min(int(arm.stamps_ns[-1]), int(jaw.stamps_ns[-1]))
+    end_ns = min(int(samples.stamps_ns[-1]) for samples in read)
     span_s = (end_ns - start_ns) / NS
     n = int(np.floor(span_s * rate + 1e-9)) + 1 if end_ns >= start_ns else 0
     if n < MIN_ROWS:
         raise DvrkDartError(
-            f"{path}: topics {arm.topic} and {jaw.topic} overlap for {max(span_s, 0.0):.3f} s: "
+            f"{path}: topics {' and '.join(s.topic for s in read)} overlap for {max(span_s, 0.0):.3f} s: "
             f"{max(n, 0)} samples at {rate:g} Hz, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)"
         )
     grid_s = np.arange(n) / rate
-    arm_values, jaw_values = _resample(arm, start_ns, grid_s), _resample(jaw, start_ns, grid_s)
-    k = len(DVRK_ARM_JOINT_NAMES)
-    dvrk = {
-        field: np.hstack([arm_values[:, i * k : (i + 1) * k], jaw_values[:, i : i + 1]])
+    values = [(_resample(samples, start_ns, grid_s), samples.position.shape[1]) for samples in read]
+    dvrk = {  # each topic's values hold its position, velocity and effort columns side by side
+        field: np.hstack([v[:, i * k : (i + 1) * k] for v, k in values])
         for i, field in enumerate(("position", "velocity", "effort"))
     }
     motor_map = load_model().motor_map
@@ -279,24 +291,27 @@ class JointStates:
     effort: np.ndarray | None = None
 
 
-def psm_joint_states(arm: str, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
-    """The topics of a PSM (the arm's joints, then the jaw on its own topic) from
-    model-coordinate arrays (N, 7): mapped to the dVRK's joint values."""
+def arm_joint_states(arm: str | None, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
+    """The topics of the current arm (its joints, then a PSM's jaw on its own
+    topic) from model-coordinate arrays (N, 7): mapped to the dVRK's joint values."""
     from dvrk_dart.model.description import load_model
 
-    motor_map = load_model().motor_map
+    model = load_model()
+    card, motor_map = model.dvrk_topics, model.motor_map
+    arm = arm or card.namespace
     position = motor_map.positions_to_dvrk(q)
     velocity = None if dq is None else motor_map.positions_to_dvrk(dq)
     effort = None if tau is None else motor_map.efforts_to_dvrk(tau)
-    k = len(DVRK_ARM_JOINT_NAMES)
+    k = len(card.arm_joints)
 
     def part(cols):
         return [None if a is None else a[:, cols] for a in (position, velocity, effort)]
 
-    return [
-        JointStates(f"/{arm}/{suffix}", DVRK_ARM_JOINT_NAMES, np.asarray(t, dtype=float), *part(slice(0, k))),
-        JointStates(f"/{arm}/jaw/{suffix}", (DVRK_JAW_JOINT_NAME,), np.asarray(t, dtype=float), *part(slice(k, k + 1))),
-    ]
+    t = np.asarray(t, dtype=float)
+    states = [JointStates(f"/{arm}/{suffix}", card.arm_joints, t, *part(slice(0, k)))]
+    if card.jaw_joints:
+        states.append(JointStates(f"/{arm}/jaw/{suffix}", card.jaw_joints, t, *part(slice(k, k + len(card.jaw_joints)))))
+    return states
 
 
 def _messages(typestore, states: JointStates, stamps_ns: np.ndarray, ros1: bool):
@@ -365,7 +380,7 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
     return out
 
 
-def export_run(run_dir: Path, out: Path, arm: str = DEFAULT_ARM, storage: str = "mcap") -> Path:
+def export_run(run_dir: Path, out: Path, arm: str | None = None, storage: str = "mcap") -> Path:
     """A simulated run folder -> a bag with the topics and types a real PSM
     publishes: measured_js (position, velocity, the *simulated* effort) and
     jaw/measured_js, stamped with the simulated time."""
@@ -389,4 +404,4 @@ def export_run(run_dir: Path, out: Path, arm: str = DEFAULT_ARM, storage: str = 
             raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
     if storage == "ros1" and out.suffix != ".bag":
         raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
-    return write_bag(out, psm_joint_states(arm, record.t, record.q, record.dq, record.effort_sim), storage)
+    return write_bag(out, arm_joint_states(arm, record.t, record.q, record.dq, record.effort_sim), storage)

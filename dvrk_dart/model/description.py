@@ -161,6 +161,21 @@ class UpstreamProcessing:
 
 
 @dataclass(frozen=True)
+class DvrkTopics:
+    """The dVRK's topics of an arm ([dvrk_topics]): its default namespace, the
+    joints of <ns>/measured_js and those of <ns>/jaw/measured_js (none on the MTM)."""
+
+    namespace: str
+    arm_joints: tuple[str, ...]
+    jaw_joints: tuple[str, ...] = ()
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The dVRK's names of q1..q7's joints, in order."""
+        return self.arm_joints + self.jaw_joints
+
+
+@dataclass(frozen=True)
 class LoopClosure:
     name: str
     link: int
@@ -192,6 +207,7 @@ class PsmModel:
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
     groups: tuple[str, ...] = ()
     processing: UpstreamProcessing = UpstreamProcessing()
+    dvrk_topics: DvrkTopics | None = None
     project_unphysical_bodies: bool = False  # DART gets the nearest physical body of a non-physical identified one
 
     @property
@@ -407,8 +423,18 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         session_offset_joints=_session_offset_joints(raw, path),
         groups=groups,
         processing=UpstreamProcessing(**raw.get("processing", {})),
+        dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
     )
+
+
+def _dvrk_topics(raw: dict, path: Path) -> DvrkTopics:
+    table = _require(raw, "dvrk_topics", path, "file")
+    topics = DvrkTopics(str(_require(table, "namespace", path, "[dvrk_topics]")), tuple(_require(table, "arm_joints", path, "[dvrk_topics]")),
+                        tuple(table.get("jaw_joints", ())))
+    if len(topics.joint_names) != N_JOINTS:
+        raise DvrkDartError(f"{path}: [dvrk_topics] names {len(topics.joint_names)} joints, the model has {N_JOINTS}")
+    return topics
 
 
 def _session_offset_joints(raw: dict, path: Path) -> tuple[str, ...] | None:

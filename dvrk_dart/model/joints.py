@@ -25,6 +25,10 @@ def position_unit(name: str) -> str:
     return "m" if name in prismatic_coordinates() else "rad"
 
 
+def velocity_unit(name: str) -> str:
+    return f"{position_unit(name)}/s"
+
+
 def effort_unit(name: str) -> str:
     return "N" if name in prismatic_coordinates() else "N·m"
 
@@ -34,14 +38,9 @@ def column_names(prefix: str) -> list[str]:
     return [f"{prefix}{i + 1}" for i in range(N_JOINTS)]
 
 
-# --- the dVRK's own joints and the motor-coordinate map ---------------------
+# --- the map between the dVRK's joints and the model's coordinates -----------
+# (the dVRK's joint names of each arm are data: its model card's [dvrk_topics])
 
-#: the joint names a dVRK PSM publishes on measured_js (dVRK 2.x), in the order
-#: of q1..q6 here; the jaw is published on its own topic (jaw/measured_js)
-DVRK_ARM_JOINT_NAMES = ("outer_yaw", "outer_pitch", "outer_insertion", "outer_roll", "outer_wrist_pitch", "outer_wrist_yaw")
-DVRK_JAW_JOINT_NAME = "jaw"
-#: the dVRK's joint order of the 7 values (arm joints, then the jaw)
-DVRK_JOINT_NAMES = (*DVRK_ARM_JOINT_NAMES, DVRK_JAW_JOINT_NAME)
 #: columns of q1..q7 that are motor coordinates: the dVRK's wrist pitch, wrist
 #: yaw and jaw mapped through inv(M) (the identification's coordinates)
 WRIST_COLUMNS = slice(4, 7)

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import DVRK_JOINT_NAMES
+from dvrk_dart.model.description import load_model
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, velocity_unit
 
 #: the identification's excitation (data README): nominal base frequency and harmonics
 EXCITATION_BASE_HZ = 0.18
@@ -87,8 +88,6 @@ def fitted_base_frequency(t: np.ndarray, q: np.ndarray) -> float:
 def fitted_excitation(name: str, rate_hz: float) -> Excitation:
     """The Fourier series fitted to the measured run `name`, sampled at rate_hz."""
     from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
-    from dvrk_dart.model.description import load_model
-
     if name not in EXCITATIONS:
         raise DvrkDartError(f"unknown excitation '{name}' (known: {', '.join(EXCITATIONS)})")
     run = load_run(resolve_run(name))
@@ -107,7 +106,7 @@ def fitted_excitation(name: str, rate_hz: float) -> Excitation:
         "base_frequency_hz": base_hz,
         "nominal_base_frequency_hz": EXCITATION_BASE_HZ,
         "harmonics": EXCITATION_HARMONICS,
-        "joints": list(DVRK_JOINT_NAMES),
+        "joints": list(load_model().dvrk_topics.joint_names),
         # rows: constant, sin(l w t) for l = 1..6, cos(l w t) for l = 1..6; columns: dVRK joints
         "coefficients": coefficients.tolist(),
         "fit_rms_position": np.sqrt(np.mean((basis @ coefficients - q_dvrk) ** 2, axis=0)).tolist(),
@@ -130,7 +129,7 @@ def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
     samples = int(math.floor(scenario.duration_s * rate_hz + 1e-9)) + 1
     steps = (samples - 1) * substeps + 1
     driver = CartesianDriver(load_arm(), scenario, "kinematic", dt, steps)
-    q, dq = np.empty((samples, len(DVRK_JOINT_NAMES))), np.empty((samples, len(DVRK_JOINT_NAMES)))
+    q, dq = np.empty((samples, N_JOINTS)), np.empty((samples, N_JOINTS))
     for k in range(steps):
         if k % substeps == 0:
             q[k // substeps] = driver.q_kin
@@ -153,8 +152,6 @@ def check_limits(excitation: Excitation) -> None:
     """Joint limits (the model's ranges, as for every measured run) and the dVRK's
     velocity limits ([dvrk_velocity_limits] of the model): one-line refusal."""
     from dvrk_dart.io.reference_data import check_joint_ranges
-    from dvrk_dart.model.description import load_model
-
     model = load_model()
     if not (np.isfinite(excitation.q).all() and np.isfinite(excitation.dq).all()):
         raise DvrkDartError(f"excitation {excitation.name}: the trajectory has non-finite values")
@@ -165,29 +162,28 @@ def check_limits(excitation: Excitation) -> None:
     over = speed > model.dvrk_velocity_limits
     if over.any():
         k, j = np.argwhere(over)[0]
-        unit = "m/s" if DVRK_JOINT_NAMES[j] == "outer_insertion" else "rad/s"
+        unit = velocity_unit(JOINT_NAMES[j])
         raise DvrkDartError(
-            f"excitation {excitation.name}: {DVRK_JOINT_NAMES[j]} moves at {speed[k, j]:.3f} {unit} at t = {excitation.t[k]:.3f} s, "
+            f"excitation {excitation.name}: {load_model().dvrk_topics.joint_names[j]} moves at {speed[k, j]:.3f} {unit} at t = {excitation.t[k]:.3f} s, "
             f"over the velocity limit {model.dvrk_velocity_limits[j]:g} {unit} ({model.source.name}, [dvrk_velocity_limits])"
         )
 
 
-def write_excitation(excitation: Excitation, folder, arm: str) -> dict:
+def write_excitation(excitation: Excitation, folder, arm: str | None) -> dict:
     """NAME.csv (time + dVRK joint names, dVRK units), NAME_servo_jp (a ROS 2 bag
     of servo_jp commands, the jaw on jaw/servo_jp) and excitation.json, in `folder`."""
     from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-    from dvrk_dart.io.bags import psm_joint_states, write_bag
-    from dvrk_dart.model.description import load_model
-
+    from dvrk_dart.io.bags import arm_joint_states, write_bag
     if Path(excitation.name).name != excitation.name or excitation.name in ("", ".", ".."):
         raise DvrkDartError(f"excitation name '{excitation.name}' cannot name a file")
     dvrk = load_model().motor_map.positions_to_dvrk(excitation.q)
-    header = ",".join(["time", *DVRK_JOINT_NAMES])
+    header = ",".join(["time", *load_model().dvrk_topics.joint_names])
     rows = "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.column_stack([excitation.t, dvrk]))
     csv = folder / f"{excitation.name}.csv"
     write_text_atomic(csv, header + "\n" + rows + "\n")
     bag = folder / f"{excitation.name}_servo_jp"
-    write_bag(bag, psm_joint_states(arm, excitation.t, excitation.q, suffix="servo_jp"))
+    states = arm_joint_states(arm, excitation.t, excitation.q, suffix="servo_jp")
+    write_bag(bag, states)
     summary = {
         "name": excitation.name,
         "samples": len(excitation.t),
@@ -195,9 +191,9 @@ def write_excitation(excitation: Excitation, folder, arm: str) -> dict:
         "rate_hz": float(1.0 / (excitation.t[1] - excitation.t[0])),
         "csv": csv.name,
         "bag": bag.name,
-        "topics": [f"/{arm}/servo_jp", f"/{arm}/jaw/servo_jp"],
-        "start_pose": dict(zip(DVRK_JOINT_NAMES, dvrk[0].tolist())),
-        "max_speed": dict(zip(DVRK_JOINT_NAMES, np.abs(load_model().motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
+        "topics": [state.topic for state in states],
+        "start_pose": dict(zip(load_model().dvrk_topics.joint_names, dvrk[0].tolist())),
+        "max_speed": dict(zip(load_model().dvrk_topics.joint_names, np.abs(load_model().motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
         "source": excitation.source,
     }
     write_json_atomic(folder / "excitation.json", summary)
