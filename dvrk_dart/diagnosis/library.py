@@ -66,7 +66,9 @@ def candidate_effects(
     else:
         effects += [FirstMomentPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k],
                                        mass_seen=mass_seen_by_gravity(arm, k)) for k in payload_links(arm.model)]
-    effects += [GravityTilt(arm), TimeShift(), CounterweightTransmission(arm)]
+    effects += [GravityTilt(arm), TimeShift()]
+    if arm.model.counterweight_link is not None:  # an arm with a counterweight tendon (the PSM's)
+        effects.append(CounterweightTransmission(arm))
     return effects
 
 

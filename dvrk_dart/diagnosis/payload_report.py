@@ -12,7 +12,7 @@ from dvrk_dart.diagnosis.payload import PointPayload, point_mass_parameters
 from dvrk_dart.diagnosis.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.model.arm import Arm
-from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.joints import N_JOINTS, PITCH
 
 #: a payload's mass counts as identified when its interval's ends are within
 #: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
@@ -105,10 +105,12 @@ def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
 
 
 def pitch_shaft_offsets(arm: Arm, position_base: np.ndarray) -> dict:
-    """Where a base-frame point (q = 0) sits relative to the pitch shaft centre:
-    horizontal distance perpendicular to the shaft and height above it (m), the
-    quantities of a hand measurement."""
-    pitch = next(l for l in arm.model.links.values() if l.group == "parallelogram" and l.variable is not None and l.joint_type == "revolute")
+    """Where a base-frame point (q = 0) sits relative to the pitch shaft centre
+    (the joint of the first link that q2 alone turns: the PSM's pitch, the
+    MTM's upper arm): horizontal distance perpendicular to the shaft and height
+    above it (m), the quantities of a hand measurement."""
+    pitch = next(l for l in arm.model.links.values() if l.joint_type == "revolute"
+                 and np.count_nonzero(l.variable.coeffs) == 1 and l.variable.coeffs[PITCH] != 0.0)
     T = arm.model.forward_kinematics(np.zeros(N_JOINTS))[pitch.key]
     up = -arm.model.gravity / np.linalg.norm(arm.model.gravity)
     v = np.asarray(position_base) - T[:3, 3]

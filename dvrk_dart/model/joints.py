@@ -12,6 +12,8 @@ N_JOINTS = len(JOINT_NAMES)
 #: the PSM's prismatic coordinate (its insertion): the PSM-only code (counterweight, insertion checks) names it
 PRISMATIC_JOINTS = ("q3",)
 INSERTION = JOINT_NAMES.index("q3")
+#: the coordinate that pitches the arm (both arms' q2): the reference of a hand-measured payload position
+PITCH = JOINT_NAMES.index("q2")
 
 
 def prismatic_coordinates() -> tuple[str, ...]:
