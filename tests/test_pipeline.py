@@ -111,10 +111,10 @@ def test_cli_runs_a_short_scenario_end_to_end(tmp_path):
 
 def test_cli_unknown_mode_is_a_clear_error(tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "dvrk_dart.cli", "run", "replay-two", "--mode", "torque", "--out", str(tmp_path / "x")],
+        [sys.executable, "-m", "dvrk_dart.cli", "run", "replay-mtm-two", "--mode", "torque", "--out", str(tmp_path / "x")],
         capture_output=True, text=True,
     )
-    assert done.returncode == 2 and "--mode: scenario 'replay-two' runs in velocity, kinematic, not 'torque'" in done.stderr
+    assert done.returncode == 2 and "--mode: scenario 'replay-mtm-two' runs in velocity, not 'torque'" in done.stderr
     assert not (tmp_path / "x").exists()
 
 
