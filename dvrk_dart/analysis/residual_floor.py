@@ -55,8 +55,7 @@ def prediction_noise(arm: Arm, run: ProcessedRun, seed: int = 0) -> np.ndarray:
     analysis = run.periodic
     t = run.t - run.t[0]
     nominal = run.in_band(arm.identified.predict(run.q, run.dq, run.ddq))
-    # each coefficient's standard deviation: the mean's, then each harmonic's cosine and sine
-    std = np.sqrt(np.repeat(analysis.position_noise.harmonic_variance, 2, axis=0)[1:])
+    std = np.sqrt(analysis.position_noise.coefficient_variance())
     rng = np.random.default_rng(seed)
     moved = []
     for _ in range(PREDICTION_NOISE_DRAWS):

@@ -120,8 +120,7 @@ def _weighted_fit(train: list[RunData], base: BaseParameters, joints: np.ndarray
         Yb = run.Y[:, :, base.independent]
         rows_Y.append(periodic.projector.series(Yb.reshape(len(Yb), -1)).coefficients.reshape(-1, *Yb.shape[1:]))
         rows_tau.append(periodic.efforts.coefficients)
-        # the mean's variance, then each harmonic's for its cosine and its sine row
-        rows_variance.append(np.repeat(periodic.effort_noise.harmonic_variance, 2, axis=0)[1:])
+        rows_variance.append(periodic.effort_noise.coefficient_variance())
     return fit_weighted_periodic(np.concatenate(rows_Y), np.concatenate(rows_tau), np.concatenate(rows_variance), joints, what)
 
 

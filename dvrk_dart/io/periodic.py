@@ -99,6 +99,10 @@ class Noise:
     harmonic_variance: np.ndarray
     whole_periods: int
 
+    def coefficient_variance(self) -> np.ndarray:
+        """(2K+1, n) the variance of each coefficient of `harmonic_design`'s columns: the mean's, then each harmonic's for its cosine and its sine."""
+        return np.repeat(self.harmonic_variance, 2, axis=0)[1:]
+
 
 def harmonic_design(t: np.ndarray, frequency_hz: float, harmonics: int, derivative: int = 0) -> np.ndarray:
     """(N, 2K+1) columns [1, cos w t, sin w t, ..., cos K w t, sin K w t], or their time derivative."""
