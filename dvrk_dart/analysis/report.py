@@ -442,9 +442,11 @@ ENV_SITE = "DVRK_DART_SITE"
 
 
 def docs_link(report_dir: Path) -> str:
-    """The documentation's index, relative to the report's folder (both stay where they are built)."""
-    site = Path(os.environ.get(ENV_SITE, PROJECT_DIR / "site"))
-    return Path(os.path.relpath(site.resolve() / "index.html", Path(report_dir).resolve())).as_posix()
+    """The documentation's index relative to the report's folder: the built
+    site (`make docs`), else its sources (docs/index.md) until it is built."""
+    site = Path(os.environ.get(ENV_SITE, PROJECT_DIR / "site")) / "index.html"
+    target = site if site.is_file() else PROJECT_DIR / "docs" / "index.md"
+    return Path(os.path.relpath(target.resolve(), Path(report_dir).resolve())).as_posix()
 
 
 def unreadable_runs(report_dir: str | os.PathLike) -> dict[str, str]:
