@@ -270,3 +270,20 @@ def test_bad_bags_are_refused_in_one_line(tmp_path, run_two, capsys):
     assert main(["import", str(bags["short"][0]), "--out", str(tmp_path / "x.csv"), "--rate", "100"]) == 2
     assert "--rate" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_jaw_follows_the_arm_topic_and_one_clock_is_required(tmp_path, capsys, run_two):
+    """--topic /PSM2/measured_js reads the jaw of /PSM2 (a bag holding PSM1 and
+    PSM2 gives PSM2's wrist and jaw); header stamps on one topic and receive
+    times on the other are refused in one line."""
+    topics, stamps = jittered_topics(run_two, arm="PSM2", rows=slice(0, 1500))
+    decoys, decoy_stamps = jittered_topics(run_two, seed=1, arm="PSM1", rows=slice(0, 1500))
+    for states in decoys:  # PSM1's jaw far from PSM2's: reading it would show
+        states.position[:] += 1.0
+    bag = write_bag(tmp_path / "two_arms", topics + decoys, stamps_ns={**stamps, **decoy_stamps})
+    run = load_bag_run(bag, BagTopics(topic="/PSM2/measured_js"))
+    # PSM2's jaw to the grid's sample offset (PSM1's would be 1 rad off)
+    assert np.max(np.abs(run.q[:, 6] - np.interp(run.t, run_two.t - run_two.t[0], run_two.q[:, 6]))) < 0.1
+    mixed = {topics[0].topic: stamps[topics[0].topic], topics[1].topic: np.zeros_like(stamps[topics[1].topic])}
+    with pytest.raises(DvrkDartError, match="two clocks cannot be aligned"):
+        load_bag_run(write_bag(tmp_path / "mixed", topics, stamps_ns=mixed), BagTopics(arm="PSM2"))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -297,3 +298,74 @@ def test_divergence_values_show_enough_digits(tmp_path, capsys):
     value, bounds = lines[0].split(" at ")[1].split(" outside its range ")
     low, high = (float(b) for b in bounds.split("]")[0].strip("[").split(","))
     assert not (low <= float(value) <= high), lines[0]  # the printed value itself shows the violation
+
+
+# ---------------------------------------------------------------- 12. the second pass's one-liners
+
+
+def _covariance_file(tmp_path: Path, damage: str) -> Path:
+    from dvrk_dart.identification.outputs import COVARIANCE_FORMAT
+    from dvrk_dart.identification.regressor import parameter_layout, standard_vector
+    from dvrk_dart.model.arm import load_arm
+
+    arm = load_arm()
+    layout = parameter_layout(arm.model)
+    n = len(layout)
+    covariance = np.diag(np.full(n, 1e-6))
+    if damage == "asymmetric":
+        covariance[0, 1] = 1e-7
+    else:  # an eigenvalue far below zero
+        covariance[0, 0] = -1e-3
+    path = tmp_path / f"{damage}.json"
+    path.write_text(json.dumps({"format": COVARIANCE_FORMAT, "names": list(layout.names),
+                                "nominal": standard_vector(arm.params, layout).tolist(), "covariance": covariance.tolist()}))
+    return path
+
+
+@pytest.mark.parametrize("argv, fragments", [
+    (["export", "x", "--bag", "y", "--arm", "PSM 1"], ["--arm", "not an arm's namespace"]),
+    (["export", "x", "--bag", "y", "--arm", "/PSM1/"], ["--arm"]),
+    (["report", "--runs", "x", "--out", "y", "--jobs", "0"], ["--jobs", "at least 1"]),
+    (["uncertainty", "--measured", "two", "--out", "y", "--jobs", "-1"], ["--jobs", "at least 1"]),
+])
+def test_option_values_are_checked_in_one_line(tmp_path, capsys, argv, fragments):
+    code, lines = cli(capsys, *argv)
+    assert code == 2 and len(lines) == 1 and "Traceback" not in lines[0], lines
+    for fragment in fragments:
+        assert fragment in lines[0], lines
+
+
+@pytest.mark.parametrize("damage, words", [("asymmetric", "not symmetric"), ("indefinite", "not positive semidefinite")])
+def test_a_covariance_that_is_no_covariance_is_refused(tmp_path, capsys, damage, words):
+    code, lines = cli(capsys, "uncertainty", "--measured", "two", "--samples", "2", "--duration", "0.2",
+                      "--params-cov", _covariance_file(tmp_path, damage), "--out", tmp_path / "mc")
+    assert_one_line_error(code, lines, "--params-cov", words)
+    assert not (tmp_path / "mc").exists()
+
+
+def test_a_large_relative_std_draws_real_bodies(tmp_path, capsys):
+    """The help allows (0, 1): 0.99 draws bodies, projected where they must be, no traceback."""
+    from dvrk_dart.identification.sampling import sample_parameters
+    from dvrk_dart.model.arm import load_arm
+
+    drawn = sample_parameters(load_arm(), 8, seed=2, relative_std=0.99)
+    assert len(drawn.samples) == 8 and drawn.projected_bodies >= 0
+
+
+def test_a_short_first_period_and_a_folder_for_a_csv_are_refused(tmp_path, capsys):
+    short = measured_csv(tmp_path, "short.csv", rows=1300)  # fewer processed samples than one period
+    code, lines = cli(capsys, "model-errors", "--measured", short, "--first-period")
+    assert_one_line_error(code, lines, "--first-period", "fewer than one period")
+    folder = tmp_path / "a_folder"
+    folder.mkdir()
+    code, lines = cli(capsys, "import", resolve_run("two"), "--out", folder, "--force")
+    assert code == 2 and len(lines) == 1
+
+
+def test_a_report_of_two_folders_holding_one_run_is_refused(tmp_path, capsys, a_run_folder):
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    shutil.copytree(a_run_folder, runs / "first")
+    shutil.copytree(a_run_folder, runs / "second")
+    code, lines = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "site")
+    assert_one_line_error(code, lines, "hold the same run")
