@@ -1,0 +1,219 @@
+"""The `dvrk-dart` command line's options: every command's parser, the checks
+of option values, and the one-line usage errors (the commands are in cli.py)."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
+
+
+def arm_namespace(text: str) -> str:
+    """A ROS namespace of one name (PSM1, MTML): letters, digits, underscores, a letter first."""
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", text):
+        raise argparse.ArgumentTypeError(f"'{text}' is not an arm's namespace (a ROS name such as PSM1: letters, digits, _)")
+    return text
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: at least 1")
+    return value
+
+
+def _add_arm_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    p.add_argument("--params", help="identified parameters file (default: the arm's upstream params.json, resolved at run time)")
+
+
+def _add_bag_options(p: argparse.ArgumentParser) -> None:
+    """Where a measured run that is a ROS bag keeps the PSM's joint states."""
+    g = p.add_argument_group("measured runs that are ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
+    g.add_argument("--arm", default=None, type=arm_namespace,
+                   help="the arm's namespace (default: the arm model's, PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js; MTML: /MTML/measured_js)")
+    g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
+    g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
+    g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
+
+
+def _add_processing_option(p: argparse.ArgumentParser, default: str | None) -> None:
+    said = default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
+    p.add_argument("--processing", default=default, choices=("upstream", "periodic"),
+                   help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
+                        f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
+
+
+REPLAY_SHORTHANDS = {
+    "replay-one": "one",
+    "replay-two": "two",
+    "replay-one-no-weight": "one-no-weight",
+    "replay-one-105g": "one-105g",
+}
+
+
+def _executor_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--executor", default="local", choices=("local", "ray"), help="where the runs execute: local processes or Ray")
+    p.add_argument("--ray-address", default=None, help="an existing Ray cluster (default: start a local Ray instance with --jobs CPUs)")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as every other error: one line naming the option, exit 2."""
+
+    def error(self, message: str):
+        print(f"{self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser(commands) -> argparse.ArgumentParser:
+    """The parser of every command; `commands` holds the cmd_* functions (dvrk_dart.cli)."""
+    parser = OneLineParser(prog="dvrk-dart", description=commands.__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
+    p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+    p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
+    _add_processing_option(p, "upstream")
+    p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    _add_arm_options(p)
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_model_errors)
+
+    p = sub.add_parser("session-floor", help="the floor of the identified model's residual from two recordings of one trajectory")
+    p.add_argument("--measured", required=True, help="a measured run: path (CSV or ROS bag), or one|two|one-no-weight|...")
+    p.add_argument("--repeat", required=True, help="the same trajectory recorded in another session")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    _add_processing_option(p, "periodic")
+    _add_arm_options(p)
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_session_floor)
+
+    p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
+    p.add_argument("--runs", nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")
+    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs, scored only")
+    p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
+    p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
+    p.add_argument("--friction-law", default="sign", choices=("sign", "tanh"),
+                   help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
+    p.add_argument("--reversal-velocity", type=float, default=None, help="velocity scale of the tanh law (rad/s or m/s)")
+    p.add_argument("--bounds", default=None, help="bounds and prior file (default: the arm's, models/<arm>/identification.toml)")
+    p.add_argument("--prior", default="none",
+                   help="prior of the parameters the data leave free: 'none' (about zero: minimum norm, the default), "
+                        "'default' (the model's default params.json) or a params file")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
+    p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
+    _add_processing_option(p, None)
+    _add_bag_options(p)
+    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    p.set_defaults(func=commands.cmd_identify)
+
+    p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
+    p.add_argument("bag", help="rosbag2 folder, .mcap or .db3 file, or ROS 1 .bag")
+    p.add_argument("--out", required=True, help="the CSV to write (21 columns, model coordinates, 200 Hz)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_import)
+
+    p = sub.add_parser("export", help="a simulated run -> a ROS 2 bag (MCAP) like a real PSM's recording")
+    p.add_argument("run_dir", help="a run folder (run.mcap)")
+    p.add_argument("--bag", required=True, help="the bag to write (a rosbag2 folder; a .bag file with --storage ros1)")
+    p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the topics (default: the arm model's, PSM1)")
+    p.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3", "ros1"), help="rosbag2 storage, or a ROS 1 bag")
+    p.set_defaults(func=commands.cmd_export)
+
+    p = sub.add_parser("excitation", help="a trajectory to play on a dVRK: CSV + ROS 2 bag of servo_jp")
+    p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the servo_jp topics (default: the arm model's, PSM1)")
+    p.add_argument("--rate", type=float, default=None, help="command rate (Hz, default 200)")
+    p.set_defaults(func=commands.cmd_excitation)
+
+    p = sub.add_parser("model-check", help="parameter oddities and model facts")
+    _add_arm_options(p)
+    p.set_defaults(func=commands.cmd_model_check)
+
+    def sim_options(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
+        p.add_argument("--dt", type=float, default=1e-3, help="simulation step (s)")
+        p.add_argument("--duration", type=float, default=None, help="simulate only the first seconds")
+        p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
+                       help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
+                            "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
+        _add_arm_options(p)
+
+    p = sub.add_parser("run", help="run one scenario variant")
+    p.add_argument("scenario", help="scenario name (pipelines/scenarios/) or .toml file")
+    p.add_argument("--mode", choices=MODES, help="default: the scenario's first mode")
+    p.add_argument("--out", required=True, help="output folder of the run")
+    sim_options(p)
+    p.set_defaults(func=commands.cmd_run)
+
+    for name in ("replay", *REPLAY_SHORTHANDS):
+        p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
+        if name == "replay":
+            p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+            _add_bag_options(p)
+        p.add_argument("--mode", default="velocity", choices=MODES)
+        p.add_argument("--out", help="output folder (default out/runs/<run name>)")
+        _add_processing_option(p, "upstream")
+        sim_options(p)
+        p.set_defaults(func=commands.cmd_replay)
+
+    p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
+    p.add_argument("--out", default="out", help="output folder (runs in OUT/runs)")
+    p.add_argument("--report", default="report", help="report folder")
+    p.add_argument("--jobs", type=positive_int, default=2, help="parallel worker processes")
+    p.add_argument("--force", action="store_true", help="re-run runs that are up to date")
+    p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
+                   help="the simulated arm of the campaign's runs that do not name one (default: their scenario's)")
+    _executor_options(p)
+    p.set_defaults(func=commands.cmd_validate)
+
+    p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
+    p.add_argument("--measured", required=True, help="measured run: path, or one|two|...")
+    p.add_argument("--samples", type=positive_int, default=64, help="parameter sets drawn")
+    p.add_argument("--out", required=True, help="output folder")
+    source = p.add_mutually_exclusive_group()
+    source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
+    source.add_argument("--relative-std", type=float, help="fallback: relative std of every parameter (default 0.05)")
+    p.add_argument("--duration", type=float, default=None, help="replay only the first seconds")
+    p.add_argument("--seed", type=int, default=0, help="seed of the parameter draws")
+    p.add_argument("--jobs", type=positive_int, default=2, help="parallel workers")
+    _executor_options(p)
+    _add_processing_option(p, None)
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_uncertainty)
+
+    p = sub.add_parser("report", help="build the validation report from a folder of runs")
+    p.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap)")
+    p.add_argument("--out", required=True, help="report folder")
+    p.add_argument("--extra", help="folder of extra sections (*.html fragments and images)")
+    p.add_argument("--jobs", type=positive_int, default=None, help="parallel workers (default: the machine's cores)")
+    p.add_argument("--allow-unreadable", action="store_true", help="exit 0 even when some run folders could not be read")
+    p.set_defaults(func=commands.cmd_report)
+
+    p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
+    p.add_argument("--measured", required=True, nargs="+",
+                   help="measured run(s): path, or one|two|one-no-weight|one-105g|one-105g-half|one-105g-insertion; several: one set of effects for all")
+    p.add_argument("--baseline", help="same trajectory without the withheld effect (isolates a payload)")
+    p.add_argument("--train", nargs="*", default=[], help="training runs (default: the measured run)")
+    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
+    p.add_argument("--repeat", help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
+    p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
+    p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "
+                                            "only on joints whose measured efforts leave the parameters' band")
+    p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
+    _executor_options(p)
+    _add_processing_option(p, "upstream")
+    p.add_argument("--out", required=True)
+    _add_arm_options(p)
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_diagnose)
+    return parser
