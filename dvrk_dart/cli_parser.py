@@ -189,6 +189,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _executor_options(p)
     _add_processing_option(p, None)
     _add_bag_options(p)
+    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
     p.set_defaults(func=commands.cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")

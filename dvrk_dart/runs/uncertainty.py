@@ -50,6 +50,8 @@ class UncertaintyConfig:
     jobs: int = 2
     #: upstream | periodic | None: periodic where the run is periodic (`processing_of`)
     processing: str | None = None
+    #: the arm's description file (None: the command's, --arm-model); workers load it themselves
+    arm_model: str | None = None
 
 
 def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
@@ -67,9 +69,17 @@ def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
     return processed[0].processing, note or "the run is a periodic excitation"
 
 
-def _replay(task: tuple[str, str, float | None, float, str, str]) -> dict:
+def _replay(task: tuple[str, str, float | None, float, str, str, str]) -> dict:
     """Worker: the velocity replay with one parameter file -> its efforts
-    (periodic: at the measured samples, in the measured efforts' band)."""
+    (periodic: at the measured samples, in the measured efforts' band), on the
+    arm of `task`'s model file (a Ray worker has no command context)."""
+    from dvrk_dart.model.description import using_model
+
+    with using_model(task[-1]):
+        return _replay_on_arm(task[:-1])
+
+
+def _replay_on_arm(task: tuple[str, str, float | None, float, str, str]) -> dict:
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
     from dvrk_dart.runs.config import RunConfig
@@ -99,6 +109,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
     from dvrk_dart.identification.sampling import sample_parameters
     from dvrk_dart.io.reference_data import resolve_run, sha256_of
     from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.model.description import current_model_file
 
     out = check_output_folder(out, "uncertainty")
     resolve_run(config.measured)  # a missing run is an error before any work
@@ -110,7 +121,8 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         paths = [folder / "params" / "nominal.json"] + [folder / "params" / f"sample_{i:04d}.json" for i in range(config.samples)]
         for path, params in zip(paths, [drawn.nominal, *drawn.samples]):
             path.write_text(json.dumps(params, indent=1))
-        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics, processing) for p in paths]
+        arm_model = config.arm_model or str(current_model_file())
+        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics, processing, arm_model) for p in paths]
         results, failures = {}, {}
         for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
             if error is None:
