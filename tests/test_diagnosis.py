@@ -517,3 +517,16 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
     lo, hi = payload["gravity_efforts_at_q0_interval"][0]
     assert lo * hi > 0.0  # determined: the interval excludes zero
     assert result["nuisance_offsets"]["weighted"]["q1"] == 0.0 and result["nuisance_offsets"]["weighted"]["q2"] > 0.0
+
+
+def test_the_answer_sentence_says_what_how_far_and_what_is_left():
+    from dvrk_dart.diagnosis.validation import answer_sentence
+
+    result = {"gap_before": {"train": [0.3, 0.3, 0.6], "holdout": [0.33, 0.32, 0.65]},
+              "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]},
+              "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05]}
+    sentence = answer_sentence(result)
+    assert "friction_q3, offset_q1" in sentence and "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
+    assert "above the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
+    result["session_floor"] = [0.06, 0.1, 0.15]
+    assert "at the session floor" in answer_sentence(result)

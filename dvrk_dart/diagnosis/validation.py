@@ -91,9 +91,36 @@ def _images(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
 
 
+#: the joints the answer sentence speaks of (the arm's main joints)
+ANSWER_JOINTS = 3
+
+
+def answer_sentence(result: dict) -> str:
+    """The diagnosis in one sentence: which effects, how far the gap shrinks on
+    the main joints (held-out runs when there are), and what is left against
+    the session floor when a --repeat measured it."""
+    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
+    before, after = result["gap_before"][split][:ANSWER_JOINTS], result["gap_after"][split][:ANSWER_JOINTS]
+    joints = JOINT_NAMES[:ANSWER_JOINTS]
+    selected = list(result["selection"]["selected"])
+    payload = result.get("payload")
+    if payload:  # the effect under study first, in words
+        selected = [f"a payload on {payload['link']} ({payload['group']})"] + [n for n in selected if not n.startswith("payload")]
+    top = ", ".join(selected[:3]) + (f" and {len(selected) - 3} more" if len(selected) > 3 else "") if selected else "no effect"
+    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
+    where = "on the held-out runs" if split == "holdout" else "on the training runs"
+    sentence = f"The gap is mostly explained by {top}: {where}, {gaps}."
+    floor = result.get("session_floor")
+    if floor is not None:
+        above = [j for j, a, f in zip(joints, after, floor) if a > 1.5 * f]
+        sentence += (f" What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
+                     if above else " What is left is at the session floor: no fixed effect can remove more.")
+    return sentence
+
+
 def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
-    """An HTML fragment: gaps before/after per joint, the ranked effects, the
-    payload, and the figures at `image_sources`."""
+    """An HTML fragment: the answer in one sentence, gaps before/after per
+    joint, the ranked effects, the payload, and the figures at `image_sources`."""
     e = html.escape
 
     def row(cells, tag="td"):
@@ -102,7 +129,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
     def fmt(v):
         return "-" if v is None else f"{v:.4g}"
 
-    parts = [f"<h3>{e(title)}</h3>", "<table>", row(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES)], "th")]
+    parts = [f"<h3>{e(title)}</h3>", f"<p class='answer'><strong>{e(answer_sentence(result))}</strong></p>", "<table>", row(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES)], "th")]
     for key in ("gap_before", "gap_after"):
         for split in ("train", "holdout"):
             values = (result.get(key) or {}).get(split)
@@ -216,6 +243,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
                            parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
                            jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
                            processing=getattr(args, "processing", "upstream"))
+    print(answer_sentence(result))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
