@@ -28,8 +28,12 @@ def positive_int(text: str) -> int:
     return value
 
 
-def _add_arm_options(p: argparse.ArgumentParser) -> None:
+def _add_arm_model_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+
+
+def _add_arm_options(p: argparse.ArgumentParser) -> None:
+    _add_arm_model_option(p)
     p.add_argument("--params", help="identified parameters file (default: the arm's upstream params.json, resolved at run time)")
 
 
@@ -111,7 +115,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     _add_processing_option(p, None)
     _add_bag_options(p)
-    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    _add_arm_model_option(p)
     p.set_defaults(func=commands.cmd_identify)
 
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
@@ -189,7 +193,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _executor_options(p)
     _add_processing_option(p, None)
     _add_bag_options(p)
-    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    _add_arm_model_option(p)
     p.set_defaults(func=commands.cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
