@@ -30,6 +30,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
     from dvrk_dart.io.atomic import atomic_path
     from dvrk_dart.io.bags import is_bag, load_bag_run
+    from dvrk_dart.io.outputs import check_writable_folder
     from dvrk_dart.io.reference_data import sample_rate_hz
 
     topics = _bag_topics(args)
@@ -44,6 +45,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
     if out.exists() and not args.force:
         raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
+    check_writable_folder(out.absolute().parent)
     run = load_bag_run(args.bag, topics)
     values = np.hstack([run.q, run.dq, run.tau])
     with atomic_path(out) as tmp:
@@ -55,8 +57,13 @@ def cmd_import(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
     from dvrk_dart.io.bags import export_run
+    from dvrk_dart.io.outputs import check_writable_folder
 
-    out = export_run(Path(args.run_dir), Path(args.bag), args.arm, args.storage)
+    run_dir, bag = Path(args.run_dir), Path(args.bag)
+    if run_dir.resolve() in bag.absolute().resolve().parents:
+        raise DvrkDartError(f"--bag: {bag} is inside the run folder {run_dir}: a run folder holds only what the run wrote")
+    check_writable_folder(bag.absolute().parent, "--bag")
+    out = export_run(run_dir, bag, args.arm, args.storage)
     print(f"{args.run_dir} -> {out}")
     return 0
 
@@ -159,9 +166,20 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
     from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.scenarios import load_scenario
 
-    dynamics = args.dynamics or load_scenario(scenario).dynamics
+    spec = load_scenario(scenario)
+    _check_arm_of_scenario(args, spec)
+    dynamics = args.dynamics or spec.dynamics
     return RunConfig(scenario, mode, args.counterweight, dynamics, args.dt, args.duration, args.params, measured,
                      getattr(args, "processing", "upstream"))
+
+
+def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
+    """A scenario written for one arm (its `arm_model`) is not run on another."""
+    from dvrk_dart.model.description import resolve_arm_model
+
+    asked = getattr(args, "arm_model", None)
+    if asked and spec.arm_model and resolve_arm_model(asked) != resolve_arm_model(spec.arm_model):
+        raise DvrkDartError(f"--arm-model {asked}: the scenario {spec.name} is the {spec.arm_model} arm's; leave --arm-model out")
 
 
 def _run_and_write(config, out: Path | None) -> int:
@@ -208,11 +226,15 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from dvrk_dart.io.outputs import (
         check_not_inside,
         check_output_folder,
-        check_writable_folder,
+        check_shared_folder,
     )
-    from dvrk_dart.pipeline import validate
+    from dvrk_dart.pipeline import VALIDATION_KIND, validate
 
-    check_writable_folder(args.out)
+    check_shared_folder(args.out, VALIDATION_KIND)
+    if args.dynamics is not None:
+        from dvrk_dart.runs.config import RunConfig, sim_config_for
+
+        sim_config_for(RunConfig("replay", "velocity", dynamics=args.dynamics))  # a bad --dynamics fails now, not after the campaign
     check_output_folder(args.report, "report", "--report")
     check_not_inside(args.out, args.report, "--out", "--report")
 
@@ -223,12 +245,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from dvrk_dart.analysis.report import build_report, unreadable_runs
 
-    index = build_report(Path(args.runs), Path(args.out), extra_sections=Path(args.extra) if args.extra else None, jobs=args.jobs)
-    unreadable = unreadable_runs(Path(args.out))
-    for name, error in unreadable.items():
-        print(f"dvrk-dart: unreadable run {name}: {error}", file=sys.stderr)
+    index = build_report(Path(args.runs), Path(args.out), extra_sections=Path(args.extra) if args.extra else None, jobs=args.jobs,
+                         allow_unreadable=args.allow_unreadable)
+    for name, error in unreadable_runs(Path(args.out)).items():
+        print(f"dvrk-dart: left out of the report, unreadable run {name}: {error}", file=sys.stderr)
     print(f"report: {index}")
-    return 2 if unreadable and not args.allow_unreadable else 0
+    return 0
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -314,6 +336,9 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
+    if getattr(args, "ray_address", None) and getattr(args, "executor", None) != "ray":
+        print("dvrk-dart: --ray-address: only with --executor ray", file=sys.stderr)
+        return 2
     if getattr(args, "executor", None) == "ray":
         from dvrk_dart.runs.executors import check_ray_address
 
@@ -342,6 +367,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader of stdout left (| head): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:  # a file the system refuses (permissions, a full disk): its name and why, in one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"dvrk-dart: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except Terminated:
         print("dvrk-dart: terminated (partial outputs removed)", file=sys.stderr)
         return 143

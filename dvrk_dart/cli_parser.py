@@ -4,10 +4,14 @@ of option values, and the one-line usage errors (the commands are in cli.py)."""
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import re
+from pathlib import Path
 import sys
 
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 
@@ -28,8 +32,57 @@ def positive_int(text: str) -> int:
     return value
 
 
+def measured_run(text: str) -> str:
+    """A measured run's name or path, checked for what the name alone tells
+    (the file's content is checked when it is read)."""
+    from dvrk_dart.io.reference_data import RUNS, manifest
+
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty name (one, two, ... or a path)")
+    if text in RUNS or text in manifest()["files"]:
+        return text
+    path = Path(text)
+    if path.is_symlink() and not path.exists():
+        raise argparse.ArgumentTypeError(f"{text}: a broken symbolic link (to {os.readlink(path)})")
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{text}: file not found, and not a reference run ({', '.join(RUNS)})")
+    if not (path.is_file() or path.is_dir()):
+        raise argparse.ArgumentTypeError(f"{text}: not a regular file (a CSV or a ROS bag)")
+    return text
+
+
+def number_in(low: float, high: float, unit: str = "", open_low: bool = False):
+    """An argparse type: a finite number in [low, high] ((low, high] when `open_low`)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+        if not (math.isfinite(value) and (value > low if open_low else value >= low) and value <= high):
+            raise argparse.ArgumentTypeError(f"{text}: must be in {'(' if open_low else '['}{low:g}, {high:g}] {unit}".rstrip())
+        return value
+
+    return parse
+
+
+def seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"{value}: a seed is a whole number in [0, 2^32)")
+    return value
+
+
+#: rates a dVRK recording or command stream can have (its controllers run at most at a few kHz)
+RATE_HZ = number_in(1.0, 1e4, "Hz")
+SECONDS = number_in(0.0, MAX_DURATION_S, "s", open_low=True)
+
+
 def _add_arm_model_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--arm-model", default="psm", help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
+    p.add_argument("--arm-model", default=None, help="the arm: psm, mtm (models/), a model folder or a description file (default psm; "
+                   "a scenario of another arm is refused)")
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
@@ -44,7 +97,7 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
                    help="the arm's namespace (default: the arm model's, PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js; MTML: /MTML/measured_js)")
     g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
     g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
-    g.add_argument("--rate", type=float, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
+    g.add_argument("--rate", type=RATE_HZ, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
 
 
 def _add_processing_option(p: argparse.ArgumentParser, default: str | None) -> None:
@@ -71,7 +124,8 @@ class OneLineParser(argparse.ArgumentParser):
     """Usage errors as every other error: one line naming the option, exit 2."""
 
     def error(self, message: str):
-        print(f"{self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        print(f"dvrk-dart: {self.prog.removeprefix('dvrk-dart').strip() + ': ' if self.prog != 'dvrk-dart' else ''}"
+              f"{message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)
 
 
@@ -81,7 +135,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
-    p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+    p.add_argument("--measured", type=measured_run, required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
     p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
     _add_processing_option(p, "upstream")
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
@@ -91,8 +145,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_model_errors)
 
     p = sub.add_parser("session-floor", help="the floor of the identified model's residual from two recordings of one trajectory")
-    p.add_argument("--measured", required=True, help="a measured run: path (CSV or ROS bag), or one|two|one-no-weight|...")
-    p.add_argument("--repeat", required=True, help="the same trajectory recorded in another session")
+    p.add_argument("--measured", type=measured_run, required=True, help="a measured run: path (CSV or ROS bag), or one|two|one-no-weight|...")
+    p.add_argument("--repeat", type=measured_run, required=True, help="the same trajectory recorded in another session")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_processing_option(p, "periodic")
     _add_arm_options(p)
@@ -100,18 +154,18 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_session_floor)
 
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
-    p.add_argument("--runs", nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")
-    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs, scored only")
+    p.add_argument("--runs", type=measured_run, nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")
+    p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs, scored only")
     p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
     p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
     p.add_argument("--friction-law", default="sign", choices=("sign", "tanh"),
                    help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
-    p.add_argument("--reversal-velocity", type=float, default=None, help="velocity scale of the tanh law (rad/s or m/s)")
+    p.add_argument("--reversal-velocity", type=number_in(0.0, 1e3, open_low=True), default=None, help="velocity scale of the tanh law (rad/s or m/s)")
     p.add_argument("--bounds", default=None, help="bounds and prior file (default: the arm's, models/<arm>/identification.toml)")
     p.add_argument("--prior", default="none",
                    help="prior of the parameters the data leave free: 'none' (about zero: minimum norm, the default), "
                         "'default' (the model's default params.json) or a params file")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random states of the base-parameter test")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     _add_processing_option(p, None)
     _add_bag_options(p)
@@ -136,7 +190,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the servo_jp topics (default: the arm model's, PSM1)")
-    p.add_argument("--rate", type=float, default=None, help="command rate (Hz, default 200)")
+    p.add_argument("--rate", type=RATE_HZ, default=None, help="command rate (Hz, default 200)")
     p.set_defaults(func=commands.cmd_excitation)
 
     p = sub.add_parser("model-check", help="parameter oddities and model facts")
@@ -145,8 +199,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
 
     def sim_options(p: argparse.ArgumentParser) -> None:
         p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
-        p.add_argument("--dt", type=float, default=1e-3, help="simulation step (s)")
-        p.add_argument("--duration", type=float, default=None, help="simulate only the first seconds")
+        p.add_argument("--dt", type=number_in(0.0, MAX_STEP_S, "s", open_low=True), default=1e-3, help="simulation step (s)")
+        p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
         p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                        help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
                             "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
@@ -162,7 +216,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     for name in ("replay", *REPLAY_SHORTHANDS):
         p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
         if name == "replay":
-            p.add_argument("--measured", required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+            p.add_argument("--measured", type=measured_run, required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
             _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
@@ -181,14 +235,14 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_validate)
 
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
-    p.add_argument("--measured", required=True, help="measured run: path, or one|two|...")
+    p.add_argument("--measured", type=measured_run, required=True, help="measured run: path, or one|two|...")
     p.add_argument("--samples", type=positive_int, default=64, help="parameter sets drawn")
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
-    source.add_argument("--relative-std", type=float, help="fallback: relative std of every parameter (default 0.05)")
-    p.add_argument("--duration", type=float, default=None, help="replay only the first seconds")
-    p.add_argument("--seed", type=int, default=0, help="seed of the parameter draws")
+    source.add_argument("--relative-std", type=number_in(0.0, 0.999, open_low=True), help="fallback: relative std of every parameter (default 0.05)")
+    p.add_argument("--duration", type=SECONDS, default=None, help="replay only the first seconds")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the parameter draws")
     p.add_argument("--jobs", type=positive_int, default=2, help="parallel workers")
     _executor_options(p)
     _add_processing_option(p, None)
@@ -201,16 +255,16 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="report folder")
     p.add_argument("--extra", help="folder of extra sections (*.html fragments and images)")
     p.add_argument("--jobs", type=positive_int, default=None, help="parallel workers (default: the machine's cores)")
-    p.add_argument("--allow-unreadable", action="store_true", help="exit 0 even when some run folders could not be read")
+    p.add_argument("--allow-unreadable", action="store_true", help="report without the run folders that cannot be read (listed in the report); without it they refuse the report")
     p.set_defaults(func=commands.cmd_report)
 
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
-    p.add_argument("--measured", required=True, nargs="+",
+    p.add_argument("--measured", type=measured_run, required=True, nargs="+",
                    help="measured run(s): path, or one|two|one-no-weight|one-105g|one-105g-half|one-105g-insertion; several: one set of effects for all")
-    p.add_argument("--baseline", help="same trajectory without the withheld effect (isolates a payload)")
-    p.add_argument("--train", nargs="*", default=[], help="training runs (default: the measured run)")
-    p.add_argument("--holdout", nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
-    p.add_argument("--repeat", help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
+    p.add_argument("--baseline", type=measured_run, help="same trajectory without the withheld effect (isolates a payload)")
+    p.add_argument("--train", type=measured_run, nargs="*", default=[], help="training runs (default: the measured run)")
+    p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
+    p.add_argument("--repeat", type=measured_run, help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
     p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
     p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "
                                             "only on joints whose measured efforts leave the parameters' band")

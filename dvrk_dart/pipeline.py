@@ -9,6 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.outputs import check_shared_folder, write_marker
 from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.runs.campaign import load_campaign, needs_diagnosis, run_campaign
 
@@ -20,6 +21,9 @@ def _campaign(configs, runs_dir: Path, jobs: int, force: bool, label: str, execu
           f"{len(summary['failures'])} failed, {summary['wall_time_s']:.0f} s")
     return summary
 
+
+#: the marker's kind of the folder `validate --out` fills in place
+VALIDATION_KIND = "validation"
 
 #: the identification's folder per processing (periodic: the default of `identify`)
 IDENTIFICATION_FOLDERS = {"periodic": "identification", "upstream": "identification-upstream"}
@@ -82,6 +86,17 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     """The campaign (its entries without `dynamics` simulate the `dynamics` arm),
     the diagnosis validation, the runs that simulate what the diagnosis found,
     and the report."""
+    check_shared_folder(out_dir, VALIDATION_KIND)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
+    try:
+        return _validate(out_dir, report_dir, jobs, force, dynamics, executor, ray_address)
+    finally:  # what this run wrote is the tool's, even when a stage failed: the next run may replace it
+        write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
+
+
+def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics: str | None, executor: str,
+              ray_address: str | None) -> int:
     runs_dir = out_dir / "runs"
     diagnosis_dir = out_dir / "diagnosis"
     configs = load_campaign(diagnosis_dir=diagnosis_dir, default_dynamics=dynamics)

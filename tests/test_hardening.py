@@ -106,8 +106,8 @@ def test_a_failed_rerun_leaves_the_previous_run_folder_intact(tmp_path, capsys, 
         raise OSError("disk full")
 
     monkeypatch.setattr("dvrk_dart.io.rerun_log.write_rrd", broken_rrd)
-    with pytest.raises(OSError, match="disk full"):
-        main(["run", "rectilinear", "--mode", "velocity", "--duration", "0.1", "--out", str(out)])
+    code, lines = cli(capsys, "run", "rectilinear", "--mode", "velocity", "--duration", "0.1", "--out", out)
+    assert code == 2 and lines == ["dvrk-dart: disk full"]
     assert tree_digest(out) == before
     assert [p.name for p in tmp_path.iterdir()] == ["run"]
 
@@ -133,7 +133,7 @@ def test_a_divergence_at_the_first_step_says_why_and_keeps_strict_json(tmp_path,
 
 
 @pytest.mark.parametrize("damage", ["corrupt", "truncated", "empty", "foreign"])
-def test_report_names_unreadable_runs_and_fails_unless_allowed(tmp_path, capsys, a_run_folder, damage):
+def test_report_refuses_unreadable_runs_unless_allowed_then_names_them(tmp_path, capsys, a_run_folder, damage):
     runs = tmp_path / "runs"
     runs.mkdir()
     subprocess.run(["cp", "-r", str(a_run_folder), str(runs / "good")], check=True)
@@ -143,10 +143,11 @@ def test_report_names_unreadable_runs_and_fails_unless_allowed(tmp_path, capsys,
     log.write_bytes({"corrupt": content[:100] + b"\0" * 500 + content[600:], "truncated": content[: len(content) // 2],
                      "empty": b"", "foreign": b"PK\x03\x04 a zip file"}[damage])
     code, lines = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "report")
-    assert code == 2 and any("unreadable run bad" in line for line in lines), lines
+    assert code == 2 and len(lines) == 1 and "bad" in lines[0] and "--allow-unreadable" in lines[0], lines
+    assert not (tmp_path / "report").exists()
+    code, lines = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "report", "--allow-unreadable")
+    assert code == 0 and any("unreadable run bad" in line for line in lines), lines
     assert "bad" in (tmp_path / "report" / "index.html").read_text()
-    code, _ = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "report", "--allow-unreadable")
-    assert code == 0
 
 
 # ---------------------------------------------------------------- 5. bad --out, before any work

@@ -22,15 +22,24 @@ NAMES = st.text(alphabet="abcdé _-0", min_size=1, max_size=10).map(lambda s: s.
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(roles=st.sampled_from([DIAGNOSE_ROLES, IDENTIFY_ROLES]).flatmap(lambda r: st.lists(st.sampled_from(r), min_size=2, max_size=2)),
-       names=st.lists(NAMES, min_size=2, max_size=2, unique=True), link=st.booleans())
-def test_one_recording_in_two_roles_is_refused_whatever_its_names(tmp_path_factory, roles, names, link):
+       names=st.lists(NAMES, min_size=2, max_size=2, unique=True),
+       form=st.sampled_from(["copy", "link", "crlf", "trimmed", "fewer digits"]))
+def test_one_recording_in_two_roles_is_refused_whatever_its_names(tmp_path_factory, roles, names, form):
+    """Under any name, and however the copy was written (its bytes differ)."""
     folder = tmp_path_factory.mktemp("runs")
     source = resolve_run("two")
     first = folder / f"{names[0]}.csv"
     shutil.copy(source, first)
     second = folder / f"{names[1]}.csv"
-    if link:
+    lines = source.read_text().splitlines()
+    if form == "link":
         os.symlink(first, second)
+    elif form == "crlf":
+        second.write_bytes("\r\n".join(lines).encode() + b"\r\n")
+    elif form == "trimmed":
+        second.write_text("\n".join(lines[37:-11]) + "\n")
+    elif form == "fewer digits":
+        np.savetxt(second, np.loadtxt(source, delimiter=","), delimiter=",", fmt="%.9g")
     else:
         shutil.copy(source, second)
     with pytest.raises(DvrkDartError, match="the same recording as"):

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.outputs import KNOWN_ENTRIES, MARKER, building_folder, read_marker
+from dvrk_dart.io.outputs import MARKER, building_folder, read_marker
 
 NAME = st.text(alphabet="abcXYZ_- é0.", min_size=1, max_size=8).filter(lambda n: n not in (".", "..") and n != MARKER)
 TOOL_FILES = ("index.html", "figures/plot.png", "analysis/metrics.csv")
@@ -113,16 +113,39 @@ def test_half_built_folders_of_dead_processes_are_removed(tmp_path):
     assert not stale.exists() and live.exists()
 
 
-def test_a_folder_marked_by_an_earlier_version_replaces_only_its_known_files(tmp_path):
+def test_a_marker_proves_nothing_about_files_changed_since(tmp_path):
+    """A forged or copied marker, or a file the user edited after the run: the
+    checksum differs, so the file is the user's and is never replaced."""
+    target = tmp_path / "id"
+    _build(target, b"tool")
+    (target / "index.html").write_text("edited by the user")
+    with pytest.raises(DvrkDartError, match="not what dvrk-dart wrote"):
+        with building_folder(target, "report") as folder:
+            (folder / "index.html").write_text("new")
+    assert (target / "index.html").read_text() == "edited by the user"
+
+
+def test_an_earlier_versions_marker_is_not_trusted(tmp_path):
     target = tmp_path / "id"
     target.mkdir()
     (target / MARKER).write_text("identification\n")
-    (target / "params.json").write_text("{}")
-    (target / "notes.txt").write_text("mine")
-    with building_folder(target, "identification") as folder:
-        (folder / "params.json").write_text('{"new": 1}')
-    assert (target / "notes.txt").read_text() == "mine" and "new" in (target / "params.json").read_text()
-    assert "params.json" in KNOWN_ENTRIES["identification"]
+    (target / "params.json").write_text("mine")
+    with pytest.raises(DvrkDartError, match="not made by dvrk-dart"):
+        with building_folder(target, "identification"):
+            pass
+    assert (target / "params.json").read_text() == "mine"
+
+
+def test_a_symbolic_link_as_out_is_refused(tmp_path):
+    real = tmp_path / "real"
+    _build(real, b"tool")
+    (real / "notes.txt").write_text("mine")
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    with pytest.raises(DvrkDartError, match="symbolic link"):
+        with building_folder(link, "report"):
+            pass
+    assert link.is_symlink() and (real / "notes.txt").read_text() == "mine"
 
 
 @pytest.mark.parametrize("args, user_file", [

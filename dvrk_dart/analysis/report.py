@@ -389,8 +389,11 @@ def _page(sections: list[str], title: str) -> str:
 # ---------------------------------------------------------------- build
 
 
-def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None) -> Path:
-    """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html."""
+def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None,
+                 allow_unreadable: bool = True) -> Path:
+    """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html.
+    Run folders that cannot be read are listed in the report, or, unless
+    `allow_unreadable`, refuse the report before anything is written."""
     from dvrk_dart.analysis.figures import build_figures
     from dvrk_dart.analysis.realistic_arm import realistic_arm_section
 
@@ -404,6 +407,10 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
     analysis = analyze(runs_dir, jobs=jobs)
     if not analysis.runs and not analysis.failures:
         raise DvrkDartError(f"--runs: no run folder (<run>/run.mcap) in {runs_dir}")
+    if analysis.failures and not allow_unreadable:
+        name, error = next(iter(analysis.failures.items()))
+        others = f" and {len(analysis.failures) - 1} more" if len(analysis.failures) > 1 else ""
+        raise DvrkDartError(f"--runs: {runs_dir / name} cannot be read ({error}){others}; --allow-unreadable reports without them")
     published = load_published()
     with building_folder(out_dir, "report") as building:
         write_analysis(analysis, building / ANALYSIS_DIR)

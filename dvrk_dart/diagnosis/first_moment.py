@@ -189,6 +189,10 @@ def parse_payload_at(text: str, model: PsmModel) -> tuple[int, np.ndarray]:
             raise DvrkDartError(f"--payload-at {text!r}: unknown link '{name}'") from None
     if key not in model.links:
         raise DvrkDartError(f"--payload-at {text!r}: unknown link {key}")
+    try:
+        _moving_body_link(model, key)
+    except DvrkDartError as exc:
+        raise DvrkDartError(f"--payload-at {text!r}: {exc}") from None
     reach = arm_reach_m(model, key)
     if float(np.linalg.norm(position)) > reach:
         raise DvrkDartError(f"--payload-at {text!r}: ({', '.join(f'{v:g}' for v in position)}) m is {np.linalg.norm(position):.3g} m "

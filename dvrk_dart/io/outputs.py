@@ -4,14 +4,17 @@ swapped in whole at the end, and never replacing what the tool did not make.
 A folder the tool makes (a run, a report, a diagnosis) holds a marker file
 naming its kind and every file it wrote, with checksums. An existing `--out`
 may be replaced only when it is empty or holds that marker; replacing it
-replaces only what the marker lists: anything else a user put there (a plot in
-figures/, notes) is carried into the new folder as it is. Half-built folders
-of processes that no longer run are removed.
+replaces only the files the marker lists *with their listed content*: anything
+else (a plot a user put in figures/, notes, a file the user edited since) is
+carried into the new folder as it is, and where the new output would write a
+file of the same name the command is refused. A symbolic link is never
+replaced. Half-built folders of processes that no longer run are removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import shutil
@@ -23,30 +26,27 @@ from pathlib import Path
 from dvrk_dart.errors import DvrkDartError
 
 MARKER = ".dvrk-dart"
-#: what each kind of folder is made of: the tool's files in a folder marked by
-#: an earlier version (a marker naming the kind, without the list of files)
-KNOWN_ENTRIES = {
-    "run": {"config.json", "metrics.json", "run.mcap", "run.rrd", "inputs.sha256"},
-    "report": {"index.html", "analysis", "figures"},
-    "uncertainty": {"uncertainty.json", "band.csv", "params", "figures"},
-    "excitation": {"excitation.json"},
-    "diagnosis": {"diagnosis.json", "diagnosis.html", "figures", "replay_before", "replay_after", "where.csv"},
-    "identification": {"params.json", "params_covariance.json", "identification.json", "identification.html"},
-}
 
 
 @dataclass(frozen=True)
 class Marker:
-    """What the tool wrote in a folder: its kind and every file (relative path ->
-    sha256); `files` None for a marker of an earlier version (kind only)."""
+    """What the tool wrote in a folder: its kind and every file (relative path -> sha256)."""
 
     kind: str
-    files: dict[str, str] | None
+    files: dict[str, str]
 
-    def owns(self, relative: str) -> bool:
-        if self.files is None:
-            return relative.split("/")[0] in KNOWN_ENTRIES.get(self.kind, set())
-        return relative in self.files
+    def owns(self, folder: Path, relative: str) -> bool:
+        """The tool wrote this file and nobody changed it since (a marker can be
+        copied or forged: only the content's checksum proves the file is ours)."""
+        from dvrk_dart.io.reference_data import sha256_of
+
+        path = folder / relative
+        if relative not in self.files or path.is_symlink() or not path.is_file():
+            return False
+        try:
+            return sha256_of(path) == self.files[relative]
+        except OSError:
+            return False
 
 
 def read_marker(folder: Path) -> Marker | None:
@@ -59,18 +59,22 @@ def read_marker(folder: Path) -> Marker | None:
         return None
     try:
         raw = json.loads(text)
-    except json.JSONDecodeError:
-        return Marker(text.strip(), None) if "\n" not in text.strip() else None
+    except json.JSONDecodeError:  # an earlier version's marker (its kind only) proves nothing
+        return None
     if not isinstance(raw, dict) or not isinstance(raw.get("kind"), str) or not isinstance(raw.get("files"), dict):
         return None
     return Marker(raw["kind"], {str(k): str(v) for k, v in raw["files"].items()})
 
 
-def _files(folder: Path) -> list[str]:
-    """Relative paths of every file and symlink below `folder` (links not followed), the marker excluded."""
+def _files(folder: Path, skip_marked: bool = False) -> list[str]:
+    """Relative paths of every file and symlink below `folder` (links not
+    followed), the marker excluded; with `skip_marked`, not those of
+    sub-folders that hold their own marker."""
     out = []
     for root, dirs, files in os.walk(folder):
         base = Path(root)
+        if skip_marked:
+            dirs[:] = [d for d in dirs if not (base / d / MARKER).is_file() or (base / d).is_symlink()]
         for name in files + [d for d in dirs if (base / d).is_symlink()]:
             relative = (base / name).relative_to(folder).as_posix()
             if relative != MARKER:
@@ -78,11 +82,11 @@ def _files(folder: Path) -> list[str]:
     return sorted(out)
 
 
-def write_marker(folder: Path, kind: str) -> None:
+def write_marker(folder: Path, kind: str, skip_marked: bool = False) -> None:
     """The marker of a folder the tool built: its kind and what it wrote, with checksums."""
     from dvrk_dart.io.reference_data import sha256_of
 
-    files = {relative: sha256_of(folder / relative) for relative in _files(folder) if (folder / relative).is_file()}
+    files = {relative: sha256_of(folder / relative) for relative in _files(folder, skip_marked) if (folder / relative).is_file()}
     (folder / MARKER).write_text(json.dumps({"kind": kind, "files": files}, indent=1) + "\n", encoding="utf-8")
 
 
@@ -110,10 +114,32 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     """The folder `path` can receive a `kind` folder (replacing only one the tool
     made): raise a one-line error otherwise. Checks only: call it before any work."""
     path = check_writable_folder(path, option)
+    if path.is_symlink():
+        raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
     if path.is_dir() and not replaceable(path, kind):
         raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as a {kind} folder: refusing to replace it")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise DvrkDartError(f"{option}: {path.absolute().parent} is not writable")
+    return path
+
+
+def check_shared_folder(path: str | os.PathLike, kind: str, option: str = "--out") -> Path:
+    """A folder several stages fill in place (`validate --out`: runs, the
+    diagnosis, the identification): new, empty, or marked as `kind` with every
+    file the marker does not vouch for inside a sub-folder of its own marker.
+    Call `write_marker(path, kind, skip_marked=True)` once it is ours."""
+    path = check_writable_folder(path, option)
+    if path.is_symlink():
+        raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
+    if not path.is_dir() or not any(path.iterdir()):
+        return path
+    marker = read_marker(path)
+    if marker is None or marker.kind != kind:
+        raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as a {kind} folder: refusing to write in it")
+    foreign = [relative for relative in _files(path, skip_marked=True) if not marker.owns(path, relative)]
+    if foreign:
+        raise DvrkDartError(f"{option}: {path / foreign[0]} is not what dvrk-dart wrote there (a file of yours, or one changed since): "
+                            "move it, then run again")
     return path
 
 
@@ -158,23 +184,37 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     try:
         yield building
         write_marker(building, kind)
-        if target.is_dir():
-            _carry_user_files(target, building)
-        swap_in(building, target)
+        with _folder_lock(target.parent):  # two commands finishing into one --out take turns
+            check_output_folder(target, kind)  # the folder may have changed while this one was built
+            if target.is_dir():
+                _carry_user_files(target, building)
+            swap_in(building, target)
     finally:
         if building.exists():
             shutil.rmtree(building, ignore_errors=True)
 
 
+@contextlib.contextmanager
+def _folder_lock(folder: Path) -> Iterator[None]:
+    """An exclusive lock on the folder itself (no lock file left behind)."""
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(descriptor)
+
+
 def _carry_user_files(old: Path, new: Path) -> None:
-    """Move what the old folder's marker does not list into the new folder, at
-    the same relative path; refuse (old folder untouched) where the new one
+    """Move what the old folder's marker does not vouch for into the new folder,
+    at the same relative path; refuse (old folder untouched) where the new one
     wrote a file of the same name."""
     marker = read_marker(old) or Marker("", {})
-    user = [relative for relative in _files(old) if not marker.owns(relative)]
+    user = [relative for relative in _files(old) if not marker.owns(old, relative)]
     clashes = [relative for relative in user if (new / relative).exists() or (new / relative).is_symlink()]
     if clashes:
-        raise DvrkDartError(f"--out: {old / clashes[0]} is not dvrk-dart's but the new output writes that file: move it, then run again")
+        raise DvrkDartError(f"--out: {old / clashes[0]} is not what dvrk-dart wrote there (a file of yours, or one changed "
+                            "since) and the new output writes that file: move it, then run again")
     for relative in user:
         (new / relative).parent.mkdir(parents=True, exist_ok=True)
         os.replace(old / relative, new / relative)

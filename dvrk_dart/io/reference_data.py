@@ -172,22 +172,44 @@ def resolve_run(name_or_path: str | Path) -> Path:
     return resolve(text, explicit=text)
 
 
+#: two recordings whose positions agree to this on a whole window are one
+#: recording (rad, m): two sessions differ by the encoders' noise, 1e-4 and more
+SAME_RECORDING_TOLERANCE = 1e-7
+SAME_RECORDING_WINDOW = 50
+
+
 def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
     """(option, run) pairs -> {run: {"role", "path", "sha256"}}; the same
-    recording (by path or content) in two roles, or twice in one, is refused
-    in one line naming both."""
-    seen: dict[str, tuple[str, str]] = {}
+    recording in two roles, or twice in one, is refused in one line naming
+    both: the same path or content, or the same positions however the file was
+    written (line endings, digits, a trimmed copy)."""
+    seen: list[tuple[str, str, str, np.ndarray]] = []
     inputs = {}
     for option, spec in roles:
         path = Path(resolve_run(spec))
+        q = load_run(path).q
         digest = sha256_of(path)
-        if digest in seen:
-            other_option, other = seen[digest]
-            raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} (same content): "
-                                "each role needs its own recording")
-        seen[digest] = (option, str(spec))
+        for other_option, other, other_digest, other_q in seen:
+            if digest == other_digest or same_recording(q, other_q):
+                raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} "
+                                    f"({'same content' if digest == other_digest else 'same positions'}): "
+                                    "each role needs its own recording")
+        seen.append((option, str(spec), digest, q))
         inputs[str(spec)] = {"role": option, "path": str(path), "sha256": digest}
     return inputs
+
+
+def same_recording(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the positions `a` hold a window of `b`'s, or `b` of `a`'s, sample
+    for sample (a copy, re-saved or trimmed: no two sessions agree that well)."""
+    def window_of(short: np.ndarray, long: np.ndarray) -> bool:
+        middle = max(0, len(short) // 2 - SAME_RECORDING_WINDOW // 2)  # moving there; a still start is alike in any two sessions
+        head = short[middle:middle + SAME_RECORDING_WINDOW]
+        starts = np.flatnonzero(np.all(np.abs(long - head[0]) <= SAME_RECORDING_TOLERANCE, axis=1))
+        return any(len(long) - k >= len(head)
+                   and np.all(np.abs(long[k:k + len(head)] - head) <= SAME_RECORDING_TOLERANCE) for k in starts)
+
+    return window_of(a, b) or window_of(b, a)
 
 
 @dataclass(frozen=True)
@@ -281,6 +303,8 @@ def load_run(path: Path | str) -> MeasuredRun:
         return load_bag_run(path)
     if not path.is_file():
         raise DvrkDartError(f"{path}: file not found")
+    if not os.access(path, os.R_OK):
+        raise DvrkDartError(f"{path}: not readable (permission denied)")
     try:
         values = pd.read_csv(path, header=None, dtype=float, skip_blank_lines=True).to_numpy()
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError):  # a well-formed file reads as numbers at once

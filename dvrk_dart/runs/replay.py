@@ -64,6 +64,15 @@ def replay(
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 
+def replay_duration(processed: ProcessedRun, duration_s: float | None) -> float:
+    """The replayed span: `duration_s`, or the whole processed run (checked against it)."""
+    available = float(processed.t[-1] - processed.t[0])
+    duration = available if duration_s is None else float(duration_s)
+    if not 0.0 < duration <= available + 1e-12:
+        raise DvrkDartError(f"--duration: {duration:g} s outside (0, {available:.3f}] s of the measured run")
+    return duration
+
+
 def replay_processed(
     processed: ProcessedRun,
     measured: str | Path,
@@ -81,10 +90,7 @@ def replay_processed(
     measured sample (the last step's reference is extrapolated by 1 step)."""
     identified = IdentifiedModel(model, params)
     t_meas = processed.t - processed.t[0]
-    available = float(t_meas[-1])
-    duration = available if duration_s is None else float(duration_s)
-    if not 0.0 < duration <= available + 1e-12:
-        raise DvrkDartError(f"duration {duration} s outside (0, {available:.3f}] s of the measured run")
+    duration = replay_duration(processed, duration_s)
 
     dt = config.dt_s
     steps = int(round(duration / dt)) + (1 if through_last_sample else 0)

@@ -107,13 +107,17 @@ def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndar
 
 def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
     from dvrk_dart.identification.sampling import sample_parameters
-    from dvrk_dart.io.reference_data import resolve_run, sha256_of
+    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.model.description import current_model_file
 
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.runs.replay import replay_duration
+
     out = check_output_folder(out, "uncertainty")
-    resolve_run(config.measured)  # a missing run is an error before any work
     processing, processing_why = processing_of(config)
+    # the run, its processing and the span: every input's error before any work
+    replay_duration(process(load_run(resolve_run(config.measured)), processing), config.duration_s)
     start = time.perf_counter()
     drawn = sample_parameters(load_arm(), config.samples, config.seed, config.relative_std, config.params_cov)
     with building_folder(out, "uncertainty") as folder:

@@ -5,8 +5,9 @@ twenty operations on 7- and 12-vectors) as DART spends integrating the closed
 chain; these three kernels do the same arithmetic in three calls.  They are
 the implementation (no numpy twin to drift from): `simulator.py` calls them
 and adds the optional identified effects in numpy.  Compiled once per machine
-(`cache=True`, under the package's __pycache__), at import: a process pays it
-with its imports, not inside a run.
+(`cache=True`, under the package's __pycache__ or the user's cache folder), at
+import: a process pays it with its imports, not inside a run.  A user who can
+write neither (a read-only install, no home) compiles them in every process.
 """
 
 from __future__ import annotations
@@ -17,7 +18,14 @@ from numba import njit
 from dvrk_dart.model.joints import INSERTION
 
 
-@njit(cache=True)
+def _compiled(function):
+    try:
+        return njit(cache=True)(function)
+    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+        return njit(function)
+
+
+@_compiled
 def counterweight_acceleration(ddq3, dq3, q3, v_cw, x_cw, ratio, dt):
     """The ideal tendon's counterweight acceleration for a given ddq3: ratio·ddq3
     plus the deadbeat correction that makes the end-of-step velocity and position
@@ -26,7 +34,7 @@ def counterweight_acceleration(ddq3, dq3, q3, v_cw, x_cw, ratio, dt):
     return ratio * ddq3 + (ratio * dq3 - v_cw) / dt + (ratio * q3 - x_cw) / (dt * dt)
 
 
-@njit(cache=True)
+@_compiled
 def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, G, counterweight_dof, ratio):
     """(dq_target, ddq, xdd) of the deadbeat servo: the coordinates' target velocity
     (with position feedback when q_des has entries), the acceleration that reaches
@@ -45,13 +53,13 @@ def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, G, co
     return dq_target, ddq, xdd
 
 
-@njit(cache=True)
+@_compiled
 def split_inverse_dynamics(F, effort_of_F, dof_forces_of_F):
     """(actuator efforts, forces on the dofs) from DART's inverse dynamics F."""
     return effort_of_F @ F, dof_forces_of_F @ F
 
 
-@njit(cache=True)
+@_compiled
 def observe(x, v, coordinates_of_x, dq_before, dt, range_mid, range_half):
     """(q, dq, ddq of the step, whether every coordinate is finite and in its range)."""
     q = coordinates_of_x @ x
