@@ -286,8 +286,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for name, spans in runs.items():
             for span, e in spans.items():
                 print(f"{name + ' ' + span.replace('_run', ''):<22} " + " ".join(f"{v:7.4f}" for v in e["relative_error"]) + f"   {kind}")
-    if args.friction_law != "sign":
-        print(f"note: errors above use the fitted law {data['config']['friction_law']}; params.json readers apply sign(v)")
+    print(f"friction law: {data['config']['friction_law']}")
+    if args.friction_law == "tanh":
+        print("note: errors above use the tanh law; params.json readers apply sign(v)")
     worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
     outside = [k for k, m in data["masses_kg"].items() if not m["lower"] <= m["value"] <= m["upper"]]
     print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "

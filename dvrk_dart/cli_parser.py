@@ -158,8 +158,9 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs, scored only")
     p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
     p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
-    p.add_argument("--friction-law", default="sign", choices=("sign", "tanh"),
-                   help="Coulomb reversal: sign (upstream; what params.json readers apply) or tanh(v / --reversal-velocity)")
+    p.add_argument("--friction-law", default="presliding", choices=("presliding", "sign", "tanh"),
+                   help="Coulomb reversal: presliding (default: over a distance per joint chosen on the training runs, written to "
+                        "params.json as xs), sign (upstream), or tanh(v / --reversal-velocity) (params.json readers apply sign)")
     p.add_argument("--reversal-velocity", type=number_in(0.0, 1e3, open_low=True), default=None, help="velocity scale of the tanh law (rad/s or m/s)")
     p.add_argument("--bounds", default=None, help="bounds and prior file (default: the arm's, models/<arm>/identification.toml)")
     p.add_argument("--prior", default="none",

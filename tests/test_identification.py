@@ -247,9 +247,10 @@ def test_periodic_identification_is_physical_and_records_its_processing(periodic
 
 
 def test_periodic_identification_on_the_held_out_run(periodic_result):
-    """Held-out "two", periodic on both sides: J1 well below the published
-    parameters' error; J2 and J3 within 5 % of them (measured: +3 %, +4 %: J3's
-    repeatable gap is not a linear friction, see the diagnosis)."""
+    """Held-out "two", periodic on both sides: no joint of J1..J3 worse than the
+    published parameters (the issue's acceptance). With the sign law J3 came out
+    1-4 % worse: its friction reverses over about 0.1 mm (the pre-sliding law,
+    chosen on "one"), which a model of the instantaneous velocity cannot follow."""
     result = periodic_result
     from dvrk_dart.model.arm import load_arm
 
@@ -257,8 +258,24 @@ def test_periodic_identification_on_the_held_out_run(periodic_result):
     run = result.holdout[0].processed
     published = load_arm().identified.predict(run.q, run.dq, run.ddq)
     theirs = np.sqrt(np.mean((run.in_band(published) - run.tau) ** 2, axis=0))[:3]
-    assert own[0] < 0.95 * theirs[0], (own, theirs)
-    assert np.all(own[1:] < 1.05 * theirs[1:]), (own, theirs)
+    assert np.all(own <= theirs), (own, theirs)
+    assert own[0] < 0.8 * theirs[0] and own[1] < 0.9 * theirs[1], (own, theirs)  # measured 0.55x, 0.81x
+    relative = np.array(result.errors(result.holdout[0], first_period=True)["relative_error"][:3])
+    reference = np.array(result.errors(result.holdout[0], first_period=True, theta=result.prior_theta, sign_law=True)["relative_error"][:3]) \
+        if np.any(result.prior_theta) else None
+    assert reference is None or np.all(relative <= reference)
+
+
+def test_the_presliding_distances_are_chosen_on_the_training_run(periodic_result):
+    """Every friction link has a distance from the bounds file's candidates (0:
+    sign), chosen by the training residual; the insertion stage's about 0.1 mm."""
+    choice = periodic_result.presliding_choice
+    law = periodic_result.regressor.friction_law
+    assert set(choice) == {str(k) for k in periodic_result.regressor.layout.friction_links}
+    for key, entry in choice.items():
+        assert entry["distance"] == law.distance(int(key))
+        assert min(entry["score_by_distance"].values()) == entry["score_by_distance"][f"{entry['distance']:g}"]
+    assert 3e-5 <= law.distance(8) <= 3e-4
 
 
 def _simulated_periodic_run(path, truth_Y_theta, positions, t, noise_std, rng):
@@ -275,13 +292,17 @@ def _simulated_periodic_run(path, truth_Y_theta, positions, t, noise_std, rng):
     return MeasuredRun(path, data)
 
 
-def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_result, tmp_path):
+def test_periodic_standard_errors_match_the_scatter_over_noise_draws(tmp_path):
     """Simulated periodic runs (the identified parameters on the analytic motion
     of "one", white effort noise of the measured size): over 20 noise draws the
-    base parameters scatter as the stated standard errors say, within a factor 1.5."""
+    base parameters scatter as the stated standard errors say, within a factor
+    1.5. The sign law: a pre-sliding state starts with a transient that does not
+    repeat, which the noise estimate of these model-made efforts would count as
+    noise (a real run's own start transient is in its measured efforts either way)."""
     from dvrk_dart.identification.identify import RunData, _weighted_fit
+    from dvrk_dart.identification.regressor import FrictionLaw
 
-    result = periodic_result
+    result = identify(IdentificationConfig(runs=("one",), processing="periodic", friction_law=FrictionLaw("sign")))
     clean = result.train[0].processed
     Y = result.regressor(clean.q, clean.dq, clean.ddq)
     efforts = Y @ result.theta

@@ -41,6 +41,7 @@ import numpy as np
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.base import ZERO_COLUMN_TOLERANCE, BaseParameters
 from dvrk_dart.identification.regressor import PARAMETER_CLASSES, ParameterLayout
+from dvrk_dart.identification.presliding import PreslidingCandidates
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.pseudo_inertia import PSEUDO_INERTIA_BASIS
@@ -70,6 +71,7 @@ class Bounds:
     source: Path
     mass_kg: dict[int, tuple[float, float]]
     prior_std: dict[str, float]
+    presliding: PreslidingCandidates = PreslidingCandidates()
 
     def scales(self, layout: ParameterLayout) -> np.ndarray:
         return np.array([self.prior_std[c] for c in layout.classes])
@@ -105,7 +107,19 @@ def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
         value = std.get(cls)
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0.0):
             raise DvrkDartError(f"{path}: prior_std.{cls} must be a positive number")
-    return Bounds(path, masses, {k: float(v) for k, v in std.items()})
+    return Bounds(path, masses, {k: float(v) for k, v in std.items()}, _presliding_candidates(raw.get("presliding", {}), path))
+
+
+def _presliding_candidates(raw: dict, path: Path) -> PreslidingCandidates:
+    """[presliding]: candidate distances per kind of joint (positive, finite)."""
+    lists = {}
+    for name in ("revolute_rad", "prismatic_m"):
+        values = raw.get(name, [])
+        if not (isinstance(values, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                 and math.isfinite(v) and v > 0.0 for v in values)):
+            raise DvrkDartError(f"{path}: presliding.{name} must be a list of positive distances")
+        lists[name] = tuple(float(v) for v in values)
+    return PreslidingCandidates(**lists)
 
 
 def integrated_autocorrelation_time(x: np.ndarray) -> float:

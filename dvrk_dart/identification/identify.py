@@ -25,6 +25,7 @@ from dvrk_dart.identification.fit import (
     fit_weighted_periodic,
     load_bounds,
 )
+from dvrk_dart.identification.presliding import choose_distances, with_link_column
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_vector
 from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_all
@@ -42,7 +43,8 @@ class IdentificationConfig:
     runs: tuple[str, ...]
     holdout: tuple[str, ...] = ()
     joints: tuple[str, ...] = JOINT_NAMES
-    friction_law: FrictionLaw = FrictionLaw()
+    #: presliding without distances: each friction link's distance chosen on the training runs (presliding.py)
+    friction_law: FrictionLaw = FrictionLaw("presliding")
     bounds_file: str | None = None
     prior: str = PRIOR_NONE
     seed: int = 0
@@ -58,6 +60,8 @@ class RunData:
     path: Path
     processed: ProcessedRun
     Y: np.ndarray  # (N, 7, n_standard), in the run's band (periodic: projected on its harmonics)
+    #: Y under the sign law, where pre-sliding columns replaced some of Y's (parameters without xs: the published)
+    Y_sign: np.ndarray | None = None
 
 
 @dataclass
@@ -75,17 +79,21 @@ class IdentificationResult:
     holdout: list[RunData]
     processing_note: str | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
+    #: link key -> the chosen pre-sliding distance and the training score of every candidate
+    presliding_choice: dict = field(default_factory=dict)
 
     @property
     def theta(self) -> np.ndarray:
         return self.consistent.theta
 
-    def predicted(self, run: RunData, theta: np.ndarray | None = None) -> np.ndarray:
-        return run.Y @ (self.theta if theta is None else theta)
+    def predicted(self, run: RunData, theta: np.ndarray | None = None, sign_law: bool = False) -> np.ndarray:
+        Y = run.Y_sign if sign_law and run.Y_sign is not None else run.Y
+        return Y @ (self.theta if theta is None else theta)
 
-    def errors(self, run: RunData, first_period: bool = False, theta: np.ndarray | None = None) -> dict:
+    def errors(self, run: RunData, first_period: bool = False, theta: np.ndarray | None = None, sign_law: bool = False) -> dict:
+        """Errors of the identified parameters (or `theta`: with `sign_law`, parameters of the sign law's model)."""
         n = run.processed.first_period_samples() if first_period else len(run.processed)
-        predicted, measured = self.predicted(run, theta)[:n], run.processed.tau[:n]
+        predicted, measured = self.predicted(run, theta, sign_law)[:n], run.processed.tau[:n]
         return {
             "samples": int(len(measured)),
             "relative_error": relative_error(predicted, measured).tolist(),
@@ -161,10 +169,24 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     check_consistent_runs(train + holdout)
     timings["load_and_regressor_s"] = time.perf_counter() - start
     base = find_base_parameters(regressor, seed=config.seed, joints=joints)
-    wls = _weighted_fit(train, base, joints, "--runs " + " ".join(config.runs))
+    what = "--runs " + " ".join(config.runs)
+    choice = {}
+    if regressor.friction_law.kind == "presliding" and not regressor.friction_law.presliding:
+        train, regressor.friction_law, choice = choose_distances(
+            train, regressor, base, joints, bounds.presliding, lambda runs: _weighted_fit(runs, base, joints, what))
+        holdout = [_with_law(run, regressor) for run in holdout]
+    wls = _weighted_fit(train, base, joints, what)
     timings["base_and_wls_s"] = time.perf_counter() - start - timings["load_and_regressor_s"]
     t0 = time.perf_counter()
     consistent = fit_consistent(wls, base, regressor.layout, bounds, prior, solver=config.solver)
     timings["convex_program_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - start
-    return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings)
+    return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings,
+                                choice)
+
+
+def _with_law(run: RunData, regressor: Regressor) -> RunData:
+    """`run` with the Coulomb columns of the regressor's pre-sliding links."""
+    for key, _ in regressor.friction_law.presliding:
+        run = with_link_column(run, regressor, key, regressor.friction_law)
+    return run

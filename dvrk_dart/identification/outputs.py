@@ -128,10 +128,10 @@ def summary(result: IdentificationResult) -> dict:
         },
     }
     prior_errors = {} if not np.any(result.prior_theta) else {
-        run.name: result.errors(run, first_period=True, theta=result.prior_theta) for run in result.holdout
+        run.name: result.errors(run, first_period=True, theta=result.prior_theta, sign_law=True) for run in result.holdout
     }
     reference = reference_theta(result)
-    reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0]) for run in result.holdout} if reference else {}
+    reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0], sign_law=True) for run in result.holdout} if reference else {}
     se = wls.standard_errors
     return {
         "joints": list(JOINT_NAMES),
@@ -143,6 +143,12 @@ def summary(result: IdentificationResult) -> dict:
         },
         "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
         "processing": _processing(result),
+        "presliding": {
+            "definition": "per friction link: the distance over which its Coulomb friction reverses (Dahl; 0 = sign), "
+                          "chosen on the training runs by their weighted fit's residual (sum over fitted joints of "
+                          "(rms / rms with sign)^2), from the bounds file's [presliding] candidates",
+            "links": result.presliding_choice,
+        },
         "definitions": {
             "relative_error": "||tau_predicted - tau_measured|| / ||tau_measured|| per joint (metrics.relative_error)",
             "rms": "root mean square of tau_predicted - tau_measured per joint, N·m (N for q3)",
@@ -203,6 +209,7 @@ def covariance_document(result: IdentificationResult) -> dict:
         "frame": "m, m c and inertia about the link frame origin, link-frame axes (Pinocchio dynamic parameters)",
         "params_file": PARAMS_FILE,
         "friction_law": result.regressor.friction_law.describe(),
+        "presliding": {str(k): d for k, d in result.regressor.friction_law.presliding},
         "basis": "weighted least squares on the base parameters, mapped with the minimum-norm inverse of K",
     }
 
@@ -285,7 +292,7 @@ def html_page(result: IdentificationResult, data: dict) -> str:
 def write_outputs(result: IdentificationResult, folder: Path) -> dict:
     """Write the four files into `folder` (a folder being built); returns the summary."""
     folder = Path(folder)
-    write_json_atomic(folder / PARAMS_FILE, params_json(result.theta, result.regressor.layout, result.model))
+    write_json_atomic(folder / PARAMS_FILE, params_json(result.theta, result.regressor.layout, result.model, result.regressor.friction_law))
     try:  # the file every --params reader will see: its own checks
         load_parameters(folder / PARAMS_FILE, result.model)
     except DvrkDartError as exc:  # name what the user asked for, not the folder being built

@@ -21,13 +21,14 @@ Y theta(params) equals `IdentifiedModel.predict` for the published parameters.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model import friction
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.identified import IdentifiedModel, body_inertia, spring_torque
 from dvrk_dart.model.joints import N_JOINTS
@@ -43,17 +44,19 @@ PARAMETER_CLASSES = {
     **{n: "inertia_kg_m2" for n in BODY_PARAMETER_NAMES[4:]},
     "Fc": "coulomb", "Fv": "viscous", "Fo": "offset", "Im": "motor_inertia_kg_m2", "K": "spring_n_m_per_rad",
 }
-FRICTION_LAWS = ("sign", "tanh")
+FRICTION_LAWS = ("sign", "tanh", "presliding")
 
 
 @dataclass(frozen=True)
 class FrictionLaw:
-    """How Coulomb friction reverses: sign(v) (upstream, and every command that
-    reads params.json) or tanh(v / reversal_velocity) (the diagnosis's smooth
-    reversal, a cable's pre-sliding; rad/s or m/s)."""
+    """How Coulomb friction reverses: sign(v) (upstream), tanh(v / reversal_velocity)
+    (a smooth reversal in velocity, rad/s or m/s), or over a pre-sliding distance
+    per link (Dahl's state on the link's position, model/friction.py; `presliding`
+    holds (link key, distance) pairs, links not named reverse at once)."""
 
     kind: str = "sign"
     reversal_velocity: float | None = None
+    presliding: tuple[tuple[int, float], ...] = ()
 
     def __post_init__(self):
         if self.kind not in FRICTION_LAWS:
@@ -61,11 +64,31 @@ class FrictionLaw:
         if self.kind == "tanh" and not (self.reversal_velocity is not None and self.reversal_velocity > 0.0):
             raise DvrkDartError("--reversal-velocity: a positive velocity scale is needed with --friction-law tanh")
 
-    def reversal(self, rate: np.ndarray) -> np.ndarray:
-        return np.sign(rate) if self.kind == "sign" else np.tanh(rate / self.reversal_velocity)
+    @classmethod
+    def of_distances(cls, distances: dict[int, float]) -> "FrictionLaw":
+        """The pre-sliding law of these (link key -> distance) pairs; sign(v) when none is positive."""
+        positive = tuple(sorted((int(k), float(d)) for k, d in distances.items() if d > 0.0))
+        return cls("presliding", presliding=positive) if positive else cls()
+
+    def distance(self, key: int) -> float:
+        return dict(self.presliding).get(key, 0.0) if self.kind == "presliding" else 0.0
+
+    def with_distance(self, key: int, distance: float) -> "FrictionLaw":
+        return replace(self, presliding=tuple(sorted({**dict(self.presliding), key: distance}.items())))
+
+    def reversal(self, rate: np.ndarray, position: np.ndarray | None = None, key: int | None = None) -> np.ndarray:
+        if self.kind == "tanh":
+            return np.tanh(rate / self.reversal_velocity)
+        distance = self.distance(key) if key is not None else 0.0
+        return friction.reversal(position, rate, distance) if distance > 0.0 else np.sign(rate)
 
     def describe(self) -> str:
-        return "sign(v)" if self.kind == "sign" else f"tanh(v / {self.reversal_velocity:g})"
+        if self.kind == "tanh":
+            return f"tanh(v / {self.reversal_velocity:g})"
+        if self.kind == "presliding":
+            return "Dahl pre-sliding over " + (", ".join(f"link{k} {d:g}" for k, d in self.presliding if d > 0) or "no link") + \
+                ", else sign(v)"
+        return "sign(v)"
 
 
 @dataclass(frozen=True)
@@ -136,9 +159,10 @@ def body_of(theta: np.ndarray, layout: ParameterLayout, key: int) -> tuple[float
     return mass, com, inertia_com
 
 
-def params_json(theta: np.ndarray, layout: ParameterLayout, model: PsmModel) -> dict:
+def params_json(theta: np.ndarray, layout: ParameterLayout, model: PsmModel, friction_law: FrictionLaw = FrictionLaw()) -> dict:
     """The upstream params.json layout: every link of the model, r and I about the
-    centre of mass with the base-frame axes at q = 0 (the loader's inverse)."""
+    centre of mass with the base-frame axes at q = 0 (the loader's inverse); a
+    link whose friction reverses over a pre-sliding distance gains "xs"."""
     out = {}
     for key in model.links:
         entry = {"m": 0.0, "r": [0.0, 0.0, 0.0], "I": [0.0] * 6, "Fc": 0.0, "Fv": 0.0, "Fo": 0.0, "Im": 0.0, "K": 0.0}
@@ -149,6 +173,8 @@ def params_json(theta: np.ndarray, layout: ParameterLayout, model: PsmModel) -> 
             entry.update(m=mass, r=(R0 @ com).tolist(), I=[I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]])
         if key in layout.friction_links:
             entry.update(zip(FRICTION_NAMES, (float(theta[layout.index(f"link{key}.{n}")]) for n in FRICTION_NAMES)))
+            if friction_law.distance(key) > 0.0:
+                entry["xs"] = friction_law.distance(key)
         if key in layout.motor_links:
             entry["Im"] = float(theta[layout.index(f"link{key}.Im")])
         if key in layout.spring_links:
@@ -188,7 +214,7 @@ class Regressor:
         for key in layout.friction_links:  # f = Fc s(v) + Fv v + Fo on the link's own rate v, projected by dv/dq
             coeffs = links[key].variable.coeffs
             rate = dq @ coeffs
-            Y[:, :, c] = np.outer(self.friction_law.reversal(rate), coeffs)
+            Y[:, :, c] = np.outer(self.friction_law.reversal(rate, q @ coeffs, key), coeffs)
             Y[:, :, c + 1] = np.outer(rate, coeffs)
             Y[:, :, c + 2] = coeffs
             c += 3

@@ -22,6 +22,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.regressor import (
+    FrictionLaw,
     parameter_layout,
     params_json,
     standard_vector,
@@ -63,7 +64,7 @@ def project_body(p: np.ndarray) -> tuple[np.ndarray, bool]:
 COVARIANCE_TOLERANCE = 1e-9
 
 
-def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, dict[int, float]]:
     if path.is_dir():
         raise DvrkDartError(f"--params-cov: {path} is a folder, not a params_covariance.json")
     try:
@@ -71,6 +72,7 @@ def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndar
         if raw.get("format") != COVARIANCE_FORMAT:
             raise DvrkDartError(f"--params-cov: {path}: format is {raw.get('format')!r}, expected {COVARIANCE_FORMAT!r}")
         file_names, nominal, covariance = raw["names"], np.asarray(raw["nominal"], float), np.asarray(raw["covariance"], float)
+        presliding = {int(k): float(v) for k, v in raw.get("presliding", {}).items()}
     except FileNotFoundError:
         raise DvrkDartError(f"--params-cov: {path}: file not found") from None
     except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -85,7 +87,7 @@ def _covariance(path: Path, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndar
     smallest = float(np.linalg.eigvalsh(covariance)[0])
     if smallest < -COVARIANCE_TOLERANCE * scale:
         raise DvrkDartError(f"--params-cov: {path}: the covariance is not positive semidefinite (eigenvalue {smallest:.3g})")
-    return nominal, covariance
+    return nominal, covariance, presliding
 
 
 def perturbed(params: IdentifiedParameters, relative_std: float, rng: np.random.Generator) -> IdentifiedParameters:
@@ -118,7 +120,8 @@ def sample_parameters(arm: Arm, samples: int, seed: int, relative_std: float | N
     layout = parameter_layout(arm.model)
     rng = np.random.default_rng(seed)
     if covariance_file is not None:
-        nominal, covariance = _covariance(Path(covariance_file), layout.names)
+        nominal, covariance, presliding = _covariance(Path(covariance_file), layout.names)
+        law = FrictionLaw.of_distances(presliding)
         # a square root robust to the rank deficiency of a base-parameter covariance
         w, V = np.linalg.eigh(0.5 * (covariance + covariance.T))
         root = V * np.sqrt(np.clip(w, 0.0, None))
@@ -128,6 +131,7 @@ def sample_parameters(arm: Arm, samples: int, seed: int, relative_std: float | N
         if relative_std is None or not (0.0 < relative_std < 1.0):
             raise DvrkDartError(f"--relative-std: {relative_std} must be in (0, 1)")
         nominal = standard_vector(arm.params, layout)
+        law = FrictionLaw.of_distances({k: p.presliding for k, p in arm.params.links.items()})
         draws = np.stack([standard_vector(perturbed(arm.params, relative_std, rng), layout) for _ in range(samples)])
         source = (f"independent relative std {relative_std:g} on every mass, centre-of-mass coordinate, principal inertia and "
                   f"friction, motor-inertia and spring coefficient of {arm.params.source.name} (no covariance given)")
@@ -145,8 +149,8 @@ def sample_parameters(arm: Arm, samples: int, seed: int, relative_std: float | N
                 clipped += bool(theta[i] < 0.0)
                 theta[i] = max(theta[i], 0.0)
     return ParameterSamples(
-        nominal=params_json(nominal, layout, arm.model),
-        samples=[params_json(theta, layout, arm.model) for theta in draws],
+        nominal=params_json(nominal, layout, arm.model, law),
+        samples=[params_json(theta, layout, arm.model, law) for theta in draws],
         source=source,
         projected_bodies=projected,
         clipped_friction=clipped,

@@ -309,12 +309,17 @@ class Projector:
     frequency_hz: float
     harmonics: int
     _design: np.ndarray = field(repr=False, compare=False, default=None)
+    _factors: tuple = field(repr=False, compare=False, default=None)
 
     def __post_init__(self):
-        object.__setattr__(self, "_design", harmonic_design(self.t, self.frequency_hz, self.harmonics))
+        design = harmonic_design(self.t, self.frequency_hz, self.harmonics)
+        object.__setattr__(self, "_design", design)
+        # factored once: a run's every column (a regressor has hundreds) is projected with it
+        object.__setattr__(self, "_factors", np.linalg.qr(design))
 
     def series(self, x: np.ndarray) -> HarmonicSeries:
-        coefficients, *_ = np.linalg.lstsq(self._design, np.asarray(x, dtype=float), rcond=None)
+        Q, R = self._factors
+        coefficients = scipy.linalg.solve_triangular(R, Q.T @ np.asarray(x, dtype=float))
         return HarmonicSeries(self.frequency_hz, coefficients)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:

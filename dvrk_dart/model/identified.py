@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model import friction
 from dvrk_dart.model.description import DHFrame, Link, PsmModel, dh_transform
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
@@ -338,7 +339,8 @@ class IdentifiedModel:
                 p = self.params[link.key]
                 coeffs = link.variable.coeffs
                 rate = dq @ coeffs
-                fric += np.outer(p.coulomb * np.sign(rate) + p.viscous * rate, coeffs)
+                reversing = friction.reversal(q @ coeffs, rate, p.presliding)
+                fric += np.outer(p.coulomb * reversing + p.viscous * rate, coeffs)
                 offs += np.outer(np.full(len(q), p.offset), coeffs)
             if "friction" in terms:
                 out["friction"] = fric

@@ -31,6 +31,8 @@ class LinkParameters:
     offset: float  # Fo
     motor_inertia: float  # Im, kg m^2 (may be negative: see oddities)
     spring: float  # K, N·m/rad
+    #: xs, m or rad: the distance over which Coulomb friction reverses (model/friction.py); 0: at once (sign)
+    presliding: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -147,6 +149,16 @@ def check_inertia(inertia: np.ndarray, where: str, tolerance: float) -> None:
         )
 
 
+def _presliding(entry: dict, where: str) -> float:
+    """The optional pre-sliding distance "xs" (absent in the upstream files: the sign law)."""
+    if "xs" not in entry:
+        return 0.0
+    value = _scalar(entry, "xs", where)
+    if value < 0.0:
+        raise DvrkDartError(f"{where}: xs {value!r}: a pre-sliding distance is >= 0")
+    return value
+
+
 def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
     """Read params.json, check it, and convert every link to its own frame."""
     path = Path(path)
@@ -189,6 +201,7 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
             offset=_scalar(entry, "Fo", where),
             motor_inertia=_scalar(entry, "Im", where),
             spring=_scalar(entry, "K", where),
+            presliding=_presliding(entry, where),
         )
     unknown = sorted(set(raw) - {str(k) for k in model.links})
     if unknown:

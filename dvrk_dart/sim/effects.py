@@ -18,6 +18,9 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
       position, acceleration solved with DART's closed-chain inertia plus
       dt·D + dt²·K), which is consistent with every constraint.  Against the
       model evaluated at the start-of-step state they differ by Fv·dt·ddq.
+    - Coulomb friction that reverses over a pre-sliding distance (params.json
+      "xs" > 0, model/friction.py) has no LCP row either: Fc times Dahl's
+      state, which the simulator steps with each link's position.
     - a smooth Coulomb reversal (JointEffects.coulomb_reversal_velocity > 0:
       Fc tanh(dq / v_r), the pre-sliding of a cable transmission found by the
       diagnosis) has no LCP row: it is a joint effort computed each step from
@@ -65,23 +68,29 @@ class ExplicitEffects:
     params: IdentifiedParameters
     #: springs acting through a linkage (the MTM's wrist pitch): nonlinear, explicit
     linkage_springs: tuple[Link, ...] = ()
+    #: links whose Coulomb friction reverses over a pre-sliding distance (Fc times their Dahl state)
+    presliding_links: tuple[Link, ...] = ()
 
     @property
     def any_effort(self) -> bool:
         """Whether `effort` can be non-zero (the armature is applied apart)."""
         return bool(
             np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
-            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs
+            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding_links
         )
 
-    def effort(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """Model-based efforts the actuators must supply beyond DART's physics (q space)."""
+    def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray | None = None) -> np.ndarray:
+        """Model-based efforts the actuators must supply beyond DART's physics (q
+        space); `presliding`: the Dahl state of each of `presliding_links`."""
         effort = self.offset + self.viscous * dq + self.coulomb * np.sign(dq) + self.stiffness * q
         effort = effort + self.smooth_coulomb * np.tanh(dq / self.reversal_velocity)
         for link in self.friction_links:
             p = self.params[link.key]
             rate = float(dq @ link.variable.coeffs)
-            effort = effort + (p.coulomb * np.sign(rate) + p.viscous * rate) * link.variable.coeffs
+            reversing = 0.0 if any(link.key == other.key for other in self.presliding_links) else np.sign(rate)  # else: below
+            effort = effort + (p.coulomb * reversing + p.viscous * rate) * link.variable.coeffs
+        for link, state in zip(self.presliding_links, presliding if presliding is not None else ()):
+            effort = effort + self.params[link.key].coulomb * state * link.variable.coeffs
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -115,16 +124,20 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
     coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
     dof_of = {key: i for i, key in enumerate(psm.dof_links)}
     friction_links = []  # motor-side links: explicit, on their variable's rate
+    presliding_links = []  # Coulomb over a pre-sliding distance: explicit, with its state
     linkage_springs = []  # nonlinear springs: explicit, at the start-of-step position
     for link in model.links.values():
         p = params[link.key]
         dof = dof_of.get(link.key)
         on_own_dof = dof is not None and dof in set(psm.actuated_dofs)
         if config.friction and link.friction and (p.coulomb or p.viscous):
+            if p.presliding > 0.0 and p.coulomb:
+                presliding_links.append(link)
             if on_own_dof:
                 # not DART's joint damping: see the module docstring (implicit, applied by the simulator)
                 damping[dof] = p.viscous
-                set_coulomb(dof, p.coulomb)
+                if p.presliding <= 0.0:
+                    set_coulomb(dof, p.coulomb)
             else:
                 friction_links.append(link)
         if config.offsets and link.friction and p.offset:
@@ -168,6 +181,6 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
     explicit = ExplicitEffects(
         coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
-        tuple(linkage_springs),
+        tuple(linkage_springs), tuple(presliding_links),
     )
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)

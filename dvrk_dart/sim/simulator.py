@@ -50,6 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.friction import PreslidingState
 from dvrk_dart.model.joints import INSERTION, N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim import kernels
@@ -135,6 +136,9 @@ class PsmSimulator(ClosedChainReadout):
         self._has_armature = bool(np.any(e.armature))
         self._has_coulomb = bool(np.any(self._coulomb_x))
         self._has_explicit = e.any_effort
+        self._presliding_coeffs = [link.variable.coeffs for link in e.presliding_links]
+        self._presliding: list[PreslidingState] = []
+        self._presliding_z = np.zeros(len(e.presliding_links))
         self.step_index = 0
         self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
@@ -168,6 +172,10 @@ class PsmSimulator(ClosedChainReadout):
         self.skeleton.setVelocities(self._x_of(dq))
         self._state_changed()
         self.last_effort = np.full(N_JOINTS, np.nan)
+        # an imposed state starts each pre-sliding friction sliding the way it moves
+        self._presliding = [PreslidingState(self.params[link.key].presliding, float(q @ c), float(dq @ c))
+                            for link, c in zip(self._explicit.presliding_links, self._presliding_coeffs)]
+        self._presliding_z = np.array([state.state for state in self._presliding])
 
     @property
     def time_s(self) -> float:
@@ -248,7 +256,7 @@ class PsmSimulator(ClosedChainReadout):
         Ia = self._explicit.armature
         if self._has_armature:
             Mz[self._diag_q] += Ia
-        explicit = self._explicit.effort(q, dq) if self._has_explicit else self._zeros
+        explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
         ratio = self.model.counterweight_ratio
         has_cw = bool(self._free_dofs)
         lam = 0.0
@@ -318,7 +326,7 @@ class PsmSimulator(ClosedChainReadout):
         n = N_JOINTS
         if self._has_armature:
             Mz[self._diag_q] += self._explicit.armature
-        explicit = self._explicit.effort(q, dq) if self._has_explicit else self._zeros
+        explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
         if self._free_dofs and self._tendon_ideal:  # the counterweight follows q3: x_cw = ratio q3
             T = np.zeros((n + 1, n))
             T[:n, :n] = np.eye(n)
@@ -361,7 +369,7 @@ class PsmSimulator(ClosedChainReadout):
         if self._has_armature:
             tau += self._explicit.armature * ddq
         if self._has_explicit:
-            tau += self._explicit.effort(q, dq)
+            tau += self._explicit.effort(q, dq, self._presliding_z)
         if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
             coulomb = self.psm.G.T @ (self._coulomb_x * np.sign(self.psm.G @ dq_target))
             tau += coulomb
@@ -382,6 +390,8 @@ class PsmSimulator(ClosedChainReadout):
             self._x, self._v, self._coordinates_of_x, dq_before, self.dt, self._range_mid, self._range_half)
         self.last_effort = effort
         self.last_counterweight_force = counterweight_force
+        if self._presliding:
+            self._presliding_z = np.array([state.step(float(self._q @ c)) for state, c in zip(self._presliding, self._presliding_coeffs)])
         self._check(self._x, self._v, self._q, in_range)
 
     def step_torque(self, tau: np.ndarray, hold: tuple[int, ...] = ()) -> None:
