@@ -292,20 +292,21 @@ def _simulated_periodic_run(path, truth_Y_theta, positions, t, noise_std, rng):
     return MeasuredRun(path, data)
 
 
-def test_periodic_standard_errors_match_the_scatter_over_noise_draws(tmp_path):
+def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_result, tmp_path):
     """Simulated periodic runs (the identified parameters on the analytic motion
     of "one", white effort noise of the measured size): over 20 noise draws the
     base parameters scatter as the stated standard errors say, within a factor
-    1.5. The sign law: a pre-sliding state starts with a transient that does not
-    repeat, which the noise estimate of these model-made efforts would count as
-    noise (a real run's own start transient is in its measured efforts either way)."""
+    1.5. The efforts are made with the friction in its periodic steady state
+    (the motion run from one period before): a state started at the first sample
+    has a transient that does not repeat, which the noise estimate would count."""
     from dvrk_dart.identification.identify import RunData, _weighted_fit
-    from dvrk_dart.identification.regressor import FrictionLaw
 
-    result = identify(IdentificationConfig(runs=("one",), processing="periodic", friction_law=FrictionLaw("sign")))
+    result = periodic_result
     clean = result.train[0].processed
-    Y = result.regressor(clean.q, clean.dq, clean.ddq)
-    efforts = Y @ result.theta
+    positions, step = clean.periodic.positions, clean.t[1] - clean.t[0]
+    before = int(round(clean.periodic.period.period_s / step))
+    t = np.r_[clean.t[0] - step * np.arange(before, 0, -1), clean.t]
+    efforts = (result.regressor(positions(t), positions(t, 1), positions(t, 2)) @ result.theta)[before:]
     noise_std = np.array(clean.periodic.effort_noise.per_sample_rms)
     rng = np.random.default_rng(11)
     betas, stated = [], []

@@ -153,7 +153,7 @@ def diagnose(
     several = baseline is not None or len(measured_list) > 1
     nuisance = several if nuisance_offsets is None else bool(nuisance_offsets)
     payload_model = payload_model or ("first_moment" if baseline is not None else "point")
-    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model)
+    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, base=base_config)
     at_index = None
     if payload_at is not None:
         key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at

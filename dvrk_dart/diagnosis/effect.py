@@ -52,6 +52,8 @@ class SimContribution:
     stiffness: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     coulomb_reversal_velocity: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    coulomb_presliding: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    link_friction: tuple[tuple[float, ...], ...] = ()
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
 

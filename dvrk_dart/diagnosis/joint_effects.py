@@ -6,6 +6,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.model import friction
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PRISMATIC_JOINTS, effort_unit
 
 #: velocity scale of the Stribeck drop of friction near zero velocity
@@ -40,11 +41,22 @@ def _unit_column(features: TrajectoryFeatures, joint: int, values: np.ndarray) -
     return out
 
 
+def presliding_distances(model, joint: str) -> tuple[float, ...]:
+    """The candidate pre-sliding distances of a joint: the arm's identification
+    file's `[presliding]` (the same the identification chooses from)."""
+    from dvrk_dart.identification.fit import load_bounds
+
+    candidates = load_bounds(None, model).presliding
+    return candidates.prismatic_m if joint in PRISMATIC_JOINTS else candidates.revolute_rad
+
+
 class JointFriction(Effect):
-    """Coulomb + viscous friction on one coordinate: Fc s(dq) + Fv dq, with
-    s = sign (a sharp reversal) or s = tanh(dq / v_r) (a smooth reversal over
-    the velocity scale v_r: pre-sliding of a cable transmission), optionally a
-    Stribeck drop near zero velocity Fs s(dq) exp(-(dq/vs)^2).
+    """Coulomb + viscous friction on one coordinate: Fc s + Fv dq, with
+    s = sign(dq) (a sharp reversal), s = tanh(dq / v_r) (a smooth reversal over
+    the velocity scale v_r), or s = Dahl's state over a pre-sliding distance
+    x_s of the joint's position (model/friction.py: the cable or guide deflects
+    before it slides, so the reversal follows the displacement, not the
+    velocity), optionally a Stribeck drop near zero velocity Fs s exp(-(dq/vs)^2).
 
     Simulation: the viscous part is DART's joint damping; a sharp Coulomb
     part is DART's joint friction; a smooth reversal is the simulator's
@@ -55,13 +67,15 @@ class JointFriction(Effect):
 
     kind = "friction"
 
-    def __init__(self, joint: str, stribeck: bool = False, reversal_velocity: float | None = None):
+    def __init__(self, joint: str, stribeck: bool = False, reversal_velocity: float | None = None, presliding: float | None = None):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.stribeck = stribeck
         self.reversal_velocity = None if reversal_velocity is None else float(reversal_velocity)
+        self.presliding = None if presliding is None else float(presliding)
         base = "stribeck_friction" if stribeck else "friction"
         suffix = "" if self.reversal_velocity is None else f"_smooth{self.reversal_velocity:g}"
+        suffix += "" if self.presliding is None else f"_presliding{self.presliding:g}"
         self.name = f"{base}_{joint}{suffix}"
         eu = effort_unit(joint)
         pars = [Parameter("coulomb", eu, 0.0), Parameter("viscous", f"{eu}/({_rate_unit(joint)})", 0.0)]
@@ -73,14 +87,17 @@ class JointFriction(Effect):
     def family(self) -> str:
         return f"friction_{self.joints[0]}"
 
-    def _sign(self, v: np.ndarray) -> np.ndarray:
+    def _reversal(self, features) -> np.ndarray:
+        v = features.dq[:, self.joint_index]
+        if self.presliding is not None:
+            return friction.reversal(features.q[:, self.joint_index], v, self.presliding)
         return np.sign(v) if self.reversal_velocity is None else np.tanh(v / self.reversal_velocity)
 
     def columns(self, features):
         v = features.dq[:, self.joint_index]
-        cols = [self._sign(v), v]
+        cols = [self._reversal(features), v]
         if self.stribeck:
-            cols.append(self._sign(v) * np.exp(-((v / STRIBECK_VELOCITY) ** 2)))
+            cols.append(cols[0] * np.exp(-((v / STRIBECK_VELOCITY) ** 2)))
         out = np.zeros((len(features), N_JOINTS, len(cols)))
         out[:, self.joint_index, :] = np.column_stack(cols)
         return out
@@ -91,6 +108,8 @@ class JointFriction(Effect):
             c.coulomb[self.joint_index] = p[0]
             if self.reversal_velocity is not None:
                 c.coulomb_reversal_velocity[self.joint_index] = self.reversal_velocity
+            if self.presliding is not None:
+                c.coulomb_presliding[self.joint_index] = self.presliding
         c.viscous[self.joint_index] = p[1]
         return c
 
@@ -106,7 +125,92 @@ class JointFriction(Effect):
 
     def describe(self, p):
         out = super().describe(p)
-        out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {_rate_unit(self.joints[0])})"
+        if self.presliding is not None:
+            out["reversal"] = f"Dahl over {self.presliding:g} {_position_unit(self.joints[0])}"
+        else:
+            out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {_rate_unit(self.joints[0])})"
+        return out
+
+
+def coupling_friction_links(model) -> list[int]:
+    """Friction links whose variable couples two or more coordinates (the MTM's
+    forearm: qd3 = q3 - q2): friction there is no joint's friction."""
+    return [key for key, link in model.links.items() if link.friction and np.count_nonzero(link.variable.coeffs) > 1]
+
+
+class LinkFriction(Effect):
+    """Coulomb (over a pre-sliding distance) and viscous friction on a link
+    variable that couples coordinates: (Fc z + Fv v) times the variable's
+    coefficients, v its rate. Simulation: the simulator's explicit friction on
+    that variable (SimConfig.extra.link_friction)."""
+
+    kind = "friction"
+
+    def __init__(self, model, key: int, presliding: float):
+        link = model.links[key]
+        self.key, self.coeffs, self.presliding = key, link.variable.coeffs, float(presliding)
+        self.joints = tuple(JOINT_NAMES[j] for j in np.flatnonzero(self.coeffs))
+        self.name = f"friction_{link.name}_presliding{self.presliding:g}"
+        self.link_name = link.name
+        self.parameters = (Parameter("coulomb", "N·m", 0.0), Parameter("viscous", "N·m/(rad/s)", 0.0))
+
+    @property
+    def family(self) -> str:
+        return f"friction_{self.link_name}"
+
+    def columns(self, features):
+        rate = features.dq @ self.coeffs
+        z = friction.reversal(features.q @ self.coeffs, rate, self.presliding)
+        return np.stack([np.outer(z, self.coeffs), np.outer(rate, self.coeffs)], axis=2)
+
+    def sim_contribution(self, p):
+        c = SimContribution()
+        c.link_friction = ((float(self.key), float(p[0]), float(p[1]), self.presliding),)
+        return c
+
+    def describe(self, p):
+        out = super().describe(p)
+        out["reversal"] = f"Dahl over {self.presliding:g} rad of {self.link_name}'s variable"
+        return out
+
+
+class PreslidingOfIdentifiedFriction(Effect):
+    """The identified Coulomb friction of a link reversing over a pre-sliding
+    distance instead of at once: share s of Fc (z - sign(v)) times the
+    variable's coefficients (s = 1: wholly pre-sliding). For a diagnosis that
+    starts from the identified arm (its friction is the base, not an effect).
+    Simulation: explicit frictions on the variable, +s Fc with the pre-sliding
+    state and -s Fc with the sign (velocity mode reports both)."""
+
+    kind = "friction"
+
+    def __init__(self, model, params, key: int, presliding: float):
+        link = model.links[key]
+        self.key, self.coeffs, self.presliding = key, link.variable.coeffs, float(presliding)
+        self.coulomb = float(params[key].coulomb)
+        self.joints = tuple(JOINT_NAMES[j] for j in np.flatnonzero(self.coeffs))
+        self.link_name = link.name
+        self.name = f"presliding_of_{link.name}_{self.presliding:g}"
+        self.parameters = (Parameter("share", "1", 0.0, 1.0),)
+
+    @property
+    def family(self) -> str:
+        return f"presliding_of_{self.link_name}"
+
+    def columns(self, features):
+        rate = features.dq @ self.coeffs
+        change = friction.reversal(features.q @ self.coeffs, rate, self.presliding) - np.sign(rate)
+        return (self.coulomb * np.outer(change, self.coeffs))[:, :, None]
+
+    def sim_contribution(self, p):
+        c = SimContribution()
+        share = float(p[0]) * self.coulomb
+        c.link_friction = ((float(self.key), share, 0.0, self.presliding), (float(self.key), -share, 0.0, 0.0))
+        return c
+
+    def describe(self, p):
+        out = super().describe(p)
+        out["reversal"] = f"the identified Fc {self.coulomb:g} of {self.link_name} over {self.presliding:g}"
         return out
 
 

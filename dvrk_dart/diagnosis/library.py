@@ -24,6 +24,10 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointFriction,
     JointOffset,
     JointStiffness,
+    LinkFriction,
+    PreslidingOfIdentifiedFriction,
+    coupling_friction_links,
+    presliding_distances,
 )
 from dvrk_dart.diagnosis.payload import (
     PointPayload,
@@ -33,9 +37,10 @@ from dvrk_dart.diagnosis.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
 
 #: the payload models of `candidate_effects`
@@ -44,9 +49,10 @@ PAYLOAD_MODELS = ("point", "first_moment")
 
 def candidate_effects(
     arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES,
-    payload_model: str = "point",
+    payload_model: str = "point", base: SimConfig = SimConfig(),
 ) -> list[Effect]:
-    """The library of candidate effects, in a fixed order.
+    """The library of candidate effects, in a fixed order; a `base` that
+    simulates the identified friction adds its pre-sliding variants.
 
     payload_model: "point" (a point mass inside the link's envelope, simulated
     as a body) or "first_moment" (what the efforts determine, `first_moment`)."""
@@ -55,6 +61,12 @@ def candidate_effects(
     effects: list[Effect] = []
     effects += [JointFriction(j) for j in JOINT_NAMES]
     effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
+    effects += [JointFriction(j, presliding=d) for j in JOINT_NAMES for d in presliding_distances(arm.model, j)]
+    effects += [LinkFriction(arm.model, key, d) for key in coupling_friction_links(arm.model) for d in presliding_distances(arm.model, "q1")]
+    if base.friction:
+        effects += [PreslidingOfIdentifiedFriction(arm.model, arm.params, link.key, d) for link in arm.model.links.values()
+                    if link.friction and arm.params[link.key].coulomb > 0.0 and arm.params[link.key].presliding == 0.0
+                    for d in presliding_distances(arm.model, "q3" if link.variable.coeffs[INSERTION] else "q1")]
     if stribeck:
         effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
     effects += [JointOffset(j) for j in JOINT_NAMES]
@@ -81,9 +93,10 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
     extra = base.extra
     fields = {
         name: np.array(getattr(extra, name), dtype=float)
-        for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity")
+        for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
     }
     payloads = list(base.payloads)
+    link_friction = list(extra.link_friction)
     tilt = np.array(base.gravity_tilt_rad, dtype=float)
     for effect, p in selected:
         contribution = effect.sim_contribution(np.asarray(p, dtype=float))
@@ -92,8 +105,9 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         for name in fields:
             fields[name] += getattr(contribution, name)
         payloads += list(contribution.payloads)
+        link_friction += list(contribution.link_friction)
         tilt += contribution.gravity_tilt_rad
-    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()})
+    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction))
     return replace(base, extra=new_extra, payloads=tuple(payloads), gravity_tilt_rad=(float(tilt[0]), float(tilt[1])))
 
 
@@ -132,8 +146,15 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
     x = config.extra
     reversal = np.asarray(x.coulomb_reversal_velocity, dtype=float)
     reversal_law = np.where(reversal > 0.0, np.tanh(features.dq / np.where(reversal > 0.0, reversal, 1.0)), np.sign(features.dq))
+    for j, distance in enumerate(x.coulomb_presliding):
+        if distance > 0.0:
+            reversal_law[:, j] = friction.reversal(features.q[:, j], features.dq[:, j], distance)
     total = total + np.asarray(x.coulomb) * reversal_law + np.asarray(x.viscous) * features.dq
     total = total + np.asarray(x.offset) + np.asarray(x.stiffness) * features.q + np.asarray(x.armature) * features.ddq
+    for key, fc, fv, distance in x.link_friction:
+        coeffs = arm.model.links[int(key)].variable.coeffs
+        rate = features.dq @ coeffs
+        total = total + np.outer(fc * friction.reversal(features.q @ coeffs, rate, distance) + fv * rate, coeffs)
     for payload in config.payloads:
         params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))
         total = total + features.body_regressor[:, :, features.body_columns(payload.link)] @ params

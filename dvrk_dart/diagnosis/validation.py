@@ -53,27 +53,27 @@ def simulation_hook(arm: Arm, executor: str = "local", jobs: int = 2, ray_addres
 
 def _sim_config_of(result: dict) -> SimConfig:
     """The SimConfig of the selected effects (diagnose() reports it as a dict)."""
-    from dvrk_dart.sim.config import JointEffects, Payload
+    raw = result.get("sim_config")
+    return SimConfig.from_dict(raw) if raw else SimConfig()
 
-    raw = dict(result.get("sim_config") or {})
-    if not raw:
-        return SimConfig()
-    raw["extra"] = JointEffects(**{k: tuple(v) for k, v in raw.get("extra", {}).items()})
-    raw["payloads"] = tuple(Payload(p["link"], p["mass_kg"], tuple(p["position_m"])) for p in raw.get("payloads", []))
-    raw["gravity_tilt_rad"] = tuple(raw.get("gravity_tilt_rad", (0.0, 0.0)))
-    raw["counterweight_pid"] = tuple(raw.get("counterweight_pid", SimConfig().counterweight_pid))
-    return SimConfig(**raw)
+
+def base_sim_config(arm: Arm) -> SimConfig:
+    """What the diagnosis simulates before any effect (the model card's [diagnosis] base)."""
+    if arm.model.diagnosis_base == "identified":
+        return SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+    return SimConfig()
 
 
 def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path) -> None:
-    """MCAP and Rerun logs of the replay before (identified inertia only) and
-    after (with the selected effects as physics)."""
+    """MCAP and Rerun logs of the replay before (the diagnosis's base: the
+    identified inertia, or the identified arm) and after (with the selected
+    effects as physics)."""
     from dvrk_dart.runs.campaign import write_run_folder
     from dvrk_dart.runs.replay import replay_processed
     from dvrk_dart.runs.runner import rcm_position
 
     processed = process(load_run(resolve_run(measured)))
-    for label, config in (("before", SimConfig()), ("after", config_after)):
+    for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
         record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
         record.name = f"diagnosis-{Path(str(measured)).stem}_{label}"
         record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
@@ -222,7 +222,7 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
                       simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
-                      processing=processing)
+                      processing=processing, base_config=base_sim_config(arm))
     if band is not None:
         apply_band(result, band)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
@@ -319,6 +319,17 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     return result, verdicts
 
 
+def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
+    """validate_holdout on the arm of `spec["arm_model"]` (the check names it)."""
+    from dvrk_dart.model.description import resolve_arm_model, using_model
+
+    with using_model(resolve_arm_model(spec["arm_model"])):
+        result, verdicts = validate_holdout(load_arm(), spec, out_dir)
+    for v in verdicts:
+        v["check"] = f"{spec['arm_model'].upper()} {v['check']}"
+    return result, verdicts
+
+
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     from dvrk_dart.diagnosis.diagnose import diagnose
     from dvrk_dart.diagnosis.synthetic import synthesize_measurement
@@ -362,8 +373,8 @@ def validate_withheld(out_dir: Path, arm: Arm | None = None, parameter_band: Pat
     verdicts: list[dict] = []
     from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 
-    steps = (("payload", validate_payload), ("insertion", validate_insertion), ("holdout", validate_holdout), ("synthetic", validate_synthetic),
-             ("out_of_library", validate_out_of_library))
+    steps = (("payload", validate_payload), ("insertion", validate_insertion), ("holdout", validate_holdout),
+             ("mtm_holdout", validate_other_arm_holdout), ("synthetic", validate_synthetic), ("out_of_library", validate_out_of_library))
     for name, step in steps:
         start = time.perf_counter()
         extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
@@ -391,7 +402,8 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     body.append("</table>")
     for name, title in (("payload", "withheld 105 g payload on the parallelogram, full and half speed together (baseline: the session's run without it)"),
                         ("insertion", "105 g on the insertion stage's base (baseline: the session's run without it)"),
-                        ("holdout", "effects fitted on 'one', scored on held-out 'two'")):
+                        ("holdout", "effects fitted on 'one', scored on held-out 'two'"),
+                        ("mtm_holdout", "the MTM: effects fitted on its 'one', scored on its held-out 'two', from its identified arm")):
         folder = out_dir / name
         if not (folder / "diagnosis.json").is_file():
             continue

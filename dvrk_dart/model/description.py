@@ -209,6 +209,9 @@ class PsmModel:
     processing: UpstreamProcessing = UpstreamProcessing()
     dvrk_topics: DvrkTopics | None = None
     project_unphysical_bodies: bool = False  # DART gets the nearest physical body of a non-physical identified one
+    #: what the diagnosis simulates before adding effects ([diagnosis] base): the identified
+    #: inertia only ("inertial"), or every identified term ("identified": effects then correct it)
+    diagnosis_base: str = "inertial"
 
     @property
     def folder(self) -> Path:
@@ -325,6 +328,16 @@ def _require(table: dict, key: str, path: Path, where: str):
     return table[key]
 
 
+DIAGNOSIS_BASES = ("inertial", "identified")
+
+
+def _diagnosis_base(raw: dict, path: Path) -> str:
+    base = raw.get("diagnosis", {}).get("base", "inertial")
+    if base not in DIAGNOSIS_BASES:
+        raise DvrkDartError(f"{path}: [diagnosis] base must be one of {', '.join(DIAGNOSIS_BASES)}, not {base!r}")
+    return base
+
+
 def load_model(path: Path | str | None = None) -> PsmModel:
     """Read and check an arm's model description file (default: the current arm's, `using_model`)."""
     path = Path(path) if path is not None else current_model_file()
@@ -425,6 +438,7 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         processing=UpstreamProcessing(**raw.get("processing", {})),
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
+        diagnosis_base=_diagnosis_base(raw, path),
     )
 
 

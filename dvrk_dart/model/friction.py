@@ -51,10 +51,12 @@ class PreslidingState:
         self.state = float(np.sign(rate))
 
     def step(self, position: float) -> float:
-        """The state after moving to `position`."""
+        """The state after moving to `position` (distance 0: the sign of the step)."""
         step = position - self.position
         self.position = position
-        if step != 0.0:
+        if step != 0.0 and self.presliding <= 0.0:
+            self.state = 1.0 if step > 0.0 else -1.0
+        elif step != 0.0:
             s = 1.0 if step > 0.0 else -1.0
             self.state = s + (self.state - s) * math.exp(-abs(step) / self.presliding)
         return self.state

@@ -35,6 +35,14 @@ class JointEffects:
     # (DART's Coulomb friction row); > 0 = coulomb * tanh(dq / scale), the
     # pre-sliding of a cable transmission, applied as a joint effort each step
     coulomb_reversal_velocity: tuple[float, ...] = (0.0,) * 7
+    # pre-sliding distance of the Coulomb reversal (m or rad): > 0 = coulomb
+    # times Dahl's state over the joint's position (model/friction.py), applied
+    # as a joint effort each step; 0 = the reversal above
+    coulomb_presliding: tuple[float, ...] = (0.0,) * 7
+    # friction on a link variable that couples coordinates (the MTM's forearm,
+    # qd3 = q3 - q2): (link key, Fc, Fv, pre-sliding distance) entries, applied
+    # as joint efforts projected by the variable's coefficients each step
+    link_friction: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -60,7 +68,7 @@ class SimConfig:
     def from_dict(cls, raw: dict) -> "SimConfig":
         """The inverse of to_dict (JSON lists back to tuples and dataclasses)."""
         raw = dict(raw)
-        raw["extra"] = JointEffects(**{k: tuple(v) for k, v in raw.get("extra", {}).items()})
+        raw["extra"] = JointEffects(**{k: tuple(tuple(x) if isinstance(x, list) else x for x in v) for k, v in raw.get("extra", {}).items()})
         raw["payloads"] = tuple(Payload(p["link"], p["mass_kg"], tuple(p["position_m"])) for p in raw.get("payloads", []))
         raw["gravity_tilt_rad"] = tuple(raw.get("gravity_tilt_rad", cls.gravity_tilt_rad))
         raw["counterweight_pid"] = tuple(raw.get("counterweight_pid", cls.counterweight_pid))

@@ -53,6 +53,18 @@ from dvrk_dart.sim.config import SimConfig
 
 
 @dataclass(frozen=True)
+class PreslidingFriction:
+    """Coulomb friction Fc on the rate of coeffs·q, reversing over a pre-sliding
+    distance, and a viscous Fv on that rate (applied here where no DART joint
+    carries it)."""
+
+    coeffs: np.ndarray
+    coulomb: float
+    distance: float
+    viscous: float = 0.0
+
+
+@dataclass(frozen=True)
 class ExplicitEffects:
     """Per-coordinate explicit terms (q coordinates, 7 each), and the motor-side
     links whose friction acts on their variable's rate."""
@@ -68,29 +80,29 @@ class ExplicitEffects:
     params: IdentifiedParameters
     #: springs acting through a linkage (the MTM's wrist pitch): nonlinear, explicit
     linkage_springs: tuple[Link, ...] = ()
-    #: links whose Coulomb friction reverses over a pre-sliding distance (Fc times their Dahl state)
-    presliding_links: tuple[Link, ...] = ()
+    #: Coulomb frictions that reverse over a pre-sliding distance (Fc times their Dahl state)
+    presliding: tuple[PreslidingFriction, ...] = ()
 
     @property
     def any_effort(self) -> bool:
         """Whether `effort` can be non-zero (the armature is applied apart)."""
         return bool(
             np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
-            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding_links
+            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding
         )
 
     def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray | None = None) -> np.ndarray:
         """Model-based efforts the actuators must supply beyond DART's physics (q
-        space); `presliding`: the Dahl state of each of `presliding_links`."""
+        space); `presliding`: the Dahl state of each of `self.presliding`."""
         effort = self.offset + self.viscous * dq + self.coulomb * np.sign(dq) + self.stiffness * q
         effort = effort + self.smooth_coulomb * np.tanh(dq / self.reversal_velocity)
         for link in self.friction_links:
             p = self.params[link.key]
             rate = float(dq @ link.variable.coeffs)
-            reversing = 0.0 if any(link.key == other.key for other in self.presliding_links) else np.sign(rate)  # else: below
+            reversing = 0.0 if p.presliding > 0.0 else np.sign(rate)  # a pre-sliding Coulomb term is below
             effort = effort + (p.coulomb * reversing + p.viscous * rate) * link.variable.coeffs
-        for link, state in zip(self.presliding_links, presliding if presliding is not None else ()):
-            effort = effort + self.params[link.key].coulomb * state * link.variable.coeffs
+        for friction, state in zip(self.presliding, presliding if presliding is not None else ()):
+            effort = effort + (friction.coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -124,7 +136,7 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
     coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
     dof_of = {key: i for i, key in enumerate(psm.dof_links)}
     friction_links = []  # motor-side links: explicit, on their variable's rate
-    presliding_links = []  # Coulomb over a pre-sliding distance: explicit, with its state
+    presliding = []  # Coulomb over a pre-sliding distance: explicit, with its state
     linkage_springs = []  # nonlinear springs: explicit, at the start-of-step position
     for link in model.links.values():
         p = params[link.key]
@@ -132,7 +144,7 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         on_own_dof = dof is not None and dof in set(psm.actuated_dofs)
         if config.friction and link.friction and (p.coulomb or p.viscous):
             if p.presliding > 0.0 and p.coulomb:
-                presliding_links.append(link)
+                presliding.append(PreslidingFriction(link.variable.coeffs, p.coulomb, p.presliding))
             if on_own_dof:
                 # not DART's joint damping: see the module docstring (implicit, applied by the simulator)
                 damping[dof] = p.viscous
@@ -165,10 +177,20 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         raise DvrkDartError("SimConfig.extra.coulomb_reversal_velocity must be >= 0")
     smooth = reversal > 0.0
     smooth_coulomb = np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0)
+    distances = np.asarray(extra.coulomb_presliding, dtype=float)
+    if np.any(distances < 0.0) or np.any(distances[smooth] > 0.0):
+        raise DvrkDartError("SimConfig.extra.coulomb_presliding must be >= 0, and 0 where a tanh reversal is set")
+    for j in np.flatnonzero(distances > 0.0):
+        presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], float(extra.coulomb[j]), float(distances[j])))
+    for key, fc, fv, distance in extra.link_friction:
+        if int(key) not in model.links or not distance >= 0.0:
+            raise DvrkDartError(f"SimConfig.extra.link_friction: link {key} of {model.source.name} with a pre-sliding distance >= 0 expected")
+        presliding.append(PreslidingFriction(model.links[int(key)].variable.coeffs, float(fc), float(distance), float(fv)))
     for j in range(N_JOINTS):
         dof = psm.actuated_dofs[j]
         direct = np.count_nonzero(psm.A[j]) == 1 and psm.A[j, j] == 1.0
-        sharp_coulomb = 0.0 if smooth[j] else extra.coulomb[j]  # a smooth reversal has no LCP row
+        # a smooth or pre-sliding reversal has no LCP row
+        sharp_coulomb = 0.0 if smooth[j] or distances[j] > 0.0 else extra.coulomb[j]
         if direct:
             damping[dof] = damping[dof] + extra.viscous[j]
             set_coulomb(dof, coulomb_x[dof] + sharp_coulomb)
@@ -181,6 +203,6 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
     explicit = ExplicitEffects(
         coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
-        tuple(linkage_springs), tuple(presliding_links),
+        tuple(linkage_springs), tuple(presliding),
     )
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)

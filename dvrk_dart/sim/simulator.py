@@ -136,9 +136,8 @@ class PsmSimulator(ClosedChainReadout):
         self._has_armature = bool(np.any(e.armature))
         self._has_coulomb = bool(np.any(self._coulomb_x))
         self._has_explicit = e.any_effort
-        self._presliding_coeffs = [link.variable.coeffs for link in e.presliding_links]
         self._presliding: list[PreslidingState] = []
-        self._presliding_z = np.zeros(len(e.presliding_links))
+        self._presliding_z = np.zeros(len(e.presliding))
         self.step_index = 0
         self.last_effort = np.full(N_JOINTS, np.nan)
         self.last_ddq = np.zeros(N_JOINTS)
@@ -173,8 +172,7 @@ class PsmSimulator(ClosedChainReadout):
         self._state_changed()
         self.last_effort = np.full(N_JOINTS, np.nan)
         # an imposed state starts each pre-sliding friction sliding the way it moves
-        self._presliding = [PreslidingState(self.params[link.key].presliding, float(q @ c), float(dq @ c))
-                            for link, c in zip(self._explicit.presliding_links, self._presliding_coeffs)]
+        self._presliding = [PreslidingState(f.distance, float(q @ f.coeffs), float(dq @ f.coeffs)) for f in self._explicit.presliding]
         self._presliding_z = np.array([state.state for state in self._presliding])
 
     @property
@@ -391,7 +389,7 @@ class PsmSimulator(ClosedChainReadout):
         self.last_effort = effort
         self.last_counterweight_force = counterweight_force
         if self._presliding:
-            self._presliding_z = np.array([state.step(float(self._q @ c)) for state, c in zip(self._presliding, self._presliding_coeffs)])
+            self._presliding_z = np.array([state.step(float(self._q @ f.coeffs)) for state, f in zip(self._presliding, self._explicit.presliding)])
         self._check(self._x, self._v, self._q, in_range)
 
     def step_torque(self, tau: np.ndarray, hold: tuple[int, ...] = ()) -> None:
