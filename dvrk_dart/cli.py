@@ -26,6 +26,24 @@ def _bag_topics(args: argparse.Namespace):
     return BagTopics(args.arm, args.topic, args.jaw_topic, args.rate)
 
 
+#: the options that name measured runs (any of them may be a bag)
+RUN_OPTIONS = ("measured", "repeat", "runs", "holdout", "baseline", "train", "bag")
+
+
+def _check_bag_options(args: argparse.Namespace) -> None:
+    """--arm, --topic and --jaw-topic select data in a bag: with no bag among the inputs they would do nothing."""
+    from dvrk_dart.io.bags import is_bag
+    from dvrk_dart.io.reference_data import RUNS
+
+    given = [f"--{name.replace('_', '-')}" for name in ("arm", "topic", "jaw_topic") if getattr(args, name, None) is not None]
+    inputs = []
+    for name in RUN_OPTIONS:
+        value = getattr(args, name, None)
+        inputs += value if isinstance(value, list) else [value] if value else []
+    if given and not any(str(v) not in RUNS and is_bag(str(v)) for v in inputs):
+        raise DvrkDartError(f"{given[0]}: selects the topics of a ROS bag, and no input of this command is one")
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
     from dvrk_dart.io.atomic import atomic_path
@@ -41,8 +59,12 @@ def cmd_import(args: argparse.Namespace) -> int:
     out, bag = Path(args.out), Path(args.bag)
     if out.resolve() == bag.resolve() or bag.resolve() in out.resolve().parents:
         raise DvrkDartError(f"--out: {out} is the input bag {bag} or inside it: refusing to write over the input, even with --force")
+    if out.is_symlink():
+        raise DvrkDartError(f"--out: {out} is a symbolic link: give the file itself, or a new name")
     if out.is_dir():
         raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
+    if out.exists() and not out.is_file():
+        raise DvrkDartError(f"--out: {out} is not a regular file (a device, a pipe): refusing to replace it")
     if out.exists() and not args.force:
         raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
     check_writable_folder(out.absolute().parent)
@@ -85,6 +107,7 @@ def cmd_excitation(args: argparse.Namespace) -> int:
 
 def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
+    from dvrk_dart.io.atomic import json_text
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
     from dvrk_dart.metrics import relative_error, rms
@@ -94,7 +117,12 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     arm = load_arm(params_file=args.params)
     terms = parse_terms(args.terms)
     processed = process(load_run(resolve_run(args.measured)), args.processing)
-    predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
+    with np.errstate(over="ignore", invalid="ignore"):
+        predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
+        sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
+    if not sane:
+        raise DvrkDartError(f"--params {args.params or arm.params.source}: the model's efforts on {args.measured} are not finite "
+                            "(a parameter far out of any physical range)")
     measured = processed.tau
     if args.first_period:
         n = processed.first_period_samples()
@@ -109,7 +137,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         **processed.summary(),
     }
     if args.json:
-        print(json.dumps(result))
+        print(json_text(result), end="")
     else:
         print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {args.processing} processing")
         if processed.periodic is not None:
@@ -117,7 +145,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
                   f"{result['whole_periods']} whole periods")
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}")
         for name, rel, r in zip(JOINT_NAMES, result["relative_error"], result["rms"]):
-            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}")
+            why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
+            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}{why}")
     return 0
 
 
@@ -168,8 +197,13 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
 
     spec = load_scenario(scenario)
     _check_arm_of_scenario(args, spec)
+    if mode == "kinematic":  # poses imposed: no dynamics for these options to change
+        for option, value in (("--counterweight", args.counterweight), ("--dynamics", args.dynamics)):
+            if value is not None:
+                raise DvrkDartError(f"{option} {value}: a kinematic run imposes the poses and simulates no dynamics; "
+                                    "use --mode velocity or torque")
     dynamics = args.dynamics or spec.dynamics
-    return RunConfig(scenario, mode, args.counterweight, dynamics, args.dt, args.duration, args.params, measured,
+    return RunConfig(scenario, mode, args.counterweight or "on", dynamics, args.dt, args.duration, args.params, measured,
                      getattr(args, "processing", "upstream"))
 
 
@@ -271,6 +305,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from dvrk_dart.identification.outputs import identify_into_folder
     from dvrk_dart.identification.regressor import FrictionLaw
 
+    if args.reversal_velocity is not None and args.friction_law != "tanh":
+        raise DvrkDartError(f"--reversal-velocity: only with --friction-law tanh (not {args.friction_law})")
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
@@ -328,11 +364,39 @@ def _terminate(signum, frame) -> None:
     raise Terminated()
 
 
+_interrupted = threading.Event()
+
+
+def _interrupt(signum, frame) -> None:
+    """Ctrl-C as usual, remembered: an interrupt that lands in an extension
+    module's import surfaces as an ImportError, not a KeyboardInterrupt."""
+    _interrupted.set()
+    raise KeyboardInterrupt
+
+
 def build_parser() -> argparse.ArgumentParser:
     return cli_parser.build_parser(sys.modules[__name__])
 
 
+def _repeated_option(argv: list[str]) -> str | None:
+    """The first option given twice (argparse would keep the last one silently)."""
+    seen = set()
+    for token in argv:
+        if token == "--":
+            break
+        name = token.split("=", 1)[0]
+        if name.startswith("--") and name in seen:
+            return name
+        seen.add(name)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    repeated = _repeated_option(sys.argv[1:] if argv is None else [str(a) for a in argv])
+    if repeated:
+        print(f"dvrk-dart: {repeated}: given twice (an option takes its values once: {repeated} A B where it takes several)",
+              file=sys.stderr)
+        return 2
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed in one line
@@ -348,7 +412,10 @@ def main(argv: list[str] | None = None) -> int:
         except DvrkDartError as exc:
             print(f"dvrk-dart: {exc}", file=sys.stderr)
             return exc.exit_code
-    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+    # (an ignored SIGINT, as under nohup, stays ignored)
+    previous_interrupt = signal.signal(signal.SIGINT, _interrupt) if main_thread and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN else None
     try:
         from dvrk_dart.model.description import resolve_arm_model, using_model
 
@@ -356,6 +423,7 @@ def main(argv: list[str] | None = None) -> int:
             if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
                 from dvrk_dart.io.bags import bag_topics
 
+                _check_bag_options(args)
                 with bag_topics(_bag_topics(args)):
                     return args.func(args)
             return args.func(args)
@@ -363,6 +431,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
+        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
+        return 130
+    except ImportError:
+        if not _interrupted.is_set():
+            raise
         print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader of stdout left (| head): nothing more to say
@@ -378,6 +451,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        if previous_interrupt is not None:
+            signal.signal(signal.SIGINT, previous_interrupt)
 
 
 if __name__ == "__main__":

@@ -199,7 +199,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_model_check)
 
     def sim_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--counterweight", default="on", choices=COUNTERWEIGHT_VARIANTS, help="ideal tendon, removed, or the paper's PID mirror")
+        p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
+                       help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
         p.add_argument("--dt", type=number_in(0.0, MAX_STEP_S, "s", open_low=True), default=1e-3, help="simulation step (s)")
         p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
         p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",

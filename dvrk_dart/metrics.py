@@ -12,9 +12,12 @@ def rms(error: np.ndarray, axis: int = 0) -> np.ndarray:
 
 
 def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> np.ndarray:
-    """||actual - reference|| / ||reference|| per joint (the upstream metric)."""
+    """||actual - reference|| / ||reference|| per joint (the upstream metric);
+    NaN (not determined) where the reference is zero throughout."""
     actual, reference = np.asarray(actual, dtype=float), np.asarray(reference, dtype=float)
-    return np.linalg.norm(actual - reference, axis=axis) / np.linalg.norm(reference, axis=axis)
+    size = np.linalg.norm(reference, axis=axis)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(size > 0.0, np.linalg.norm(actual - reference, axis=axis) / size, np.nan)
 
 
 #: torque-mode tracking is judged after the closed loop's initial transient (s)

@@ -104,13 +104,28 @@ def test_a_symlink_the_user_put_in_a_marked_folder_is_kept(tmp_path):
 
 def test_half_built_folders_of_dead_processes_are_removed(tmp_path):
     target = tmp_path / "site"
+    from dvrk_dart.io.outputs import BUILDING_SENTINEL
+
     stale = tmp_path / ".site.building-999999999-deadbeef"
     stale.mkdir()
+    (stale / BUILDING_SENTINEL).touch()
     (stale / "index.html").write_text("half")
-    live = tmp_path / f".site.building-{os.getppid()}-cafe"
+    live = tmp_path / f".site.building-{os.getppid()}-cafebabe"
     live.mkdir()
+    (live / BUILDING_SENTINEL).touch()
+    users = tmp_path / ".site.building-999999999-mine"  # a user's folder of a like name, no sentinel
+    users.mkdir()
+    (users / "important.txt").write_text("mine")
     _build(target, b"new")
-    assert not stale.exists() and live.exists()
+    assert not stale.exists() and live.exists() and (users / "important.txt").read_text() == "mine"
+
+
+def test_an_empty_user_folder_is_carried(tmp_path):
+    target = tmp_path / "site"
+    _build(target, b"old")
+    (target / "keepme").mkdir()
+    _build(target, b"new")
+    assert (target / "keepme").is_dir()
 
 
 def test_a_marker_proves_nothing_about_files_changed_since(tmp_path):

@@ -360,10 +360,13 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
     if isinstance(extra_sections, (str, os.PathLike)):
         folder = Path(extra_sections)
         if not folder.is_dir():
-            raise DvrkDartError(f"extra sections: {folder} is not a folder")
+            raise DvrkDartError(f"--extra: {folder} is not a folder")
         for path in sorted(folder.iterdir()):
             if path.suffix.lower() == ".html":
-                items.append((path.stem.replace("_", " "), path.read_text()))
+                try:
+                    items.append((path.stem.replace("_", " "), path.read_text(encoding="utf-8")))
+                except UnicodeDecodeError:
+                    raise DvrkDartError(f"--extra: {path}: not UTF-8 text (an HTML section is)") from None
             elif path.suffix.lower() in IMAGE_SUFFIXES:
                 extra_dir.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(path, extra_dir / path.name)
@@ -407,6 +410,9 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
     analysis = analyze(runs_dir, jobs=jobs)
     if not analysis.runs and not analysis.failures:
         raise DvrkDartError(f"--runs: no run folder (<run>/run.mcap) in {runs_dir}")
+    if analysis.failures and not analysis.runs:
+        raise DvrkDartError(f"--runs: no run folder of {runs_dir} can be read ({len(analysis.failures)} tried, "
+                            f"{next(iter(analysis.failures))}: {next(iter(analysis.failures.values()))})")
     if analysis.failures and not allow_unreadable:
         name, error = next(iter(analysis.failures.items()))
         others = f" and {len(analysis.failures) - 1} more" if len(analysis.failures) > 1 else ""

@@ -158,12 +158,11 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
 def processed_pair(names: tuple[str, str], processing: str) -> list[ProcessedRun]:
     """Two recordings through one processing; periodic ones on their common
     (smaller) harmonic cutoff. The same file twice is refused."""
-    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+    from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve_run
     from dvrk_dart.io.signal import process
 
+    distinct_inputs([("--measured", names[0]), ("--repeat", names[1])])  # a floor needs two sessions
     paths = [resolve_run(name) for name in names]
-    if sha256_of(paths[0]) == sha256_of(paths[1]):
-        raise DvrkDartError(f"--repeat {names[1]}: the same recording as --measured {names[0]} (a floor needs two sessions)")
     measured = [load_run(path) for path in paths]
     runs = [process(run, processing) for run in measured]
     if processing == "periodic":

@@ -160,11 +160,13 @@ class Analysis:
 
 
 def discover_runs(runs_dir: str | os.PathLike) -> list[Path]:
-    """The run folders of `runs_dir` (those holding a run.mcap), sorted by name."""
+    """The run folders of `runs_dir` (those holding a run.mcap, and those the
+    tool may not look into: they are reported unreadable), sorted by name."""
     runs_dir = Path(runs_dir)
     if not runs_dir.is_dir():
         raise DvrkDartError(f"--runs: {runs_dir} is not a folder")
-    return sorted(p.parent for p in runs_dir.glob(f"*/{RUN_LOG}"))
+    closed = [p for p in runs_dir.iterdir() if p.is_dir() and not os.access(p, os.R_OK | os.X_OK)]
+    return sorted([p.parent for p in runs_dir.glob(f"*/{RUN_LOG}")] + closed)
 
 
 def _read_json(path: Path) -> dict:

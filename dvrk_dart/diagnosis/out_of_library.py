@@ -2,9 +2,9 @@
 
 The synthetic injections of `validate_synthetic` use the very effect models the
 diagnosis fits; these do not:
-- a cable with hysteresis: Dahl friction, a friction state F with
-  dF/dt = sigma (1 - F / Fc sign(dq)) dq (pre-sliding with memory; the library
-  has only memoryless sign and tanh reversals);
+- a friction that grows with the load: Fc + mu |g_j(q)| on a joint, g_j its
+  gravity effort (a bearing pressed by the arm's weight; the library's
+  Coulomb friction does not depend on the load);
 - a position-dependent Coulomb friction Fc (1 + a sin(2 pi q / lambda)) sign(dq)
   (a cable rubbing on a pulley with a flaw; the library's friction is uniform);
 - an offset drifting linearly in time over the run (warm-up; the library's
@@ -33,23 +33,9 @@ from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
-#: Euler sub-steps per sample of the Dahl state (its time constant Fc / (sigma |dq|)
-#: is a few samples at the runs' rates: 10 sub-steps keep the integration error < 1 %)
-DAHL_SUBSTEPS = 10
 #: a leftover counts as present when the gap after exceeds the noise by this
 #: factor in energy (after^2 > ratio noise^2): a tenth of the noise energy
 LEFTOVER_ENERGY_RATIO = 1.1
-
-
-def dahl_friction(state: ProcessedRun, joint: int, coulomb: float, stiffness: float) -> np.ndarray:
-    """(N,) Dahl friction effort along the measured velocity (state starts at 0)."""
-    dt = 1.0 / sample_rate_hz() / DAHL_SUBSTEPS
-    F, out = 0.0, np.empty(len(state))
-    for k, v in enumerate(state.dq[:, joint]):
-        for _ in range(DAHL_SUBSTEPS):
-            F += dt * stiffness * (1.0 - F / coulomb * np.sign(v)) * v
-        out[k] = F
-    return out
 
 
 def _bar_payload_effort(arm: Arm, state: ProcessedRun, link: int, mass_each_kg: float, centre_m, half_length_m: float, axis: int) -> np.ndarray:
@@ -66,8 +52,9 @@ def injected_effort(arm: Arm, state: ProcessedRun, case: dict) -> np.ndarray:
     out = np.zeros((len(state), N_JOINTS))
     kind, p = case["physics"], case["parameters"]
     j = JOINT_NAMES.index(case["joint"]) if "joint" in case else None
-    if kind == "dahl_friction":
-        out[:, j] = dahl_friction(state, j, p["coulomb"], p["stiffness"])
+    if kind == "load_friction":
+        gravity = arm.identified.predict(state.q, np.zeros_like(state.q), np.zeros_like(state.q), "gravity")[:, j]
+        out[:, j] = (p["coulomb"] + p["load_coefficient"] * np.abs(gravity)) * np.sign(state.dq[:, j])
     elif kind == "position_friction":
         q = state.q[:, j]
         out[:, j] = p["coulomb"] * (1.0 + p["amplitude"] * np.sin(2 * np.pi * q / p["wavelength"])) * np.sign(state.dq[:, j])

@@ -374,7 +374,12 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
             # in time order across topics, as a recorder writes them (players replay in file order)
             for received, _, connection, msg in heapq.merge(*streams, key=lambda item: (item[0], item[1])):
                 writer.write(connection, received, serialize(msg, JOINT_STATE))
-        os.replace(target, out)
+        if out.exists() or out.is_symlink():
+            raise DvrkDartError(f"{out}: written by another process meanwhile; a bag is never overwritten")
+        try:
+            os.replace(target, out)
+        except OSError:  # created between the check and the move
+            raise DvrkDartError(f"{out}: written by another process meanwhile; a bag is never overwritten") from None
     finally:
         shutil.rmtree(building, ignore_errors=True)
     return out

@@ -17,6 +17,7 @@ import contextlib
 import fcntl
 import json
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Iterator
@@ -67,14 +68,16 @@ def read_marker(folder: Path) -> Marker | None:
 
 
 def _files(folder: Path, skip_marked: bool = False) -> list[str]:
-    """Relative paths of every file and symlink below `folder` (links not
-    followed), the marker excluded; with `skip_marked`, not those of
-    sub-folders that hold their own marker."""
+    """Relative paths of every file, symlink and empty folder below `folder`
+    (links not followed), the marker excluded; with `skip_marked`, not those
+    of sub-folders that hold their own marker."""
     out = []
     for root, dirs, files in os.walk(folder):
         base = Path(root)
         if skip_marked:
             dirs[:] = [d for d in dirs if not (base / d / MARKER).is_file() or (base / d).is_symlink()]
+        if not dirs and not files and base != folder:
+            out.append(base.relative_to(folder).as_posix())
         for name in files + [d for d in dirs if (base / d).is_symlink()]:
             relative = (base / name).relative_to(folder).as_posix()
             if relative != MARKER:
@@ -97,6 +100,10 @@ def _nearest_existing(path: Path) -> Path:
     return Path(".")
 
 
+def _article(word: str) -> str:
+    return "an" if word[:1] in "aeiou" else "a"
+
+
 def check_writable_folder(path: str | os.PathLike, option: str = "--out") -> Path:
     """`path` is, or can be created as, a folder this process may write in."""
     path = Path(path)
@@ -117,7 +124,7 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     if path.is_symlink():
         raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
     if path.is_dir() and not replaceable(path, kind):
-        raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as a {kind} folder: refusing to replace it")
+        raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as {_article(kind)} {kind} folder: refusing to replace it")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise DvrkDartError(f"{option}: {path.absolute().parent} is not writable")
     return path
@@ -135,8 +142,9 @@ def check_shared_folder(path: str | os.PathLike, kind: str, option: str = "--out
         return path
     marker = read_marker(path)
     if marker is None or marker.kind != kind:
-        raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as a {kind} folder: refusing to write in it")
-    foreign = [relative for relative in _files(path, skip_marked=True) if not marker.owns(path, relative)]
+        raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as {_article(kind)} {kind} folder: refusing to write in it")
+    foreign = [relative for relative in _files(path, skip_marked=True)
+               if not marker.owns(path, relative) and not (path / relative).is_dir()]  # an empty folder holds nothing to lose
     if foreign:
         raise DvrkDartError(f"{option}: {path / foreign[0]} is not what dvrk-dart wrote there (a file of yours, or one changed since): "
                             "move it, then run again")
@@ -161,11 +169,19 @@ def _process_alive(pid: int) -> bool:
     return True
 
 
+#: the file every half-built folder holds from its first instant: only such folders are ever removed as stale
+BUILDING_SENTINEL = ".dvrk-dart-building"
+
+
 def remove_stale_building(target: Path) -> None:
-    """Half-built folders of `target` left by processes killed hard (they are hidden: .NAME.building-PID-*)."""
+    """Half-built folders of `target` left by processes killed hard (hidden:
+    .NAME.building-PID-HEX, holding the sentinel; a user's folder of a like
+    name is not one of them)."""
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.building-(\d+)-[0-9a-f]{{8}}")
     for candidate in target.parent.glob(f".{target.name}.building-*"):
-        pid = candidate.name[len(f".{target.name}.building-"):].split("-")[0]
-        if pid.isdigit() and int(pid) != os.getpid() and not _process_alive(int(pid)) and candidate.is_dir() and not candidate.is_symlink():
+        match = pattern.fullmatch(candidate.name)
+        if (match and int(match.group(1)) != os.getpid() and not _process_alive(int(match.group(1)))
+                and candidate.is_dir() and not candidate.is_symlink() and (candidate / BUILDING_SENTINEL).is_file()):
             shutil.rmtree(candidate, ignore_errors=True)
 
 
@@ -181,8 +197,10 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     remove_stale_building(target)
     building = target.with_name(f".{target.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     building.mkdir()
+    (building / BUILDING_SENTINEL).touch()
     try:
         yield building
+        (building / BUILDING_SENTINEL).unlink()
         write_marker(building, kind)
         with _folder_lock(target.parent):  # two commands finishing into one --out take turns
             check_output_folder(target, kind)  # the folder may have changed while this one was built
@@ -210,7 +228,8 @@ def _carry_user_files(old: Path, new: Path) -> None:
     at the same relative path; refuse (old folder untouched) where the new one
     wrote a file of the same name."""
     marker = read_marker(old) or Marker("", {})
-    user = [relative for relative in _files(old) if not marker.owns(old, relative)]
+    user = [relative for relative in _files(old) if not marker.owns(old, relative)
+            and not ((old / relative).is_dir() and not (old / relative).is_symlink() and (new / relative).is_dir())]  # an empty folder the new one has too
     clashes = [relative for relative in user if (new / relative).exists() or (new / relative).is_symlink()]
     if clashes:
         raise DvrkDartError(f"--out: {old / clashes[0]} is not what dvrk-dart wrote there (a file of yours, or one changed "

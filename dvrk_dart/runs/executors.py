@@ -68,6 +68,18 @@ def _ray(jobs: int, address: str | None):
             ray.shutdown()
 
 
+def _stop(pool: ProcessPoolExecutor, finished: bool) -> None:
+    """Shut the pool down; interrupted (Ctrl-C, an error of the caller), at once:
+    queued tasks cancelled and running workers ended, not waited for."""
+    if finished:
+        pool.shutdown(wait=True)
+        return
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+
+
 def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
               desc: str = "runs", unit: str = "run") -> Iterator[tuple[object, object, str | None]]:
     """(task, result, None) or (task, None, error) for each task, as they finish."""
@@ -79,7 +91,9 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
         return
     with tqdm(total=len(tasks), desc=desc, unit=unit) as bar:
         if executor == "local":
-            with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+            pool = ProcessPoolExecutor(max_workers=max(1, jobs))
+            finished = False
+            try:
                 futures = {pool.submit(fn, task): task for task in tasks}
                 for future in as_completed(futures):
                     try:
@@ -87,6 +101,9 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
                     except Exception as exc:  # one failed task must not stop the batch
                         yield futures[future], None, error_text(exc)
                     bar.update()
+                finished = True
+            finally:
+                _stop(pool, finished)
             return
         with _ray(jobs, ray_address) as ray:
             remote = ray.remote(fn)

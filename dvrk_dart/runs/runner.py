@@ -34,6 +34,11 @@ def add_model_efforts(arm: Arm, record: RunRecord) -> None:
     record.effort_model = {k: np.where(valid[:, None], v, np.nan) for k, v in efforts.terms.items()}
 
 
+#: the tool tip of a kinematic or velocity run follows its path to ~1e-11 m;
+#: farther off than this the path has left what the arm can reach (m)
+MAX_PATH_DEVIATION_M = 1e-3
+
+
 def cartesian_metrics(record: RunRecord, mode: str, config: SimConfig) -> dict:
     if not len(record):
         return {}
@@ -42,6 +47,11 @@ def cartesian_metrics(record: RunRecord, mode: str, config: SimConfig) -> dict:
         "tracking_rms_position": rms(position).tolist(),
         "tracking_rms_orientation": rms(orientation).tolist(),
     }
+    distance = np.linalg.norm(position, axis=1)
+    if mode != "torque" and np.nanmax(distance, initial=0.0) > MAX_PATH_DEVIATION_M:
+        k = int(np.nanargmax(distance))
+        metrics["error"] = (f"the tool tip is {distance[k]:.3g} m off the path at t = {record.t[k]:.3f} s: "
+                            "the path leaves what the arm can reach (its workspace or joint limits)")
     if mode == "torque":
         after = record.t >= TORQUE_TRANSIENT_S
         metrics["tracking_rms_position_after_1s"] = rms(position[after]).tolist() if after.any() else None
@@ -103,7 +113,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         record = run_cartesian(arm, scenario, mode, sim_config, duration)
         if mode != "kinematic":
             add_model_efforts(arm, record)
-        record.metrics.update(cartesian_metrics(record, mode, sim_config))
+        record.metrics = {**cartesian_metrics(record, mode, sim_config), **record.metrics}  # a divergence is the first error
     record.name = run_name(scenario.name, mode, counterweight, config.dynamics_label, config.processing)
     record.config = {
         "run_config": config.to_dict(),

@@ -1,0 +1,90 @@
+"""Inputs a hostile user tried (the second fuzz): each is refused in one line
+naming the option or file (exit 2, nothing written or changed), or answered
+with what the data determine."""
+
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.io.reference_data import resolve_run
+
+
+def cli(capsys, *argv) -> tuple[int, list[str], str]:
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, [line for line in err.splitlines() if line.strip()], out
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["model-errors", "--measured", "one", "--measured", "two"], "--measured: given twice"),
+    (["model-errors", "--measured", "one", "--topic", "/PSM2/measured_js"], "--topic"),
+    (["model-errors", "--measured", "one", "--arm", "PSM2"], "--arm"),
+    (["run", "spiral", "--counterweight", "off", "--duration", "0.1"], "--counterweight off: a kinematic run"),
+    (["run", "spiral", "--dynamics", "identified", "--duration", "0.1"], "--dynamics identified: a kinematic run"),
+    (["identify", "--runs", "two", "--reversal-velocity", "0.1"], "--reversal-velocity"),
+    (["excitation", "two", "--rate", "1e9"], "--rate"),
+    (["replay", "--measured", "two", "--dt", "nan"], "--dt"),
+    (["validate", "--ray-address", "127.0.0.1:1"], "--ray-address"),
+    (["run", "replay-mtm-two", "--arm-model", "psm"], "--arm-model psm"),
+])
+def test_an_option_that_would_be_ignored_or_meaningless_is_refused(tmp_path, capsys, argv, fragment):
+    out = tmp_path / "out"
+    code, lines, _ = cli(capsys, *argv, "--out", out) if argv[0] not in ("model-errors",) else cli(capsys, *argv)
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert not out.exists()
+
+
+def test_import_never_replaces_a_link_or_a_device(tmp_path, capsys):
+    bag = tmp_path / "bag.mcap"
+    # any bag: the checks come before it is read
+    bag.write_bytes(b"\x89MCAP0\r\n")
+    link = tmp_path / "link.csv"
+    link.symlink_to(tmp_path / "nowhere.csv")
+    code, lines, _ = cli(capsys, "import", bag, "--out", link, "--force")
+    assert code == 2 and "symbolic link" in lines[0] and link.is_symlink()
+    fifo = tmp_path / "fifo.csv"
+    os.mkfifo(fifo)
+    code, lines, _ = cli(capsys, "import", bag, "--out", fifo, "--force")
+    assert code == 2 and "not a regular file" in lines[0]
+
+
+def test_session_floor_refuses_a_copy_written_otherwise(tmp_path, capsys):
+    copy = tmp_path / "one_crlf.csv"
+    copy.write_bytes(resolve_run("one").read_bytes().replace(b"\n", b"\r\n"))
+    code, lines, _ = cli(capsys, "session-floor", "--measured", "one", "--repeat", copy)
+    assert code == 2 and "same recording" in lines[0]
+
+
+def test_zero_efforts_give_no_relative_error_and_no_warning(tmp_path, capsys):
+    values = np.loadtxt(resolve_run("two"), delimiter=",")
+    values[:, 14:] = 0.0
+    path = tmp_path / "zeros.csv"
+    np.savetxt(path, values, delimiter=",")
+    code, lines, out = cli(capsys, "model-errors", "--measured", path, "--json")
+    assert code == 0 and lines == []
+    result = json.loads(out)
+    assert all(v is None for v in result["relative_error"]) and all(np.isfinite(result["rms"]))
+
+
+def test_a_path_out_of_reach_is_an_error_not_a_result(tmp_path, capsys):
+    from dvrk_dart.paths import PIPELINES_DIR
+
+    scenario = tmp_path / "far.toml"
+    source = (PIPELINES_DIR / "scenarios" / "spiral.toml").read_text()
+    assert "radius_m = 0.05" in source
+    scenario.write_text(source.replace("radius_m = 0.05", "radius_m = 50.0"))
+    code, lines, _ = cli(capsys, "run", scenario, "--duration", "0.2", "--out", tmp_path / "run")
+    assert code == 2 and "off the path" in lines[0], lines
+
+
+def test_a_users_folder_named_like_a_half_built_one_is_kept(tmp_path, capsys):
+    users = tmp_path / ".run.building-999999999-mine"
+    users.mkdir()
+    (users / "important.txt").write_text("mine")
+    code, _, _ = cli(capsys, "run", "rectilinear", "--mode", "velocity", "--duration", "0.05", "--out", tmp_path / "run")
+    assert code == 0 and (users / "important.txt").read_text() == "mine"
+    shutil.rmtree(tmp_path / "run")
