@@ -51,15 +51,18 @@ def measured_run(text: str) -> str:
     return text
 
 
-def number_in(low: float, high: float, unit: str = "", open_low: bool = False):
-    """An argparse type: a finite number in [low, high] ((low, high] when `open_low`)."""
+def number_in(low: float, high: float, unit: str = "", open_low: bool = False, open_high: bool = False):
+    """An argparse type: a finite number in [low, high] (an end excluded when open)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-        if not (math.isfinite(value) and (value > low if open_low else value >= low) and value <= high):
-            raise argparse.ArgumentTypeError(f"{text}: must be in {'(' if open_low else '['}{low:g}, {high:g}] {unit}".rstrip())
+        above = value > low if open_low else value >= low
+        below = value < high if open_high else value <= high
+        if not (math.isfinite(value) and above and below):
+            interval = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
+            raise argparse.ArgumentTypeError(f"{text}: must be in {interval} {unit}".rstrip())
         return value
 
     return parse
@@ -242,7 +245,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
-    source.add_argument("--relative-std", type=number_in(0.0, 0.999, open_low=True), help="fallback: relative std of every parameter (default 0.05)")
+    source.add_argument("--relative-std", type=number_in(0.0, 1.0, open_low=True, open_high=True), help="fallback: relative std of every parameter (default 0.05)")
     p.add_argument("--duration", type=SECONDS, default=None, help="replay only the first seconds")
     p.add_argument("--seed", type=seed, default=0, help="seed of the parameter draws")
     p.add_argument("--jobs", type=positive_int, default=2, help="parallel workers")
@@ -272,7 +275,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
                                             "only on joints whose measured efforts leave the parameters' band")
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
-    _add_processing_option(p, "upstream")
+    _add_processing_option(p, None)  # a payload diagnosis (--baseline) keeps upstream: its intervals are calibrated there
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     _add_bag_options(p)

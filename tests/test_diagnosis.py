@@ -363,7 +363,7 @@ def test_contract_and_outputs(arm, segment, noise_rms, tmp_path):
     on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
     assert on_disk["effects"][0]["name"] == "offset_q3"
     assert (tmp_path / "where.csv").is_file()
-    assert len(list((tmp_path / "figures").glob("*.png"))) == 14
+    assert len(list((tmp_path / "figures").glob("*.png"))) == 15  # 7 joints before and after, and one period
 
 
 def test_baseline_must_match_the_run(arm, segment):
@@ -520,13 +520,20 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
 
 
 def test_the_answer_sentence_says_what_how_far_and_what_is_left():
-    from dvrk_dart.diagnosis.validation import answer_sentence
+    from dvrk_dart.diagnosis.page import answer_sentence
 
+    friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
+                "units": {"coulomb": "N"}, "size": 0.5}
+    split = [{"before": b, "left_over": left, "session_floor": f} for b, left, f in ((0.33, 0.04, 0.05), (0.32, 0.07, 0.08), (0.65, 0.17, 0.05))]
     result = {"gap_before": {"train": [0.3, 0.3, 0.6], "holdout": [0.33, 0.32, 0.65]},
-              "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]},
-              "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05]}
+              "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]}, "effects": [friction],
+              "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05],
+              "gap_split": {"runs": "holdout", "joints": split}}
     sentence = answer_sentence(result)
-    assert "friction_q3, offset_q1" in sentence and "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
+    assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
+    assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
+    # q3: 1 - 0.17^2 / (0.65^2 - 0.05^2) of the repeatable gap removed
+    assert "q3 93% of the repeatable gap" in sentence
     assert "above the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
     result["session_floor"] = [0.06, 0.1, 0.15]
     assert "at the session floor" in answer_sentence(result)

@@ -46,7 +46,7 @@ def test_a_failed_campaign_run_is_named_and_the_others_land_on_ray(tmp_path):
     good, bad = CAMPAIGN[0], RunConfig("replay-two", "velocity", duration_s=100.0)  # longer than the measured run
     summary = run_campaign([good, bad], tmp_path, jobs=2, executor="ray")
     assert summary["ran"] == [config_name(good)] and list(summary["failures"]) == [config_name(bad)]
-    assert "duration 100.0 s outside" in summary["failures"][config_name(bad)]
+    assert "--duration: 100 s outside" in summary["failures"][config_name(bad)]
 
 
 def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():

@@ -125,7 +125,7 @@ def test_campaign_skips_unchanged_runs_and_lists_failures(tmp_path):
     bad = RunConfig("replay-two", "velocity", "on", duration_s=100.0)  # longer than the measured run
     first = run_campaign([good, bad], tmp_path, jobs=1)
     assert first["ran"] == [config_name(good)] and list(first["failures"]) == [config_name(bad)]
-    assert "duration 100.0 s outside" in first["failures"][config_name(bad)]
+    assert "--duration: 100 s outside" in first["failures"][config_name(bad)]
     assert not (tmp_path / config_name(bad) / "inputs.sha256").exists()
     second = run_campaign([good], tmp_path, jobs=1)
     assert second["skipped_up_to_date"] == [config_name(good)] and second["ran"] == []

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from dvrk_dart.metrics import rms
 from dvrk_dart.model.friction import PreslidingState, reversal
 
 
@@ -71,3 +72,28 @@ def test_a_negative_distance_is_refused(presliding_params, model, tmp_path):
     path.write_text(json.dumps(raw))
     with pytest.raises(DvrkDartError, match="xs"):
         load_parameters(path, model)
+
+
+def test_friction_along_the_range_is_simulated_as_the_regressor_says(arm):
+    """PositionFriction (Fc piecewise linear in q2, reversing over 0.01 rad): the
+    regressor, the SimConfig's formula and DART's replay give the same effort."""
+    from dvrk_dart.diagnosis.features import TrajectoryFeatures
+    from dvrk_dart.diagnosis.joint_effects import PositionFriction
+    from dvrk_dart.diagnosis.library import config_effort_by_formula, effects_to_sim_config
+    from dvrk_dart.diagnosis.validation import simulation_hook
+    from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.sim.config import SimConfig
+
+    state = process(load_run(resolve_run("two"))).head(800)
+    effect, p = PositionFriction(arm.model, "q2", 0.01), np.array([0.05, 0.30, 0.10, 0.20, 0.0])
+    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
+    injected = effect.effort(TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz()), p)
+    config = effects_to_sim_config([(effect, p)])
+    by_formula = config_effort_by_formula(arm, config, state.q, state.dq, state.ddq)
+    assert np.max(np.abs(by_formula - ref - injected)) < 1e-10
+    assert np.all(injected[:, [0, *range(2, 7)]] == 0.0) and rms(injected[:, 1]) > 0.05
+    simulate = simulation_hook(arm, jobs=1)
+    simulated = simulate(config, state) - simulate(SimConfig(), state)
+    # DART's Dahl state runs on the simulated positions: the same to far below Fc (0.05-0.3 N·m)
+    assert rms(simulated[:, 1] - injected[:, 1]) < 0.01, rms(simulated[:, 1] - injected[:, 1])

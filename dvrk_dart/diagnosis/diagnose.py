@@ -38,9 +38,11 @@ from dvrk_dart.diagnosis.payload_report import (
     describe_payload,
     mass_profile,
 )
-from dvrk_dart.diagnosis.regimes import plot_residuals, residual_regimes
+from dvrk_dart.diagnosis.page import PERIOD_FIGURE
+from dvrk_dart.diagnosis.regimes import plot_period, plot_residuals, residual_regimes
 from dvrk_dart.diagnosis.runs import (
     DiagnosisRun,
+    RunProcessing,
     Simulate,
     choose_processing,
     loaded_states,
@@ -163,7 +165,11 @@ def diagnose(
 
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
     inputs = distinct_inputs(_roles(measured_list, baseline, train, holdout, repeat))
-    run_processing = choose_processing(all_specs, processing)
+    if processing is None and baseline is not None:
+        run_processing = RunProcessing(why="upstream: a payload diagnosis (with a baseline) keeps the upstream processing, "
+                                           "on which its intervals are calibrated")
+    else:
+        run_processing = choose_processing(all_specs, processing)
 
     def as_run(spec, baseline=None):
         if isinstance(spec, tuple):
@@ -390,7 +396,8 @@ def diagnose(
         "not_in_simulation": [e.name for e, _ in extra_by_regressor],
     }
     if out_dir is not None:
-        _write_outputs(Path(out_dir), result, train_runs[0], train_after[0], figures)
+        period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
+        _write_outputs(Path(out_dir), result, train_runs[0], train_after[0], figures, period)
     return result
 
 
@@ -424,7 +431,7 @@ def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimC
     return [(shared_config if run.role == "baseline" else sim_config, run.state)]
 
 
-def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool) -> None:
+def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple) -> None:
     from dvrk_dart.io.atomic import write_text_atomic
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -436,5 +443,7 @@ def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.nda
     if figures:
         paths = plot_residuals(run.state, run.residual, out_dir / "figures", "residual_before")
         paths += plot_residuals(run.state, after, out_dir / "figures", "residual_after")
+        period_run, period_after, floor = period
+        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png"))
         result["where"]["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     write_json_atomic(out_dir / "diagnosis.json", result)

@@ -54,6 +54,7 @@ class SimContribution:
     coulomb_reversal_velocity: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     coulomb_presliding: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     link_friction: tuple[tuple[float, ...], ...] = ()
+    position_friction: tuple[tuple[float, ...], ...] = ()
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
 

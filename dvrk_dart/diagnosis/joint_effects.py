@@ -7,7 +7,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.model import friction
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PRISMATIC_JOINTS, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit, velocity_unit
 
 #: velocity scale of the Stribeck drop of friction near zero velocity
 #: (rad/s or m/s): about the resolution of the measured velocities
@@ -27,27 +27,21 @@ CABLE_ELASTICITY_JOINTS = ("q1", "q2")
 TORSION_SPRING_JOINT = "q4"
 
 
-def _rate_unit(joint: str) -> str:
-    return "m/s" if joint in PRISMATIC_JOINTS else "rad/s"
-
-
-def _position_unit(joint: str) -> str:
-    return "m" if joint in PRISMATIC_JOINTS else "rad"
-
-
 def _unit_column(features: TrajectoryFeatures, joint: int, values: np.ndarray) -> np.ndarray:
     out = np.zeros((len(features), N_JOINTS, 1))
     out[:, joint, 0] = values
     return out
 
 
-def presliding_distances(model, joint: str) -> tuple[float, ...]:
-    """The candidate pre-sliding distances of a joint: the arm's identification
-    file's `[presliding]` (the same the identification chooses from)."""
+def presliding_distances(model, joint: str | None = None, link=None) -> tuple[float, ...]:
+    """The candidate pre-sliding distances of a coordinate or a link: the arm's
+    identification file's `[presliding]` (the same the identification chooses from)."""
     from dvrk_dart.identification.fit import load_bounds
 
     candidates = load_bounds(None, model).presliding
-    return candidates.prismatic_m if joint in PRISMATIC_JOINTS else candidates.revolute_rad
+    if link is not None:
+        return candidates.of(link)
+    return candidates.prismatic_m if position_unit(joint) == "m" else candidates.revolute_rad
 
 
 class JointFriction(Effect):
@@ -78,7 +72,7 @@ class JointFriction(Effect):
         suffix += "" if self.presliding is None else f"_presliding{self.presliding:g}"
         self.name = f"{base}_{joint}{suffix}"
         eu = effort_unit(joint)
-        pars = [Parameter("coulomb", eu, 0.0), Parameter("viscous", f"{eu}/({_rate_unit(joint)})", 0.0)]
+        pars = [Parameter("coulomb", eu, 0.0), Parameter("viscous", f"{eu}/({velocity_unit(joint)})", 0.0)]
         if stribeck:
             pars.append(Parameter("stribeck", eu, 0.0))
         self.parameters = tuple(pars)
@@ -126,9 +120,57 @@ class JointFriction(Effect):
     def describe(self, p):
         out = super().describe(p)
         if self.presliding is not None:
-            out["reversal"] = f"Dahl over {self.presliding:g} {_position_unit(self.joints[0])}"
+            out["reversal"] = f"Dahl over {self.presliding:g} {position_unit(self.joints[0])}"
         else:
-            out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {_rate_unit(self.joints[0])})"
+            out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {velocity_unit(self.joints[0])})"
+        return out
+
+
+#: knots of a position-dependent friction over the joint's range (the hat functions' count)
+POSITION_FRICTION_KNOTS = 4
+
+
+class PositionFriction(Effect):
+    """Coulomb friction that changes along the joint's range (a guide or a
+    cable tighter at one end), reversing over a pre-sliding distance:
+    sum_k Fc_k phi_k(q) z + Fv dq, phi_k the hat functions on knots spread
+    over the model's joint range (piecewise-linear Fc(q)).
+    Simulation: the simulator's explicit friction with Fc interpolated in q
+    (SimConfig.extra.position_friction)."""
+
+    kind = "friction"
+
+    def __init__(self, model, joint: str, presliding: float):
+        self.joint_index = JOINT_NAMES.index(joint)
+        self.joints = (joint,)
+        self.presliding = float(presliding)
+        self.knots = np.linspace(model.joint_lower[self.joint_index], model.joint_upper[self.joint_index], POSITION_FRICTION_KNOTS)
+        self.name = f"position_friction_{joint}_presliding{self.presliding:g}"
+        eu = effort_unit(joint)
+        self.parameters = (*(Parameter(f"coulomb_at_{x:.3g}", eu, 0.0) for x in self.knots),
+                           Parameter("viscous", f"{eu}/({velocity_unit(joint)})", 0.0))
+
+    @property
+    def family(self) -> str:
+        return f"friction_{self.joints[0]}"
+
+    def columns(self, features):
+        q, v = features.q[:, self.joint_index], features.dq[:, self.joint_index]
+        z = friction.reversal(q, v, self.presliding)
+        hats = np.column_stack([np.interp(q, self.knots, np.eye(len(self.knots))[k]) for k in range(len(self.knots))])
+        out = np.zeros((len(features), N_JOINTS, len(self.knots) + 1))
+        out[:, self.joint_index, :] = np.column_stack([hats * z[:, None], v])
+        return out
+
+    def sim_contribution(self, p):
+        c = SimContribution()
+        c.position_friction = ((float(self.joint_index), self.presliding, *map(float, self.knots), *map(float, p[:-1])),)
+        c.viscous[self.joint_index] = p[-1]
+        return c
+
+    def describe(self, p):
+        out = super().describe(p)
+        out["reversal"] = f"Dahl over {self.presliding:g} {position_unit(self.joints[0])}, Fc piecewise linear in {self.joints[0]}"
         return out
 
 
@@ -246,7 +288,7 @@ class JointStiffness(Effect):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.name = f"{'torsion_spring' if joint == TORSION_SPRING_JOINT else 'cable_elasticity'}_{joint}"
-        self.parameters = (Parameter("stiffness", f"{effort_unit(joint)}/{_position_unit(joint)}", 0.0),)
+        self.parameters = (Parameter("stiffness", f"{effort_unit(joint)}/{position_unit(joint)}", 0.0),)
 
     def columns(self, features):
         return _unit_column(features, self.joint_index, features.q[:, self.joint_index])
@@ -266,7 +308,7 @@ class JointArmature(Effect):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.name = f"armature_{joint}"
-        self.parameters = (Parameter("armature", "kg" if joint in PRISMATIC_JOINTS else "kg·m²", 0.0),)
+        self.parameters = (Parameter("armature", "kg" if position_unit(joint) == "m" else "kg·m²", 0.0),)
 
     def columns(self, features):
         return _unit_column(features, self.joint_index, features.ddq[:, self.joint_index])

@@ -25,6 +25,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointOffset,
     JointStiffness,
     LinkFriction,
+    PositionFriction,
     PreslidingOfIdentifiedFriction,
     coupling_friction_links,
     presliding_distances,
@@ -40,8 +41,12 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
+
+#: the joints whose friction may change along their range (the arm joints: a
+#: guide or a capstan; the wrist's cables run over pulleys at fixed radius)
+POSITION_FRICTION_JOINTS = ("q1", "q2", "q3")
 
 #: the payload models of `candidate_effects`
 PAYLOAD_MODELS = ("point", "first_moment")
@@ -62,11 +67,13 @@ def candidate_effects(
     effects += [JointFriction(j) for j in JOINT_NAMES]
     effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
     effects += [JointFriction(j, presliding=d) for j in JOINT_NAMES for d in presliding_distances(arm.model, j)]
-    effects += [LinkFriction(arm.model, key, d) for key in coupling_friction_links(arm.model) for d in presliding_distances(arm.model, "q1")]
+    effects += [PositionFriction(arm.model, j, d) for j in POSITION_FRICTION_JOINTS for d in presliding_distances(arm.model, j)]
+    effects += [LinkFriction(arm.model, key, d) for key in coupling_friction_links(arm.model)
+                for d in presliding_distances(arm.model, link=arm.model.links[key])]
     if base.friction:
         effects += [PreslidingOfIdentifiedFriction(arm.model, arm.params, link.key, d) for link in arm.model.links.values()
                     if link.friction and arm.params[link.key].coulomb > 0.0 and arm.params[link.key].presliding == 0.0
-                    for d in presliding_distances(arm.model, "q3" if link.variable.coeffs[INSERTION] else "q1")]
+                    for d in presliding_distances(arm.model, link=link)]
     if stribeck:
         effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
     effects += [JointOffset(j) for j in JOINT_NAMES]
@@ -96,7 +103,7 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
     }
     payloads = list(base.payloads)
-    link_friction = list(extra.link_friction)
+    link_friction, position_friction = list(extra.link_friction), list(extra.position_friction)
     tilt = np.array(base.gravity_tilt_rad, dtype=float)
     for effect, p in selected:
         contribution = effect.sim_contribution(np.asarray(p, dtype=float))
@@ -106,8 +113,10 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
             fields[name] += getattr(contribution, name)
         payloads += list(contribution.payloads)
         link_friction += list(contribution.link_friction)
+        position_friction += list(contribution.position_friction)
         tilt += contribution.gravity_tilt_rad
-    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction))
+    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction),
+                           position_friction=tuple(position_friction))
     return replace(base, extra=new_extra, payloads=tuple(payloads), gravity_tilt_rad=(float(tilt[0]), float(tilt[1])))
 
 
@@ -155,6 +164,11 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
         coeffs = arm.model.links[int(key)].variable.coeffs
         rate = features.dq @ coeffs
         total = total + np.outer(fc * friction.reversal(features.q @ coeffs, rate, distance) + fv * rate, coeffs)
+    for entry in x.position_friction:
+        j, distance, values = int(entry[0]), entry[1], entry[2:]
+        half = len(values) // 2
+        coulomb = np.interp(features.q[:, j], values[:half], values[half:])
+        total[:, j] += coulomb * friction.reversal(features.q[:, j], features.dq[:, j], distance)
     for payload in config.payloads:
         params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))
         total = total + features.body_regressor[:, :, features.body_columns(payload.link)] @ params

@@ -2,9 +2,10 @@
 
 The synthetic injections of `validate_synthetic` use the very effect models the
 diagnosis fits; these do not:
-- a friction that grows with the load: Fc + mu |g_j(q)| on a joint, g_j its
-  gravity effort (a bearing pressed by the arm's weight; the library's
-  Coulomb friction does not depend on the load);
+- a friction that grows with the load: Fc + mu |g_k(q)| on a joint, g_k the
+  gravity effort of a joint k (a guide pressed by the arm's weight: the
+  insertion stage's by the pitch's gravity moment; the library's Coulomb
+  friction depends on the joint's own position at most);
 - a position-dependent Coulomb friction Fc (1 + a sin(2 pi q / lambda)) sign(dq)
   (a cable rubbing on a pulley with a flaw; the library's friction is uniform);
 - an offset drifting linearly in time over the run (warm-up; the library's
@@ -53,7 +54,8 @@ def injected_effort(arm: Arm, state: ProcessedRun, case: dict) -> np.ndarray:
     kind, p = case["physics"], case["parameters"]
     j = JOINT_NAMES.index(case["joint"]) if "joint" in case else None
     if kind == "load_friction":
-        gravity = arm.identified.predict(state.q, np.zeros_like(state.q), np.zeros_like(state.q), "gravity")[:, j]
+        load = JOINT_NAMES.index(case.get("load_joint", case["joint"]))
+        gravity = arm.identified.predict(state.q, np.zeros_like(state.q), np.zeros_like(state.q), "gravity")[:, load]
         out[:, j] = (p["coulomb"] + p["load_coefficient"] * np.abs(gravity)) * np.sign(state.dq[:, j])
     elif kind == "position_friction":
         q = state.q[:, j]

@@ -98,3 +98,37 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
         plt.close(fig)
         paths.append(target)
     return paths
+
+
+#: the joints of the figure over one period (the arm's main joints)
+PERIOD_FIGURE_JOINTS = 3
+
+
+def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path) -> Path:
+    """The residual before and after the effects over the run's first period,
+    one panel per main joint, ± the session floor as a band (when measured)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dvrk_dart.io.atomic import atomic_path
+
+    n = min(len(state), state.first_period_samples())
+    t = state.t[:n] - state.t[0]
+    fig, axes = plt.subplots(PERIOD_FIGURE_JOINTS, 1, figsize=(11, 2.4 * PERIOD_FIGURE_JOINTS), sharex=True)
+    for j, ax in enumerate(axes):
+        if floor is not None:
+            ax.axhspan(-floor[j], floor[j], color="0.85", label="± session floor")
+        ax.plot(t, before[:n, j], color="tab:red", lw=0.8, alpha=0.6, label="before")
+        ax.plot(t, after[:n, j], color="tab:blue", lw=1.0, label="after")
+        ax.set_ylabel(f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})")
+    axes[0].legend(loc="upper right", ncol=3, fontsize=8)
+    axes[-1].set_xlabel("time in the period (s)")
+    fig.suptitle("residual (measured - simulated) over one period")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=90)
+    plt.close(fig)
+    return path

@@ -27,6 +27,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointOffset,
     JointStiffness,
 )
+from dvrk_dart.diagnosis.page import PERIOD_FIGURE, answer_sentence, diagnosis_html, diagnosis_page, offset_joints_sentence
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_sentence, load_band
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
@@ -91,124 +92,6 @@ def _images(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
 
 
-#: the joints the answer sentence speaks of (the arm's main joints)
-ANSWER_JOINTS = 3
-
-
-def answer_sentence(result: dict) -> str:
-    """The diagnosis in one sentence: which effects, how far the gap shrinks on
-    the main joints (held-out runs when there are), and what is left against
-    the session floor when a --repeat measured it."""
-    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    before, after = result["gap_before"][split][:ANSWER_JOINTS], result["gap_after"][split][:ANSWER_JOINTS]
-    joints = JOINT_NAMES[:ANSWER_JOINTS]
-    selected = list(result["selection"]["selected"])
-    payload = result.get("payload")
-    if payload:  # the effect under study first, in words
-        selected = [f"a payload on {payload['link']} ({payload['group']})"] + [n for n in selected if not n.startswith("payload")]
-    top = ", ".join(selected[:3]) + (f" and {len(selected) - 3} more" if len(selected) > 3 else "") if selected else "no effect"
-    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
-    where = "on the held-out runs" if split == "holdout" else "on the training runs"
-    sentence = f"The gap is mostly explained by {top}: {where}, {gaps}."
-    floor = result.get("session_floor")
-    if floor is not None:
-        above = [j for j, a, f in zip(joints, after, floor) if a > 1.5 * f]
-        sentence += (f" What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                     if above else " What is left is at the session floor: no fixed effect can remove more.")
-    return sentence
-
-
-def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
-    """An HTML fragment: the answer in one sentence, gaps before/after per
-    joint, the ranked effects, the payload, and the figures at `image_sources`."""
-    e = html.escape
-
-    def row(cells, tag="td"):
-        return "<tr>" + "".join(f"<{tag}>{c}</{tag}>" for c in cells) + "</tr>"
-
-    def fmt(v):
-        return "-" if v is None else f"{v:.4g}"
-
-    parts = [f"<h3>{e(title)}</h3>", f"<p class='answer'><strong>{e(answer_sentence(result))}</strong></p>", "<table>", row(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES)], "th")]
-    for key in ("gap_before", "gap_after"):
-        for split in ("train", "holdout"):
-            values = (result.get(key) or {}).get(split)
-            if values is not None:
-                parts.append(row([f"{key.replace('gap_', '')}, {split}", *(fmt(v) for v in values)]))
-    parts.append("</table>")
-    parts.append(f"<p>after: {e(str(result.get('gap_after_source', '')))}</p>")
-    parts += ["<table>", row(["rank", "effect", "joints", "selected", "explained (train)", "explained (held out)", "parameters"], "th")]
-    for rank, effect in enumerate(result.get("effects", [])[:12], 1):
-        frac = effect.get("explained_fraction", {})
-        params = ", ".join(f"{k} = {fmt(v) if isinstance(v, (int, float)) else e(str(v))}" for k, v in effect.get("parameters", {}).items())
-        parts.append(row([rank, e(effect["name"]), e(", ".join(effect.get("joints", []))), "yes" if effect.get("selected") else "no",
-                          fmt(frac.get("train")), fmt(frac.get("holdout")), params]))
-    parts.append("</table>")
-    parts += _split_and_nuisance_html(result)
-    parts += _band_html(result)
-    payload = result.get("payload")
-    if payload and payload.get("words"):  # the identifiable quantity first (first_moment payload)
-        parts.append("<p>" + " ".join(e(w) for w in payload["words"]) + "</p>")
-        g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
-        parts += ["<table>", row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
-                  row(["gravity effort (interval)", *(f"{fmt(v)} ({fmt(lo)} .. {fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
-    elif payload:
-        text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
-                f"at {np.round(payload['position_m'], 3).tolist()} m in the link frame")
-        if payload.get("equivalent_links"):
-            text += f"; the efforts cannot tell it from the same payload on {e(', '.join(payload['equivalent_links']))}"
-        if payload.get("mass_profile"):
-            lo, hi = payload["mass_profile"]["mass_interval_kg"]
-            pinned = "identified" if payload["mass_profile"]["identifiable"] else "not identified by these runs"
-            text += f"; cross-validated mass interval {lo:.3f}-{hi:.3f} kg ({pinned})"
-        parts.append(f"<p>{text}</p>")
-    for source in image_sources:
-        name = Path(source).stem
-        parts.append(f"<figure><img src='{e(source)}' alt='{e(name)}'><figcaption>{e(name)}</figcaption></figure>")
-    return "\n".join(parts)
-
-
-def _split_and_nuisance_html(result: dict) -> list[str]:
-    """The gap split per joint (explained, session-to-session, left over) and the per-run nuisance offsets."""
-    e = html.escape
-    parts = []
-    split = (result.get("gap_split") or {}).get("joints") or []
-    if split and split[0].get("session_to_session") is not None:
-        parts.append(f"<p>Gap of the {e(result['gap_split']['runs'])} runs split per joint (RMS, adding in squares): explained by the selected "
-                     f"effects, session-to-session (floor from two sessions of the same trajectory, {e(str(result.get('repeat')))}: no fixed "
-                     "effect can remove it), left over.</p>")
-        parts.append("<table><tr><th>joint</th><th>before</th><th>explained</th><th>session-to-session</th><th>left over</th><th>after</th></tr>")
-        for r in split[:3]:
-            parts.append(f"<tr><td>{r['joint']} ({e(r['unit'])})</td>" + "".join(f"<td>{r[k]:.4f}</td>" for k in ("before", "explained", "session_to_session", "left_over", "after")) + "</tr>")
-        parts.append("</table>")
-    if result.get("nuisance_offset_joints"):
-        parts.append(f"<p>{e(_offset_joints_sentence(result['nuisance_offset_joints']))}</p>")
-    for run, offsets in (result.get("nuisance_offsets") or {}).items():
-        parts.append(f"<p>nuisance offsets of {e(run)} (a constant per run, fitted, not an effect): "
-                     + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]) + "</p>")
-    return parts
-
-
-def _offset_joints_sentence(offset_joints: dict) -> str:
-    joints = ", ".join(offset_joints["joints"]) or "none"
-    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run minus its baseline "
-            "has a nuisance offset on these only; a run of another motion has one on every joint.")
-
-
-def _band_html(result: dict) -> list[str]:
-    """Per joint: is the measured run inside the parameters' uncertainty band?"""
-    band = result.get("parameter_band")
-    if band is None:
-        return []
-    e = html.escape
-    rows = "".join(f"<tr><td>{j} ({e(effort_unit(j))})</td><td>{band['measured_inside_band_fraction'][j]:.3f}</td>"
-                   f"<td>{band['rms_measured_outside_band'][j]:.4f}</td><td>{'outside' if j in band['joints_outside_band'] else 'inside'}</td></tr>"
-                   for j in JOINT_NAMES[:3])
-    return [f"<p>{e(band_sentence(result))}. Rule: {e(band['rule'])}. Parameters: {e(str(band['parameters']))}.</p>",
-            "<table><tr><th>joint</th><th>measured inside the 5-95 % band</th><th>RMS outside the band</th><th>verdict</th></tr>",
-            rows, "</table>"]
-
-
 def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
                   parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
                   processing: str | None = "upstream") -> dict:
@@ -228,8 +111,7 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
-    write_text_atomic(out_dir / "diagnosis.html", "<!DOCTYPE html><html><head><meta charset='utf-8'><title>diagnosis</title></head><body>"
-                      + diagnosis_html(result, [str(p.relative_to(out_dir)) for p in _images(out_dir)], f"diagnosis of {measured}") + "</body></html>\n")
+    write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in _images(out_dir)], f"diagnosis of {measured}"))
     if logs:
         log_replays(arm, measured, _sim_config_of(result), out_dir)
     return result
@@ -242,7 +124,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
                            repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
                            parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
                            jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
-                           processing=getattr(args, "processing", "upstream"))
+                           processing=getattr(args, "processing", None))
     print(answer_sentence(result))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
@@ -258,7 +140,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         for sentence in p.get("words", []):
             print(f"  {sentence}")
     if result.get("nuisance_offset_joints"):
-        print(_offset_joints_sentence(result["nuisance_offset_joints"]))
+        print(offset_joints_sentence(result["nuisance_offset_joints"]))
     if result.get("nuisance_offsets"):
         for run, offsets in result["nuisance_offsets"].items():
             print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
@@ -303,20 +185,37 @@ def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 
 def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
     train, *others = spec["train"]
-    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band)
-    # the bar: the full identified model on the held-out run
+    processing = spec.get("processing", "upstream")
+    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
+                           processing=processing)
+    # the bar: the full identified model on the held-out run, in the same band
     identified = []
     for name in spec["holdout"]:
-        pr = process(load_run(resolve_run(name)))
-        identified.append(rms(pr.tau - arm.identified.predict(pr.q, pr.dq, pr.ddq, "all")))
+        pr = process(load_run(resolve_run(name)), processing, result["processing"].get("harmonics"))
+        identified.append(rms(pr.tau - pr.in_band(arm.identified.predict(pr.q, pr.dq, pr.ddq, "all"))))
     bar = np.mean(identified, axis=0)
     after = np.asarray(result["gap_after"]["holdout"])
     result["identified_model_gap_holdout"] = bar.tolist()
+    share = repeatable_share_explained(bar, after, result.get("session_floor"))
+    result["repeatable_gap_explained_share"] = None if share is None else share.tolist()
+    shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
-                 "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}"}
+                 "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
     write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts
+
+
+def repeatable_share_explained(identified: np.ndarray, after: np.ndarray, floor) -> np.ndarray | None:
+    """Per joint, the share of the identified model's repeatable gap (its gap
+    above the session floor, in squares) that the selected effects remove:
+    1 - (after^2 - floor^2) / (identified^2 - floor^2); None without a floor."""
+    if floor is None:
+        return None
+    floor = np.asarray(floor, dtype=float)
+    repeatable = np.square(identified) - np.square(floor)
+    left = np.maximum(np.square(after) - np.square(floor), 0.0)
+    return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
 
 
 def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
@@ -408,7 +307,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
         if not (folder / "diagnosis.json").is_file():
             continue
         sources = []
-        for image in (p for p in _images(folder) if p.stem.endswith(REPORT_FIGURE_JOINTS)):
+        for image in (p for p in _images(folder) if p.stem.endswith(REPORT_FIGURE_JOINTS) or p.stem == PERIOD_FIGURE):
             staged = staging / f"{name}_{image.name}"  # the report copies extras by file name: keep them apart
             shutil.copy2(image, staged)
             files.append(staged)

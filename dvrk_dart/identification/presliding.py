@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.joints import INSERTION
 
 
 @dataclass(frozen=True)
@@ -26,8 +25,9 @@ class PreslidingCandidates:
     revolute_rad: tuple[float, ...] = ()
     prismatic_m: tuple[float, ...] = ()
 
-    def of(self, coeffs: np.ndarray) -> tuple[float, ...]:
-        return self.prismatic_m if coeffs[INSERTION] else self.revolute_rad
+    def of(self, link) -> tuple[float, ...]:
+        """The candidates of a link (by its joint's type)."""
+        return self.prismatic_m if link.joint_type == "prismatic" else self.revolute_rad
 
 
 def with_link_column(run, regressor, key: int, law):
@@ -53,15 +53,15 @@ def choose_distances(train: list, regressor, base, joints: np.ndarray, candidate
     reference = residual(train)
     record = {}
     for key in regressor.layout.friction_links:
-        coeffs = regressor.model.links[key].variable.coeffs
+        link = regressor.model.links[key]
         scores = {}
-        for distance in (0.0, *candidates.of(coeffs)):
+        for distance in (0.0, *candidates.of(link)):
             trial_law = law.with_distance(key, distance)
             trial = [with_link_column(run, regressor, key, trial_law) for run in train]
             scores[distance] = float(np.sum(np.square(residual(trial) / reference)))
         best = min(scores, key=scores.get)
         law = law.with_distance(key, best)
         train = [with_link_column(run, regressor, key, law) for run in train]
-        record[str(key)] = {"distance": best, "unit": "m" if coeffs[INSERTION] else "rad",
+        record[str(key)] = {"distance": best, "unit": "m" if link.joint_type == "prismatic" else "rad",
                             "score_by_distance": {f"{d:g}": s for d, s in scores.items()}}
     return train, law, record

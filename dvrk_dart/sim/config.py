@@ -43,6 +43,9 @@ class JointEffects:
     # qd3 = q3 - q2): (link key, Fc, Fv, pre-sliding distance) entries, applied
     # as joint efforts projected by the variable's coefficients each step
     link_friction: tuple[tuple[float, ...], ...] = ()
+    # Coulomb friction piecewise linear along a coordinate, reversing over a
+    # pre-sliding distance: (coordinate index, distance, knots..., Fc at the knots...)
+    position_friction: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,12 @@ class PreslidingFriction:
     coulomb: float
     distance: float
     viscous: float = 0.0
+    #: Fc piecewise linear in coeffs·q: at these positions, these values (empty: `coulomb` throughout)
+    knots: tuple[float, ...] = ()
+    coulomb_at_knots: tuple[float, ...] = ()
+
+    def coulomb_at(self, position: float) -> float:
+        return float(np.interp(position, self.knots, self.coulomb_at_knots)) if self.knots else self.coulomb
 
 
 @dataclass(frozen=True)
@@ -102,7 +108,8 @@ class ExplicitEffects:
             reversing = 0.0 if p.presliding > 0.0 else np.sign(rate)  # a pre-sliding Coulomb term is below
             effort = effort + (p.coulomb * reversing + p.viscous * rate) * link.variable.coeffs
         for friction, state in zip(self.presliding, presliding if presliding is not None else ()):
-            effort = effort + (friction.coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
+            coulomb = friction.coulomb_at(float(q @ friction.coeffs))
+            effort = effort + (coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -186,6 +193,10 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         if int(key) not in model.links or not distance >= 0.0:
             raise DvrkDartError(f"SimConfig.extra.link_friction: link {key} of {model.source.name} with a pre-sliding distance >= 0 expected")
         presliding.append(PreslidingFriction(model.links[int(key)].variable.coeffs, float(fc), float(distance), float(fv)))
+    for entry in extra.position_friction:
+        j, distance, values = int(entry[0]), float(entry[1]), entry[2:]
+        half = len(values) // 2
+        presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], 0.0, distance, 0.0, tuple(values[:half]), tuple(values[half:])))
     for j in range(N_JOINTS):
         dof = psm.actuated_dofs[j]
         direct = np.count_nonzero(psm.A[j]) == 1 and psm.A[j, j] == 1.0

@@ -1,0 +1,234 @@
+"""The diagnosis as a reader sees it: the answer in one sentence, effects by
+their plain names, the ranked effects as bars of explained share, and
+diagnosis.html in the report's page style (analysis/html.py).
+
+Everything here reads a `diagnosis.json` dict: the page can be rebuilt from
+the file alone (the report does so for the withheld-data diagnoses)."""
+
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+
+from dvrk_dart.analysis.html import STYLE
+from dvrk_dart.diagnosis.parameter_band import band_sentence
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+#: the joints the answer sentence speaks of (the arm's main joints)
+ANSWER_JOINTS = 3
+#: what is left counts as at the floor below this multiple of the session floor
+AT_FLOOR_RATIO = 1.5
+#: effects shown in the ranked table (the rest are in diagnosis.json)
+SHOWN_EFFECTS = 12
+#: the figure of the residual over one period (diagnose writes it; the page shows it first)
+PERIOD_FIGURE = "residual_over_one_period"
+
+_KIND_WORDS = {
+    "offset": "a constant effort offset on {joints}",
+    "armature": "extra reflected motor inertia on {joints}",
+    "gravity_tilt": "gravity tilted against the model (base not level)",
+    "time_shift": "efforts recorded late against the positions",
+    "counterweight_transmission": "an error in the counterweight cable's transmission to {joints}",
+}
+
+
+def plain_name(entry: dict) -> str:
+    """An effect of diagnosis.json's `effects` in words (its `name` is the
+    library's identifier, e.g. friction_q3_presliding0.0001)."""
+    name, kind, joints = entry["name"], entry.get("kind", ""), ", ".join(entry.get("joints", ()))
+    reversal = (entry.get("parameters") or {}).get("reversal")
+    how = "" if reversal in (None, "sign") else f", reversing over {reversal.removeprefix('Dahl over ').split(',')[0]}" + (
+        " (pre-sliding)" if reversal.startswith("Dahl") else "")
+    if kind == "friction":
+        if name.startswith("position_friction"):
+            return f"friction of {joints} that changes along its range{how}"
+        if name.startswith("presliding_of_"):
+            return f"the identified friction of {joints} reversing gradually{how}"
+        if len(entry.get("joints", ())) > 1:
+            return f"friction of the coupled joints {joints}{how}"
+        return f"{'Stribeck ' if name.startswith('stribeck') else ''}friction of {joints}{how}"
+    if kind == "elastic":
+        return f"{'a torsion spring' if name.startswith('torsion') else 'cable elasticity'} on {joints}"
+    if kind in ("payload", "payload_at_position"):
+        link = name.split("_on_")[-1].split("_at_")[-1]
+        return f"a payload on the {link} link"
+    return _KIND_WORDS.get(kind, name).format(joints=joints)
+
+
+def _size_words(entry: dict) -> str:
+    size, units = entry.get("size"), entry.get("units") or {}
+    unit = next(iter(units.values()), "")
+    return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
+
+
+def repeatable_share(split_row: dict) -> float | None:
+    """The share of a joint's repeatable gap (before, above the session floor,
+    in squares) that the effects remove; None without a floor or a repeatable gap."""
+    floor = split_row.get("session_floor")
+    if floor is None:
+        return None
+    repeatable = split_row["before"] ** 2 - floor**2
+    return None if repeatable <= 0.0 else 1.0 - split_row["left_over"] ** 2 / repeatable
+
+
+def answer_sentence(result: dict) -> str:
+    """The diagnosis in one sentence: the main effect (what, where, how big),
+    how far the gap shrinks on the main joints (held-out runs when there are),
+    the share of the repeatable gap removed, and what is left against the
+    session floor when a --repeat measured it."""
+    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
+    before, after = result["gap_before"][split][:ANSWER_JOINTS], result["gap_after"][split][:ANSWER_JOINTS]
+    joints = JOINT_NAMES[:ANSWER_JOINTS]
+    selected = list(result["selection"]["selected"])
+    entries = {e["name"]: e for e in result.get("effects", [])}
+    payload = result.get("payload")
+    if payload:  # the effect under study first
+        lead = f"a payload on {payload['link']} ({payload['group']})"
+        others = [n for n in selected if not n.startswith("payload")]
+    elif selected:
+        first = entries.get(selected[0], {"name": selected[0]})
+        lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
+        others = selected[1:]
+    else:
+        lead, others = "no effect", []
+    more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
+    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
+    where = "on the held-out runs" if split == "holdout" else "on the training runs"
+    sentence = f"The gap is mostly explained by {lead}{more}: {where}, {gaps}"
+    shares = [repeatable_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
+    if shares and any(s is not None for s in shares):
+        sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
+    floor = result.get("session_floor")
+    if floor is None:
+        return sentence + "."
+    above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
+    return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
+                       if above else ". What is left is at the session floor: no fixed effect can remove more.")
+
+
+def _fmt(v) -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4g}"
+
+
+def _row(cells, tag="td") -> str:
+    return "<tr>" + "".join(f"<{tag}>{c}</{tag}>" for c in cells) + "</tr>"
+
+
+def _bar(share) -> str:
+    """An explained share as a bar (CSS only) with its number."""
+    if share is None or (isinstance(share, float) and math.isnan(share)):
+        return "-"
+    width = max(0.0, min(1.0, share)) * 100
+    return (f"<div style='display:inline-block;width:8em;background:#eee;vertical-align:middle'>"
+            f"<div style='width:{width:.1f}%;background:#4a7fb5;height:0.8em'></div></div> {share:.1%}")
+
+
+def _gap_table(result: dict) -> list[str]:
+    parts = ["<table>", _row(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES)], "th")]
+    for key in ("gap_before", "gap_after"):
+        for split in ("train", "holdout"):
+            values = (result.get(key) or {}).get(split)
+            if values is not None:
+                parts.append(_row([f"{key.replace('gap_', '')}, {split}", *(_fmt(v) for v in values)]))
+    return parts + ["</table>", f"<p class='note'>after: {html.escape(str(result.get('gap_after_source', '')))}</p>"]
+
+
+def _effects_table(result: dict) -> list[str]:
+    """The ranked effects: plain name, explained share as a bar; the parameters folded away."""
+    e = html.escape
+    parts = ["<table>", _row(["rank", "effect", "identifier", "joints", "selected", "explained (train)", "explained (held out)"], "th")]
+    for rank, effect in enumerate(result.get("effects", [])[:SHOWN_EFFECTS], 1):
+        frac = effect.get("explained_fraction", {})
+        parts.append(_row([rank, e(plain_name(effect)), f"<code>{e(effect['name'])}</code>", e(", ".join(effect.get("joints", []))),
+                           "yes" if effect.get("selected") else "no", _bar(frac.get("train")), _bar(frac.get("holdout"))]))
+    parts.append("</table>")
+    dump = "".join(_row([f"<code>{e(effect['name'])}</code>", e(", ".join(
+        f"{k} = {_fmt(v) if isinstance(v, (int, float)) else v} {(effect.get('units') or {}).get(k, '')}".rstrip()
+        for k, v in effect.get("parameters", {}).items()))]) for effect in result.get("effects", [])[:SHOWN_EFFECTS])
+    return parts + [f"<details><summary>fitted parameters of the ranked effects</summary><table>{_row(['effect', 'parameters'], 'th')}{dump}</table></details>"]
+
+
+def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
+    """An HTML fragment: the answer in one sentence, the residual over one
+    period, gaps before/after per joint, the ranked effects, the payload, and
+    the other figures at `image_sources`."""
+    e = html.escape
+    period = [s for s in image_sources if Path(s).stem == PERIOD_FIGURE]
+    parts = [f"<h3>{e(title)}</h3>", f"<p class='summary'>{e(answer_sentence(result))}</p>"]
+    parts += [f"<figure><img src='{e(s)}' alt='{PERIOD_FIGURE}'><figcaption>The residual (measured - simulated) over one period of the "
+              "run the answer speaks of, before and after the selected effects; the band is ± the session floor.</figcaption></figure>" for s in period]
+    parts += _gap_table(result) + _effects_table(result)
+    parts += _split_and_nuisance_html(result) + _band_html(result) + _payload_html(result)
+    for source in (s for s in image_sources if s not in period):
+        parts.append(f"<figure><img src='{e(source)}' alt='{e(Path(source).stem)}'><figcaption>{e(Path(source).stem)}</figcaption></figure>")
+    return "\n".join(parts)
+
+
+def diagnosis_page(result: dict, image_sources: list[str], title: str) -> str:
+    """diagnosis.html: the fragment as a page in the report's style."""
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>{STYLE}</style></head><body>"
+            + diagnosis_html(result, image_sources, title) + "</body></html>\n")
+
+
+def _payload_html(result: dict) -> list[str]:
+    e = html.escape
+    payload = result.get("payload")
+    if payload and payload.get("words"):  # the identifiable quantity first (first_moment payload)
+        g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
+        return ["<p>" + " ".join(e(w) for w in payload["words"]) + "</p>", "<table>",
+                _row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
+                _row(["gravity effort (interval)", *(f"{_fmt(v)} ({_fmt(lo)} .. {_fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
+    if not payload:
+        return []
+    text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
+            f"at {[round(x, 3) for x in payload['position_m']]} m in the link frame")
+    if payload.get("equivalent_links"):
+        text += f"; the efforts cannot tell it from the same payload on {e(', '.join(payload['equivalent_links']))}"
+    if payload.get("mass_profile"):
+        lo, hi = payload["mass_profile"]["mass_interval_kg"]
+        pinned = "identified" if payload["mass_profile"]["identifiable"] else "not identified by these runs"
+        text += f"; cross-validated mass interval {lo:.3f}-{hi:.3f} kg ({pinned})"
+    return [f"<p>{text}</p>"]
+
+
+def _split_and_nuisance_html(result: dict) -> list[str]:
+    """The gap split per joint (explained, session-to-session, left over) and the per-run nuisance offsets."""
+    e = html.escape
+    parts = []
+    split = (result.get("gap_split") or {}).get("joints") or []
+    if split and split[0].get("session_to_session") is not None:
+        parts.append(f"<p>Gap of the {e(result['gap_split']['runs'])} runs split per joint (RMS, adding in squares): explained by the selected "
+                     f"effects, session-to-session (floor from two sessions of the same trajectory, {e(str(result.get('repeat')))}: no fixed "
+                     "effect can remove it), left over; and the share of the repeatable gap (above the floor) the effects remove.</p>")
+        parts.append("<table>" + _row(["joint", "before", "explained", "session-to-session", "left over", "after", "repeatable gap removed"], "th"))
+        for r in split[:ANSWER_JOINTS]:
+            parts.append(f"<tr><td>{r['joint']} ({e(r['unit'])})</td>" + "".join(f"<td>{r[k]:.4f}</td>" for k in ("before", "explained", "session_to_session", "left_over", "after"))
+                         + f"<td>{_bar(repeatable_share(r))}</td></tr>")
+        parts.append("</table>")
+    if result.get("nuisance_offset_joints"):
+        parts.append(f"<p>{e(offset_joints_sentence(result['nuisance_offset_joints']))}</p>")
+    for run, offsets in (result.get("nuisance_offsets") or {}).items():
+        parts.append(f"<p>nuisance offsets of {e(run)} (a constant per run, fitted, not an effect): "
+                     + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]) + "</p>")
+    return parts
+
+
+def offset_joints_sentence(offset_joints: dict) -> str:
+    joints = ", ".join(offset_joints["joints"]) or "none"
+    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run minus its baseline "
+            "has a nuisance offset on these only; a run of another motion has one on every joint.")
+
+
+def _band_html(result: dict) -> list[str]:
+    """Per joint: is the measured run inside the parameters' uncertainty band?"""
+    band = result.get("parameter_band")
+    if band is None:
+        return []
+    e = html.escape
+    rows = "".join(f"<tr><td>{j} ({e(effort_unit(j))})</td><td>{band['measured_inside_band_fraction'][j]:.3f}</td>"
+                   f"<td>{band['rms_measured_outside_band'][j]:.4f}</td><td>{'outside' if j in band['joints_outside_band'] else 'inside'}</td></tr>"
+                   for j in JOINT_NAMES[:3])
+    return [f"<p>{e(band_sentence(result))}. Rule: {e(band['rule'])}. Parameters: {e(str(band['parameters']))}.</p>",
+            "<table><tr><th>joint</th><th>measured inside the 5-95 % band</th><th>RMS outside the band</th><th>verdict</th></tr>",
+            rows, "</table>"]
