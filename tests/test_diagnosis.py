@@ -254,6 +254,20 @@ def test_withheld_payload_found_on_the_parallelogram(payload_diagnosis):
     assert on_disk["payload"]["link"] == payload["link"]
 
 
+def test_the_payload_is_the_finding_of_a_run_minus_baseline_diagnosis(arm):
+    """The 105 g runs at full and half speed against the full-speed run without
+    the weight: the half-speed run is another motion, fitted with the baseline,
+    so the inertia-only simulation's own errors (friction, ...) explain more of
+    the training residual than the payload; they are the runs' common model
+    errors and rank after the payload, the one effect the runs have and their
+    baseline has not."""
+    result = diagnose(["one-105g", "one-105g-half"], baseline="one-no-weight", arm=arm, figures=False, profile_payload_mass=False)
+    top, *others = result["effects"]
+    assert top["kind"] in ("payload", "payload_at_position") and top["selected"] and top["role"] == "finding"
+    common = [e for e in others if e["selected"] and e["role"] == "common_model_error"]
+    assert common and all(e["kind"] not in ("payload", "payload_at_position") for e in common)
+
+
 @pytest.mark.xfail(strict=True, reason="the mass alone is not identifiable from this pair of runs (see the docstring's numbers)")
 def test_withheld_payload_mass(payload_diagnosis):
     """Why the mass is not pinned (residual = 105 g run - no-weight run, stand-in

@@ -247,6 +247,8 @@ def diagnose(
     # every candidate alone, fitted on all training data, for its parameters and scores
     entries = []
     rank_order = selected + sorted((i for i in individual if i not in selected), key=lambda i: -individual[i].fraction)
+    if baseline is not None:  # the finding is what the runs have and their baseline has not; the rest are errors common to both
+        rank_order = sorted(rank_order, key=lambda i: i not in selected or effects[i].kind not in WITHHELD_KINDS)
     for rank, i in enumerate(rank_order, start=1):
         e = effects[i]
         alone = selector.fit_all([i])
@@ -271,6 +273,7 @@ def diagnose(
             },
             "explained_fraction_per_joint": {"cross_validated": per_joint_fraction(cv.after, train_grams.s)},
             "selected": i in selected,
+            "role": "finding" if baseline is None or e.kind in WITHHELD_KINDS else "common_model_error",
             "selection_step": selected.index(i) + 1 if i in selected else None,
             "in_simulation": e.sim_contribution(np.asarray(p)) is not None,
             "fully_in_simulation": e.fully_simulated(np.asarray(p)),

@@ -33,6 +33,10 @@ _KIND_WORDS = {
 }
 
 
+#: an effect's role in a diagnosis with a baseline (diagnosis.json `effects[].role`)
+_ROLE_WORDS = {"finding": "finding", "common_model_error": "model error common to the runs and their baseline"}
+
+
 def plain_name(entry: dict) -> str:
     """An effect of diagnosis.json's `effects` in words (its `name` is the
     library's identifier, e.g. friction_q3_presliding0.0001)."""
@@ -137,11 +141,12 @@ def _gap_table(result: dict) -> list[str]:
 def _effects_table(result: dict) -> list[str]:
     """The ranked effects: plain name, explained share as a bar; the parameters folded away."""
     e = html.escape
-    parts = ["<table>", _row(["rank", "effect", "identifier", "joints", "selected", "explained (train)", "explained (held out)"], "th")]
+    parts = ["<table>", _row(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", "explained (held out)"], "th")]
     for rank, effect in enumerate(result.get("effects", [])[:SHOWN_EFFECTS], 1):
         frac = effect.get("explained_fraction", {})
         parts.append(_row([rank, e(plain_name(effect)), f"<code>{e(effect['name'])}</code>", e(", ".join(effect.get("joints", []))),
-                           "yes" if effect.get("selected") else "no", _bar(frac.get("train")), _bar(frac.get("holdout"))]))
+                           "yes" if effect.get("selected") else "no", _ROLE_WORDS.get(effect.get("role"), "finding"),
+                           _bar(frac.get("train")), _bar(frac.get("holdout"))]))
     parts.append("</table>")
     dump = "".join(_row([f"<code>{e(effect['name'])}</code>", e(", ".join(
         f"{k} = {_fmt(v) if isinstance(v, (int, float)) else v} {(effect.get('units') or {}).get(k, '')}".rstrip()

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
@@ -87,6 +88,10 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
             verdicts.append({"check": f"{title}: mass with --payload-at (hand position) within {tol:.0%} of {m_true} kg",
                              "passed": abs(error) <= tol,
                              "value": f"{at['mass_kg']:.3f} kg ({error:+.0%}), interval {at['mass_kg_interval'][0]:.3f}-{at['mass_kg_interval'][1]:.3f} kg"})
+    top = result["effects"][0] if result.get("effects") else None
+    verdicts.append({"check": f"{title}: the payload is the top finding (the runs minus their baseline), not a model error common to both",
+                     "passed": bool(top and top["kind"] in WITHHELD_KINDS),
+                     "value": f"rank 1: {top['name'] if top else 'none'}"})
     before, after = result["gap_before"]["train"], result["gap_after"]["train"]
     verdicts.append({"check": f"{title}: the diagnosis closes the J2 gap", "passed": after[1] < before[1],
                      "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
