@@ -69,6 +69,19 @@ def noise_rms(arm, segment):
     return rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
 
 
+#: diagnosis.json's top-level keys and those of each effect (docs/outputs.md)
+DIAGNOSIS_KEYS = {
+    "joints", "units", "measured", "measured_runs", "baseline_source", "nuisance_offsets", "nuisance_offset_joints", "session_floor",
+    "repeat", "gap_split", "baseline", "train_runs", "holdout_runs", "inputs", "processing", "residual_definition", "simulated_source",
+    "gap_before", "gap_after", "gap_after_source", "explained_fraction", "effects", "selection", "payload", "payloads",
+    "payload_candidates", "sim_config", "not_in_simulation", "where",
+}
+EFFECT_KEYS = {
+    "rank", "name", "kind", "family", "joints", "parameters", "units", "size", "explained_fraction", "explained_fraction_per_joint",
+    "selected", "role", "selection_step", "in_simulation", "fully_in_simulation",
+}
+
+
 def _recover(arm, segment, noise_rms, effect, p_true, seed):
     measured = synthesize_measurement(arm, segment, [(effect, np.asarray(p_true))], noise_rms, seed=seed)
     result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False, profile_payload_mass=False)
@@ -376,6 +389,9 @@ def test_contract_and_outputs(arm, segment, noise_rms, tmp_path):
     assert result["sim_config"]["extra"]["offset"][2] == pytest.approx(0.4, rel=SIZE_TOLERANCE)
     on_disk = json.loads((tmp_path / "diagnosis.json").read_text())
     assert on_disk["effects"][0]["name"] == "offset_q3"
+    # the layout of diagnosis.json (docs/outputs.md): a change of it is a decision, made here
+    assert set(on_disk) == DIAGNOSIS_KEYS
+    assert all(set(entry) == EFFECT_KEYS for entry in on_disk["effects"])
     assert (tmp_path / "where.csv").is_file()
     assert len(list((tmp_path / "figures").glob("*.png"))) == 15  # 7 joints before and after, and one period
 
