@@ -30,6 +30,31 @@ def _bag_topics(args: argparse.Namespace):
 RUN_OPTIONS = ("measured", "repeat", "runs", "holdout", "baseline", "train", "bag")
 
 
+#: the options that name files or folders a command reads (argparse dest: option)
+INPUT_OPTIONS = {"measured": "--measured", "runs": "--runs", "repeat": "--repeat", "holdout": "--holdout", "train": "--train",
+                 "baseline": "--baseline", "prior": "--prior", "params": "--params", "params_cov": "--params-cov",
+                 "parameter_band": "--parameter-band", "bounds": "--bounds", "dynamics": "--dynamics", "bag": "--bag",
+                 "arm_model": "--arm-model"}
+OUTPUT_OPTIONS = {"out": "--out", "report": "--report"}
+
+
+def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
+    """No output (replaced whole) holds an input, and none is written into an
+    input's folder (a bag, a run folder): refused before any work, even with --force."""
+    from dvrk_dart.io.outputs import check_not_inside, normalised
+
+    outputs = [(getattr(args, dest), option) for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None)]
+    for dest, option in INPUT_OPTIONS.items():
+        values = getattr(args, dest, None)
+        for value in values if isinstance(values, (list, tuple)) else [values]:
+            if not isinstance(value, (str, os.PathLike)) or not Path(value).exists():
+                continue  # a reference run's name, a dynamics keyword, or absent
+            for out, out_option in outputs:
+                check_not_inside(value, out, option, out_option)
+                if Path(value).is_dir() and normalised(value) in normalised(out).parents:
+                    raise DvrkDartError(f"{out_option}: {out} is inside {option} {value}: an output is not written into an input")
+
+
 def _check_bag_options(args: argparse.Namespace) -> None:
     """--arm, --topic and --jaw-topic select data in a bag: with no bag among the inputs they would do nothing."""
     from dvrk_dart.io.bags import is_bag
@@ -412,6 +437,11 @@ def main(argv: list[str] | None = None) -> int:
         except DvrkDartError as exc:
             print(f"dvrk-dart: {exc}", file=sys.stderr)
             return exc.exit_code
+    try:
+        _check_outputs_apart_from_inputs(args)
+    except DvrkDartError as exc:
+        print(f"dvrk-dart: {exc}", file=sys.stderr)
+        return exc.exit_code
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     # (an ignored SIGINT, as under nohup, stays ignored)

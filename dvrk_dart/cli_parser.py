@@ -11,7 +11,7 @@ from pathlib import Path
 import sys
 
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S
+from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 
@@ -124,7 +124,12 @@ def _executor_options(p: argparse.ArgumentParser) -> None:
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """Usage errors as every other error: one line naming the option, exit 2."""
+    """Usage errors as every other error: one line naming the option, exit 2.
+    No abbreviated options: `--dur 3 --duration 4` would give one option twice."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         print(f"dvrk-dart: {self.prog.removeprefix('dvrk-dart').strip() + ': ' if self.prog != 'dvrk-dart' else ''}"
@@ -204,7 +209,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     def sim_options(p: argparse.ArgumentParser) -> None:
         p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
                        help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
-        p.add_argument("--dt", type=number_in(0.0, MAX_STEP_S, "s", open_low=True), default=1e-3, help="simulation step (s)")
+        p.add_argument("--dt", type=number_in(MIN_STEP_S, MAX_STEP_S, "s"), default=1e-3, help="simulation step (s)")
         p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
         p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                        help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "

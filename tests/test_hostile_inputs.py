@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dvrk_dart.cli import main
-from dvrk_dart.io.reference_data import resolve_run
+from dvrk_dart.io.reference_data import resolve, resolve_run
 
 
 def cli(capsys, *argv) -> tuple[int, list[str], str]:
@@ -88,3 +88,60 @@ def test_a_users_folder_named_like_a_half_built_one_is_kept(tmp_path, capsys):
     code, _, _ = cli(capsys, "run", "rectilinear", "--mode", "velocity", "--duration", "0.05", "--out", tmp_path / "run")
     assert code == 0 and (users / "important.txt").read_text() == "mine"
     shutil.rmtree(tmp_path / "run")
+
+
+# ------------------------------------------------ the third fuzz
+@pytest.mark.parametrize("argv, fragment", [
+    (["replay", "--measured", "one", "--dur", "3", "--duration", "4"], "unrecognized arguments: --dur"),  # no abbreviations
+    (["replay", "--measured", "one", "--dt", "1e-9"], "--dt"),  # 10^9 steps a second: refused, not run out of memory
+    (["replay", "--measured", "one", "--dt", "1e-5", "--duration", "3600"], "steps"),
+])
+def test_options_given_twice_by_abbreviation_or_beyond_memory_are_refused(tmp_path, capsys, argv, fragment):
+    out = tmp_path / "out"
+    code, lines, _ = cli(capsys, *argv, "--out", out)
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert not out.exists()
+
+
+def test_an_out_spelled_through_its_parent_is_replaced_in_place(tmp_path, capsys, monkeypatch):
+    """`--out r/../r`: the folder is replaced (the user's file carried over),
+    nothing is left hidden beside it; `--out .` inside it is refused."""
+    monkeypatch.chdir(tmp_path)
+    assert cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", "r")[0] == 0
+    (tmp_path / "r" / "notes.txt").write_text("mine")
+    code, lines, _ = cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", "r/../r")
+    assert code == 0, lines
+    assert (tmp_path / "r" / "notes.txt").read_text() == "mine" and (tmp_path / "r" / "metrics.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]
+    monkeypatch.chdir(tmp_path / "r")
+    code, lines, _ = cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", ".")
+    assert code == 2 and "current folder" in lines[0]
+
+
+def test_an_input_inside_the_output_or_an_output_inside_an_input_is_refused(tmp_path, capsys):
+    out = tmp_path / "id"
+    out.mkdir()
+    prior = out / "params.json"
+    shutil.copy(resolve("params.json"), prior)
+    before = prior.read_bytes()
+    code, lines, _ = cli(capsys, "identify", "--runs", "one", "--prior", prior, "--out", out)
+    assert code == 2 and "--prior" in lines[0] and prior.read_bytes() == before
+    run_folder = tmp_path / "run"
+    run_folder.mkdir()
+    measured = run_folder / "one.csv"
+    shutil.copy(resolve_run("one"), measured)
+    code, lines, _ = cli(capsys, "replay", "--measured", run_folder, "--out", run_folder / "replay")
+    assert code == 2 and len(lines) == 1, lines
+    assert sorted(p.name for p in run_folder.iterdir()) == ["one.csv"]
+
+
+def test_the_report_figures_of_validate_leave_a_users_folder_there(tmp_path):
+    """validate stages the diagnosis figures in report_figures/: a folder of
+    the user's inside it stays (it used to be emptied whole)."""
+    from dvrk_dart.diagnosis.validation import report_section
+
+    mine = tmp_path / "report_figures" / "myreplay"
+    mine.mkdir(parents=True)
+    (mine / "notes.txt").write_text("mine")
+    report_section(tmp_path, [])
+    assert (mine / "notes.txt").read_text() == "mine"

@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 from dvrk_dart.analysis.tables import LoadedRun, simulated_terms_of  # noqa: E402
 from dvrk_dart.model.identified import TERMS  # noqa: E402
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit  # noqa: E402
+from dvrk_dart.runs.executors import quiet_worker  # noqa: E402
 
 COLORS = {"sim": "tab:red", "model": "tab:blue", "measured": "tab:green", "reference": "black", "command": "tab:purple"}
 REFERENCE_STYLE = "--"
@@ -231,7 +232,7 @@ def build_figures(runs: dict[str, LoadedRun], out_dir: Path, jobs: int = 1) -> l
     if jobs > 1 and len(plans) > 1 and "fork" in multiprocessing.get_all_start_methods():
         _PLANS = plans
         try:
-            with ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=multiprocessing.get_context("fork")) as pool:
+            with ProcessPoolExecutor(max_workers=min(jobs, len(plans)), mp_context=multiprocessing.get_context("fork"), initializer=quiet_worker) as pool:
                 list(pool.map(_draw, range(len(plans))))
         finally:
             _PLANS = []

@@ -48,6 +48,7 @@ from dvrk_dart.io.reference_data import sha256_of
 from dvrk_dart.metrics import REGIME_ALL, TORQUE_TRANSIENT_S, relative_error, rms
 from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
+from dvrk_dart.runs.executors import quiet_worker
 
 RUN_LOG = "run.mcap"
 CONFIG_FILE = "config.json"
@@ -362,7 +363,7 @@ def analyze(
     checks, published = load_checks(checks_file), load_published(published_file)  # fail early on bad data files
     jobs = jobs or default_jobs()
     if jobs > 1 and len(folders) > 1:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(folders))) as pool:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), initializer=quiet_worker) as pool:
             results = list(pool.map(_load_and_measure, map(str, folders)))
     else:
         results = [_load_and_measure(str(f)) for f in folders]

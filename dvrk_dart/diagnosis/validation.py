@@ -291,8 +291,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     e = html.escape
     files: list[Path] = []
     staging = out_dir / "report_figures"
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
+    staging.mkdir(parents=True, exist_ok=True)  # what else is there stays: the staged files are named, and overwritten, one by one
     body = ["<p>The simulation carries the identified inertia only; the diagnosis finds which unmodelled effect explains "
             "the gap to the measured efforts, puts it into the DART simulation as physics and re-runs the replay.</p>", "<table>",
             "<tr><th>check</th><th>result</th><th>value</th></tr>"]

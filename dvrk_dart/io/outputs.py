@@ -123,6 +123,11 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     path = check_writable_folder(path, option)
     if path.is_symlink():
         raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
+    whole = normalised(path)
+    if whole == Path.cwd() or whole in Path.cwd().parents:
+        raise DvrkDartError(f"{option}: {path} is the current folder or holds it: give a folder beside or below it")
+    if len(os.fsencode(whole.name)) + BUILDING_SUFFIX_BYTES > NAME_MAX_BYTES:
+        raise DvrkDartError(f"{option}: the name {whole.name[:20]}... is too long (at most {NAME_MAX_BYTES - BUILDING_SUFFIX_BYTES} bytes)")
     if path.is_dir() and not replaceable(path, kind):
         raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as {_article(kind)} {kind} folder: refusing to replace it")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
@@ -149,6 +154,18 @@ def check_shared_folder(path: str | os.PathLike, kind: str, option: str = "--out
         raise DvrkDartError(f"{option}: {path / foreign[0]} is not what dvrk-dart wrote there (a file of yours, or one changed since): "
                             "move it, then run again")
     return path
+
+
+#: a file name's longest length on the usual file systems, and what the
+#: half-built folder's name adds to the output's (.NAME.building-PID-HEX)
+NAME_MAX_BYTES = 255
+BUILDING_SUFFIX_BYTES = 40
+
+
+def normalised(path: str | os.PathLike) -> Path:
+    """The absolute path with `..` and `.` resolved by name (`r7/../r7` is
+    `r7`: once the folder is moved aside, `r7/..` no longer exists)."""
+    return Path(os.path.normpath(Path(path).absolute()))
 
 
 def replaceable(path: Path, kind: str) -> bool:
@@ -191,8 +208,8 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     (marked as `kind`, with the user's own files of the old folder carried
     over); on any failure or interruption `target` is left as it was and the
     partial folder is removed."""
-    target = Path(target)
     check_output_folder(target, kind)
+    target = normalised(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_building(target)
     building = target.with_name(f".{target.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
@@ -246,7 +263,12 @@ def swap_in(built: Path, target: Path) -> None:
     if target.exists():
         old = target.with_name(f".{target.name}.old-{uuid.uuid4().hex[:8]}")
         os.replace(target, old)
-    os.replace(built, target)
+    try:
+        os.replace(built, target)
+    except OSError:
+        if old is not None:  # the previous folder goes back where it was
+            os.replace(old, target)
+        raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
 

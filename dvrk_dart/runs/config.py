@@ -24,9 +24,14 @@ from dvrk_dart.sim.config import SimConfig
 #: the simulation step bounds a user may ask for (s): above 10 ms the closed
 #: chain's constraint stabilisation no longer holds the loops
 MAX_STEP_S = 0.01
+#: the smallest simulation step: 100 kHz, ten times any servo rate of the arm (a 1 ns step
+#: would hold 10^9 states per simulated second, more than the machine's memory)
+MIN_STEP_S = 1e-5
 #: the longest run (s): an hour of simulated time at 1 kHz is 3.6 M steps, whose
 #: logs still fit in memory; longer runs belong in several files
 MAX_DURATION_S = 3600.0
+#: the most simulation steps of one run (the hour at 1 kHz above)
+MAX_STEPS = 3.6e6
 
 
 @dataclass(frozen=True)
@@ -46,10 +51,13 @@ class RunConfig:
     def __post_init__(self) -> None:
         if self.processing not in ("upstream", "periodic"):
             raise DvrkDartError(f"--processing: '{self.processing}' is not upstream or periodic")
-        if not (0.0 < self.dt_s <= MAX_STEP_S):
-            raise DvrkDartError(f"--dt: {self.dt_s} s is outside (0, {MAX_STEP_S}] s")
+        if not (MIN_STEP_S <= self.dt_s <= MAX_STEP_S):
+            raise DvrkDartError(f"--dt: {self.dt_s} s is outside [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s")
         if self.duration_s is not None and not (0.0 < self.duration_s <= MAX_DURATION_S):
             raise DvrkDartError(f"--duration: {self.duration_s} s is outside (0, {MAX_DURATION_S:g}] s")
+        if self.duration_s is not None and self.duration_s / self.dt_s > MAX_STEPS:
+            raise DvrkDartError(f"--dt: {self.dt_s:g} s over {self.duration_s:g} s is {self.duration_s / self.dt_s:.3g} steps, "
+                                f"more than {MAX_STEPS:.3g}: a longer step or a shorter --duration")
         if self.dynamics not in DYNAMICS_CHOICES and not Path(self.dynamics).suffix == ".json":
             raise DvrkDartError(f"--dynamics: '{self.dynamics}' is not one of {', '.join(DYNAMICS_CHOICES)} nor a diagnosis.json")
 

@@ -11,12 +11,20 @@ driver, which writes every output: Ray workers need not share its file system.
 from __future__ import annotations
 
 import contextlib
+import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from dvrk_dart.errors import DvrkDartError
 
 EXECUTORS = ("local", "ray")
+
+
+def quiet_worker() -> None:
+    """A pool worker's start: Ctrl-C is the main process's to handle (it ends
+    the pool), and a worker it ends dies at once, without a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 #: how long a Ray head may take to accept a connection before the address is called unreachable (s)
@@ -91,7 +99,7 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
         return
     with tqdm(total=len(tasks), desc=desc, unit=unit) as bar:
         if executor == "local":
-            pool = ProcessPoolExecutor(max_workers=max(1, jobs))
+            pool = ProcessPoolExecutor(max_workers=max(1, jobs), initializer=quiet_worker)
             finished = False
             try:
                 futures = {pool.submit(fn, task): task for task in tasks}
