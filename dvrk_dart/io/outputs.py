@@ -130,6 +130,9 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
         raise DvrkDartError(f"{option}: the name {whole.name[:20]}... is too long (at most {NAME_MAX_BYTES - BUILDING_SUFFIX_BYTES} bytes)")
     if path.is_dir() and not replaceable(path, kind):
         raise DvrkDartError(f"{option}: {path} exists and was not made by dvrk-dart as {_article(kind)} {kind} folder: refusing to replace it")
+    edited = _edited_files(path) if path.is_dir() else []
+    if edited:  # the new output may write that file: say so now, not after the work
+        raise DvrkDartError(f"{option}: {path / edited[0]} was written by dvrk-dart and changed since: move it, then run again")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise DvrkDartError(f"{option}: {path.absolute().parent} is not writable")
     return path
@@ -166,6 +169,14 @@ def normalised(path: str | os.PathLike) -> Path:
     """The absolute path with `..` and `.` resolved by name (`r7/../r7` is
     `r7`: once the folder is moved aside, `r7/..` no longer exists)."""
     return Path(os.path.normpath(Path(path).absolute()))
+
+
+def _edited_files(folder: Path) -> list[str]:
+    """The files the folder's marker lists that are no longer as the tool wrote them."""
+    marker = read_marker(folder)
+    if marker is None:
+        return []
+    return [relative for relative in marker.files if (folder / relative).exists() and not marker.owns(folder, relative)]
 
 
 def replaceable(path: Path, kind: str) -> bool:
