@@ -280,7 +280,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
                                             "only on joints whose measured efforts leave the parameters' band")
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
-    _add_processing_option(p, None)  # a payload diagnosis (--baseline) keeps upstream: its intervals are calibrated there
+    _add_processing_option(p, None)  # a payload diagnosis (--baseline) keeps upstream, where its checks were made
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     _add_bag_options(p)

@@ -18,6 +18,7 @@ from dvrk_dart.diagnosis.design import (
     weighted_fraction,
 )
 from dvrk_dart.diagnosis.effect import Effect
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.first_moment import (
     FirstMomentPayload,
@@ -165,9 +166,12 @@ def diagnose(
 
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
     inputs = distinct_inputs(_roles(measured_list, baseline, train, holdout, repeat))
+    if baseline is not None and processing == "periodic":
+        raise DvrkDartError("--processing periodic with --baseline: the payload fit on periodic difference signals is not built; "
+                            "its intervals would not hold (leave --processing out: upstream)")
     if processing is None and baseline is not None:
         run_processing = RunProcessing(why="upstream: a payload diagnosis (with a baseline) keeps the upstream processing, "
-                                           "on which its intervals are calibrated")
+                                           "on which its payload checks were made")
     else:
         run_processing = choose_processing(all_specs, processing)
 

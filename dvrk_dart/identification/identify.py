@@ -105,6 +105,9 @@ def _joint_indices(names: tuple[str, ...]) -> np.ndarray:
     unknown = [n for n in names if n not in JOINT_NAMES]
     if unknown or not names:
         raise DvrkDartError(f"--joints: unknown joints {unknown} (known: {', '.join(JOINT_NAMES)})")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise DvrkDartError(f"--joints: {', '.join(repeated)} given twice")
     return np.array(sorted({JOINT_NAMES.index(n) for n in names}))
 
 

@@ -19,6 +19,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -272,6 +273,7 @@ def swap_in(built: Path, target: Path) -> None:
     that there is always a complete folder at `target` or the old one."""
     old = None
     if target.exists():
+        os.chmod(built, stat.S_IMODE(target.stat().st_mode))  # the folder keeps its permissions (a read-only folder stays so)
         old = target.with_name(f".{target.name}.old-{uuid.uuid4().hex[:8]}")
         os.replace(target, old)
     try:

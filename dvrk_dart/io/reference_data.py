@@ -278,7 +278,7 @@ def _joint_ranges_of(model_file: Path) -> tuple[np.ndarray, np.ndarray]:
 def _numbers_or_error(path: Path) -> np.ndarray:
     """Read the CSV as text to name the first cell that is not a number."""
     try:
-        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True)
+        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False)
     except pd.errors.EmptyDataError:
         raise DvrkDartError(f"{path}: file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -306,7 +306,7 @@ def load_run(path: Path | str) -> MeasuredRun:
     if not os.access(path, os.R_OK):
         raise DvrkDartError(f"{path}: not readable (permission denied)")
     try:
-        values = pd.read_csv(path, header=None, dtype=float, skip_blank_lines=True).to_numpy()
+        values = pd.read_csv(path, header=None, dtype=float, skip_blank_lines=True, index_col=False).to_numpy()
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError):  # a well-formed file reads as numbers at once
         values = _numbers_or_error(path)
     if values.shape[1] != len(CSV_COLUMNS):
