@@ -25,9 +25,14 @@ from dvrk_dart.sim.config import SimConfig
 SAME_MOTION_POSITION_RMS = 0.01
 #: ... and their velocities by less than this fraction of the velocity RMS
 SAME_MOTION_VELOCITY_FRACTION = 0.1
-#: two recordings of one motion may start this far apart (s): the baseline is
-#: aligned on the run by whole samples within it, then both cut to their common span
-MAX_START_OFFSET_S = 1.0
+#: two recordings of one motion may start this far apart (a share of the shorter
+#: one): the baseline is aligned on the run by whole samples within it, then both
+#: cut to their common span (at least half the shorter run)
+MAX_START_OFFSET_SHARE = 0.25
+#: shifts whose position error is within this factor of the best are as good:
+#: the smallest of them keeps the longest common span (a periodic motion
+#: matches itself a period later too)
+ALIGNMENT_TIE = 1.05
 
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 """simulate(config, run) -> (N, 7) simulated efforts at the run's samples (DART replay)."""
@@ -198,13 +203,15 @@ def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
     motion (decided from the positions over their common span), else None."""
     if abs(a.rate_hz - b.rate_hz) > 1e-6 * a.rate_hz:
         return None
-    limit = int(round(MAX_START_OFFSET_S * a.rate_hz))
+    limit = int(min(len(a), len(b)) * MAX_START_OFFSET_SHARE)
     end = min(len(a), len(b)) - limit
     if end <= 2 * limit:
         return None
     # a's positions inside its margins against b's shifted by k (every shift stays inside b)
-    errors = [np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in range(-limit, limit + 1)]
-    offset = int(np.argmin(errors)) - limit
+    shifts = np.arange(-limit, limit + 1)
+    errors = np.array([np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in shifts])
+    good = shifts[errors <= ALIGNMENT_TIE * errors.min() + np.finfo(float).tiny]
+    offset = int(good[np.argmin(np.abs(good))])
     start_a, start_b = max(0, -offset), max(0, offset)
     span = min(len(a) - start_a, len(b) - start_b)
     return offset if same_motion(a.window(start_a, span), b.window(start_b, span)) else None
