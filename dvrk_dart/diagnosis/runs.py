@@ -29,10 +29,7 @@ SAME_MOTION_VELOCITY_FRACTION = 0.1
 #: one): the baseline is aligned on the run by whole samples within it, then both
 #: cut to their common span (at least half the shorter run)
 MAX_START_OFFSET_SHARE = 0.25
-#: shifts whose position error is within this factor of the best are as good:
-#: the smallest of them keeps the longest common span (a periodic motion
-#: matches itself a period later too)
-ALIGNMENT_TIE = 1.05
+
 
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 """simulate(config, run) -> (N, 7) simulated efforts at the run's samples (DART replay)."""
@@ -210,8 +207,12 @@ def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
     # a's positions inside its margins against b's shifted by k (every shift stays inside b)
     shifts = np.arange(-limit, limit + 1)
     errors = np.array([np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in shifts])
-    good = shifts[errors <= ALIGNMENT_TIE * errors.min() + np.finfo(float).tiny]
-    offset = int(good[np.argmin(np.abs(good))])
+    # the smallest shift at which the positions agree keeps the longest common
+    # span (a periodic motion matches itself a period later too)
+    agree = shifts[errors < SAME_MOTION_POSITION_RMS**2]
+    if not len(agree):
+        return None
+    offset = int(agree[np.argmin(np.abs(agree))])
     start_a, start_b = max(0, -offset), max(0, offset)
     span = min(len(a) - start_a, len(b) - start_b)
     return offset if same_motion(a.window(start_a, span), b.window(start_b, span)) else None

@@ -136,6 +136,8 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
     """Locate a reference file by manifest name (explicit path wins, unchecked)."""
     if explicit is not None:
         path = Path(explicit)
+        if path.is_dir():
+            raise DvrkDartError(f"{path}: a folder, where the file {name} was expected")
         if not path.is_file():
             raise DvrkDartError(f"{path}: file not found")
         return path
