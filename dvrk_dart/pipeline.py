@@ -107,7 +107,7 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
 
     # the Monte Carlo first: the held-out diagnosis calls an effect unmodelled only outside its band
     uncertainty = _uncertainty_section(out_dir, jobs, executor, ray_address)
-    section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty")
+    section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty", jobs=jobs)
     identification = _identification_section(out_dir)
     periodic = _periodic_section(out_dir, runs_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)

@@ -264,24 +264,41 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
     return summary, verdicts
 
 
-def validate_withheld(out_dir: Path, arm: Arm | None = None, parameter_band: Path | None = None) -> list[dict]:
-    """All withheld-effect validations; writes out_dir/verdicts.json and returns the verdicts.
-    parameter_band: the uncertainty folder of the held-out run, used by the held-out diagnosis."""
-    arm = arm or load_arm()
-    spec = tomllib.loads(WITHHELD_FILE.read_text())
-    verdicts: list[dict] = []
+#: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
+#: they run side by side, each in its own process
+WITHHELD_STEPS = ("payload", "mtm_holdout", "holdout", "synthetic", "insertion", "out_of_library")
+
+
+def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], float]:
+    """One validation of WITHHELD_STEPS in a worker: (its verdicts, its wall time)."""
     from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 
-    steps = (("payload", validate_payload), ("insertion", validate_insertion), ("holdout", validate_holdout),
-             ("mtm_holdout", validate_other_arm_holdout), ("synthetic", validate_synthetic), ("out_of_library", validate_out_of_library))
-    for name, step in steps:
-        start = time.perf_counter()
-        extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
-        _, found = step(arm, spec[name], out_dir / name, **extra)
+    name, out_dir, parameter_band = task
+    step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout,
+            "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library}[name]
+    start = time.perf_counter()
+    extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
+    _, found = step(load_arm(), tomllib.loads(WITHHELD_FILE.read_text())[name], out_dir / name, **extra)
+    return found, time.perf_counter() - start
+
+
+def validate_withheld(out_dir: Path, parameter_band: Path | None = None, jobs: int = 2) -> list[dict]:
+    """All withheld-effect validations, `jobs` side by side; writes
+    out_dir/verdicts.json and returns the verdicts (in WITHHELD_STEPS' order).
+    parameter_band: the uncertainty folder of the held-out run, used by the held-out diagnosis."""
+    from dvrk_dart.runs.executors import run_tasks
+
+    by_step: dict[str, list[dict]] = {}
+    tasks = [(name, out_dir, parameter_band) for name in WITHHELD_STEPS]
+    for (name, _, _), outcome, error in run_tasks(_withheld_step, tasks, jobs=jobs, desc="withheld validations", unit="check"):
+        if error is not None:
+            raise DvrkDartError(f"withheld validation {name}: {error}")
+        found, seconds = outcome
         for v in found:
             v["group"] = f"diagnosis: {name}"
-        verdicts += found
-        print(f"diagnosis {name}: {sum(v['passed'] for v in found)}/{len(found)} checks passed ({time.perf_counter() - start:.0f} s)")
+        by_step[name] = found
+        print(f"diagnosis {name}: {sum(v['passed'] for v in found)}/{len(found)} checks passed ({seconds:.0f} s)")
+    verdicts = [v for name in WITHHELD_STEPS for v in by_step[name]]
     write_json_atomic(out_dir / "verdicts.json", verdicts)
     return verdicts
 
@@ -323,9 +340,9 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     return ("Sim-to-real gap diagnosis", "\n".join(body), files)
 
 
-def validation_section(out_dir: Path, parameter_band: Path | None = None) -> tuple[str, str, list[Path]]:
+def validation_section(out_dir: Path, parameter_band: Path | None = None, jobs: int = 2) -> tuple[str, str, list[Path]]:
     """Run the withheld-effect validation and return the report section."""
-    verdicts = validate_withheld(out_dir, parameter_band=parameter_band)
+    verdicts = validate_withheld(out_dir, parameter_band=parameter_band, jobs=jobs)
     return report_section(out_dir, verdicts)
 
 
