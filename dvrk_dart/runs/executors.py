@@ -11,6 +11,7 @@ driver, which writes every output: Ray workers need not share its file system.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -20,11 +21,18 @@ from dvrk_dart.errors import DvrkDartError
 EXECUTORS = ("local", "ray")
 
 
+#: Linux's prctl option: a signal the process gets when its parent dies
+PR_SET_PDEATHSIG = 1
+
+
 def quiet_worker() -> None:
     """A pool worker's start: Ctrl-C is the main process's to handle (it ends
-    the pool), and a worker it ends dies at once, without a traceback."""
+    the pool), a worker it ends dies at once, without a traceback, and a
+    worker whose parent died (a pool inside a pool worker) dies with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the pool's own shutdown ends it
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 #: how long a Ray head may take to accept a connection before the address is called unreachable (s)
