@@ -34,7 +34,7 @@ RUN_OPTIONS = ("measured", "repeat", "runs", "holdout", "baseline", "train", "ba
 INPUT_OPTIONS = {"measured": "--measured", "runs": "--runs", "repeat": "--repeat", "holdout": "--holdout", "train": "--train",
                  "baseline": "--baseline", "prior": "--prior", "params": "--params", "params_cov": "--params-cov",
                  "parameter_band": "--parameter-band", "bounds": "--bounds", "dynamics": "--dynamics", "bag": "--bag",
-                 "arm_model": "--arm-model"}
+                 "arm_model": "--arm-model", "extra": "--extra"}
 OUTPUT_OPTIONS = {"out": "--out", "report": "--report"}
 
 
@@ -43,6 +43,9 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
     input's folder (a bag, a run folder): refused before any work, even with --force."""
     from dvrk_dart.io.outputs import check_not_inside, normalised
 
+    empty = [option for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None) == ""]
+    if empty:
+        raise DvrkDartError(f"{empty[0]}: an empty name")
     outputs = [(getattr(args, dest), option) for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None)]
     for dest, option in INPUT_OPTIONS.items():
         values = getattr(args, dest, None)

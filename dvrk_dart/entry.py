@@ -4,6 +4,7 @@ does not wait on worker pools an interrupt ended (a worker killed while it
 handed back a result leaves the pool's thread waiting forever)."""
 
 import os
+import signal
 import sys
 
 #: exit codes of an interrupted (Ctrl-C) or terminated (SIGTERM) command
@@ -17,6 +18,9 @@ def run() -> None:
         print("dvrk-dart: interrupted", file=sys.stderr)
         os._exit(INTERRUPTED)
     code = main()
+    # the command is over (its outputs are in place or removed): a Ctrl-C while
+    # the interpreter shuts down must not turn its exit code into "interrupted"
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if code in (INTERRUPTED, TERMINATED):
         sys.stdout.flush()
         sys.stderr.flush()

@@ -145,3 +145,30 @@ def test_the_report_figures_of_validate_leave_a_users_folder_there(tmp_path):
     (mine / "notes.txt").write_text("mine")
     report_section(tmp_path, [])
     assert (mine / "notes.txt").read_text() == "mine"
+
+
+def test_an_out_inside_another_output_or_empty_is_refused(tmp_path, capsys):
+    """A folder an output of the tool lists (a diagnosis's replay_before/) is
+    not replaced by another command; an empty --out is no folder at all."""
+    from dvrk_dart.io.outputs import write_marker
+
+    owner = tmp_path / "diagnosis"
+    (owner / "replay_before").mkdir(parents=True)
+    (owner / "replay_before" / "metrics.json").write_text("{}")
+    write_marker(owner, "diagnosis")
+    code, lines, _ = cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", owner / "replay_before")
+    assert code == 2 and "part of" in lines[0] and (owner / "replay_before" / "metrics.json").read_text() == "{}"
+    code, lines, _ = cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", "")
+    assert code == 2 and "--out: an empty name" in lines[0]
+
+
+def test_a_late_baseline_is_aligned_on_the_best_shift(arm):
+    """A copy of one-no-weight started 499 samples late: aligned at 499 exactly
+    (a shift one sample off leaves twice the position error)."""
+    from dvrk_dart.diagnosis.runs import motion_offset
+    from dvrk_dart.io.reference_data import load_run
+    from dvrk_dart.io.signal import process
+
+    run = process(load_run(resolve_run("one-no-weight")))
+    late = run.window(499, len(run) - 499)
+    assert motion_offset(run, late) == -499

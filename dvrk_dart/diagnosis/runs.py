@@ -207,12 +207,14 @@ def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
     # a's positions inside its margins against b's shifted by k (every shift stays inside b)
     shifts = np.arange(-limit, limit + 1)
     errors = np.array([np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in shifts])
-    # the smallest shift at which the positions agree keeps the longest common
-    # span (a periodic motion matches itself a period later too)
-    agree = shifts[errors < SAME_MOTION_POSITION_RMS**2]
-    if not len(agree):
+    # a periodic motion matches itself a period later too: of the best shifts of
+    # each match (the local minima where the positions agree), the smallest
+    # keeps the longest common span
+    inner = errors[1:-1]
+    minima = shifts[1:-1][(inner <= errors[:-2]) & (inner <= errors[2:]) & (inner < SAME_MOTION_POSITION_RMS**2)]
+    if not len(minima):
         return None
-    offset = int(agree[np.argmin(np.abs(agree))])
+    offset = int(minima[np.argmin(np.abs(minima))])
     start_a, start_b = max(0, -offset), max(0, offset)
     span = min(len(a) - start_a, len(b) - start_b)
     return offset if same_motion(a.window(start_a, span), b.window(start_b, span)) else None

@@ -125,6 +125,9 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     if path.is_symlink():
         raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
     whole = normalised(path)
+    owner = _enclosing_output(whole)
+    if owner is not None:
+        raise DvrkDartError(f"{option}: {path} is part of {owner}, a folder dvrk-dart wrote: give a folder outside it")
     if whole == Path.cwd() or whole in Path.cwd().parents:
         raise DvrkDartError(f"{option}: {path} is the current folder or holds it: give a folder beside or below it")
     if len(os.fsencode(whole.name)) + BUILDING_SUFFIX_BYTES > NAME_MAX_BYTES:
@@ -170,6 +173,18 @@ def normalised(path: str | os.PathLike) -> Path:
     """The absolute path with `..` and `.` resolved by name (`r7/../r7` is
     `r7`: once the folder is moved aside, `r7/..` no longer exists)."""
     return Path(os.path.normpath(Path(path).absolute()))
+
+
+def _enclosing_output(path: Path) -> Path | None:
+    """The nearest folder above `path` whose marker lists a file under it (a
+    diagnosis's replay_before/, ...): replacing `path` would break that output."""
+    for parent in path.parents:
+        marker = read_marker(parent)
+        if marker is not None:
+            inside = path.relative_to(parent).as_posix() + "/"
+            if any(relative.startswith(inside) for relative in marker.files):
+                return parent
+    return None
 
 
 def _edited_files(folder: Path) -> list[str]:
