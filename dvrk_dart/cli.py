@@ -58,6 +58,22 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
                     raise DvrkDartError(f"{out_option}: {out} is inside {option} {value}: an output is not written into an input")
 
 
+def _check_arm_of_reference_runs(args: argparse.Namespace) -> None:
+    """A reference run of another arm than --arm-model (mtm-one without --arm-model mtm) is named, not read as this arm's."""
+    from dvrk_dart.io.reference_data import RUNS, reference_run_arm
+    from dvrk_dart.model.description import resolve_arm_model
+
+    if not hasattr(args, "arm_model"):
+        return
+    asked = args.arm_model or "psm"
+    for dest in RUN_OPTIONS:
+        values = getattr(args, dest, None)
+        for value in values if isinstance(values, (list, tuple)) else [values]:
+            if isinstance(value, str) and value in RUNS and resolve_arm_model(reference_run_arm(value)) != resolve_arm_model(asked):
+                arm = reference_run_arm(value)
+                raise DvrkDartError(f"--{dest}: {value} is a recording of the {arm.upper()}: add --arm-model {arm}")
+
+
 def _check_bag_options(args: argparse.Namespace) -> None:
     """--arm, --topic and --jaw-topic select data in a bag: with no bag among the inputs they would do nothing."""
     from dvrk_dart.io.bags import is_bag
@@ -442,6 +458,7 @@ def main(argv: list[str] | None = None) -> int:
             return exc.exit_code
     try:
         _check_outputs_apart_from_inputs(args)
+        _check_arm_of_reference_runs(args)
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code

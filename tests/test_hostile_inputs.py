@@ -172,3 +172,8 @@ def test_a_late_baseline_is_aligned_on_the_best_shift(arm):
     run = process(load_run(resolve_run("one-no-weight")))
     late = run.window(499, len(run) - 499)
     assert motion_offset(run, late) == -499
+
+
+def test_a_reference_run_of_the_other_arm_is_named(capsys):
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "mtm-two")
+    assert code == 2 and "recording of the MTM: add --arm-model mtm" in lines[0]

@@ -42,6 +42,11 @@ RUNS = {
 CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
 
 
+def reference_run_arm(name: str) -> str:
+    """The arm model a reference run was recorded on (its data folder: mtm/... is the MTM's)."""
+    return RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
+
+
 @cache
 def manifest() -> dict:
     return tomllib.loads(MANIFEST_FILE.read_text())
