@@ -120,16 +120,32 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_of_run(run_dir: Path) -> Path:
+    """The arm model a run folder was simulated with (its config.json's model_file), else the PSM's."""
+    from dvrk_dart.model.description import resolve_arm_model
+
+    try:
+        name = Path(json.loads((run_dir / "config.json").read_text())["model_file"]).stem
+    except (OSError, ValueError, KeyError, TypeError):
+        return resolve_arm_model("psm")
+    try:
+        return resolve_arm_model(name)
+    except DvrkDartError:
+        raise DvrkDartError(f"{run_dir}: simulated with the arm model {name}, which is not in models/") from None
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
     from dvrk_dart.io.bags import export_run
     from dvrk_dart.io.outputs import check_writable_folder
+    from dvrk_dart.model.description import using_model
 
     run_dir, bag = Path(args.run_dir), Path(args.bag)
     if run_dir.resolve() in bag.absolute().resolve().parents:
         raise DvrkDartError(f"--bag: {bag} is inside the run folder {run_dir}: a run folder holds only what the run wrote")
     check_writable_folder(bag.absolute().parent, "--bag")
-    out = export_run(run_dir, bag, args.arm, args.storage)
+    with using_model(_model_of_run(run_dir)):  # an MTM run gets the MTM's topics and joint names
+        out = export_run(run_dir, bag, args.arm, args.storage)
     print(f"{args.run_dir} -> {out}")
     return 0
 
