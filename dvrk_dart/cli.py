@@ -41,7 +41,8 @@ OUTPUT_OPTIONS = {"out": "--out", "report": "--report"}
 def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
     """No output (replaced whole) holds an input, and none is written into an
     input's folder (a bag, a run folder): refused before any work, even with --force."""
-    from dvrk_dart.io.outputs import check_not_inside, normalised
+    from dvrk_dart.io.bags import is_bag
+    from dvrk_dart.io.outputs import check_not_inside
 
     empty = [option for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None) == ""]
     if empty:
@@ -52,9 +53,12 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
         for value in values if isinstance(values, (list, tuple)) else [values]:
             if not isinstance(value, (str, os.PathLike)) or not Path(value).exists():
                 continue  # a reference run's name, a dynamics keyword, or absent
+            folder = Path(value).resolve()
+            if folder.is_file() and is_bag(folder.parent):  # a bag given by its .mcap/.db3: the bag is the folder
+                folder = folder.parent
             for out, out_option in outputs:
                 check_not_inside(value, out, option, out_option)
-                if Path(value).is_dir() and normalised(value) in normalised(out).parents:
+                if folder.is_dir() and folder in Path(out).resolve().parents:
                     raise DvrkDartError(f"{out_option}: {out} is inside {option} {value}: an output is not written into an input")
 
 
@@ -92,7 +96,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
     from dvrk_dart.io.atomic import atomic_path
     from dvrk_dart.io.bags import is_bag, load_bag_run
-    from dvrk_dart.io.outputs import check_writable_folder
+    from dvrk_dart.io.outputs import check_writable_folder, enclosing_output
     from dvrk_dart.io.reference_data import sample_rate_hz
 
     topics = _bag_topics(args)
@@ -105,6 +109,9 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise DvrkDartError(f"--out: {out} is the input bag {bag} or inside it: refusing to write over the input, even with --force")
     if out.is_symlink():
         raise DvrkDartError(f"--out: {out} is a symbolic link: give the file itself, or a new name")
+    owner = enclosing_output(out)
+    if owner is not None:
+        raise DvrkDartError(f"--out: {out} is part of {owner}, a folder dvrk-dart wrote: refusing to replace it, even with --force")
     if out.is_dir():
         raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
     if out.exists() and not out.is_file():

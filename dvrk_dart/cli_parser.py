@@ -22,14 +22,21 @@ def arm_namespace(text: str) -> str:
     return text
 
 
-def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value}: at least 1")
-    return value
+def int_at_least(low: int):
+    """An argparse type: a whole number >= low."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{value}: at least {low}")
+        return value
+
+    return parse
+
+
+positive_int = int_at_least(1)
 
 
 def measured_run(text: str) -> str:
@@ -246,7 +253,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
 
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
     p.add_argument("--measured", type=measured_run, required=True, help="measured run: path, or one|two|...")
-    p.add_argument("--samples", type=positive_int, default=64, help="parameter sets drawn")
+    p.add_argument("--samples", type=int_at_least(2), default=64, help="parameter sets drawn (at least 2: a band)")
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")

@@ -177,3 +177,20 @@ def test_a_late_baseline_is_aligned_on_the_best_shift(arm):
 def test_a_reference_run_of_the_other_arm_is_named(capsys):
     code, lines, _ = cli(capsys, "model-errors", "--measured", "mtm-two")
     assert code == 2 and "recording of the MTM: add --arm-model mtm" in lines[0]
+
+
+def test_links_do_not_carry_an_output_into_an_input_or_over_a_tool_file(tmp_path, capsys, monkeypatch):
+    """An output reached through a symbolic link into an input's folder, or an
+    import over a file a tool folder lists, is refused even with --force."""
+    monkeypatch.chdir(tmp_path)
+    assert cli(capsys, "replay", "--measured", "one", "--duration", "0.5", "--out", "r")[0] == 0
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    (tmp_path / "r").rename(runs / "r")
+    (tmp_path / "link").symlink_to(runs)
+    code, lines, _ = cli(capsys, "report", "--runs", runs, "--out", "link/report")
+    assert code == 2 and "inside --runs" in lines[0] and not (runs / "report").exists()
+    (runs / "r").rename(tmp_path / "r")
+    before = (tmp_path / "r" / "config.json").read_bytes()
+    code, lines, _ = cli(capsys, "import", tmp_path / "r", "--out", tmp_path / "r" / "config.json", "--force")
+    assert code == 2 and (tmp_path / "r" / "config.json").read_bytes() == before

@@ -58,8 +58,8 @@ def test_uncertainty_cli_writes_the_band_and_the_fractions(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--params-cov", "missing.json"], "--params-cov: missing.json: file not found"),
     (["--relative-std", "2"], "--relative-std: 2: must be in (0, 1)"),
-    (["--samples", "0"], "--samples: 0: at least 1"),
-    (["--samples", "1"], "--samples: 1: a band needs at least 2 parameter sets"),
+    (["--samples", "0"], "--samples: 0: at least 2"),
+    (["--samples", "1"], "--samples: 1: at least 2"),
 ])
 def test_uncertainty_bad_input_is_one_line(tmp_path, capsys, argv, message):
     code = main(["uncertainty", "--measured", "two", "--out", str(tmp_path / "mc"), *argv])

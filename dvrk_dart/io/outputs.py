@@ -125,7 +125,7 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     if path.is_symlink():
         raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
     whole = normalised(path)
-    owner = _enclosing_output(whole)
+    owner = enclosing_output(path)
     if owner is not None:
         raise DvrkDartError(f"{option}: {path} is part of {owner}, a folder dvrk-dart wrote: give a folder outside it")
     if whole == Path.cwd() or whole in Path.cwd().parents:
@@ -175,14 +175,16 @@ def normalised(path: str | os.PathLike) -> Path:
     return Path(os.path.normpath(Path(path).absolute()))
 
 
-def _enclosing_output(path: Path) -> Path | None:
-    """The nearest folder above `path` whose marker lists a file under it (a
-    diagnosis's replay_before/, ...): replacing `path` would break that output."""
+def enclosing_output(path: str | os.PathLike) -> Path | None:
+    """The nearest folder above `path` (links resolved) whose marker lists it
+    or a file under it (a diagnosis's replay_before/, a run's config.json):
+    replacing `path` would break that output."""
+    path = Path(path).resolve()
     for parent in path.parents:
         marker = read_marker(parent)
         if marker is not None:
-            inside = path.relative_to(parent).as_posix() + "/"
-            if any(relative.startswith(inside) for relative in marker.files):
+            inside = path.relative_to(parent).as_posix()
+            if any(relative == inside or relative.startswith(inside + "/") for relative in marker.files):
                 return parent
     return None
 
