@@ -554,7 +554,7 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
 
     friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
                 "units": {"coulomb": "N"}, "size": 0.5}
-    split = [{"before": b, "left_over": left, "session_floor": f} for b, left, f in ((0.33, 0.04, 0.05), (0.32, 0.07, 0.08), (0.65, 0.17, 0.05))]
+    split = [{"before": b, "after": a, "session_floor": f} for b, a, f in ((0.33, 0.065, 0.05), (0.32, 0.106, 0.08), (0.65, 0.18, 0.05))]
     result = {"gap_before": {"train": [0.3, 0.3, 0.6], "holdout": [0.33, 0.32, 0.65]},
               "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]}, "effects": [friction],
               "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05],
@@ -562,7 +562,7 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     sentence = answer_sentence(result)
     assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
     assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
-    # q3: 1 - 0.17^2 / (0.65^2 - 0.05^2) of the repeatable gap removed
+    # q3: 1 - (0.18^2 - 0.05^2) / (0.65^2 - 0.05^2) of the repeatable gap removed
     assert "q3 93% of the repeatable gap" in sentence
     assert "above the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
     result["session_floor"] = [0.06, 0.1, 0.15]

@@ -11,7 +11,9 @@ import html
 import math
 from pathlib import Path
 
-from dvrk_dart.analysis.html import STYLE
+import numpy as np
+
+from dvrk_dart.analysis.html import STYLE, fmt
 from dvrk_dart.diagnosis.parameter_band import band_sentence
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
@@ -66,14 +68,22 @@ def _size_words(entry: dict) -> str:
     return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
 
 
-def repeatable_share(split_row: dict) -> float | None:
-    """The share of a joint's repeatable gap (before, above the session floor,
-    in squares) that the effects remove; None without a floor or a repeatable gap."""
-    floor = split_row.get("session_floor")
-    if floor is None:
+def repeatable_share(before, after, floor):
+    """The share of a gap's repeatable part (above the session floor, in
+    squares) that is gone after: 1 - (after^2 - floor^2) / (before^2 - floor^2),
+    per joint; NaN where nothing repeatable was there."""
+    before, after, floor = (np.asarray(x, dtype=float) for x in (before, after, floor))
+    repeatable = np.square(before) - np.square(floor)
+    left = np.maximum(np.square(after) - np.square(floor), 0.0)
+    return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
+
+
+def _row_share(split_row: dict) -> float | None:
+    """repeatable_share of a row of diagnosis.json's gap_split (None without a floor)."""
+    if split_row.get("session_floor") is None:
         return None
-    repeatable = split_row["before"] ** 2 - floor**2
-    return None if repeatable <= 0.0 else 1.0 - split_row["left_over"] ** 2 / repeatable
+    share = float(repeatable_share(split_row["before"], split_row["after"], split_row["session_floor"]))
+    return None if math.isnan(share) else share
 
 
 def answer_sentence(result: dict) -> str:
@@ -100,7 +110,7 @@ def answer_sentence(result: dict) -> str:
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     sentence = f"The gap is mostly explained by {lead}{more}: {where}, {gaps}"
-    shares = [repeatable_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
+    shares = [_row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
     floor = result.get("session_floor")
@@ -111,17 +121,13 @@ def answer_sentence(result: dict) -> str:
                        if above else ". What is left is at the session floor: no fixed effect can remove more.")
 
 
-def _fmt(v) -> str:
-    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.4g}"
-
-
 def _row(cells, tag="td") -> str:
     return "<tr>" + "".join(f"<{tag}>{c}</{tag}>" for c in cells) + "</tr>"
 
 
 def _bar(share) -> str:
     """An explained share as a bar (CSS only) with its number."""
-    if share is None or (isinstance(share, float) and math.isnan(share)):
+    if share is None or math.isnan(share):
         return "-"
     width = max(0.0, min(1.0, share)) * 100
     return (f"<div style='display:inline-block;width:8em;background:#eee;vertical-align:middle'>"
@@ -134,7 +140,7 @@ def _gap_table(result: dict) -> list[str]:
         for split in ("train", "holdout"):
             values = (result.get(key) or {}).get(split)
             if values is not None:
-                parts.append(_row([f"{key.replace('gap_', '')}, {split}", *(_fmt(v) for v in values)]))
+                parts.append(_row([f"{key.replace('gap_', '')}, {split}", *(fmt(v) for v in values)]))
     return parts + ["</table>", f"<p class='note'>after: {html.escape(str(result.get('gap_after_source', '')))}</p>"]
 
 
@@ -149,7 +155,7 @@ def _effects_table(result: dict) -> list[str]:
                            _bar(frac.get("train")), _bar(frac.get("holdout"))]))
     parts.append("</table>")
     dump = "".join(_row([f"<code>{e(effect['name'])}</code>", e(", ".join(
-        f"{k} = {_fmt(v) if isinstance(v, (int, float)) else v} {(effect.get('units') or {}).get(k, '')}".rstrip()
+        f"{k} = {fmt(v) if isinstance(v, (int, float)) else v} {(effect.get('units') or {}).get(k, '')}".rstrip()
         for k, v in effect.get("parameters", {}).items()))]) for effect in result.get("effects", [])[:SHOWN_EFFECTS])
     return parts + [f"<details><summary>fitted parameters of the ranked effects</summary><table>{_row(['effect', 'parameters'], 'th')}{dump}</table></details>"]
 
@@ -183,7 +189,7 @@ def _payload_html(result: dict) -> list[str]:
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
         return ["<p>" + " ".join(e(w) for w in payload["words"]) + "</p>", "<table>",
                 _row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
-                _row(["gravity effort (interval)", *(f"{_fmt(v)} ({_fmt(lo)} .. {_fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
+                _row(["gravity effort (interval)", *(f"{fmt(v)} ({fmt(lo)} .. {fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
     if not payload:
         return []
     text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "
@@ -209,7 +215,7 @@ def _split_and_nuisance_html(result: dict) -> list[str]:
         parts.append("<table>" + _row(["joint", "before", "explained", "session-to-session", "left over", "after", "repeatable gap removed"], "th"))
         for r in split[:ANSWER_JOINTS]:
             parts.append(f"<tr><td>{r['joint']} ({e(r['unit'])})</td>" + "".join(f"<td>{r[k]:.4f}</td>" for k in ("before", "explained", "session_to_session", "left_over", "after"))
-                         + f"<td>{_bar(repeatable_share(r))}</td></tr>")
+                         + f"<td>{_bar(_row_share(r))}</td></tr>")
         parts.append("</table>")
     if result.get("nuisance_offset_joints"):
         parts.append(f"<p>{e(offset_joints_sentence(result['nuisance_offset_joints']))}</p>")

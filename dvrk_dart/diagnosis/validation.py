@@ -27,7 +27,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointOffset,
     JointStiffness,
 )
-from dvrk_dart.diagnosis.page import PERIOD_FIGURE, answer_sentence, diagnosis_html, diagnosis_page, offset_joints_sentence
+from dvrk_dart.diagnosis.page import PERIOD_FIGURE, answer_sentence, diagnosis_html, diagnosis_page, offset_joints_sentence, repeatable_share
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_sentence, load_band
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
@@ -196,7 +196,8 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     bar = np.mean(identified, axis=0)
     after = np.asarray(result["gap_after"]["holdout"])
     result["identified_model_gap_holdout"] = bar.tolist()
-    share = repeatable_share_explained(bar, after, result.get("session_floor"))
+    floor = result.get("session_floor")
+    share = None if floor is None else repeatable_share(bar, after, floor)  # of the identified model's repeatable gap
     result["repeatable_gap_explained_share"] = None if share is None else share.tolist()
     shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
@@ -204,18 +205,6 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
                 for i, j in enumerate(JOINT_NAMES[:3])]
     write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts
-
-
-def repeatable_share_explained(identified: np.ndarray, after: np.ndarray, floor) -> np.ndarray | None:
-    """Per joint, the share of the identified model's repeatable gap (its gap
-    above the session floor, in squares) that the selected effects remove:
-    1 - (after^2 - floor^2) / (identified^2 - floor^2); None without a floor."""
-    if floor is None:
-        return None
-    floor = np.asarray(floor, dtype=float)
-    repeatable = np.square(identified) - np.square(floor)
-    left = np.maximum(np.square(after) - np.square(floor), 0.0)
-    return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
 
 
 def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
