@@ -38,6 +38,12 @@ INPUT_OPTIONS = {"measured": "--measured", "runs": "--runs", "repeat": "--repeat
 OUTPUT_OPTIONS = {"out": "--out", "report": "--report"}
 
 
+def _values(args: argparse.Namespace, dest: str) -> list:
+    """An option's values as a list (one value, several, or none)."""
+    values = getattr(args, dest, None)
+    return list(values) if isinstance(values, (list, tuple)) else [values]
+
+
 def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
     """No output (replaced whole) holds an input, and none is written into an
     input's folder (a bag, a run folder): refused before any work, even with --force."""
@@ -49,8 +55,7 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
         raise DvrkDartError(f"{empty[0]}: an empty name")
     outputs = [(getattr(args, dest), option) for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None)]
     for dest, option in INPUT_OPTIONS.items():
-        values = getattr(args, dest, None)
-        for value in values if isinstance(values, (list, tuple)) else [values]:
+        for value in _values(args, dest):
             if not isinstance(value, (str, os.PathLike)) or not Path(value).exists():
                 continue  # a reference run's name, a dynamics keyword, or absent
             folder = Path(value).resolve()
@@ -71,8 +76,7 @@ def _check_arm_of_reference_runs(args: argparse.Namespace) -> None:
         return
     asked = args.arm_model or "psm"
     for dest in RUN_OPTIONS:
-        values = getattr(args, dest, None)
-        for value in values if isinstance(values, (list, tuple)) else [values]:
+        for value in _values(args, dest):
             if isinstance(value, str) and value in RUNS and resolve_arm_model(reference_run_arm(value)) != resolve_arm_model(asked):
                 arm = reference_run_arm(value)
                 raise DvrkDartError(f"--{dest}: {value} is a recording of the {arm.upper()}: add --arm-model {arm}")
