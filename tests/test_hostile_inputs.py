@@ -194,3 +194,43 @@ def test_links_do_not_carry_an_output_into_an_input_or_over_a_tool_file(tmp_path
     before = (tmp_path / "r" / "config.json").read_bytes()
     code, lines, _ = cli(capsys, "import", tmp_path / "r", "--out", tmp_path / "r" / "config.json", "--force")
     assert code == 2 and (tmp_path / "r" / "config.json").read_bytes() == before
+
+
+def test_a_dangling_link_as_out_is_named_a_link(tmp_path, capsys):
+    link = tmp_path / "out"
+    link.symlink_to(tmp_path / "nowhere")
+    code, lines, _ = cli(capsys, "excitation", "two", "--out", link)
+    assert code == 2 and len(lines) == 1 and "symbolic link to a missing" in lines[0]
+
+
+def test_an_excitation_too_slow_for_servo_jp_is_refused(tmp_path, capsys):
+    code, lines, _ = cli(capsys, "excitation", "two", "--rate", "1", "--out", tmp_path / "x")
+    assert code == 2 and len(lines) == 1 and "--rate: 1 Hz is below" in lines[0]
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_run_recording_given_as_a_bag_says_how_to_make_one(tmp_path, capsys):
+    run = tmp_path / "r"
+    assert cli(capsys, "replay", "--measured", "two", "--duration", "0.5", "--out", run)[0] == 0
+    code, lines, _ = cli(capsys, "model-errors", "--measured", run / "run.mcap")
+    assert code == 2 and len(lines) == 1 and "a dvrk-dart run recording" in lines[0] and "export" in lines[0]
+    assert "Error" not in lines[0]
+    bag = tmp_path / "bag"
+    assert cli(capsys, "export", run, "--bag", bag)[0] == 0
+    # the PSM's bag read as an MTM's: the hint names the model to add
+    code, lines, _ = cli(capsys, "model-errors", "--measured", bag, "--arm-model", "mtm")
+    assert code == 2 and len(lines) == 1 and "add --arm-model psm" in lines[0], lines
+
+
+def test_a_parameter_band_of_another_run_is_refused_before_the_diagnosis(tmp_path, capsys, monkeypatch):
+    import dvrk_dart.diagnosis.diagnose as diagnose_module
+
+    band = tmp_path / "band"
+    assert cli(capsys, "uncertainty", "--measured", "one", "--samples", "2", "--duration", "1", "--out", band)[0] == 0
+
+    def no_diagnosis(*args, **kwargs):
+        raise AssertionError("the diagnosis ran before the band was checked")
+
+    monkeypatch.setattr(diagnose_module, "diagnose", no_diagnosis)
+    code, lines, _ = cli(capsys, "diagnose", "--measured", "two", "--parameter-band", band, "--out", tmp_path / "d")
+    assert code == 2 and len(lines) == 1 and "--parameter-band" in lines[0] and "none of the diagnosed runs" in lines[0]

@@ -42,14 +42,20 @@ def load_band(folder: str | Path) -> dict:
     return {**band, "folder": str(folder), "run": Path(str(measured)).stem, "sha256": digest, "replayed_s": replayed}
 
 
+def band_run(band: dict, runs_sha256: dict[str, str]) -> str:
+    """The diagnosed run (name -> content sha256) whose band `band` is; refused
+    in one line when it is none of them (call it before the diagnosis runs)."""
+    diagnosed = {digest: name for name, digest in runs_sha256.items()}
+    if band["sha256"] not in diagnosed:
+        raise DvrkDartError(f"--parameter-band: the band of {band['folder']} is of a recording ({band['run']}, sha256 "
+                            f"{band['sha256'][:12]}...) that is none of the diagnosed runs ({', '.join(runs_sha256)})")
+    return diagnosed[band["sha256"]]
+
+
 def apply_band(result: dict, band: dict) -> dict:
     """Mark each effect of a diagnosis result as beyond the parameters'
     uncertainty or within it, and add the per-joint band summary."""
-    diagnosed = {entry["sha256"]: name for name, entry in result.get("inputs", {}).items()}
-    if band["sha256"] not in diagnosed:
-        raise DvrkDartError(f"--parameter-band: the band of {band['folder']} is of a recording ({band['run']}, sha256 "
-                            f"{band['sha256'][:12]}...) that is none of the diagnosed runs ({', '.join(diagnosed.values())})")
-    band["run"] = diagnosed[band["sha256"]]
+    band["run"] = band_run(band, {name: entry["sha256"] for name, entry in result.get("inputs", {}).items()})
     inside = band["measured_inside_band_fraction"]
     outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction < BAND_COVERAGE}
     for effect in result["effects"]:

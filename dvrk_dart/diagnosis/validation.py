@@ -28,11 +28,11 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointStiffness,
 )
 from dvrk_dart.diagnosis.page import PERIOD_FIGURE, answer_sentence, diagnosis_html, diagnosis_page, offset_joints_sentence, repeatable_share
-from dvrk_dart.diagnosis.parameter_band import apply_band, band_sentence, load_band
+from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, band_sentence, load_band
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
@@ -102,6 +102,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
 
     start = time.perf_counter()
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
+    if band is not None:
+        band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline, *train, *holdout, repeat]))
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
                       simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
@@ -115,6 +117,12 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if logs:
         log_replays(arm, measured, _sim_config_of(result), out_dir)
     return result
+
+
+def _runs_sha256(specs) -> dict[str, str]:
+    """name -> content sha256 of the runs given by name or path ((run, baseline) pairs opened)."""
+    flat = [part for spec in specs for part in (spec if isinstance(spec, tuple) else (spec,))]
+    return {str(s): sha256_of(resolve_run(s)) for s in flat if isinstance(s, (str, Path))}
 
 
 def run_diagnosis_cli(args: argparse.Namespace) -> int:

@@ -28,6 +28,7 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.outputs import MARKER
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,
@@ -131,9 +132,31 @@ class TopicSamples:
     receive_time: bool  # stamps are the bag's receive times (no header stamps)
 
 
+def _other_arm_hint(present) -> str | None:
+    """'add --arm-model X' when the bag holds the joint states of another arm
+    model (its namespace without the arm's number or side: MTM for MTML)."""
+    from dvrk_dart.model.description import load_model
+    from dvrk_dart.paths import MODELS_DIR
+
+    current = _card().namespace
+    for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
+        family = load_model(folder / f"{folder.name}.toml").dvrk_topics.namespace[:-1]
+        if not current.startswith(family) and any(t.startswith(f"/{family}") and t.endswith("/measured_js") for t in present):
+            return f"the bag holds another arm's joints: add --arm-model {folder.name}"
+    return None
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
+    if type(exc).__name__ == "AnyReaderError" and text:  # rosbags' wrapper of every reader's error: its name says nothing
+        return text[0]
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def _is_run_recording(path: Path) -> bool:
+    """A run.mcap that dvrk-dart wrote (its folder's marker lists it)."""
+    marker = path.parent / MARKER
+    return path.suffix == ".mcap" and marker.is_file() and path.name in marker.read_text(errors="replace")
 
 
 def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
@@ -148,7 +171,8 @@ def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
             for topic in dict(wanted):
                 if topic not in present:
                     listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
-                    raise DvrkDartError(f"{path}: no topic {topic} (topics in the bag: {listed}); see --arm, --topic, --jaw-topic")
+                    raise DvrkDartError(f"{path}: no topic {topic} (topics in the bag: {listed}); "
+                                        f"{_other_arm_hint(present) or 'see --arm, --topic, --jaw-topic'}")
                 msgtype = present[topic].msgtype
                 if msgtype != JOINT_STATE:
                     raise DvrkDartError(f"{path}: topic {topic} has messages of type {msgtype}, expected {JOINT_STATE}")
@@ -158,6 +182,9 @@ def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
     except DvrkDartError:
         raise
     except Exception as exc:  # rosbags, mcap, sqlite3 and yaml each raise their own: one line for the user
+        if _is_run_recording(path):
+            raise DvrkDartError(f"{path}: a dvrk-dart run recording, not a ROS bag (`dvrk-dart export {path.parent} --bag BAG` "
+                                "writes its joint states as one)") from None
         raise DvrkDartError(f"{path}: not a readable bag ({_first_line(exc)})") from None
 
 

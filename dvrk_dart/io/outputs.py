@@ -109,6 +109,8 @@ def check_writable_folder(path: str | os.PathLike, option: str = "--out") -> Pat
     """`path` is, or can be created as, a folder this process may write in."""
     path = Path(path)
     existing = _nearest_existing(path.absolute())
+    if existing == path.absolute() and path.is_symlink() and not path.exists():
+        raise DvrkDartError(f"{option}: {path} is a symbolic link to a missing {os.readlink(path)} (give the folder itself)")
     if existing == path.absolute() and not path.is_dir():
         raise DvrkDartError(f"{option}: {path} is a file, not a folder")
     if existing != path.absolute() and not existing.is_dir():

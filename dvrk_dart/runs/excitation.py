@@ -37,6 +37,9 @@ EXCITATION_HARMONICS = 6
 BASE_SEARCH_HZ = (0.10, 0.25)
 BASE_SEARCH_STEP_HZ = 1e-4
 SEARCH_DECIMATION = 10
+#: the slowest setpoint stream a dVRK can play smoothly: servo_jp jumps to each
+#: setpoint (no interpolation), so setpoints more than 20 ms apart jerk the arm
+MIN_SERVO_RATE_HZ = 50.0
 #: the measured runs whose excitations can be played
 EXCITATIONS = ("one", "two")
 #: integration step of the Cartesian scenarios' kinematic controller: the
@@ -143,6 +146,9 @@ def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
 def build_excitation(name: str, rate_hz: float) -> Excitation:
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise DvrkDartError(f"--rate: {rate_hz!r} is not a positive rate (Hz)")
+    if rate_hz < MIN_SERVO_RATE_HZ:
+        raise DvrkDartError(f"--rate: {rate_hz:g} Hz is below {MIN_SERVO_RATE_HZ:g} Hz: servo_jp jumps to each setpoint, "
+                            f"{1 / rate_hz:.3g} s apart would jerk the arm")
     excitation = fitted_excitation(name, rate_hz) if name in EXCITATIONS else cartesian_excitation(name, rate_hz)
     check_limits(excitation)
     return excitation

@@ -105,7 +105,8 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
         raise DvrkDartError(f"--executor: '{executor}' is not one of {', '.join(EXECUTORS)}")
     if not tasks:
         return
-    with tqdm(total=len(tasks), desc=desc, unit=unit) as bar:
+    # a bar on a terminal only, cleared when done or interrupted: stderr keeps the one-line messages
+    with tqdm(total=len(tasks), desc=desc, unit=unit, leave=False, disable=None) as bar:
         if executor == "local":
             pool = ProcessPoolExecutor(max_workers=max(1, jobs), initializer=quiet_worker)
             finished = False
