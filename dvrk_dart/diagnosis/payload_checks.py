@@ -51,6 +51,20 @@ def _inside(value: float, interval) -> bool:
     return bool(interval[0] <= value <= interval[1])
 
 
+def _mass_verdict(payload: dict, m_true: float, tol: float, title: str) -> dict:
+    """The mass from the data alone: within the tolerance when identified; else
+    its interval holds the truth, or it is reported as not determined, with the reason."""
+    check = f"{title}: mass from the data alone within {tol:.0%} of {m_true} kg"
+    if payload["mass_kg"] is None:
+        reason = payload.get("not_determined", {}).get("mass_kg", "")
+        return {"check": check + " (reported as not determined)", "passed": bool(reason), "value": f"not determined: {reason}"}
+    lo, hi = payload["mass_kg_interval"]
+    error = payload["mass_kg"] / m_true - 1.0
+    return {"check": check + ("" if payload["mass_identified"] else " (reported as not identified)"),
+            "passed": bool(payload["mass_identified"] and abs(error) <= tol) or bool(not payload["mass_identified"] and lo <= m_true <= hi),
+            "value": f"{payload['mass_kg']:.3f} kg ({error:+.0%}), interval {lo:.3f}-{hi:.3f} kg, identified: {payload['mass_identified']}"}
+
+
 def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tuple[dict, list[dict]]:
     """Diagnose the payload run(s) against their baseline, with the hand
     position given as --payload-at, and check group, first moment, masses."""
@@ -77,11 +91,7 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
             verdicts.append({"check": f"{title}: hand placement's first moment {name} inside the reported interval",
                              "passed": _inside(hand_moment[axis], intervals[axis]),
                              "value": f"{hand_moment[axis]:+.4f} kg·m vs [{intervals[axis][0]:+.4f}, {intervals[axis][1]:+.4f}]"})
-        lo, hi = payload["mass_kg_interval"]
-        error = payload["mass_kg"] / m_true - 1.0
-        verdicts.append({"check": f"{title}: mass from the data alone within {tol:.0%} of {m_true} kg" + ("" if payload["mass_identified"] else " (reported as not identified)"),
-                         "passed": bool(payload["mass_identified"] and abs(error) <= tol) or bool(not payload["mass_identified"] and lo <= m_true <= hi),
-                         "value": f"{payload['mass_kg']:.3f} kg ({error:+.0%}), interval {lo:.3f}-{hi:.3f} kg, identified: {payload['mass_identified']}"})
+        verdicts.append(_mass_verdict(payload, m_true, tol, title))
         at = payload.get("payload_at")
         if at:
             error = at["mass_kg"] / m_true - 1.0

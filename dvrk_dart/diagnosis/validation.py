@@ -144,7 +144,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         print(band_sentence(result))
     if result.get("payload"):
         p = result["payload"]
-        print(f"payload: {p['mass_kg']:.3f} kg on {p['link']} ({p['group']})")
+        mass = "mass not determined" if p["mass_kg"] is None else f"{p['mass_kg']:.3f} kg"
+        print(f"payload: {mass} on {p['link']} ({p['group']})")
         for sentence in p.get("words", []):
             print(f"  {sentence}")
     if result.get("nuisance_offset_joints"):

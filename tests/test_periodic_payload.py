@@ -1,0 +1,109 @@
+"""The payload on periodic difference signals (diagnosis/periodic_payload.py):
+its 90 % intervals hold on simulated pairs of runs (same motion, a known
+payload, the measured noise and session scatter), and on the real 105 g runs
+the mass at the hand position lands where the scale says."""
+
+import numpy as np
+import pytest
+
+from dvrk_dart.diagnosis.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
+from dvrk_dart.diagnosis.payload import point_mass_parameters
+from dvrk_dart.diagnosis.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.periodic_payload import (
+    INTERVAL_PROBABILITY,
+    Pair,
+    fit_payload,
+    harmonic_coefficients,
+    linear_map,
+    make_pair,
+    point_payload_columns,
+    rigid_as_first_moment,
+    rigid_payload_columns,
+    session_variance,
+)
+from dvrk_dart.diagnosis.runs import choose_processing, prepare_run, run_features
+from dvrk_dart.model.joints import N_JOINTS
+
+#: simulated pairs per placement: the coverage's binomial standard deviation is 1.5 %
+DRAWS = 400
+#: the measured session offset of J2's constant (N·m): a per-run nuisance absorbs it
+J2_SESSION_OFFSET_NM = 0.07
+HAND_PLACEMENTS = {  # pipelines/withheld.toml's hand measurements (the 105 g runs)
+    "parallelogram": {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_horizontal_m": 0.165, "check_height_m": 0.020},
+    "insertion_base": {"hand_link": "pitch_bottom", "hand_reference": "rcm", "check_horizontal_m": 0.024, "check_height_m": 0.535},
+}
+
+
+@pytest.fixture(scope="module")
+def pairs(arm):
+    """The real 105 g run and the --repeat run, each minus the no-weight baseline, on the harmonics."""
+    processing = choose_processing(["one-105g", "one-no-weight", "one"], "periodic")
+    baseline = prepare_run("one-no-weight", arm, processing=processing)
+    runs = {name: prepare_run(name, arm, baseline=baseline, processing=processing) for name in ("one-105g", "one")}
+    return runs
+
+
+def _draw(rng, noise, session):
+    offset = np.zeros_like(noise)
+    offset[0, 1] = rng.normal(0.0, J2_SESSION_OFFSET_NM)
+    return rng.standard_normal(noise.shape) * np.sqrt(noise) + rng.standard_normal(noise.shape) * np.sqrt(session) + offset
+
+
+@pytest.mark.parametrize("placement", sorted(HAND_PLACEMENTS))
+def test_intervals_hold_on_simulated_pairs_at_the_measured_noise_and_session_scatter(arm, pairs, placement):
+    run, repeat = pairs["one-105g"], pairs["one"]
+    repeat_pair = make_pair("one", repeat.state, repeat.baseline.state, repeat.residual, None, 1)
+    session = session_variance(repeat_pair)  # the measured session scatter, per harmonic and joint
+    noise_run = make_pair("run", run.state, run.baseline.state, run.residual, None, 1).noise
+    key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
+    mass = 0.105
+    features = run_features(arm, run)
+    body = features.body_regressor[:, :, features.body_columns(key)]
+    truth_coefficients = harmonic_coefficients(run.state, run.state.in_band(body @ point_mass_parameters(mass, position)))
+    X_rigid = harmonic_coefficients(run.state, run.state.in_band(rigid_payload_columns(features, key)))
+    X_point = harmonic_coefficients(run.state, run.state.in_band(point_payload_columns(features, key, position)))
+
+    effect, gravity = FirstMomentPayload(arm.model, key), _gravity_at_zero(arm, key)
+    first_moment = point_mass_parameters(mass, position)[:4]
+    truth = _quantities(arm, effect, np.r_[first_moment, first_moment], gravity)  # the model's J1 path: the body's own
+    rigid_maps = linear_map(lambda p: _quantities(arm, effect, rigid_as_first_moment(p), gravity), X_rigid.shape[-1])
+    unit = point_mass_parameters(1.0, position)[:4]
+    point_maps = linear_map(lambda p: {"mass_kg": p[0], "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :, :4], p[0] * unit, p[1:5]),
+                                       "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, p[1:5])}, X_point.shape[-1])
+    point_truth = {"mass_kg": mass, **{k: truth[k] for k in ("gravity_efforts_at_q0", "q1_gravity_slope_at_q0_nm_per_rad")}}
+    offsets = np.zeros(N_JOINTS, bool)
+    offsets[1] = True
+    rng = np.random.default_rng(7)
+    inside: dict[str, list] = {}
+    for _ in range(DRAWS):
+        y = truth_coefficients + _draw(rng, noise_run, session)
+        y_repeat = _draw(rng, repeat_pair.noise, session)
+        for label, X, maps, values in (("rigid", X_rigid, rigid_maps, truth), ("at", X_point, point_maps, point_truth)):
+            fit = fit_payload([Pair("run", y, X, noise_run), Pair("one", y_repeat, np.zeros_like(X), repeat_pair.noise)], offsets)
+            for name, jacobian in maps.items():
+                value, interval = fit.interval(jacobian)
+                seen = fit.determined(jacobian) & (np.abs(jacobian).max(axis=1) > 0)  # a quantity that is zero for every payload is not reported
+                truth_value = np.atleast_1d(values[name])
+                for k in np.flatnonzero(seen):
+                    inside.setdefault(f"{label} {name}[{k}]", []).append(interval[0, k] <= truth_value[k] <= interval[1, k])
+    coverage = {name: float(np.mean(hits)) for name, hits in inside.items() if name != "rigid mass_kg[0]"}
+    assert {"at mass_kg[0]", "rigid q1_gravity_slope_at_q0_nm_per_rad[0]", "rigid gravity_efforts_at_q0[1]"} <= set(coverage)
+    # the issue's band for the coverage over all quantities; each one's within
+    # it up to twice its binomial standard deviation over DRAWS (1.1 % at 0.95)
+    low, high = INTERVAL_PROBABILITY - 0.05, INTERVAL_PROBABILITY + 0.05
+    assert low <= np.mean(list(coverage.values())) <= high, coverage
+    assert all(low <= c <= high + 0.02 for c in coverage.values()), coverage
+
+
+def test_the_mass_at_the_hand_position_on_the_real_105g_runs(arm, pairs):
+    """Fitted on the real run minus its baseline (the repeat pair measuring the
+    session scatter): the scale's 105 g inside the interval, within 20 %."""
+    run, repeat = pairs["one-105g"], pairs["one"]
+    key, position = hand_position_on_link(arm, HAND_PLACEMENTS["parallelogram"])
+    columns = run.state.in_band(point_payload_columns(run_features(arm, run), key, position))
+    fit = fit_payload([make_pair("run", run.state, run.baseline.state, run.residual, columns, columns.shape[-1]),
+                       make_pair("one", repeat.state, repeat.baseline.state, repeat.residual, None, columns.shape[-1])],
+                      np.eye(N_JOINTS, dtype=bool)[1])
+    value, interval = fit.interval(np.eye(columns.shape[-1])[0])
+    assert abs(value[0] / 0.105 - 1.0) < 0.20 and interval[0, 0] <= 0.105 <= interval[1, 0], (value, interval)
