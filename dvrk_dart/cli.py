@@ -16,7 +16,7 @@ import numpy as np
 
 from dvrk_dart import cli_parser
 from dvrk_dart.cli_parser import REPLAY_SHORTHANDS
-from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 
@@ -147,7 +147,7 @@ def _model_of_run(run_dir: Path) -> Path:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
-    from dvrk_dart.io.bags import export_run
+    from dvrk_dart.io.bags import check_arm_namespace, export_run
     from dvrk_dart.io.outputs import check_writable_folder
     from dvrk_dart.model.description import using_model
 
@@ -155,7 +155,11 @@ def cmd_export(args: argparse.Namespace) -> int:
     if run_dir.resolve() in bag.absolute().resolve().parents:
         raise DvrkDartError(f"--bag: {bag} is inside the run folder {run_dir}: a run folder holds only what the run wrote")
     check_writable_folder(bag.absolute().parent, "--bag")
+    if bag.suffix == ".bag" and args.storage != "ros1":
+        raise DvrkDartError(f"--bag: {bag} is a ROS 1 bag's name and --storage {args.storage} writes a rosbag2 folder: "
+                            "add --storage ros1, or name the folder without .bag")
     with using_model(_model_of_run(run_dir)):  # an MTM run gets the MTM's topics and joint names
+        check_arm_namespace(args.arm)
         out = export_run(run_dir, bag, args.arm, args.storage)
     print(f"{args.run_dir} -> {out}")
     return 0
@@ -163,11 +167,13 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 def cmd_excitation(args: argparse.Namespace) -> int:
     """An excitation to play on a real dVRK: CSV + ROS 2 bag of servo_jp commands."""
+    from dvrk_dart.io.bags import check_arm_namespace
     from dvrk_dart.io.outputs import building_folder, check_output_folder
     from dvrk_dart.io.reference_data import sample_rate_hz
     from dvrk_dart.runs.excitation import build_excitation, write_excitation
 
     check_output_folder(args.out, "excitation")
+    check_arm_namespace(args.arm)
     excitation = build_excitation(args.name, args.rate if args.rate is not None else sample_rate_hz())
     with building_folder(args.out, "excitation") as folder:
         summary = write_excitation(excitation, folder, args.arm)
@@ -269,6 +275,10 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
     spec = load_scenario(scenario)
     _check_arm_of_scenario(args, spec)
     if mode == "kinematic":  # poses imposed: no dynamics for these options to change
+        if args.dynamics is not None:  # an unknown value is named as such first
+            from dvrk_dart.runs.config import sim_config_for
+
+            sim_config_for(RunConfig("replay", "velocity", dynamics=args.dynamics))
         for option, value in (("--counterweight", args.counterweight), ("--dynamics", args.dynamics)):
             if value is not None:
                 raise DvrkDartError(f"{option} {value}: a kinematic run imposes the poses and simulates no dynamics; "
@@ -435,13 +445,15 @@ def _terminate(signum, frame) -> None:
     raise Terminated()
 
 
-_interrupted = threading.Event()
+#: local worker processes per core: more only wait on each other (and each holds a simulator)
+MAX_JOBS_PER_CORE = 4
 
 
 def _interrupt(signum, frame) -> None:
-    """Ctrl-C as usual, remembered: an interrupt that lands in an extension
-    module's import surfaces as an ImportError, not a KeyboardInterrupt."""
-    _interrupted.set()
+    """Ctrl-C as usual, remembered (`errors.interrupted`): an interrupt that
+    lands in an extension module surfaces as another error (an ImportError, a
+    SystemError from a compiled kernel) or is swallowed in a callback."""
+    interrupted.set()
     raise KeyboardInterrupt
 
 
@@ -475,6 +487,11 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "ray_address", None) and getattr(args, "executor", None) != "ray":
         print("dvrk-dart: --ray-address: only with --executor ray", file=sys.stderr)
         return 2
+    local_jobs = getattr(args, "jobs", None) if getattr(args, "executor", "local") != "ray" else None
+    if local_jobs is not None and local_jobs > MAX_JOBS_PER_CORE * (os.cpu_count() or 1):
+        print(f"dvrk-dart: --jobs: {local_jobs} workers on {os.cpu_count()} cores would only wait on each other "
+              f"(at most {MAX_JOBS_PER_CORE * (os.cpu_count() or 1)}; a Ray cluster: --executor ray)", file=sys.stderr)
+        return 2
     if getattr(args, "executor", None) == "ray":
         from dvrk_dart.runs.executors import check_ray_address
 
@@ -489,6 +506,7 @@ def main(argv: list[str] | None = None) -> int:
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code
+    interrupted.clear()  # (main may run several times in one process: the tests)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     # (an ignored SIGINT, as under nohup, stays ignored)
@@ -502,17 +520,15 @@ def main(argv: list[str] | None = None) -> int:
 
                 _check_bag_options(args)
                 with bag_topics(_bag_topics(args)):
-                    return args.func(args)
-            return args.func(args)
+                    code = args.func(args)
+            else:
+                code = args.func(args)
+        raise_if_interrupted()  # a Ctrl-C swallowed on the way: the outputs were not committed after it
+        return code
     except DvrkDartError as exc:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
-        return 130
-    except ImportError:
-        if not _interrupted.is_set():
-            raise
         print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader of stdout left (| head): nothing more to say
@@ -525,6 +541,11 @@ def main(argv: list[str] | None = None) -> int:
     except Terminated:
         print("dvrk-dart: terminated (partial outputs removed)", file=sys.stderr)
         return 143
+    except Exception:  # an interrupt that surfaced as another error (ImportError, SystemError) is an interrupt
+        if not interrupted.is_set():
+            raise
+        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
+        return 130
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

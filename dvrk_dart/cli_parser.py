@@ -15,6 +15,13 @@ from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 
+def non_empty(text: str) -> str:
+    """An argparse type: any text but an empty one (an empty name would fall back to the default silently)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty value (leave the option out for its default)")
+    return text
+
+
 def arm_namespace(text: str) -> str:
     """A ROS namespace of one name (PSM1, MTML): letters, digits, underscores, a letter first."""
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", text):
@@ -37,6 +44,24 @@ def int_at_least(low: int):
 
 
 positive_int = int_at_least(1)
+
+
+def int_in(low: int, high: int, why: str):
+    """An argparse type: a whole number in [low, high], `why` saying where the top comes from."""
+    at_least = int_at_least(low)
+
+    def parse(text: str) -> int:
+        value = at_least(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"{value}: at most {high} ({why})")
+        return value
+
+    return parse
+
+
+#: parameter sets of an uncertainty band: its 5-95 % quantiles settle within a
+#: few hundred draws, and each draw is a whole replay
+MAX_SAMPLES = 10000
 
 
 def measured_run(text: str) -> str:
@@ -91,7 +116,7 @@ SECONDS = number_in(0.0, MAX_DURATION_S, "s", open_low=True)
 
 
 def _add_arm_model_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--arm-model", default=None, help="the arm: psm, mtm (models/), a model folder or a description file (default psm; "
+    p.add_argument("--arm-model", default=None, type=non_empty, help="the arm: psm, mtm (models/), a model folder or a description file (default psm; "
                    "a scenario of another arm is refused)")
 
 
@@ -253,7 +278,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
 
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
     p.add_argument("--measured", type=measured_run, required=True, help="measured run: path, or one|two|...")
-    p.add_argument("--samples", type=int_at_least(2), default=64, help="parameter sets drawn (at least 2: a band)")
+    p.add_argument("--samples", type=int_in(2, MAX_SAMPLES, "each is a replay; a band settles within hundreds"), default=64, help="parameter sets drawn (at least 2: a band)")
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")

@@ -88,7 +88,7 @@ def test_malformed_parameter_files_are_refused_cleanly(tmp_path_factory, capsys,
     folder = tmp_path_factory.mktemp("params")
     path = folder / "params.json"
     path.write_text(json.dumps(raw))
-    argv = ["replay", "--measured", "two", "--duration", "0.01", "--params", str(path), "--out", str(folder / "out")]
+    argv = ["replay", "--measured", "two", "--duration", "0.05", "--params", str(path), "--out", str(folder / "out")]
     code = main(argv)
     err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     if code == 0:  # a damage that is still a valid file (e.g. a friction set to -1): it ran
@@ -149,4 +149,4 @@ def test_malformed_scenario_files_are_refused_cleanly(tmp_path_factory, capsys, 
     folder = tmp_path_factory.mktemp("scenario")
     path = folder / "scenario.toml"
     path.write_text(text)
-    expect_clean_refusal(capsys, ["run", str(path), "--duration", "0.01", "--out", str(folder / "out")], folder / "out")
+    expect_clean_refusal(capsys, ["run", str(path), "--duration", "0.05", "--out", str(folder / "out")], folder / "out")

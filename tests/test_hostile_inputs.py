@@ -234,3 +234,106 @@ def test_a_parameter_band_of_another_run_is_refused_before_the_diagnosis(tmp_pat
     monkeypatch.setattr(diagnose_module, "diagnose", no_diagnosis)
     code, lines, _ = cli(capsys, "diagnose", "--measured", "two", "--parameter-band", band, "--out", tmp_path / "d")
     assert code == 2 and len(lines) == 1 and "--parameter-band" in lines[0] and "none of the diagnosed runs" in lines[0]
+
+
+# ---------------------------------------------------------------- fifth fuzz
+def _two_rows(n: int = 2000) -> np.ndarray:
+    return np.loadtxt(resolve_run("two"), delimiter=",")[:n]
+
+
+@pytest.mark.parametrize("damage, fragment", [
+    (lambda v: v.__setitem__((499, 8), 1e5), "row 500: the velocity column dq2"),
+    (lambda v: v.__setitem__((699, 16), 1e308), "row 700, column tau3"),
+    (lambda v: v.__setitem__(slice(1000, 2000), np.roll(v[1000:2000], 500, axis=0)), "rows out of order"),
+    (lambda v: v.__setitem__(slice(None), v[::-1]), "runs against the positions"),
+])
+def test_a_glitched_or_reordered_csv_is_refused_with_its_row(tmp_path, capsys, damage, fragment):
+    values = _two_rows()
+    damage(values)
+    path = tmp_path / "damaged.csv"
+    np.savetxt(path, values, delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", path)
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+
+
+def test_the_rate_a_half_rate_file_names_is_its_rate(tmp_path, capsys):
+    path = tmp_path / "half_rate.csv"
+    np.savetxt(path, np.loadtxt(resolve_run("two"), delimiter=",")[::2], delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", path)
+    fits = float(lines[0].split("--rate ")[1].rstrip(")"))
+    assert code == 2 and abs(fits - 100.0) < 1.0, lines
+
+
+def test_a_copy_with_tiny_noise_is_the_same_recording(tmp_path, capsys):
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    values[:, :7] += np.random.default_rng(0).normal(0.0, 1e-6, values[:, :7].shape)
+    path = tmp_path / "one_noisy.csv"
+    np.savetxt(path, values, delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "session-floor", "--measured", "one", "--repeat", path)
+    assert code == 2 and "same recording" in lines[0]
+
+
+def test_a_negative_friction_is_refused(tmp_path, capsys):
+    raw = json.loads(resolve("params.json").read_text())
+    raw["2"]["Fv"] = -1e4
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps(raw))
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "two", "--params", path)
+    assert code == 2 and len(lines) == 1 and "Fv" in lines[0] and "dissipates" in lines[0]
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["replay", "--measured", "two", "--duration", "1e-6"], "--duration"),
+    (["uncertainty", "--measured", "two", "--samples", "100000000"], "--samples"),
+    (["uncertainty", "--measured", "two", "--samples", "2", "--jobs", "100000"], "--jobs"),
+    (["excitation", "two", "--arm", "MTML"], "--arm MTML"),
+    (["run", "rectilinear", "--dynamics", "bogus"], "'bogus'"),
+    (["identify", "--runs", "one", "--prior", "bogus"], "--prior bogus"),
+])
+def test_values_beyond_sense_are_refused_before_any_work(tmp_path, capsys, argv, fragment):
+    out = tmp_path / "out"
+    code, lines, _ = cli(capsys, *argv, "--out", out)
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+    assert not out.exists()
+
+
+def test_an_empty_arm_model_and_another_arms_csv_are_named(capsys):
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "two", "--arm-model", "")
+    assert code == 2 and "--arm-model" in lines[0]
+    code, lines, _ = cli(capsys, "model-errors", "--measured", resolve_run("two"), "--arm-model", "mtm")
+    assert code == 2 and "--arm-model psm" in lines[0], lines
+
+
+def test_an_export_named_like_a_ros1_bag_is_refused_in_mcap(tmp_path, capsys):
+    run = tmp_path / "r"
+    assert cli(capsys, "replay", "--measured", "two", "--duration", "0.5", "--out", run)[0] == 0
+    code, lines, _ = cli(capsys, "export", run, "--bag", tmp_path / "b.bag")
+    assert code == 2 and "--storage ros1" in lines[0] and not (tmp_path / "b.bag").exists()
+
+
+def test_a_swallowed_interrupt_stops_the_commit(tmp_path):
+    """A Ctrl-C that a library swallowed (raised in a weakref callback) is
+    remembered: the new folder is not swapped in, the old one is kept whole."""
+    from dvrk_dart import errors
+    from dvrk_dart.io.outputs import building_folder
+
+    target = tmp_path / "out"
+    with building_folder(target, "run") as folder:
+        (folder / "a.txt").write_text("old")
+    (target / "mine.txt").write_text("the user's")
+    errors.interrupted.set()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with building_folder(target, "run") as folder:
+                (folder / "a.txt").write_text("new")
+    finally:
+        errors.interrupted.clear()
+    assert (target / "a.txt").read_text() == "old" and (target / "mine.txt").read_text() == "the user's"
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_outputs_record_versions_params_and_the_rate(tmp_path, capsys):
+    out = tmp_path / "id"
+    assert cli(capsys, "identify", "--runs", "one", "--joints", "q1", "--out", out)[0] == 0
+    record = json.loads((out / "identification.json").read_text())
+    assert record["versions"] and record["runs"]["train"][0]["rate_hz"] == 200.0

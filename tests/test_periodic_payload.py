@@ -107,3 +107,24 @@ def test_the_mass_at_the_hand_position_on_the_real_105g_runs(arm, pairs):
                       np.eye(N_JOINTS, dtype=bool)[1])
     value, interval = fit.interval(np.eye(columns.shape[-1])[0])
     assert abs(value[0] / 0.105 - 1.0) < 0.20 and interval[0, 0] <= 0.105 <= interval[1, 0], (value, interval)
+
+
+@pytest.mark.parametrize("run, placement", [("one-105g", "parallelogram"), ("one-105g-insertion", "insertion_base")])
+def test_a_periodic_diagnosis_with_a_baseline_reads_the_real_weight(arm, run, placement):
+    """`diagnose --processing periodic --baseline one-no-weight --repeat one
+    --payload-at <hand>` on the real 105 g runs: the parallelogram group, the
+    payload found against the session scatter, the mass at the hand position
+    within 20 % with the scale's 105 g inside its interval; every quantity
+    reported with an interval or as not determined with its reason."""
+    from dvrk_dart.diagnosis.diagnose import diagnose
+
+    key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
+    payload = diagnose(run, baseline="one-no-weight", repeat="one", processing="periodic", payload_at=(key, position), arm=arm,
+                       figures=False)["payload"]
+    assert payload["group"] == "parallelogram" and payload["found"], payload["words"]
+    at = payload["payload_at"]
+    assert abs(at["mass_kg"] / 0.105 - 1.0) <= 0.20 and at["mass_kg_interval"][0] <= 0.105 <= at["mass_kg_interval"][1], at
+    for key in ("gravity_efforts_at_q0", "first_moment_base_at_q0_kg_m"):
+        for value, interval in zip(payload[key], payload[f"{key}_interval"]):
+            assert (value is None) == (interval is None) and (value is not None or key in payload["not_determined"])
+            assert value is None or interval[0] <= value <= interval[1]

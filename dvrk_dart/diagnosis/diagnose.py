@@ -40,6 +40,7 @@ from dvrk_dart.diagnosis.payload_report import (
     mass_profile,
 )
 from dvrk_dart.diagnosis.page import PERIOD_FIGURE
+from dvrk_dart.diagnosis.periodic_payload_report import periodic_payload_report
 from dvrk_dart.diagnosis.regimes import plot_period, plot_residuals, residual_regimes
 from dvrk_dart.diagnosis.runs import (
     DiagnosisRun,
@@ -166,9 +167,6 @@ def diagnose(
 
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
     inputs = distinct_inputs(_roles(measured_list, baseline, train, holdout, repeat))
-    if baseline is not None and processing == "periodic":
-        raise DvrkDartError("--processing periodic with --baseline: the payload fit on periodic difference signals is not built; "
-                            "its intervals would not hold (leave --processing out: upstream)")
     if processing is None and baseline is not None:
         run_processing = RunProcessing(why="upstream: a payload diagnosis (with a baseline) keeps the upstream processing, "
                                            "on which its payload checks were made")
@@ -336,10 +334,15 @@ def diagnose(
         for i in selected
         if isinstance(effects[i], PointPayload)
     ]
-    first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index, session_fit)
-                     for i in selected if isinstance(effects[i], FirstMomentPayload)]
-    for report in first_moments:
-        report["words"].append(_j1_constant_sentence(offset_joints, offset_joints_source))
+    if run_processing.name == "periodic" and baseline is not None:  # on the harmonics of the runs minus their baseline
+        first_moments = [periodic_payload_report(arm, [e for e in effects if isinstance(e, FirstMomentPayload)], train_runs, repeat_run,
+                                                 features_of, offset_joints if offset_joints is not None else np.zeros(N_JOINTS, bool),
+                                                 effects[at_index] if at_index is not None else None)]
+    else:
+        first_moments = [first_moment_report(arm, selector, selected, i, final.params, selected_cv.fold_params, at_index, session_fit)
+                         for i in selected if isinstance(effects[i], FirstMomentPayload)]
+        for report in first_moments:
+            report["words"].append(_j1_constant_sentence(offset_joints, offset_joints_source))
     payload_candidates = sorted(
         (
             {

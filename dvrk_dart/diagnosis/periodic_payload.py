@@ -29,7 +29,7 @@ scatter at the measured levels (tests/test_periodic_payload.py).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import chi2
@@ -47,10 +47,8 @@ from dvrk_dart.model.joints import N_JOINTS
 VARIANCE_WINDOW_HARMONICS = 3
 #: re-estimations of the variance and refits (the estimate settles in two)
 FEASIBLE_GLS_ITERATIONS = 3
-#: the reported intervals' probability, and the payload's test level against
-#: the session scatter (a payload is found when p < this)
+#: the reported intervals' probability
 INTERVAL_PROBABILITY = 0.90
-PAYLOAD_TEST_LEVEL = 0.01
 #: a quantity is determined when the part of it outside what the efforts see
 #: is below this fraction (round-off of the normal equations)
 ESTIMABLE_TOLERANCE = 1e-6
@@ -165,9 +163,10 @@ class PayloadFit:
         got wrong, and wide where few harmonics carry the quantity."""
         jacobian = np.atleast_2d(jacobian)
         value = jacobian @ self.params
-        a = jacobian @ self.influence[: jacobian.shape[1]]
-        s2 = a**2 * np.where(np.isfinite(self.scaled_residual), 1.0, 0.0)
-        se = np.sqrt(np.sum(s2 * np.nan_to_num(self.scaled_residual) ** 2, axis=1))
+        # rows the fit matches exactly (a run's offset on its mean) carry no information
+        informative = np.isfinite(self.scaled_residual)
+        a = jacobian @ self.influence[: jacobian.shape[1]] * informative
+        se = np.sqrt(np.sum(a**2 * np.nan_to_num(self.scaled_residual) ** 2, axis=1))
         weights = a**2 / self.one_minus_leverage
         dof = np.sum(weights * self.one_minus_leverage, axis=1) ** 2 / np.maximum(
             np.einsum("ki,ij,kj->k", weights, self.annihilator_squared, weights), 1e-300)
@@ -251,19 +250,6 @@ def linear_map(quantity, n_parameters: int) -> dict[str, np.ndarray]:
     return {key: np.stack([np.atleast_1d(np.asarray(c[key], dtype=float)) for c in columns], axis=-1) for key in columns[0]}
 
 
-def with_intervals(fit: PayloadFit, maps: dict[str, np.ndarray], scalars: set[str]) -> dict:
-    """{key: value, key_interval: [lo, hi] (per element for vectors)} from the fit's covariance."""
-    out = {}
-    for key, jacobian in maps.items():
-        value, interval = fit.interval(jacobian)
-        if key in scalars:
-            out[key], out[f"{key}_interval"] = float(value[0]), interval[:, 0].tolist()
-        else:
-            out[key], out[f"{key}_interval"] = value.tolist(), interval.T.tolist()
-    return out
-
-
-
 # ------------------------------------------------------------------ the designs
 def rigid_payload_columns(features: TrajectoryFeatures, key: int) -> np.ndarray:
     """(N, 7, 20): a rigid body on link `key` (its 10 dynamic parameters) on
@@ -289,152 +275,3 @@ def point_payload_columns(features: TrajectoryFeatures, key: int, position_m: np
 def rigid_as_first_moment(p: np.ndarray) -> np.ndarray:
     """The (m, m c, yaw path m, m c) of `identifiable`'s quantities from a rigid design's 20 parameters."""
     return np.r_[p[:FIRST_MOMENT_COLUMNS], p[BODY_PARAMETERS:BODY_PARAMETERS + FIRST_MOMENT_COLUMNS]]
-
-
-# ------------------------------------------------------------------ the report
-def _pairs(runs, columns_of) -> list[Pair]:
-    """Pairs of the runs minus their baselines (DiagnosisRun, role "difference");
-    columns_of(run) -> the payload columns in the run's band, None for a run
-    without the payload (the --repeat pair: it measures the session scatter)."""
-    pairs = []
-    for run in runs:
-        columns = columns_of(run)
-        n = columns.shape[-1] if columns is not None else None
-        pairs.append((run, columns, n))
-    n_parameters = next(n for _, _, n in pairs if n is not None)
-    return [make_pair(run.name, run.state, run.baseline.state, run.residual, columns, n_parameters) for run, columns, _ in pairs]
-
-
-def _report_quantities(fit: PayloadFit, maps: dict[str, np.ndarray], not_seen: dict[str, str]) -> tuple[dict, dict]:
-    """Each quantity with its interval where the efforts determine it, else
-    None and the reason (`not_seen`: reasons known beforehand, by key)."""
-    report, reasons = {}, {}
-    for key, jacobian in maps.items():
-        scalar = jacobian.shape[0] == 1 and key in SCALAR_QUANTITIES
-        value, interval = fit.interval(jacobian)
-        determined = fit.determined(jacobian) & (key not in not_seen)
-        if scalar:
-            report[key] = float(value[0]) if determined[0] else None
-            report[f"{key}_interval"] = interval[:, 0].tolist() if determined[0] else None
-        else:
-            report[key] = [float(v) if d else None for v, d in zip(value, determined)]
-            report[f"{key}_interval"] = [[float(lo), float(hi)] if d else None for lo, hi, d in zip(*interval, determined)]
-        if not determined.all():
-            reasons[key] = not_seen.get(key, "the efforts do not determine it (the runs' motion does not excite it)")
-    return report, reasons
-
-
-SCALAR_QUANTITIES = {"mass_kg", "q1_gravity_slope_at_q0_nm_per_rad"}
-
-#: what the report says of how its intervals were made
-INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squares on the harmonics of the runs minus their baseline "
-                   "(weights: measured noise plus the session scatter the fit leaves, per harmonic), HC2 standard errors with "
-                   "Bell-McCaffrey degrees of freedom; coverage shown on simulated pairs at the measured noise and session scatter")
-MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
-                 "mass is below the noise: give --payload-at LINK:x,y,z to turn the first moment into a mass")
-
-
-def choose_payload_link(candidates: list, pair_runs, differences, features_of, offset_joints) -> int:
-    """Index of the payload (among FirstMomentPayload candidates) whose rigid
-    body explains the runs minus their baseline best on the harmonics:
-    weighted residual under one variance model for all (that of no payload),
-    plus log(rows) per parameter the efforts determine (BIC): a link that can
-    also absorb a session change of another joint pays for its parameters."""
-    def pairs_of(effect):
-        return _pairs(pair_runs, lambda r: r.state.in_band(rigid_payload_columns(features_of(r), effect.link_key)) if r in differences else None)
-
-    common = fit_payload([replace(p, X=np.zeros_like(p.X)) for p in pairs_of(candidates[0])], offset_joints).variance
-    costs = []
-    for effect in candidates:
-        fit = fit_payload(pairs_of(effect), offset_joints, common)
-        costs.append(fit.weighted_rss + fit.rank * np.log(fit.rows))
-    return int(np.argmin(costs))
-
-
-def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offset_joints, at=None) -> dict:
-    """The payload (of the FirstMomentPayload `candidates`, the link chosen by
-    `choose_payload_link`) read from the runs
-    minus their baseline (and the --repeat pair) on the harmonics: every
-    quantity with an interval that holds, or None with the reason; with `at`
-    (a PayloadAtPosition), the mass at that position."""
-    from dvrk_dart.diagnosis.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-    from dvrk_dart.diagnosis.payload import mass_seen_by_gravity
-    from dvrk_dart.diagnosis.payload_report import pitch_shaft_offsets
-
-    differences = [r for r in runs if r.role == "difference"]
-    if not differences:
-        raise DvrkDartError("--processing periodic with --baseline: no run has the baseline's motion (a payload needs a run minus its "
-                            "baseline of the same motion on the harmonics)")
-    pair_runs = differences + ([repeat_run] if repeat_run is not None and repeat_run.role == "difference" else [])
-    effect = candidates[choose_payload_link(candidates, pair_runs, differences, features_of, offset_joints)]
-    key = effect.link_key
-
-    def fit_with(columns) -> PayloadFit:
-        return fit_payload(_pairs(pair_runs, lambda r: r.state.in_band(columns(features_of(r))) if r in differences else None), offset_joints)
-
-    gravity = _gravity_at_zero(arm, key)
-    fit = fit_with(lambda f: rigid_payload_columns(f, key))
-    maps = linear_map(lambda p: _quantities(arm, effect, rigid_as_first_moment(p), gravity), 2 * BODY_PARAMETERS)
-    not_seen = {} if mass_seen_by_gravity(arm, key) else {"mass_kg": MASS_NOT_SEEN}
-    quantities, reasons = _report_quantities(fit, maps, not_seen)
-    # the payload against none: its gravity signature the efforts determine (first moment, J1's slope)
-    signature = np.vstack([maps[k][fit.determined(maps[k])] for k in ("first_moment_base_at_q0_kg_m", "q1_gravity_slope_at_q0_nm_per_rad")])
-    p_value = fit.p_value(signature)
-    report = {**effect.describe(np.zeros(effect.n_parameters)), **quantities, "not_determined": reasons,
-              "first_moment_reference_link": arm.model.links[effect.reference_key].name,
-              "mass_identified": quantities["mass_kg"] is not None, "position_m": None,
-              "payload_p_value": p_value, "found": bool(p_value < PAYLOAD_TEST_LEVEL),
-              "pairs": [p.name for p in pair_runs], "session_pair": pair_runs[-1].name if len(pair_runs) > len(differences) else None,
-              "interval_method": INTERVAL_METHOD}
-    report.pop("first_moment_link_kg_m", None), report.pop("yaw_path_mass_and_first_moment_link", None)  # not determined apart
-    moment = report["first_moment_base_at_q0_kg_m"]
-    report["pitch_shaft_offsets_of_first_moment_m_kg"] = (pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None)
-    if at is not None:
-        at_fit = fit_with(lambda f: point_payload_columns(f, at.link_key, at.position))
-        at_gravity = _gravity_at_zero(arm, at.link_key)
-        unit = point_mass_parameters(1.0, at.position)[:FIRST_MOMENT_COLUMNS]
-        at_maps = linear_map(lambda p: {"mass_kg": p[0], "gravity_efforts_at_q0": _gravity_efforts(at_gravity[:, :, :FIRST_MOMENT_COLUMNS], p[0] * unit,
-                                                                                                      p[1:1 + FIRST_MOMENT_COLUMNS]),
-                                        "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(at_gravity, p[1:1 + FIRST_MOMENT_COLUMNS])}, 1 + BODY_PARAMETERS)
-        at_quantities, at_reasons = _report_quantities(at_fit, at_maps, {})
-        report["payload_at"] = {"link": at.link_name, "position_m": at.position.tolist(), **at_quantities, "not_determined": at_reasons}
-        report["position_m"] = at.position.tolist()
-    report["words"] = _words(report)
-    return report
-
-
-def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
-    if value is None:
-        return "not determined"
-    return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f})"
-
-
-def _words(report: dict) -> list[str]:
-    from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
-
-    words = []
-    if not report["found"]:
-        words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}): what the runs "
-                     "differ by from their baseline is what two sessions differ by.")
-    moment, intervals = report["first_moment_base_at_q0_kg_m"], report["first_moment_base_at_q0_kg_m_interval"]
-    words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
-                 + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
-    words.append("Gravity efforts at q = 0: " + ", ".join(
-        f"{j} {_interval_text(v, i, effort_unit(j))}" for j, v, i in
-        zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".")
-    words.append(f"J1's effort changes with q1 at {_interval_text(report['q1_gravity_slope_at_q0_nm_per_rad'], report['q1_gravity_slope_at_q0_nm_per_rad_interval'], 'N·m/rad')} "
-                 "at q = 0 (J1's own path: how the real yaw axis lies relative to gravity).")
-    if report["mass_kg"] is None:
-        words.append(f"The mass is not determined: {report['not_determined'].get('mass_kg', '')}.")
-    else:
-        words.append(f"Mass {_interval_text(report['mass_kg'], report['mass_kg_interval'], 'kg')}.")
-    at = report.get("payload_at")
-    if at:
-        words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
-                     f"{_interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')}.")
-    words.append(f"Intervals: {report['interval_method']}.")
-    if report["session_pair"] is None:
-        words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
-                     "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
-                     "reads as a payload, and the intervals do not count it.")
-    return words

@@ -32,6 +32,7 @@ from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, band_senten
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
@@ -111,6 +112,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if band is not None:
         apply_band(result, band)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
+    result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
+    result["versions"] = software_versions()
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in _images(out_dir)], f"diagnosis of {measured}"))

@@ -152,8 +152,13 @@ def _prior(config: IdentificationConfig, model: PsmModel, regressor: Regressor) 
     if config.prior == PRIOR_NONE:
         return np.zeros(len(layout)), "none (zero: minimum norm)"
     explicit = None if config.prior == PRIOR_DEFAULT else config.prior
-    path = resolve(model.default_parameters, explicit=explicit)
-    return standard_vector(load_parameters(path, model), layout), str(path)
+    try:
+        path = resolve(model.default_parameters, explicit=explicit)
+        return standard_vector(load_parameters(path, model), layout), str(path)
+    except DvrkDartError as exc:
+        if explicit is None:
+            raise
+        raise DvrkDartError(f"--prior {explicit}: {exc}") from None
 
 
 def identify(config: IdentificationConfig) -> IdentificationResult:

@@ -47,7 +47,8 @@ from dvrk_dart.identification.identify import (
 )
 from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
-from dvrk_dart.io.reference_data import resolve, sha256_of
+from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.reference_data import input_record, resolve, sha256_of
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
 from dvrk_dart.model.parameters import load_parameters
 from dvrk_dart.model.pseudo_inertia import pseudo_inertia
@@ -100,7 +101,7 @@ def reference_theta(result: IdentificationResult) -> tuple[np.ndarray, str, floa
 
 
 def _run_entry(run: RunData) -> dict:
-    return {"name": run.name, "path": str(run.path), "sha256": sha256_of(run.path), "samples_after_processing": len(run.processed)}
+    return {"name": run.name, **input_record(run.path), "samples_after_processing": len(run.processed)}
 
 
 def _processing(result: IdentificationResult) -> dict:
@@ -142,6 +143,7 @@ def summary(result: IdentificationResult) -> dict:
             "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": str(result.model.source),
         },
         "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
+        "versions": software_versions(),
         "processing": _processing(result),
         "presliding": {
             "definition": "per friction link: the distance over which its Coulomb friction reverses (Dahl; 0 = sign), "

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.errors import raise_if_interrupted
+
 
 def _jsonable(value):
     if isinstance(value, np.ndarray):
@@ -36,6 +38,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.partial")
     try:
         yield tmp
+        raise_if_interrupted()
         os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)

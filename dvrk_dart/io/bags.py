@@ -132,24 +132,43 @@ class TopicSamples:
     receive_time: bool  # stamps are the bag's receive times (no header stamps)
 
 
-def _other_arm_hint(present) -> str | None:
-    """'add --arm-model X' when the bag holds the joint states of another arm
-    model (its namespace without the arm's number or side: MTM for MTML)."""
+def _other_families() -> dict[str, str]:
+    """{namespace family: arm model} of the arm models other than the current
+    one (a family is a namespace without the arm's number or side: MTM for MTML)."""
     from dvrk_dart.model.description import load_model
     from dvrk_dart.paths import MODELS_DIR
 
     current = _card().namespace
+    families = {}
     for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
         family = load_model(folder / f"{folder.name}.toml").dvrk_topics.namespace[:-1]
-        if not current.startswith(family) and any(t.startswith(f"/{family}") and t.endswith("/measured_js") for t in present):
-            return f"the bag holds another arm's joints: add --arm-model {folder.name}"
+        if not current.startswith(family):
+            families[family] = folder.name
+    return families
+
+
+def _other_arm_hint(present) -> str | None:
+    """'add --arm-model X' when the bag holds the joint states of another arm model."""
+    for family, model in _other_families().items():
+        if any(t.startswith(f"/{family}") and t.endswith("/measured_js") for t in present):
+            return f"the bag holds another arm's joints: add --arm-model {model}"
     return None
+
+
+def check_arm_namespace(namespace: str | None) -> None:
+    """--arm of a command that writes topics: not the namespace of another arm
+    model (an MTM's servo_jp with the PSM's joints would drive the wrong arm)."""
+    for family, model in _other_families().items():
+        if namespace and namespace.startswith(family):
+            raise DvrkDartError(f"--arm {namespace}: an arm of the {model} model, and these are the {_card().namespace[:-1]}'s joints")
 
 
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     if type(exc).__name__ == "AnyReaderError" and text:  # rosbags' wrapper of every reader's error: its name says nothing
         return text[0]
+    if isinstance(exc, UnicodeDecodeError):  # a ROS 1 reader decoding junk as a header
+        return "its header is not a bag's"
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 

@@ -19,13 +19,15 @@ import json
 import os
 import re
 import shutil
+import signal
 import stat
+import threading
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.errors import DvrkDartError, raise_if_interrupted
 
 MARKER = ".dvrk-dart"
 
@@ -250,7 +252,10 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
         yield building
         (building / BUILDING_SENTINEL).unlink()
         write_marker(building, kind)
-        with _folder_lock(target.parent):  # two commands finishing into one --out take turns
+        # two commands finishing into one --out take turns; Ctrl-C waits for the
+        # swap (the user's files are in the new folder once carried over)
+        with _folder_lock(target.parent), signals_held():
+            raise_if_interrupted()
             check_output_folder(target, kind)  # the folder may have changed while this one was built
             if target.is_dir():
                 _carry_user_files(target, building)
@@ -258,6 +263,20 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     finally:
         if building.exists():
             shutil.rmtree(building, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """Ctrl-C and SIGTERM are delivered when the block is over (main thread
+    only: elsewhere the process's handlers do not run anyway)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 @contextlib.contextmanager

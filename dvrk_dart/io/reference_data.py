@@ -81,16 +81,70 @@ def rate_of(path: Path) -> tuple[float, str]:
 def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
     """The velocity column against finite differences of the positions at the
     rate: a mismatch names the rate that fits (the median over the moving
-    joints of each joint's least-squares scale: one odd column is no clock)."""
+    joints of each joint's scale: one odd column is no clock). The scale is
+    the regression of the velocity column on the differences: a dVRK's
+    velocity column is the noisier of the two (the other way, its noise biases
+    the scale: 101.5 Hz for a 100 Hz file)."""
     differences = np.gradient(q, 1.0 / rate_hz, axis=0)
     moving = (np.sum(differences**2, axis=0) > 0) & (np.sum(dq**2, axis=0) > 0)
     if not moving.any():
         return  # a still arm says nothing of its rate
-    scale = float(np.median(np.sum(differences * dq, axis=0)[moving] / np.sum(dq**2, axis=0)[moving]))
+    scale = float(np.median(np.sum(differences**2, axis=0)[moving] / np.sum(differences * dq, axis=0)[moving]))
+    if not scale > 0:
+        raise DvrkDartError(f"{where}: the velocity column runs against the positions' finite differences (rows in reverse order, "
+                            "or the velocities' sign flipped)")
     if abs(scale - 1.0) > RATE_TOLERANCE:
-        fits = rate_hz / scale if scale > 0 else float("nan")
+        fits = rate_hz / scale
         raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
                             f"column; the rate that fits is {fits:.4g} Hz (--rate {fits:.4g})")
+
+
+#: a row stands out as a glitch when its disagreement is this many times the
+#: 99th percentile of the column's (the reference runs' largest: 3.7 times)
+GLITCH_RATIO = 30.0
+
+
+def _outlier_row(x: np.ndarray) -> tuple[int, int] | None:
+    """(row, column) of the largest value of |x| if it exceeds GLITCH_RATIO times its column's 99th percentile."""
+    scale = np.maximum(np.percentile(x, 99, axis=0), np.finfo(float).tiny)
+    rows = np.argmax(x, axis=0)  # each column's worst row, then the column that stands out most
+    with np.errstate(over="ignore"):
+        ratio = x[rows, np.arange(x.shape[1])] / scale
+    column = int(np.argmax(ratio))
+    return (int(rows[column]), column) if ratio[column] > GLITCH_RATIO else None
+
+
+def check_glitches(values: np.ndarray, rate_hz: float, where: str) -> None:
+    """One bad row (a glitched value, rows out of order) refused with its row
+    number: a velocity that disagrees with the positions' finite differences,
+    or an effort that stands out of its neighbours, far more than anywhere else."""
+    q, dq, tau = values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], values[:, 2 * N_JOINTS :]
+    velocity = _outlier_row(np.abs(dq - np.gradient(q, 1.0 / rate_hz, axis=0)))
+    if velocity is not None:
+        row, j = velocity
+        raise DvrkDartError(f"{where}: row {row + 1}: the velocity column {CSV_COLUMNS[N_JOINTS + j]} ({dq[row, j]:.6g}) and the finite "
+                            f"differences of {CSV_COLUMNS[j]} disagree {GLITCH_RATIO:g} times more than on 99 % of the rows "
+                            "(a glitched value, or rows out of order)")
+    effort = _outlier_row(np.abs(tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])))
+    if effort is not None:
+        row, j = effort
+        raise DvrkDartError(f"{where}: row {row + 2}, column {CSV_COLUMNS[2 * N_JOINTS + j]}: {tau[row + 1, j]:.6g} stands out of its "
+                            f"neighbouring rows {GLITCH_RATIO:g} times more than on 99 % of the rows (a glitched value)")
+
+
+def input_record(path: str | Path) -> dict:
+    """What an output records of a measured-run file it used: path, sha256 and
+    the options that selected its data (a bag's topics, a CSV's rate)."""
+    from dvrk_dart.io.bags import current_topics, is_bag
+
+    path = Path(path)
+    entry = {"path": str(path), "sha256": sha256_of(path)}
+    if is_bag(path):
+        topics = current_topics()
+        entry["bag_topics"] = {"arm": topics.arm, "topic": topics.joint_topic, "jaw_topic": topics.jaw, "rate_hz": topics.rate}
+    else:
+        entry["rate_hz"], entry["rate_from"] = rate_of(path)
+    return entry
 
 
 def sha256_of(path: Path) -> str:
@@ -180,8 +234,9 @@ def resolve_run(name_or_path: str | Path) -> Path:
 
 
 #: two recordings whose positions agree to this on a whole window are one
-#: recording (rad, m): two sessions differ by the encoders' noise, 1e-4 and more
-SAME_RECORDING_TOLERANCE = 1e-7
+#: recording (rad, m): two sessions differ by the encoders' noise, 1e-4 and
+#: more; a copy with noise added below a tenth of that is still the same recording
+SAME_RECORDING_TOLERANCE = 1e-5
 SAME_RECORDING_WINDOW = 50
 
 
@@ -195,14 +250,15 @@ def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
     for option, spec in roles:
         path = Path(resolve_run(spec))
         q = load_run(path).q
-        digest = sha256_of(path)
+        record = input_record(path)
+        digest = record["sha256"]
         for other_option, other, other_digest, other_q in seen:
             if digest == other_digest or same_recording(q, other_q):
                 raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} "
                                     f"({'same content' if digest == other_digest else 'same positions'}): "
                                     "each role needs its own recording")
         seen.append((option, str(spec), digest, q))
-        inputs[str(spec)] = {"role": option, "path": str(path), "sha256": digest}
+        inputs[str(spec)] = {"role": option, **record}
     return inputs
 
 
@@ -263,8 +319,23 @@ def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
         row, j = np.argwhere(outside)[0]
         raise DvrkDartError(
             f"{where}: row {row + 1}, column {CSV_COLUMNS[j]}: {float(q[row, j])!r} outside the joint range "
-            f"[{float(lower[j])!r}, {float(upper[j])!r}]"
+            f"[{float(lower[j])!r}, {float(upper[j])!r}]" + _other_arm_fitting(q)
         )
+
+
+def _other_arm_fitting(q: np.ndarray) -> str:
+    """' (... --arm-model X)' when every row lies in the joint ranges of another arm model."""
+    from dvrk_dart.model.description import current_model_file
+    from dvrk_dart.paths import MODELS_DIR
+
+    for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
+        model_file = folder / f"{folder.name}.toml"
+        if model_file.resolve() == current_model_file().resolve():
+            continue
+        lower, upper = _joint_ranges_of(model_file)
+        if np.all((q >= lower) & (q <= upper)):
+            return f" (every row fits the {folder.name} arm model's ranges: --arm-model {folder.name})"
+    return ""
 
 
 def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
@@ -329,6 +400,7 @@ def load_run(path: Path | str) -> MeasuredRun:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
     check_joint_ranges(values[:, :N_JOINTS], path)
     rate, source = rate_of(path)
+    check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)

@@ -149,6 +149,19 @@ def check_inertia(inertia: np.ndarray, where: str, tolerance: float) -> None:
         )
 
 
+#: a friction coefficient this far below zero is the identification's solver
+#: round-off (its fit bounds friction at >= 0), not a negative friction
+FRICTION_ROUND_OFF = 1e-9
+
+
+def _friction(entry: dict, name: str, where: str) -> float:
+    """A Coulomb or viscous coefficient: friction dissipates, so it is >= 0."""
+    value = _scalar(entry, name, where)
+    if value < -FRICTION_ROUND_OFF:
+        raise DvrkDartError(f"{where}: {name} {value!r}: a friction dissipates energy, its coefficient is >= 0")
+    return value
+
+
 def _presliding(entry: dict, where: str) -> float:
     """The optional pre-sliding distance "xs" (absent in the upstream files: the sign law)."""
     if "xs" not in entry:
@@ -196,8 +209,8 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
             mass=mass,
             com=R0.T @ _vector(entry, "r", 3, where),
             inertia_com=R0.T @ inertia_base @ R0,
-            coulomb=_scalar(entry, "Fc", where),
-            viscous=_scalar(entry, "Fv", where),
+            coulomb=_friction(entry, "Fc", where),
+            viscous=_friction(entry, "Fv", where),
             offset=_scalar(entry, "Fo", where),
             motor_inertia=_scalar(entry, "Im", where),
             spring=_scalar(entry, "K", where),

@@ -190,7 +190,10 @@ def write_excitation(excitation: Excitation, folder, arm: str | None) -> dict:
     bag = folder / f"{excitation.name}_servo_jp"
     states = arm_joint_states(arm, excitation.t, excitation.q, suffix="servo_jp")
     write_bag(bag, states)
+    from dvrk_dart.io.provenance import software_versions
+
     summary = {
+        "versions": software_versions(),
         "name": excitation.name,
         "samples": len(excitation.t),
         "duration_s": float(excitation.t[-1]),

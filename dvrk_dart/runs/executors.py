@@ -108,7 +108,7 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
     # a bar on a terminal only, cleared when done or interrupted: stderr keeps the one-line messages
     with tqdm(total=len(tasks), desc=desc, unit=unit, leave=False, disable=None) as bar:
         if executor == "local":
-            pool = ProcessPoolExecutor(max_workers=max(1, jobs), initializer=quiet_worker)
+            pool = ProcessPoolExecutor(max_workers=max(1, min(jobs, len(tasks))), initializer=quiet_worker)
             finished = False
             try:
                 futures = {pool.submit(fn, task): task for task in tasks}

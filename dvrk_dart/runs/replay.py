@@ -64,12 +64,20 @@ def replay(
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 
+#: the fewest measured samples a replay compares with (an RMS of one sample is no statistic)
+MIN_COMPARED_SAMPLES = 10
+
+
 def replay_duration(processed: ProcessedRun, duration_s: float | None) -> float:
     """The replayed span: `duration_s`, or the whole processed run (checked against it)."""
     available = float(processed.t[-1] - processed.t[0])
     duration = available if duration_s is None else float(duration_s)
     if not 0.0 < duration <= available + 1e-12:
         raise DvrkDartError(f"--duration: {duration:g} s outside (0, {available:.3f}] s of the measured run")
+    shortest = (MIN_COMPARED_SAMPLES - 1) / processed.rate_hz
+    if duration < shortest - 1e-12:
+        raise DvrkDartError(f"--duration: {duration:g} s holds fewer than {MIN_COMPARED_SAMPLES} samples of the measured run "
+                            f"(one every {1e3 / processed.rate_hz:g} ms): at least {shortest:g} s to compare anything")
     return duration
 
 

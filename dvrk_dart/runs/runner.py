@@ -150,19 +150,11 @@ def inputs_used(config: RunConfig, scenario: Scenario) -> dict[str, dict]:
     """The input files the run really used (measured run, diagnosis): path,
     sha256 and the options that selected data from them (a bag's topics, a
     CSV's rate)."""
-    from dvrk_dart.io.bags import current_topics, is_bag
-    from dvrk_dart.io.reference_data import rate_of
+    from dvrk_dart.io.reference_data import input_record
 
     inputs = {}
     if scenario.measured:
-        path = resolve_run(scenario.measured)
-        entry = {"path": str(path), "sha256": sha256_of(path)}
-        if is_bag(path):
-            topics = current_topics()
-            entry["bag_topics"] = {"arm": topics.arm, "topic": topics.joint_topic, "jaw_topic": topics.jaw, "rate_hz": topics.rate}
-        else:
-            entry["rate_hz"], entry["rate_from"] = rate_of(path)
-        inputs[str(scenario.measured)] = entry
+        inputs[str(scenario.measured)] = input_record(resolve_run(scenario.measured))
     if config.dynamics.endswith(".json"):
         inputs[config.dynamics] = {"path": str(Path(config.dynamics)), "sha256": sha256_of(Path(config.dynamics))}
     return inputs

@@ -107,11 +107,11 @@ def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndar
 
 def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
     from dvrk_dart.identification.sampling import sample_parameters
-    from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+    from dvrk_dart.io.provenance import software_versions
+    from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, sha256_of
+    from dvrk_dart.io.signal import process
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.model.description import current_model_file
-
-    from dvrk_dart.io.signal import process
     from dvrk_dart.runs.replay import replay_duration
 
     out = check_output_folder(out, "uncertainty")
@@ -144,10 +144,12 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         model_inside, _ = band_statistics(low, high, nominal["model"])
         summary = {
             "config": asdict(config),
-            "measured_file": {"path": str(resolve_run(config.measured)), "sha256": sha256_of(resolve_run(config.measured)),
-                              "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
+            "measured_file": {**input_record(resolve_run(config.measured)), "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
+            "versions": software_versions(),
             "processing": {"processing": processing, "chosen_because": processing_why},
             "parameters": drawn.source,
+            "params": {"path": str(load_arm().params.source), "sha256": sha256_of(load_arm().params.source)},
+            "params_cov_sha256": sha256_of(Path(config.params_cov)) if config.params_cov else None,
             "projected_bodies": drawn.projected_bodies,
             "clipped_friction_coefficients": drawn.clipped_friction,
             "samples_replayed": len(sims),

@@ -1,0 +1,224 @@
+"""What the periodic payload fit (`periodic_payload`) reports: the link the
+efforts choose, the links they cannot tell from it, every quantity with an
+interval that holds or None with the reason, and the sentences."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from dvrk_dart.diagnosis.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
+from dvrk_dart.diagnosis.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
+from dvrk_dart.diagnosis.payload import mass_seen_by_gravity, point_mass_parameters
+from dvrk_dart.diagnosis.payload_report import pitch_shaft_offsets
+from dvrk_dart.diagnosis.periodic_payload import (
+    INTERVAL_PROBABILITY,
+    Pair,
+    PayloadFit,
+    fit_payload,
+    linear_map,
+    make_pair,
+    point_payload_columns,
+    rigid_as_first_moment,
+    rigid_payload_columns,
+    session_variance,
+)
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+#: the payload is found when its gravity signature stands out of the session
+#: scatter at this level (Wald test, HC2 covariance)
+PAYLOAD_TEST_LEVEL = 0.01
+#: links whose payloads explain the efforts within this BIC of the best are
+#: tied (Kass and Raftery 1995: beyond 10, "very strong" evidence)
+TIED_BIC = 10.0
+SCALAR_QUANTITIES = {"mass_kg", "q1_gravity_slope_at_q0_nm_per_rad"}
+INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squares on the harmonics of the runs minus their baseline "
+                   "(weights: measured noise plus the session scatter the fit leaves, per harmonic), HC2 standard errors with "
+                   "Bell-McCaffrey degrees of freedom; coverage shown on simulated pairs at the measured noise and session scatter")
+MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
+                 "mass is below the noise: give --payload-at LINK:x,y,z to turn the first moment into a mass")
+
+
+def _pairs(pair_runs, differences, columns) -> list[Pair]:
+    """The runs minus their baselines on the harmonics; `columns(features)` the
+    payload's columns on a run with it, none on the --repeat pair (it measures the session scatter)."""
+    n = None
+    built = []
+    for run in pair_runs:
+        x = run.state.in_band(columns(run)) if run in differences else None
+        n = x.shape[-1] if x is not None else n
+        built.append((run, x))
+    return [make_pair(run.name, run.state, run.baseline.state, run.residual, x, n) for run, x in built]
+
+
+def _common_variance(pairs: list[Pair], n_differences: int, offset_joints) -> list[np.ndarray]:
+    """One variance model to compare links by: the --repeat pair's session
+    scatter (no payload there) plus each pair's noise; without it, what no payload leaves."""
+    if len(pairs) > n_differences:
+        session = session_variance(pairs[-1])
+        return [session + p.noise for p in pairs]
+    return fit_payload([replace(p, X=np.zeros_like(p.X)) for p in pairs], offset_joints).variance
+
+
+def link_costs(candidates: list, pair_runs, differences, features_of, offset_joints) -> np.ndarray:
+    """BIC of each candidate's first moment (and J1's path, `FirstMomentPayload`)
+    under one variance model: the weighted residual plus log(rows) per
+    parameter the efforts determine."""
+    pairs = [_pairs(pair_runs, differences, lambda r, e=e: e.columns(features_of(r))) for e in candidates]
+    common = _common_variance(pairs[0], len(differences), offset_joints)
+    costs = []
+    for candidate_pairs in pairs:
+        fit = fit_payload(candidate_pairs, offset_joints, common)
+        costs.append(fit.weighted_rss + fit.rank * np.log(fit.rows))
+    return np.array(costs)
+
+
+def _report_quantities(fit: PayloadFit, maps: dict[str, np.ndarray], not_seen: dict[str, str]) -> tuple[dict, dict]:
+    """Each quantity with its interval where the efforts determine it, else
+    None and the reason (`not_seen`: reasons known beforehand, by key)."""
+    report, reasons = {}, {}
+    for key, jacobian in maps.items():
+        value, interval = fit.interval(jacobian)
+        determined = fit.determined(jacobian) & (key not in not_seen)
+        values = [float(v) if d else None for v, d in zip(value, determined)]
+        intervals = [[float(lo), float(hi)] if d else None for lo, hi, d in zip(*interval, determined)]
+        scalar = key in SCALAR_QUANTITIES
+        report[key], report[f"{key}_interval"] = (values[0], intervals[0]) if scalar else (values, intervals)
+        if not determined.all():
+            reasons[key] = not_seen.get(key, "the efforts do not determine it (the runs' motion does not excite it)")
+    return report, reasons
+
+
+def _rigid_report(arm, effect, fit_with) -> tuple[dict, dict, PayloadFit, dict]:
+    """A rigid body on the effect's link: its quantities, the reasons of those not determined, the fit and the maps."""
+    gravity = _gravity_at_zero(arm, effect.link_key)
+    fit = fit_with(lambda r: rigid_payload_columns(r, effect.link_key))
+    maps = linear_map(lambda p: _quantities(arm, effect, rigid_as_first_moment(p), gravity), 2 * BODY_PARAMETERS)
+    quantities, reasons = _report_quantities(fit, maps, {} if mass_seen_by_gravity(arm, effect.link_key) else {"mass_kg": MASS_NOT_SEEN})
+    return quantities, reasons, fit, maps
+
+
+#: a first moment "as a body on" a link means something else on another link
+FRAME_DEPENDENT = "first_moment_base_at_q0_kg_m"
+
+
+def _span_ties(report: dict, reasons: dict, tied: list[tuple[object, dict]], effect) -> None:
+    """Every interval widened to hold the tied links' intervals; a quantity one
+    of them does not determine (or reads in another frame) is not determined."""
+    for key in [k for k in report if k.endswith("_interval")]:
+        name = key[: -len("_interval")]
+        scalar = name in SCALAR_QUANTITIES
+        mine = [report[key]] if scalar else report[key]
+        for other_effect, other in tied:
+            theirs = [other[key]] if scalar else other[key]
+            if name == FRAME_DEPENDENT and other_effect.reference_key != effect.reference_key:
+                theirs = [None] * len(theirs)
+            for k, (a, b) in enumerate(zip(mine, theirs)):
+                if a is None:
+                    continue
+                if b is None:
+                    mine[k] = None
+                    reasons[name] = f"a payload on {other_effect.link_name} explains the efforts as well and does not determine it the same way"
+                else:
+                    mine[k] = [min(a[0], b[0]), max(a[1], b[1])]
+        report[key] = mine[0] if scalar else mine
+        values = [report[name]] if scalar else report[name]
+        values = [v if i is not None else None for v, i in zip(values, mine)]
+        report[name] = values[0] if scalar else values
+
+
+def _at_position(arm, at, fit_with) -> dict:
+    """A point mass at the given position: its mass and gravity efforts, with intervals."""
+    fit = fit_with(lambda r: point_payload_columns(r, at.link_key, at.position))
+    gravity = _gravity_at_zero(arm, at.link_key)
+    unit = point_mass_parameters(1.0, at.position)[:FIRST_MOMENT_COLUMNS]
+
+    def quantities(p):
+        yaw_path = p[1:1 + FIRST_MOMENT_COLUMNS]
+        return {"mass_kg": p[0], "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :, :FIRST_MOMENT_COLUMNS], p[0] * unit, yaw_path),
+                "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, yaw_path)}
+
+    values, reasons = _report_quantities(fit, linear_map(quantities, 1 + BODY_PARAMETERS), {})
+    return {"link": at.link_name, "position_m": at.position.tolist(), **values, "not_determined": reasons}
+
+
+def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offset_joints, at=None) -> dict:
+    """The payload read from the runs minus their baseline on the harmonics (and
+    the --repeat pair for the session scatter): the link of the lowest BIC among
+    the FirstMomentPayload `candidates`, intervals spanning the tied links'; with
+    `at` (a PayloadAtPosition), the mass at that position."""
+    differences = [r for r in runs if r.role == "difference"]
+    if not differences:
+        raise DvrkDartError("--processing periodic with --baseline: no run has the baseline's motion (a payload needs a run minus its "
+                            "baseline of the same motion on the harmonics)")
+    pair_runs = differences + ([repeat_run] if repeat_run is not None and repeat_run.role == "difference" else [])
+
+    def fit_with(columns) -> PayloadFit:
+        return fit_payload(_pairs(pair_runs, differences, lambda r: columns(features_of(r))), offset_joints)
+
+    costs = link_costs(candidates, pair_runs, differences, features_of, offset_joints)
+    best = int(np.argmin(costs))
+    effect = candidates[best]
+    quantities, reasons, fit, maps = _rigid_report(arm, effect, fit_with)
+    tied_effects = [e for e, c in zip(candidates, costs) if e is not effect and c - costs[best] <= TIED_BIC]
+    _span_ties(quantities, reasons, [(e, _rigid_report(arm, e, fit_with)[0]) for e in tied_effects], effect)
+    # the payload against none: its gravity signature the efforts determine (first moment, J1's slope)
+    signature = np.vstack([maps[k][fit.determined(maps[k])] for k in ("first_moment_base_at_q0_kg_m", "q1_gravity_slope_at_q0_nm_per_rad")])
+    p_value = fit.p_value(signature)
+    groups = sorted({e.group for e in [effect, *tied_effects]})
+    report = {"link": effect.link_name, "link_key": effect.link_key, "group": effect.group, "equivalent_links": list(effect.equivalent_links),
+              "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
+              "link_bic": dict(zip((e.link_name for e in candidates), costs.tolist())),
+              **quantities, "not_determined": reasons,
+              "first_moment_reference_link": arm.model.links[effect.reference_key].name,
+              "mass_identified": quantities["mass_kg"] is not None, "position_m": None,
+              "payload_p_value": p_value, "found": bool(p_value < PAYLOAD_TEST_LEVEL),
+              "pairs": [r.name for r in pair_runs], "session_pair": pair_runs[-1].name if len(pair_runs) > len(differences) else None,
+              "interval_method": INTERVAL_METHOD}
+    moment = report["first_moment_base_at_q0_kg_m"]
+    report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
+    if at is not None:
+        report["payload_at"] = _at_position(arm, at, fit_with)
+        report["position_m"] = at.position.tolist()
+    report["words"] = _words(report)
+    return report
+
+
+def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
+    if value is None:
+        return "not determined"
+    return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f})"
+
+
+def _words(report: dict) -> list[str]:
+    words = []
+    if not report["found"]:
+        words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}): what the runs "
+                     "differ by from their baseline is what two sessions differ by.")
+    words.append(f"The efforts choose a payload on {report['link']} ({report['group']})" + (
+        f"; payloads on {', '.join(report['tied_links'])} explain them as well (within {TIED_BIC:g} of BIC), and every interval "
+        "spans theirs" if report["tied_links"] else "") + ".")
+    moment, intervals = report["first_moment_base_at_q0_kg_m"], report["first_moment_base_at_q0_kg_m_interval"]
+    words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
+                 + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
+    words.append("Gravity efforts at q = 0: " + ", ".join(
+        f"{j} {_interval_text(v, i, effort_unit(j))}" for j, v, i in
+        zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".")
+    slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad")
+    words.append(f"J1's effort changes with q1 at {slope} at q = 0 (J1's own path: how the real yaw axis lies relative to gravity).")
+    if report["mass_kg"] is None:
+        words.append(f"The mass is not determined: {report['not_determined'].get('mass_kg', '')}.")
+    else:
+        words.append(f"Mass {_interval_text(report['mass_kg'], report['mass_kg_interval'], 'kg')}.")
+    at = report.get("payload_at")
+    if at:
+        words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
+                     f"{_interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')}.")
+    words.append(f"Intervals: {report['interval_method']}.")
+    if report["session_pair"] is None:
+        words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
+                     "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
+                     "reads as a payload, and the intervals do not count it.")
+    return words
