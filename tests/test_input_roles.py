@@ -80,7 +80,7 @@ def test_a_baseline_one_sample_longer_is_still_the_same_motion(arm, tmp_path):
         # the shifted baseline lines up: its positions follow the run's to the recordings' own spread
         assert np.sqrt(np.mean((run.state.q - run.baseline.state.q) ** 2)) < 0.01
     other = prepare_run("one-105g", arm, baseline="two")
-    assert other.role == "joint"
+    assert other.role == "other_motion"
 
 
 @pytest.mark.parametrize("position, words", [

@@ -80,7 +80,7 @@ def test_friction_along_the_range_is_simulated_as_the_regressor_says(arm):
     from dvrk_dart.diagnosis.features import TrajectoryFeatures
     from dvrk_dart.diagnosis.joint_effects import PositionFriction
     from dvrk_dart.diagnosis.library import config_effort_by_formula, effects_to_sim_config
-    from dvrk_dart.diagnosis.validation import simulation_hook
+    from dvrk_dart.diagnosis.api import simulation_hook
     from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
     from dvrk_dart.io.signal import process
     from dvrk_dart.sim.config import SimConfig

@@ -128,7 +128,7 @@ def test_the_same_weight_gives_the_same_efforts_in_one_run_or_two(arm, parallelo
     constant does not move between sessions, so the run minus its baseline
     determines J1 at q = 0; the half-speed run has no J1 reference of its own
     motion and leaves J1's path to the difference run."""
-    from dvrk_dart.diagnosis.validation import run_diagnosis
+    from dvrk_dart.diagnosis.api import run_diagnosis
 
     two = parallelogram[0]["payload"]
     one = run_diagnosis(arm, "one-105g", tmp_path, baseline="one-no-weight", repeat="one", logs=False)["payload"]

@@ -63,10 +63,10 @@ class Design:
         yaw_path=False: the withheld effects' J1 rows (a payload's own J1 path,
         `first_moment`) are zero in this run."""
         Phi = self.columns(features)
-        if role == "difference":
+        if role == "difference":  # RunRole.DIFFERENCE (a str enum)
             shared = ~self.withheld
             Phi[:, :, shared] -= self.columns(baseline_features)[:, :, shared]
-        elif role == "baseline":
+        elif role == "baseline":  # RunRole.BASELINE
             Phi[:, :, self.withheld] = 0.0
         if not yaw_path:
             Phi[:, YAW_PATH_JOINT, self.withheld] = 0.0

@@ -18,7 +18,6 @@ from dvrk_dart.diagnosis.design import (
     weighted_fraction,
 )
 from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.first_moment import (
     FirstMomentPayload,
@@ -45,11 +44,11 @@ from dvrk_dart.diagnosis.regimes import plot_period, plot_residuals, residual_re
 from dvrk_dart.diagnosis.runs import (
     DiagnosisRun,
     RunProcessing,
+    RunRole,
     Simulate,
     choose_processing,
     loaded_states,
     prepare_run,
-    run_features,
 )
 from dvrk_dart.diagnosis.selection import (
     BOOTSTRAP_RESAMPLES,
@@ -184,27 +183,25 @@ def diagnose(
     train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
     holdout_runs = [as_run(s) for s in (holdout or [])]
-    if baseline_run is not None and any(r.role == "joint" for r in train_runs):  # another motion: the baseline is fitted with them
-        train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role="baseline"))
+    if baseline_run is not None and any(r.role is RunRole.OTHER_MOTION for r in train_runs):  # the baseline is fitted with them
+        train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role=RunRole.BASELINE))
 
     design = Design(effects)
-    features_cache: dict[int, TrajectoryFeatures] = {}
 
     def features_of(run: DiagnosisRun) -> TrajectoryFeatures:
-        if id(run) not in features_cache:
-            features_cache[id(run)] = run_features(arm, run)
-        return features_cache[id(run)]
+        return run.features(arm)
 
     # A run of another motion than its baseline has no J1 reference: its raw J1
     # gap is dominated by motion-dependent errors (0.36 N·m RMS on the half-speed
     # 105 g run, the weight's J1 effort 0.1), which a payload's free J1 path
     # would absorb; J1's payload is read from the runs minus their baseline.
-    yaw_path_from_differences = any(r.role == "difference" for r in train_runs)
+    yaw_path_from_differences = any(r.role is RunRole.DIFFERENCE for r in train_runs)
 
     def columns_of(run: DiagnosisRun) -> np.ndarray:
         """The effects' columns in the band of the run's efforts."""
-        return run.state.in_band(design.run_columns(run.role, features_of(run), features_of(run.baseline) if run.role == "difference" else None,
-                                                    yaw_path=not (yaw_path_from_differences and run.role == "joint")))
+        baseline_features = features_of(run.baseline) if run.role is RunRole.DIFFERENCE else None
+        return run.state.in_band(design.run_columns(run.role, features_of(run), baseline_features,
+                                                    yaw_path=not (yaw_path_from_differences and run.role is RunRole.OTHER_MOTION)))
 
     repeat_run = as_run(repeat, baseline_run) if repeat is not None else None
     reference_run = baseline_run or train_runs[0]
@@ -222,7 +219,7 @@ def diagnose(
         errors, e.g. friction's asymmetry, is its own)."""
         if not nuisance:
             return None
-        return offset_joints if run.role == "difference" else np.ones(N_JOINTS, dtype=bool)
+        return offset_joints if run.role is RunRole.DIFFERENCE else np.ones(N_JOINTS, dtype=bool)
 
     train_parts = [Grams.of_run(design, f, r.residual, folds, demean_of(r), Phi) for f, r, Phi in zip(train_features, train_runs, train_columns)]
     holdout_grams = [Grams.of_run(design, f, r.residual, 1, demean_of(r), Phi) for f, r, Phi in zip(holdout_features, holdout_runs, holdout_columns)]
@@ -298,10 +295,10 @@ def diagnose(
     def after_residual(run: DiagnosisRun, columns: np.ndarray) -> np.ndarray:
         if simulate is None:
             after = run.residual - columns @ final.beta
-        elif run.role == "difference":
+        elif run.role is RunRole.DIFFERENCE:
             after = simulated_after(run) - simulated_after(run.baseline, with_withheld=False)
         else:
-            after = simulated_after(run, with_withheld=run.role != "baseline")
+            after = simulated_after(run, with_withheld=run.role is not RunRole.BASELINE)
         return after - demean_of(run) * after.mean(axis=0) if nuisance else after
 
     if hasattr(simulate, "prefetch"):  # the replays after the effects, side by side
@@ -316,7 +313,7 @@ def diagnose(
     floor, session_fit = None, None
     if repeat_run is not None:  # two runs without the effect under study, of two sessions
         floor = session_floor(reference_run, repeat_run)
-        if repeat_run.role == "difference":  # what the effects read from a session change alone
+        if repeat_run.role is RunRole.DIFFERENCE:  # what the effects read from a session change alone
             session = Grams.of_run(design, features_of(repeat_run), repeat_run.residual, 1, demean_of(repeat_run), columns_of(repeat_run))
             A, g = np.einsum("bjpq,j->pq", session.A, w2), np.einsum("bjp,j->p", session.g, w2)
 
@@ -436,9 +433,9 @@ def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) 
 def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimConfig) -> list[tuple[SimConfig, object]]:
     """The (config, state) replays `simulated_after` asks for a run: a baseline
     run gets only the effects all runs share (no withheld payload)."""
-    if run.role == "difference":
+    if run.role is RunRole.DIFFERENCE:
         return [(sim_config, run.state), (shared_config, run.baseline.state)]
-    return [(shared_config if run.role == "baseline" else sim_config, run.state)]
+    return [(shared_config if run.role is RunRole.BASELINE else sim_config, run.state)]
 
 
 def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple) -> None:

@@ -25,7 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.api import simulation_hook
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload import point_mass_parameters
+from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
@@ -40,8 +44,6 @@ LEFTOVER_ENERGY_RATIO = 1.1
 
 
 def _bar_payload_effort(arm: Arm, state: ProcessedRun, link: int, mass_each_kg: float, centre_m, half_length_m: float, axis: int) -> np.ndarray:
-    from dvrk_dart.diagnosis.features import TrajectoryFeatures
-
     f = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, np.zeros_like(state.q), sample_rate_hz())
     offset = np.eye(3)[axis] * half_length_m
     params = sum(point_mass_parameters(mass_each_kg, np.asarray(centre_m) + s * offset) for s in (1.0, -1.0))
@@ -70,10 +72,6 @@ def injected_effort(arm: Arm, state: ProcessedRun, case: dict) -> np.ndarray:
 
 
 def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    from dvrk_dart.diagnosis.diagnose import diagnose
-    from dvrk_dart.diagnosis.synthetic import synthesize_measurement
-    from dvrk_dart.diagnosis.validation import simulation_hook
-
     simulate = simulation_hook(arm)
     segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)
     noise_rms = rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))

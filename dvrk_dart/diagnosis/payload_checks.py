@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.api import run_diagnosis
 from dvrk_dart.diagnosis.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload import point_mass_parameters
@@ -68,8 +69,6 @@ def _mass_verdict(payload: dict, m_true: float, tol: float, title: str) -> dict:
 def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tuple[dict, list[dict]]:
     """Diagnose the payload run(s) against their baseline, with the hand
     position given as --payload-at, and check group, first moment, masses."""
-    from dvrk_dart.diagnosis.validation import run_diagnosis
-
     key, position = hand_position_on_link(arm, spec)
     # no replay logs here: the held-out case writes them, and `make validate` has a time budget
     result = run_diagnosis(arm, spec["measured"], out_dir, baseline=spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,

@@ -24,6 +24,7 @@ from dvrk_dart.diagnosis.periodic_payload import (
     rigid_payload_columns,
     session_variance,
 )
+from dvrk_dart.diagnosis.runs import RunRole
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
@@ -149,11 +150,11 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     the --repeat pair for the session scatter): the link of the lowest BIC among
     the FirstMomentPayload `candidates`, intervals spanning the tied links'; with
     `at` (a PayloadAtPosition), the mass at that position."""
-    differences = [r for r in runs if r.role == "difference"]
+    differences = [r for r in runs if r.role is RunRole.DIFFERENCE]
     if not differences:
         raise DvrkDartError("--processing periodic with --baseline: no run has the baseline's motion (a payload needs a run minus its "
                             "baseline of the same motion on the harmonics)")
-    pair_runs = differences + ([repeat_run] if repeat_run is not None and repeat_run.role == "difference" else [])
+    pair_runs = differences + ([repeat_run] if repeat_run is not None and repeat_run.role is RunRole.DIFFERENCE else [])
 
     def fit_with(columns) -> PayloadFit:
         return fit_payload(_pairs(pair_runs, differences, lambda r: columns(features_of(r))), offset_joints)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import enum
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
@@ -75,6 +76,15 @@ def _flat(specs) -> list:
 
 
 # ------------------------------------------------------------------- the runs
+class RunRole(str, enum.Enum):
+    """How a run's residual is made and which effects' columns it has."""
+
+    RAW = "raw"  # the gap itself
+    DIFFERENCE = "difference"  # minus its baseline's gap, sample by sample (same motion)
+    BASELINE = "baseline"  # a run without the effect under study, fitted with the others: no withheld-effect columns
+    OTHER_MOTION = "other_motion"  # its gap, fitted with its baseline run of another motion
+
+
 @dataclass
 class DiagnosisRun:
     """A measured run with the simulated efforts at its samples, and optionally
@@ -84,21 +94,20 @@ class DiagnosisRun:
     state: ProcessedRun
     simulated: np.ndarray
     baseline: "DiagnosisRun | None" = None
-    #: "raw" (the gap itself), "difference" (minus its baseline's gap, sample by
-    #: sample), "baseline" (a run without the effect under study, fitted with the
-    #: others: its withheld-effect columns are zero), "joint" (a run whose
-    #: baseline has another motion: its gap, fitted with the baseline run)
-    role: str = "raw"
+    role: RunRole = RunRole.RAW
     #: how a baseline of the same motion was put on the run's samples
     alignment: str | None = None
+    #: the run's regressor features, made once (`features`)
+    _features: TrajectoryFeatures | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         self.simulated = np.asarray(self.simulated, dtype=float)
+        self.role = RunRole(self.role)
         if self.simulated.shape != self.state.tau.shape:
             raise DvrkDartError(f"{self.name}: simulated efforts {self.simulated.shape} do not match the measured {self.state.tau.shape}")
-        if self.baseline is not None and self.role == "raw":
-            self.role = "difference"
-        if self.role == "difference" and len(self.baseline.state) != len(self.state):
+        if self.baseline is not None and self.role is RunRole.RAW:
+            self.role = RunRole.DIFFERENCE
+        if self.role is RunRole.DIFFERENCE and len(self.baseline.state) != len(self.state):
             raise DvrkDartError(f"{self.name}: baseline {self.baseline.name} has {len(self.baseline.state)} samples, not {len(self.state)}")
 
     def __len__(self) -> int:
@@ -112,13 +121,20 @@ class DiagnosisRun:
     @property
     def baseline_effort(self) -> np.ndarray:
         """What is subtracted from the gap: the baseline's gap, sample by sample (N, 7)."""
-        return self.baseline.gap if self.role == "difference" else np.zeros_like(self.state.tau)
+        return self.baseline.gap if self.role is RunRole.DIFFERENCE else np.zeros_like(self.state.tau)
 
     @property
     def baseline_source(self) -> str | None:
         difference = "subtracted sample by sample" + (f" ({self.alignment})" if self.alignment else "")
-        return {"difference": difference, "joint": "fitted together with the baseline run (another motion)",
-                "baseline": "the baseline itself (withheld effects absent)"}.get(self.role)
+        return {RunRole.DIFFERENCE: difference, RunRole.OTHER_MOTION: "fitted together with the baseline run (another motion)",
+                RunRole.BASELINE: "the baseline itself (withheld effects absent)"}.get(self.role)
+
+    def features(self, arm: Arm) -> TrajectoryFeatures:
+        """The regressor features of the run's samples (made once per run)."""
+        if self._features is None:
+            s = self.state
+            self._features = TrajectoryFeatures(arm, s.q, s.dq, s.ddq, self.simulated, s.rate_hz)
+        return self._features
 
     @property
     def residual(self) -> np.ndarray:
@@ -178,7 +194,7 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
         base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)
         offset = motion_offset(run.state, base.state)
         if offset is None:
-            return DiagnosisRun(run.name, run.state, run.simulated, None, role="joint")
+            return DiagnosisRun(run.name, run.state, run.simulated, None, role=RunRole.OTHER_MOTION)
         if offset == 0 and len(run) == len(base):
             return DiagnosisRun(run.name, run.state, run.simulated, base)
         return _on_common_span(run, base, offset)
@@ -231,5 +247,4 @@ def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
 
 
 def run_features(arm: Arm, run: DiagnosisRun) -> TrajectoryFeatures:
-    s = run.state
-    return TrajectoryFeatures(arm, s.q, s.dq, s.ddq, run.simulated, s.rate_hz)
+    return run.features(arm)

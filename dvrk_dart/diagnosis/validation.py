@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import argparse
 import html
 import json
 import shutil
@@ -20,150 +19,34 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.api import images_of, run_diagnosis, simulation_hook
 from dvrk_dart.diagnosis.arm_effects import GravityTilt
+from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.joint_effects import (
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
 )
-from dvrk_dart.diagnosis.page import PERIOD_FIGURE, answer_sentence, diagnosis_html, diagnosis_page, offset_joints_sentence, repeatable_share
-from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, band_sentence, load_band
+from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
+from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
+from dvrk_dart.diagnosis.payload_checks import validate_real_payload
+from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.provenance import software_versions
-from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 from dvrk_dart.paths import PIPELINES_DIR
-from dvrk_dart.sim.config import SimConfig
 
 WITHHELD_FILE = PIPELINES_DIR / "withheld.toml"
-IMAGE_SUFFIXES = (".png", ".svg")
-
-
-def simulation_hook(arm: Arm, executor: str = "local", jobs: int = 2, ray_address: str | None = None):
-    """The diagnosis's `simulate(config, processed) -> efforts`: the DART
-    replay, its independent replays run side by side on the executor."""
-    from dvrk_dart.diagnosis.batch import BatchSimulate
-
-    return BatchSimulate(arm, executor, jobs, ray_address)
-
-
-def _sim_config_of(result: dict) -> SimConfig:
-    """The SimConfig of the selected effects (diagnose() reports it as a dict)."""
-    raw = result.get("sim_config")
-    return SimConfig.from_dict(raw) if raw else SimConfig()
-
-
-def base_sim_config(arm: Arm) -> SimConfig:
-    """What the diagnosis simulates before any effect (the model card's [diagnosis] base)."""
-    if arm.model.diagnosis_base == "identified":
-        return SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
-    return SimConfig()
-
-
-def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path) -> None:
-    """MCAP and Rerun logs of the replay before (the diagnosis's base: the
-    identified inertia, or the identified arm) and after (with the selected
-    effects as physics)."""
-    from dvrk_dart.runs.campaign import write_run_folder
-    from dvrk_dart.runs.replay import replay_processed
-    from dvrk_dart.runs.runner import rcm_position
-
-    processed = process(load_run(resolve_run(measured)))
-    for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
-        record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
-        record.name = f"diagnosis-{Path(str(measured)).stem}_{label}"
-        record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
-                         "counterweight": config.counterweight, "sim": config.to_dict()}
-        record.markers.setdefault("rcm", rcm_position(arm))
-        write_run_folder(record, out_dir / f"replay_{label}", arm.model)
 
 
 #: the report shows the residual figures of the arm joints; diagnosis.html has all
 REPORT_FIGURE_JOINTS = ("q1", "q2", "q3")
-
-
-def _images(folder: Path) -> list[Path]:
-    """The diagnosis figures (not those of the replay logs)."""
-    return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
-
-
-def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
-                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
-                  processing: str | None = "upstream") -> dict:
-    """diagnose() with the DART replay, plus diagnosis.html and the replay logs
-    (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
-    folder of one of the runs: effects are unmodelled only outside its band."""
-    from dvrk_dart.diagnosis.diagnose import diagnose
-
-    start = time.perf_counter()
-    band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
-    if band is not None:
-        band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline, *train, *holdout, repeat]))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
-                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
-                      processing=processing, base_config=base_sim_config(arm))
-    if band is not None:
-        apply_band(result, band)
-    measured = measured[0] if isinstance(measured, (list, tuple)) else measured
-    result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
-    result["versions"] = software_versions()
-    result["wall_time_s"] = time.perf_counter() - start
-    write_json_atomic(out_dir / "diagnosis.json", result)
-    write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in _images(out_dir)], f"diagnosis of {measured}"))
-    if logs:
-        log_replays(arm, measured, _sim_config_of(result), out_dir)
-    return result
-
-
-def _runs_sha256(specs) -> dict[str, str]:
-    """name -> content sha256 of the runs given by name or path ((run, baseline) pairs opened)."""
-    flat = [part for spec in specs for part in (spec if isinstance(spec, tuple) else (spec,))]
-    return {str(s): sha256_of(resolve_run(s)) for s in flat if isinstance(s, (str, Path))}
-
-
-def run_diagnosis_cli(args: argparse.Namespace) -> int:
-    arm = load_arm(params_file=args.params)
-    measured = args.measured[0] if len(args.measured) == 1 else args.measured
-    result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
-                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
-                           parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
-                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
-                           processing=getattr(args, "processing", None))
-    print(answer_sentence(result))
-    for key in ("gap_before", "gap_after"):
-        for split, values in (result.get(key) or {}).items():
-            if values is not None:
-                print(f"{key} ({split}): {np.array2string(np.asarray(values), precision=4)}")
-    selected = [e["name"] for e in result["effects"] if e.get("selected")]
-    print(f"selected effects: {', '.join(selected) or 'none'}")
-    if band_sentence(result):
-        print(band_sentence(result))
-    if result.get("payload"):
-        p = result["payload"]
-        mass = "mass not determined" if p["mass_kg"] is None else f"{p['mass_kg']:.3f} kg"
-        print(f"payload: {mass} on {p['link']} ({p['group']})")
-        for sentence in p.get("words", []):
-            print(f"  {sentence}")
-    if result.get("nuisance_offset_joints"):
-        print(offset_joints_sentence(result["nuisance_offset_joints"]))
-    if result.get("nuisance_offsets"):
-        for run, offsets in result["nuisance_offsets"].items():
-            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
-    for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
-        if row.get("session_to_session") is not None:
-            print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
-                  f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
-    return 0
-
-
-# ------------------------------------------------------------ validation
 
 
 def _effect(arm: Arm, case: dict):
@@ -183,15 +66,11 @@ def _effect(arm: Arm, case: dict):
 
 def validate_payload(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     """The 105 g parallelogram runs (full and half speed together) against the no-weight run."""
-    from dvrk_dart.diagnosis.payload_checks import validate_real_payload
-
     return validate_real_payload(arm, spec, out_dir, "105 g parallelogram")
 
 
 def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     """The 105 g weight on the insertion stage's base against the no-weight run."""
-    from dvrk_dart.diagnosis.payload_checks import validate_real_payload
-
     return validate_real_payload(arm, spec, out_dir, "105 g insertion-stage base")
 
 
@@ -231,8 +110,6 @@ def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_ba
 
 
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    from dvrk_dart.diagnosis.diagnose import diagnose
-    from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 
     simulate = simulation_hook(arm)
     segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)
@@ -272,8 +149,6 @@ WITHHELD_STEPS = ("payload", "mtm_holdout", "holdout", "synthetic", "insertion",
 
 def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], float]:
     """One validation of WITHHELD_STEPS in a worker: (its verdicts, its wall time)."""
-    from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
-
     name, out_dir, parameter_band = task
     step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout,
             "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library}[name]
@@ -324,7 +199,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
         if not (folder / "diagnosis.json").is_file():
             continue
         sources = []
-        for image in (p for p in _images(folder) if p.stem.endswith(REPORT_FIGURE_JOINTS) or p.stem == PERIOD_FIGURE):
+        for image in (p for p in images_of(folder) if p.stem.endswith(REPORT_FIGURE_JOINTS) or p.stem == PERIOD_FIGURE):
             staged = staging / f"{name}_{image.name}"  # the report copies extras by file name: keep them apart
             shutil.copy2(image, staged)
             files.append(staged)

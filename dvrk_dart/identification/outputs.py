@@ -48,7 +48,7 @@ from dvrk_dart.identification.identify import (
 from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
-from dvrk_dart.io.reference_data import input_record, resolve, sha256_of
+from dvrk_dart.io.reference_data import input_record, resolve
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
 from dvrk_dart.model.parameters import load_parameters
 from dvrk_dart.model.pseudo_inertia import pseudo_inertia

@@ -28,7 +28,9 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun, check_joint_ranges, sample_rate_hz
 from dvrk_dart.io.outputs import MARKER
+from dvrk_dart.io.signal import MIN_ROWS
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,
@@ -73,8 +75,6 @@ class BagTopics:
 
     @property
     def rate(self) -> float:
-        from dvrk_dart.io.reference_data import sample_rate_hz
-
         rate = sample_rate_hz() if self.rate_hz is None else float(self.rate_hz)
         if not np.isfinite(rate) or rate <= 0:
             raise DvrkDartError(f"--rate: {self.rate_hz!r} is not a positive rate (Hz)")
@@ -266,13 +266,6 @@ def _resample(samples: TopicSamples, start_ns: int, grid_s: np.ndarray) -> np.nd
 
 def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
     """A bag -> MeasuredRun (model coordinates, uniform grid), with one-line errors."""
-    from dvrk_dart.io.reference_data import (
-        CSV_COLUMNS,
-        MeasuredRun,
-        check_joint_ranges,
-        sample_rate_hz,
-    )
-    from dvrk_dart.io.signal import MIN_ROWS
     from dvrk_dart.model.description import load_model
 
     path = Path(path)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError, raise_if_interrupted
+from dvrk_dart.io.provenance import sha256_of
 
 MARKER = ".dvrk-dart"
 
@@ -42,8 +43,7 @@ class Marker:
     def owns(self, folder: Path, relative: str) -> bool:
         """The tool wrote this file and nobody changed it since (a marker can be
         copied or forged: only the content's checksum proves the file is ours)."""
-        from dvrk_dart.io.reference_data import sha256_of
-
+    
         path = folder / relative
         if relative not in self.files or path.is_symlink() or not path.is_file():
             return False
@@ -90,8 +90,6 @@ def _files(folder: Path, skip_marked: bool = False) -> list[str]:
 
 def write_marker(folder: Path, kind: str, skip_marked: bool = False) -> None:
     """The marker of a folder the tool built: its kind and what it wrote, with checksums."""
-    from dvrk_dart.io.reference_data import sha256_of
-
     files = {relative: sha256_of(folder / relative) for relative in _files(folder, skip_marked) if (folder / relative).is_file()}
     (folder / MARKER).write_text(json.dumps({"kind": kind, "files": files}, indent=1) + "\n", encoding="utf-8")
 

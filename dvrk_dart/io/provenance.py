@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import functools
+import hashlib
 import importlib.metadata
 import platform
 import subprocess
+from pathlib import Path
 
 from dvrk_dart.paths import PACKAGE_DIR
 
@@ -47,3 +49,17 @@ def _git_state() -> tuple[str, str]:
         return "unknown", "unknown"
     status = git("status", "--porcelain", "--untracked-files=no")
     return revision, "unknown" if status is None else str(bool(status)).lower()
+
+
+def sha256_of(path: Path) -> str:
+    """sha256 of a file; of a folder (a rosbag2 bag): of its files' relative names and contents."""
+    digest = hashlib.sha256()
+    path = Path(path)
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for file in files:
+        if path.is_dir():
+            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
+        with open(file, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                digest.update(chunk)
+    return digest.hexdigest()

@@ -5,13 +5,8 @@ otherwise; the velocity column is checked against the rate)."""
 
 from __future__ import annotations
 
-import functools
-import hashlib
 import os
-import tomllib
 import urllib.request
-from dataclasses import dataclass
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -19,10 +14,23 @@ import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path
-from dvrk_dart.model.joints import N_JOINTS, column_names
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.io.bags import current_topics, is_bag, load_bag_run
+from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers' names)
+    CSV_COLUMNS,
+    MANIFEST_FILE,
+    MeasuredRun,
+    check_glitches,
+    check_joint_ranges,
+    check_rate,
+    joint_ranges,
+    manifest,
+    sample_rate_hz,
+)
+from dvrk_dart.io.provenance import sha256_of  # noqa: F401  (re-exported)
+from dvrk_dart.io.signal import MIN_ROWS
 from dvrk_dart.paths import PROJECT_DIR
 
-MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
 SHARED_ROOT = PROJECT_DIR.parent / "shared" / "reference_data"
 ENV_DATA_DIR = "DVRK_REFERENCE_DATA"
 ENV_CACHE_DIR = "DVRK_DART_CACHE"
@@ -39,34 +47,14 @@ RUNS = {
     "mtm-one": "mtm/one_results.csv",
     "mtm-two": "mtm/two_results.csv",
 }
-CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
-
-
 def reference_run_arm(name: str) -> str:
     """The arm model a reference run was recorded on (its data folder: mtm/... is the MTM's)."""
     return RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
 
 
-@cache
-def manifest() -> dict:
-    return tomllib.loads(MANIFEST_FILE.read_text())
-
-
-def sample_rate_hz() -> float:
-    """The default rate of a measured run's rows (the reference data's, 200 Hz)."""
-    return float(manifest()["sample_rate_hz"])
-
-
-#: a CSV's velocity column must match the finite differences of its positions
-#: at its rate to this fraction (the half-speed run read at 200 Hz: 1.0 off)
-RATE_TOLERANCE = 0.1
-
-
 def rate_of(path: Path) -> tuple[float, str]:
     """(rows per second, where it comes from) of a CSV: --rate, else the
     manifest's entry of that file name, else the reference data's default."""
-    from dvrk_dart.io.bags import current_topics
-
     explicit = current_topics().rate_hz
     if explicit is not None:
         if not (np.isfinite(explicit) and explicit > 0):
@@ -78,65 +66,9 @@ def rate_of(path: Path) -> tuple[float, str]:
     return sample_rate_hz(), "the default rate"
 
 
-def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
-    """The velocity column against finite differences of the positions at the
-    rate: a mismatch names the rate that fits (the median over the moving
-    joints of each joint's scale: one odd column is no clock). The scale is
-    the regression of the velocity column on the differences: a dVRK's
-    velocity column is the noisier of the two (the other way, its noise biases
-    the scale: 101.5 Hz for a 100 Hz file)."""
-    differences = np.gradient(q, 1.0 / rate_hz, axis=0)
-    moving = (np.sum(differences**2, axis=0) > 0) & (np.sum(dq**2, axis=0) > 0)
-    if not moving.any():
-        return  # a still arm says nothing of its rate
-    scale = float(np.median(np.sum(differences**2, axis=0)[moving] / np.sum(differences * dq, axis=0)[moving]))
-    if not scale > 0:
-        raise DvrkDartError(f"{where}: the velocity column runs against the positions' finite differences (rows in reverse order, "
-                            "or the velocities' sign flipped)")
-    if abs(scale - 1.0) > RATE_TOLERANCE:
-        fits = rate_hz / scale
-        raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
-                            f"column; the rate that fits is {fits:.4g} Hz (--rate {fits:.4g})")
-
-
-#: a row stands out as a glitch when its disagreement is this many times the
-#: 99th percentile of the column's (the reference runs' largest: 3.7 times)
-GLITCH_RATIO = 30.0
-
-
-def _outlier_row(x: np.ndarray) -> tuple[int, int] | None:
-    """(row, column) of the largest value of |x| if it exceeds GLITCH_RATIO times its column's 99th percentile."""
-    scale = np.maximum(np.percentile(x, 99, axis=0), np.finfo(float).tiny)
-    rows = np.argmax(x, axis=0)  # each column's worst row, then the column that stands out most
-    with np.errstate(over="ignore"):
-        ratio = x[rows, np.arange(x.shape[1])] / scale
-    column = int(np.argmax(ratio))
-    return (int(rows[column]), column) if ratio[column] > GLITCH_RATIO else None
-
-
-def check_glitches(values: np.ndarray, rate_hz: float, where: str) -> None:
-    """One bad row (a glitched value, rows out of order) refused with its row
-    number: a velocity that disagrees with the positions' finite differences,
-    or an effort that stands out of its neighbours, far more than anywhere else."""
-    q, dq, tau = values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], values[:, 2 * N_JOINTS :]
-    velocity = _outlier_row(np.abs(dq - np.gradient(q, 1.0 / rate_hz, axis=0)))
-    if velocity is not None:
-        row, j = velocity
-        raise DvrkDartError(f"{where}: row {row + 1}: the velocity column {CSV_COLUMNS[N_JOINTS + j]} ({dq[row, j]:.6g}) and the finite "
-                            f"differences of {CSV_COLUMNS[j]} disagree {GLITCH_RATIO:g} times more than on 99 % of the rows "
-                            "(a glitched value, or rows out of order)")
-    effort = _outlier_row(np.abs(tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])))
-    if effort is not None:
-        row, j = effort
-        raise DvrkDartError(f"{where}: row {row + 2}, column {CSV_COLUMNS[2 * N_JOINTS + j]}: {tau[row + 1, j]:.6g} stands out of its "
-                            f"neighbouring rows {GLITCH_RATIO:g} times more than on 99 % of the rows (a glitched value)")
-
-
 def input_record(path: str | Path) -> dict:
     """What an output records of a measured-run file it used: path, sha256 and
     the options that selected its data (a bag's topics, a CSV's rate)."""
-    from dvrk_dart.io.bags import current_topics, is_bag
-
     path = Path(path)
     entry = {"path": str(path), "sha256": sha256_of(path)}
     if is_bag(path):
@@ -145,20 +77,6 @@ def input_record(path: str | Path) -> dict:
     else:
         entry["rate_hz"], entry["rate_from"] = rate_of(path)
     return entry
-
-
-def sha256_of(path: Path) -> str:
-    """sha256 of a file; of a folder (a rosbag2 bag): of its files' relative names and contents."""
-    digest = hashlib.sha256()
-    path = Path(path)
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
-    for file in files:
-        if path.is_dir():
-            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
-        with open(file, "rb") as f:
-            for chunk in iter(lambda: f.read(1 << 20), b""):
-                digest.update(chunk)
-    return digest.hexdigest()
 
 
 def _checked(path: Path, name: str) -> Path:
@@ -219,8 +137,6 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
 def resolve_run(name_or_path: str | Path) -> Path:
     """A measured run by shorthand ('two'), manifest name or path (a CSV or a
     ROS bag: a rosbag2 folder, an .mcap/.db3 file or a ROS 1 .bag)."""
-    from dvrk_dart.io.bags import is_bag
-
     text = str(name_or_path)
     if text in RUNS:
         return resolve(RUNS[text])
@@ -275,84 +191,6 @@ def same_recording(a: np.ndarray, b: np.ndarray) -> bool:
     return window_of(a, b) or window_of(b, a)
 
 
-@dataclass(frozen=True)
-class MeasuredRun:
-    """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7."""
-
-    path: Path
-    data: pd.DataFrame
-
-    @property
-    def name(self) -> str:
-        return self.path.stem
-
-    @property
-    def t(self) -> np.ndarray:
-        return self.data["t"].to_numpy()
-
-    @property
-    def rate_hz(self) -> float:
-        """Rows per second (checked against the velocity column when loaded)."""
-        return float(1.0 / (self.data["t"].iat[1] - self.data["t"].iat[0]))
-
-    @property
-    def q(self) -> np.ndarray:
-        return self.data[column_names("q")].to_numpy()
-
-    @property
-    def dq(self) -> np.ndarray:
-        return self.data[column_names("dq")].to_numpy()
-
-    @property
-    def tau(self) -> np.ndarray:
-        return self.data[column_names("tau")].to_numpy()
-
-    def __len__(self) -> int:
-        return len(self.data)
-
-
-def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
-    """Positions within the model's joint ranges (the simulator's own limits)."""
-    lower, upper = joint_ranges()
-    outside = (q < lower) | (q > upper)
-    if outside.any():
-        row, j = np.argwhere(outside)[0]
-        raise DvrkDartError(
-            f"{where}: row {row + 1}, column {CSV_COLUMNS[j]}: {float(q[row, j])!r} outside the joint range "
-            f"[{float(lower[j])!r}, {float(upper[j])!r}]" + _other_arm_fitting(q)
-        )
-
-
-def _other_arm_fitting(q: np.ndarray) -> str:
-    """' (... --arm-model X)' when every row lies in the joint ranges of another arm model."""
-    from dvrk_dart.model.description import current_model_file
-    from dvrk_dart.paths import MODELS_DIR
-
-    for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
-        model_file = folder / f"{folder.name}.toml"
-        if model_file.resolve() == current_model_file().resolve():
-            continue
-        lower, upper = _joint_ranges_of(model_file)
-        if np.all((q >= lower) & (q <= upper)):
-            return f" (every row fits the {folder.name} arm model's ranges: --arm-model {folder.name})"
-    return ""
-
-
-def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) joint ranges of the current arm's model description (rad, m)."""
-    from dvrk_dart.model.description import current_model_file
-
-    return _joint_ranges_of(current_model_file())
-
-
-@functools.cache
-def _joint_ranges_of(model_file: Path) -> tuple[np.ndarray, np.ndarray]:
-    from dvrk_dart.model.description import load_model
-
-    model = load_model(model_file)
-    return model.joint_lower, model.joint_upper
-
-
 def _numbers_or_error(path: Path) -> np.ndarray:
     """Read the CSV as text to name the first cell that is not a number."""
     try:
@@ -374,8 +212,6 @@ def _numbers_or_error(path: Path) -> np.ndarray:
 def load_run(path: Path | str) -> MeasuredRun:
     """Load a measured run (the upstream CSV format, or a ROS bag read with the
     command's topics: io/bags.py), with one-line errors."""
-    from dvrk_dart.io.bags import is_bag, load_bag_run
-
     path = Path(path)
     if is_bag(path):
         return load_bag_run(path)
@@ -392,10 +228,6 @@ def load_run(path: Path | str) -> MeasuredRun:
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
         raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: missing, NaN or infinite value")
-    from dvrk_dart.io.signal import (
-        MIN_ROWS,  # the processing's own need (signal imports this module)
-    )
-
     if len(values) < MIN_ROWS:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
     check_joint_ranges(values[:, :N_JOINTS], path)

@@ -23,7 +23,7 @@ import scipy.signal
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import PeriodicAnalysis, analyse
-from dvrk_dart.io.reference_data import MeasuredRun, sample_rate_hz
+from dvrk_dart.io.measured_run import MeasuredRun, sample_rate_hz
 
 FILTER_ORDER = 6
 CUTOFF_PARAMETER_HZ = 5.4  # upstream's fc, used as Wn = 2 pi fc h (not a true cut-off)

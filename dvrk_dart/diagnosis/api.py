@@ -1,0 +1,97 @@
+"""The diagnosis as the CLI and the withheld-data checks call it: diagnose()
+with the DART replay as the simulation, written with its page and replay logs.
+The checks (`validation`, `payload_checks`, `out_of_library`), the page
+(`page`) and the printing (`printout`) import this module, never the reverse."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from dvrk_dart.diagnosis.batch import BatchSimulate
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.page import diagnosis_page
+from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
+from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
+from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+from dvrk_dart.io.signal import process
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.sim.config import SimConfig
+
+IMAGE_SUFFIXES = (".png", ".svg")
+
+
+def simulation_hook(arm: Arm, executor: str = "local", jobs: int = 2, ray_address: str | None = None):
+    """The diagnosis's `simulate(config, processed) -> efforts`: the DART
+    replay, its independent replays run side by side on the executor."""
+    return BatchSimulate(arm, executor, jobs, ray_address)
+
+
+def sim_config_of(result: dict) -> SimConfig:
+    """The SimConfig of the selected effects (diagnose() reports it as a dict)."""
+    raw = result.get("sim_config")
+    return SimConfig.from_dict(raw) if raw else SimConfig()
+
+
+def base_sim_config(arm: Arm) -> SimConfig:
+    """What the diagnosis simulates before any effect (the model card's [diagnosis] base)."""
+    if arm.model.diagnosis_base == "identified":
+        return SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+    return SimConfig()
+
+
+def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path) -> None:
+    """MCAP and Rerun logs of the replay before (the diagnosis's base: the
+    identified inertia, or the identified arm) and after (with the selected
+    effects as physics)."""
+    from dvrk_dart.runs.campaign import write_run_folder
+    from dvrk_dart.runs.replay import replay_processed
+    from dvrk_dart.runs.runner import rcm_position
+
+    processed = process(load_run(resolve_run(measured)))
+    for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
+        record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
+        record.name = f"diagnosis-{Path(str(measured)).stem}_{label}"
+        record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
+                         "counterweight": config.counterweight, "sim": config.to_dict()}
+        record.markers.setdefault("rcm", rcm_position(arm))
+        write_run_folder(record, out_dir / f"replay_{label}", arm.model)
+
+
+def images_of(folder: Path) -> list[Path]:
+    """The diagnosis figures (not those of the replay logs)."""
+    return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
+
+
+def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
+                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
+                  processing: str | None = "upstream") -> dict:
+    """diagnose() with the DART replay, plus diagnosis.html and the replay logs
+    (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
+    folder of one of the runs: effects are unmodelled only outside its band."""
+    start = time.perf_counter()
+    band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
+    if band is not None:
+        band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline, *train, *holdout, repeat]))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
+                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
+                      processing=processing, base_config=base_sim_config(arm))
+    if band is not None:
+        apply_band(result, band)
+    measured = measured[0] if isinstance(measured, (list, tuple)) else measured
+    result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
+    result["versions"] = software_versions()
+    result["wall_time_s"] = time.perf_counter() - start
+    write_json_atomic(out_dir / "diagnosis.json", result)
+    write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], f"diagnosis of {measured}"))
+    if logs:
+        log_replays(arm, measured, sim_config_of(result), out_dir)
+    return result
+
+
+def _runs_sha256(specs) -> dict[str, str]:
+    """name -> content sha256 of the runs given by name or path ((run, baseline) pairs opened)."""
+    flat = [part for spec in specs for part in (spec if isinstance(spec, tuple) else (spec,))]
+    return {str(s): sha256_of(resolve_run(s)) for s in flat if isinstance(s, (str, Path))}

@@ -1,0 +1,51 @@
+"""What `dvrk-dart diagnose` prints: the answer, the gaps, the effects, the payload."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.diagnosis.api import run_diagnosis
+from dvrk_dart.diagnosis.page import answer_sentence, offset_joints_sentence
+from dvrk_dart.diagnosis.parameter_band import band_sentence
+from dvrk_dart.model.arm import load_arm
+
+
+def run_diagnosis_cli(args: argparse.Namespace) -> int:
+    arm = load_arm(params_file=args.params)
+    measured = args.measured[0] if len(args.measured) == 1 else args.measured
+    result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
+                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
+                           parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
+                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
+                           processing=getattr(args, "processing", None))
+    print(answer_sentence(result))
+    for key in ("gap_before", "gap_after"):
+        for split, values in (result.get(key) or {}).items():
+            if values is not None:
+                print(f"{key} ({split}): {np.array2string(np.asarray(values), precision=4)}")
+    selected = [e["name"] for e in result["effects"] if e.get("selected")]
+    print(f"selected effects: {', '.join(selected) or 'none'}")
+    if band_sentence(result):
+        print(band_sentence(result))
+    if result.get("payload"):
+        p = result["payload"]
+        mass = "mass not determined" if p["mass_kg"] is None else f"{p['mass_kg']:.3f} kg"
+        print(f"payload: {mass} on {p['link']} ({p['group']})")
+        for sentence in p.get("words", []):
+            print(f"  {sentence}")
+    if result.get("nuisance_offset_joints"):
+        print(offset_joints_sentence(result["nuisance_offset_joints"]))
+    if result.get("nuisance_offsets"):
+        for run, offsets in result["nuisance_offsets"].items():
+            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
+    for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
+        if row.get("session_to_session") is not None:
+            print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
+                  f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
+    return 0
+
+
+# ------------------------------------------------------------ validation

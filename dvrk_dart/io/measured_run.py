@@ -1,0 +1,170 @@
+"""A measured run, the project's one type for it (io/ leaf): named columns
+t, q1..q7, dq1..dq7, tau1..tau7 at a uniform rate, and the checks of its
+content that every reader (CSV, ROS bag) applies: joint ranges, the rate
+against the velocity column, glitched rows."""
+
+from __future__ import annotations
+
+import functools
+import tomllib
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import N_JOINTS, column_names
+from dvrk_dart.paths import PROJECT_DIR
+
+MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
+
+CSV_COLUMNS = column_names("q") + column_names("dq") + column_names("tau")
+
+
+@cache
+def manifest() -> dict:
+    return tomllib.loads(MANIFEST_FILE.read_text())
+
+
+def sample_rate_hz() -> float:
+    """The default rate of a measured run's rows (the reference data's, 200 Hz)."""
+    return float(manifest()["sample_rate_hz"])
+
+
+#: a CSV's velocity column must match the finite differences of its positions
+#: at its rate to this fraction (the half-speed run read at 200 Hz: 1.0 off)
+RATE_TOLERANCE = 0.1
+
+
+def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
+    """The velocity column against finite differences of the positions at the
+    rate: a mismatch names the rate that fits. Each joint's least-squares
+    scale is biased low by its velocity column's noise (a noisy wrist joint:
+    7 % low), so the clock is the median of the upper half of the joints'
+    scales: the cleanest joints, and still no single odd column."""
+    differences = np.gradient(q, 1.0 / rate_hz, axis=0)
+    moving = (np.sum(differences**2, axis=0) > 0) & (np.sum(dq**2, axis=0) > 0)
+    if not moving.any():
+        return  # a still arm says nothing of its rate
+    scales = np.sort(np.sum(differences * dq, axis=0)[moving] / np.sum(dq**2, axis=0)[moving])
+    scale = float(np.median(scales[len(scales) // 2:]))
+    if not scale > 0:
+        raise DvrkDartError(f"{where}: the velocity column runs against the positions' finite differences (rows in reverse order, "
+                            "or the velocities' sign flipped)")
+    if abs(scale - 1.0) > RATE_TOLERANCE:
+        fits = rate_hz / scale
+        raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
+                            f"column; the rate that fits is {fits:.4g} Hz (--rate {fits:.4g})")
+
+
+#: a row stands out as a glitch when its disagreement is this many times the
+#: 99th percentile of the column's (the reference runs' largest: 3.7 times)
+GLITCH_RATIO = 30.0
+
+
+def _outlier_row(x: np.ndarray) -> tuple[int, int] | None:
+    """(row, column) of the largest value of |x| if it exceeds GLITCH_RATIO times its column's 99th percentile."""
+    scale = np.maximum(np.percentile(x, 99, axis=0), np.finfo(float).tiny)
+    rows = np.argmax(x, axis=0)  # each column's worst row, then the column that stands out most
+    with np.errstate(over="ignore"):
+        ratio = x[rows, np.arange(x.shape[1])] / scale
+    column = int(np.argmax(ratio))
+    return (int(rows[column]), column) if ratio[column] > GLITCH_RATIO else None
+
+
+def check_glitches(values: np.ndarray, rate_hz: float, where: str) -> None:
+    """One bad row (a glitched value, rows out of order) refused with its row
+    number: a velocity that disagrees with the positions' finite differences,
+    or an effort that stands out of its neighbours, far more than anywhere else."""
+    q, dq, tau = values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], values[:, 2 * N_JOINTS :]
+    velocity = _outlier_row(np.abs(dq - np.gradient(q, 1.0 / rate_hz, axis=0)))
+    if velocity is not None:
+        row, j = velocity
+        raise DvrkDartError(f"{where}: row {row + 1}: the velocity column {CSV_COLUMNS[N_JOINTS + j]} ({dq[row, j]:.6g}) and the finite "
+                            f"differences of {CSV_COLUMNS[j]} disagree {GLITCH_RATIO:g} times more than on 99 % of the rows "
+                            "(a glitched value, or rows out of order)")
+    effort = _outlier_row(np.abs(tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])))
+    if effort is not None:
+        row, j = effort
+        raise DvrkDartError(f"{where}: row {row + 2}, column {CSV_COLUMNS[2 * N_JOINTS + j]}: {tau[row + 1, j]:.6g} stands out of its "
+                            f"neighbouring rows {GLITCH_RATIO:g} times more than on 99 % of the rows (a glitched value)")
+
+
+@dataclass(frozen=True)
+class MeasuredRun:
+    """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7."""
+
+    path: Path
+    data: pd.DataFrame
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.data["t"].to_numpy()
+
+    @property
+    def rate_hz(self) -> float:
+        """Rows per second (checked against the velocity column when loaded)."""
+        return float(1.0 / (self.data["t"].iat[1] - self.data["t"].iat[0]))
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.data[column_names("q")].to_numpy()
+
+    @property
+    def dq(self) -> np.ndarray:
+        return self.data[column_names("dq")].to_numpy()
+
+    @property
+    def tau(self) -> np.ndarray:
+        return self.data[column_names("tau")].to_numpy()
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+
+def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
+    """Positions within the model's joint ranges (the simulator's own limits)."""
+    lower, upper = joint_ranges()
+    outside = (q < lower) | (q > upper)
+    if outside.any():
+        row, j = np.argwhere(outside)[0]
+        raise DvrkDartError(
+            f"{where}: row {row + 1}, column {CSV_COLUMNS[j]}: {float(q[row, j])!r} outside the joint range "
+            f"[{float(lower[j])!r}, {float(upper[j])!r}]" + _other_arm_fitting(q)
+        )
+
+
+def _other_arm_fitting(q: np.ndarray) -> str:
+    """' (... --arm-model X)' when every row lies in the joint ranges of another arm model."""
+    from dvrk_dart.model.description import current_model_file
+    from dvrk_dart.paths import MODELS_DIR
+
+    for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
+        model_file = folder / f"{folder.name}.toml"
+        if model_file.resolve() == current_model_file().resolve():
+            continue
+        lower, upper = _joint_ranges_of(model_file)
+        if np.all((q >= lower) & (q <= upper)):
+            return f" (every row fits the {folder.name} arm model's ranges: --arm-model {folder.name})"
+    return ""
+
+
+def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) joint ranges of the current arm's model description (rad, m)."""
+    from dvrk_dart.model.description import current_model_file
+
+    return _joint_ranges_of(current_model_file())
+
+
+@functools.cache
+def _joint_ranges_of(model_file: Path) -> tuple[np.ndarray, np.ndarray]:
+    from dvrk_dart.model.description import load_model
+
+    model = load_model(model_file)
+    return model.joint_lower, model.joint_upper
