@@ -1,0 +1,187 @@
+"""The first stage of a diagnosis: the problem it solves.
+
+The runs by role (`runs.RunRole`), the candidate effects as one design, the
+per-joint and per-run weights, the joints that carry a nuisance constant,
+and the runs' Gram blocks the selection works on."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from dvrk_dart.diagnosis.design import Design, Grams
+from dvrk_dart.diagnosis.effect import Effect
+from dvrk_dart.diagnosis.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
+from dvrk_dart.diagnosis.library import candidate_effects
+from dvrk_dart.diagnosis.runs import (
+    DiagnosisRun,
+    RunProcessing,
+    RunRole,
+    Simulate,
+    choose_processing,
+    loaded_states,
+    prepare_run,
+)
+from dvrk_dart.diagnosis.session_floor import session_offset_joints
+from dvrk_dart.io.reference_data import distinct_inputs
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.sim.config import SimConfig
+
+#: joint weights are 1 / max(residual RMS, this): a joint whose residual is
+#: below the effort resolution (N·m or N) must not dominate the fit
+EFFORT_WEIGHT_FLOOR = 1e-3
+
+
+@dataclass
+class Problem:
+    """Runs by role, effects, design and weights: what the selection fits."""
+
+    arm: Arm
+    effects: list[Effect]
+    design: Design
+    processing: RunProcessing
+    inputs: dict
+    train_runs: list[DiagnosisRun]
+    holdout_runs: list[DiagnosisRun]
+    baseline_run: DiagnosisRun | None
+    repeat_run: DiagnosisRun | None
+    n_measured: int
+    #: the index in `effects` of the payload at a given position (--payload-at)
+    at_index: int | None
+    #: a constant per run fitted as a nuisance, on `offset_joints` for a run minus its baseline
+    nuisance: bool
+    offset_joints: np.ndarray | None
+    offset_joints_source: str | None
+    folds: int
+    train_columns: list[np.ndarray] = field(default_factory=list, repr=False)
+    holdout_columns: list[np.ndarray] = field(default_factory=list, repr=False)
+    train_grams: Grams | None = field(default=None, repr=False)
+    holdout_grams: list[Grams] = field(default_factory=list, repr=False)
+    #: per-joint weights, 1 / (training residual RMS)^2
+    joint_weights: np.ndarray | None = None
+
+    @property
+    def has_baseline(self) -> bool:
+        return self.baseline_run is not None
+
+    @property
+    def reference_run(self) -> DiagnosisRun:
+        """The run the session floor is read against: the baseline, else the first training run."""
+        return self.baseline_run or self.train_runs[0]
+
+    def features_of(self, run: DiagnosisRun):
+        return run.features(self.arm)
+
+    def columns_of(self, run: DiagnosisRun) -> np.ndarray:
+        """The effects' columns in the band of the run's efforts. A run of
+        another motion than its baseline has no J1 reference: its raw J1 gap is
+        dominated by motion-dependent errors (0.36 N·m RMS on the half-speed
+        105 g run, the weight's J1 effort 0.1), which a payload's free J1 path
+        would absorb; J1's payload is read from the runs minus their baseline."""
+        yaw_path_from_differences = any(r.role is RunRole.DIFFERENCE for r in self.train_runs)
+        baseline_features = self.features_of(run.baseline) if run.role is RunRole.DIFFERENCE else None
+        return run.state.in_band(self.design.run_columns(run.role, self.features_of(run), baseline_features,
+                                                         yaw_path=not (yaw_path_from_differences and run.role is RunRole.OTHER_MOTION)))
+
+    def demean_of(self, run: DiagnosisRun) -> np.ndarray | None:
+        """The joints with a nuisance constant: a run minus its baseline (same
+        motion) changes its constant with the session only; a run of another
+        motion keeps one on every joint (the mean of its motion-dependent
+        errors, e.g. friction's asymmetry, is its own)."""
+        if not self.nuisance:
+            return None
+        return self.offset_joints if run.role is RunRole.DIFFERENCE else np.ones(N_JOINTS, dtype=bool)
+
+    def grams_of(self, run: DiagnosisRun, columns: np.ndarray, folds: int) -> Grams:
+        return Grams.of_run(self.design, self.features_of(run), run.residual, folds, self.demean_of(run), columns)
+
+
+def _joint_weights(residual: np.ndarray) -> np.ndarray:
+    sigma = np.maximum(rms(residual), EFFORT_WEIGHT_FLOOR)
+    return 1.0 / sigma**2
+
+
+def _run_weights(parts: list[Grams]) -> list[np.ndarray]:
+    """Per run and joint, weights that give every training run the pooled
+    residual level: runs are heteroscedastic (a run minus its baseline has a
+    tenth of a raw run's residual) and each must count, not only the largest."""
+    if len(parts) < 2:
+        return [np.ones(N_JOINTS) for _ in parts]
+    energy = [p.s.sum(0) / max(p.n.sum(), 1) for p in parts]
+    pooled = np.sum([p.s.sum(0) for p in parts], axis=0) / max(sum(p.n.sum() for p in parts), 1)
+    return [np.where(e > 0, pooled / np.maximum(e, 1e-300), 1.0) for e in energy]
+
+
+def roles(measured_list, baseline, train, holdout, repeat) -> list[tuple[str, str]]:
+    """(option, run) of every run given by name or path (a run given as data has no file)."""
+    pairs = [("--measured", m) for m in measured_list] + [("--baseline", baseline), ("--repeat", repeat)]
+    for option, specs in (("--train", train or []), ("--holdout", holdout or [])):
+        # a (run, baseline) pair: its baseline may serve several runs
+        pairs += [(option, spec[0] if isinstance(spec, tuple) else spec) for spec in specs]
+    measured = {str(m) for m in measured_list}
+    return [(option, s) for option, s in pairs if isinstance(s, (str, Path))
+            and not (option == "--train" and str(s) in measured)]  # --train may repeat the measured run (it always trains)
+
+
+def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payload_at) -> tuple[list[Effect], int | None]:
+    """The candidate effects, and a payload at a given position appended (its index)."""
+    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, base=base_config)
+    if payload_at is None:
+        return effects, None
+    key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
+    check_mass_determinable(arm, key, position, str(payload_at))
+    return effects + [PayloadAtPosition(arm.model, key, position)], len(effects)
+
+
+def _processing(specs, processing: str | None, baseline) -> RunProcessing:
+    if processing is None and baseline is not None:
+        return RunProcessing(why="upstream: a payload diagnosis (with a baseline) keeps the upstream processing, "
+                                 "on which its payload checks were made")
+    return choose_processing(specs, processing)
+
+
+def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
+                  simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
+                  nuisance: bool, processing: str | None, folds: int) -> Problem:
+    """The runs prepared by role (simulated, aligned on their baseline), the
+    design of the candidate effects and the Gram blocks of every run."""
+    effects, at_index = _effects(arm, effects, payload_model, base_config, payload_at)
+    all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
+    inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat))
+    run_processing = _processing(all_specs, processing, baseline)
+
+    def as_run(spec, baseline=None):
+        if isinstance(spec, tuple):
+            spec, baseline = spec
+        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing)
+
+    if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
+        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], run_processing)])
+    baseline_run = as_run(baseline) if baseline is not None else None
+    train_runs = [as_run(m, baseline_run) for m in measured_list]
+    train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
+    holdout_runs = [as_run(s) for s in (holdout or [])]
+    if baseline_run is not None and any(r.role is RunRole.OTHER_MOTION for r in train_runs):  # the baseline is fitted with them
+        train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role=RunRole.BASELINE))
+    repeat_run = as_run(repeat, baseline_run) if repeat is not None else None
+    offset_joints, offset_source = (session_offset_joints(arm.model, repeat_run, baseline_run or train_runs[0]) if nuisance
+                                    else (None, None))
+    problem = Problem(arm, effects, Design(effects), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
+                      len(measured_list), at_index, nuisance, offset_joints, offset_source, folds)
+    _add_grams(problem)
+    return problem
+
+
+def _add_grams(problem: Problem) -> None:
+    """Columns and Gram blocks of every run; the training runs weighted to one residual level."""
+    problem.train_columns = [problem.columns_of(r) for r in problem.train_runs]
+    problem.holdout_columns = [problem.columns_of(r) for r in problem.holdout_runs]
+    parts = [problem.grams_of(r, Phi, problem.folds) for r, Phi in zip(problem.train_runs, problem.train_columns)]
+    problem.holdout_grams = [problem.grams_of(r, Phi, 1) for r, Phi in zip(problem.holdout_runs, problem.holdout_columns)]
+    problem.joint_weights = _joint_weights(np.vstack([r.residual for r in problem.train_runs]))
+    problem.train_grams = Grams.concat([part.scaled(weight) for part, weight in zip(parts, _run_weights(parts))])

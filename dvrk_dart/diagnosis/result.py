@@ -1,0 +1,201 @@
+"""The later stages of a diagnosis: the selection of effects, the
+re-simulation with them, and the frozen result (`Diagnosis.to_json()` is the
+contract of diagnosis.json, docs/outputs.md)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from dvrk_dart.diagnosis.design import BLOCK_DURATION_S, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
+from dvrk_dart.diagnosis.library import effects_to_sim_config, not_simulated, unsimulated_effort
+from dvrk_dart.diagnosis.payload_report import choose_within_families
+from dvrk_dart.diagnosis.problem import Problem
+from dvrk_dart.diagnosis.runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.selection import (
+    BOOTSTRAP_RESAMPLES,
+    GAIN_FAILURE_QUANTILE,
+    MIN_HELDOUT_GAIN,
+    CvResult,
+    Selector,
+)
+from dvrk_dart.metrics import rms
+from dvrk_dart.sim.config import SimConfig
+
+
+# ------------------------------------------------------------------ selection
+@dataclass
+class Selection:
+    """The greedy selection's outcome: the chosen effects, their joint fit, every candidate's own score."""
+
+    selector: Selector
+    selected: list[int]
+    final: Fit
+    steps: list
+    individual: dict[int, CvResult]
+    cross_validated: CvResult
+
+    def method(self) -> str:
+        return (f"greedy forward selection on {len(self.selector.folds)}-fold contiguous time-segment cross-validation of the training "
+                f"runs, weighted least squares (joint weight 1/RMS before), bounded to physical ranges; stop when the held-out gain < "
+                f"{MIN_HELDOUT_GAIN} or not positive with probability {1 - GAIN_FAILURE_QUANTILE:.2f} (block bootstrap, "
+                f"{BLOCK_DURATION_S} s blocks, {BOOTSTRAP_RESAMPLES} resamples); a payload's link among its equivalent links "
+                f"(identical efforts) by the penalised training cost")
+
+
+def select(problem: Problem, max_effects: int) -> Selection:
+    selector = Selector(problem.design, problem.train_grams, problem.joint_weights, problem.folds)
+    selected, steps, individual, selected_cv = selector.greedy(max_effects)
+    selected, final, selected_cv = choose_within_families(selector, selected, selected_cv)
+    return Selection(selector, selected, final, steps, individual, selected_cv)
+
+
+def train_fraction(problem: Problem, beta: np.ndarray) -> float:
+    grams = problem.train_grams
+    return weighted_fraction(sse(beta, grams.A.sum(0), grams.g.sum(0), grams.s.sum(0)), grams.s.sum(0), problem.joint_weights)
+
+
+def holdout_fraction(problem: Problem, beta: np.ndarray) -> float | None:
+    if not problem.holdout_grams:
+        return None
+    errors = np.sum([sse(beta, h.A.sum(0), h.g.sum(0), h.s.sum(0)) for h in problem.holdout_grams], axis=0)
+    return weighted_fraction(errors, np.sum([h.s.sum(0) for h in problem.holdout_grams], axis=0), problem.joint_weights)
+
+
+def effect_entries(problem: Problem, selection: Selection) -> list[dict]:
+    """Every candidate, fitted alone on all training data, for its parameters
+    and scores; with a baseline the finding (what the runs have and their
+    baseline has not) ranks before the errors common to both."""
+    s, effects = selection, problem.effects
+    rank_order = s.selected + sorted((i for i in s.individual if i not in s.selected), key=lambda i: -s.individual[i].fraction)
+    if problem.has_baseline:
+        rank_order = sorted(rank_order, key=lambda i: i not in s.selected or effects[i].kind not in WITHHELD_KINDS)
+    return [_entry(problem, selection, rank, i) for rank, i in enumerate(rank_order, start=1)]
+
+
+def _entry(problem: Problem, s: Selection, rank: int, i: int) -> dict:
+    e = problem.effects[i]
+    alone = s.selector.fit_all([i])
+    p = s.final.params[i] if i in s.selected else alone.params[i]
+    cv = s.individual[i]
+    hold = holdout_fraction(problem, alone.beta)
+    return {
+        "rank": rank,
+        "name": e.name,
+        "kind": e.kind,
+        "family": e.family,
+        "joints": list(e.joints),
+        "parameters": e.describe(p),
+        "units": e.units(),
+        "size": e.size(p),
+        "explained_fraction": {
+            "train": train_fraction(problem, alone.beta),
+            "holdout": hold if hold is not None else cv.fraction,
+            "holdout_source": "runs" if hold is not None else "time_segments",
+            "cross_validated": cv.fraction,
+            "cross_validated_interval": s.selector.interval(cv.after),
+        },
+        "explained_fraction_per_joint": {"cross_validated": per_joint_fraction(cv.after, problem.train_grams.s)},
+        "selected": i in s.selected,
+        "role": "finding" if not problem.has_baseline or e.kind in WITHHELD_KINDS else "common_model_error",
+        "selection_step": s.selected.index(i) + 1 if i in s.selected else None,
+        "in_simulation": e.sim_contribution(np.asarray(p)) is not None,
+        "fully_in_simulation": e.fully_simulated(np.asarray(p)),
+    }
+
+
+# ------------------------------------------------------------ re-simulation
+@dataclass
+class Resimulation:
+    """The selected effects as physics, and what they leave on every run."""
+
+    sim_config: SimConfig
+    not_in_simulation: list
+    train_after: list[np.ndarray]
+    holdout_after: list[np.ndarray]
+    source: str
+
+
+def resimulate(problem: Problem, selection: Selection, simulate: Simulate | None, base_config: SimConfig) -> Resimulation:
+    """Each run replayed with the selected effects (a baseline run, and the
+    baseline under a run of the same motion, with the effects all runs share:
+    no withheld payload); without a simulation, the effects' regressors."""
+    chosen = [(problem.effects[i], selection.final.params[i]) for i in selection.selected]
+    full = (effects_to_sim_config(chosen, base_config), not_simulated(chosen))
+    shared_effects = [(e, p) for e, p in chosen if e.kind not in WITHHELD_KINDS]
+    shared = (effects_to_sim_config(shared_effects, base_config), not_simulated(shared_effects))
+
+    def simulated_after(run: DiagnosisRun, with_withheld: bool = True) -> np.ndarray:
+        config, extra = full if with_withheld else shared
+        simulated = np.asarray(simulate(config, run.state), dtype=float) + unsimulated_effort(extra, problem.features_of(run))
+        return run.state.tau - run.state.in_band(simulated)
+
+    def after_residual(run: DiagnosisRun, columns: np.ndarray) -> np.ndarray:
+        if simulate is None:
+            after = run.residual - columns @ selection.final.beta
+        elif run.role is RunRole.DIFFERENCE:
+            after = simulated_after(run) - simulated_after(run.baseline, with_withheld=False)
+        else:
+            after = simulated_after(run, with_withheld=run.role is not RunRole.BASELINE)
+        return after - problem.demean_of(run) * after.mean(axis=0) if problem.nuisance else after
+
+    if hasattr(simulate, "prefetch"):  # the replays after the effects, side by side
+        simulate.prefetch([pair for r in problem.train_runs + problem.holdout_runs for pair in _after_replays(r, full[0], shared[0])])
+    train_after = [after_residual(r, c) for r, c in zip(problem.train_runs, problem.train_columns)]
+    holdout_after = [after_residual(r, c) for r, c in zip(problem.holdout_runs, problem.holdout_columns)]
+    source = "regressor" if simulate is None else ("simulation" if not full[1] else "simulation+regressor")
+    return Resimulation(full[0], [e.name for e, _ in full[1]], train_after, holdout_after, source)
+
+
+def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimConfig) -> list[tuple[SimConfig, object]]:
+    """The (config, state) replays a run's residual after asks for."""
+    if run.role is RunRole.DIFFERENCE:
+        return [(sim_config, run.state), (shared_config, run.baseline.state)]
+    return [(shared_config if run.role is RunRole.BASELINE else sim_config, run.state)]
+
+
+def gaps(residuals: list[np.ndarray]) -> list[float] | None:
+    """RMS per joint over the runs' residuals, or None without runs."""
+    if not residuals:
+        return None
+    return rms(np.vstack(residuals)).tolist()
+
+
+# ------------------------------------------------------------------- result
+@dataclass(frozen=True)
+class Diagnosis:
+    """The diagnosis's outcome, field for field the keys of diagnosis.json."""
+
+    joints: list
+    units: list
+    measured: str
+    measured_runs: list
+    baseline_source: dict
+    nuisance_offsets: dict | None
+    nuisance_offset_joints: dict | None
+    session_floor: list | None
+    repeat: str | None
+    gap_split: dict
+    baseline: str | None
+    train_runs: list
+    holdout_runs: list
+    inputs: dict
+    processing: dict
+    residual_definition: str
+    simulated_source: str
+    gap_before: dict
+    gap_after: dict
+    gap_after_source: str
+    explained_fraction: dict
+    effects: list
+    selection: dict
+    payload: dict | None
+    payloads: list
+    payload_candidates: list
+    sim_config: dict
+    not_in_simulation: list
+
+    def to_json(self) -> dict:
+        """The diagnosis.json document (a fresh dict: the caller may add to it)."""
+        return asdict(self)
