@@ -100,7 +100,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
     from dvrk_dart.io.atomic import atomic_path
     from dvrk_dart.io.bags import is_bag, load_bag_run
-    from dvrk_dart.io.outputs import check_writable_folder, enclosing_output
+    from dvrk_dart.io.outputs import MARKER, check_writable_folder, enclosing_output
     from dvrk_dart.io.reference_data import sample_rate_hz
 
     topics = _bag_topics(args)
@@ -113,9 +113,10 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise DvrkDartError(f"--out: {out} is the input bag {bag} or inside it: refusing to write over the input, even with --force")
     if out.is_symlink():
         raise DvrkDartError(f"--out: {out} is a symbolic link: give the file itself, or a new name")
-    owner = enclosing_output(out)
+    owner = enclosing_output(out) or next((p for p in out.absolute().resolve().parents if (p / MARKER).is_file()), None)
     if owner is not None:
-        raise DvrkDartError(f"--out: {out} is part of {owner}, a folder dvrk-dart wrote: refusing to replace it, even with --force")
+        raise DvrkDartError(f"--out: {out} is inside {owner}, a folder dvrk-dart wrote, which holds only what its command wrote: "
+                            "write the CSV elsewhere")
     if out.is_dir():
         raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
     if out.exists() and not out.is_file():
@@ -492,26 +493,22 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dvrk-dart: --jobs: {local_jobs} workers on {os.cpu_count()} cores would only wait on each other "
               f"(at most {MAX_JOBS_PER_CORE * (os.cpu_count() or 1)}; a Ray cluster: --executor ray)", file=sys.stderr)
         return 2
-    if getattr(args, "executor", None) == "ray":
-        from dvrk_dart.runs.executors import check_ray_address
-
-        try:
-            check_ray_address(args.ray_address)
-        except DvrkDartError as exc:
-            print(f"dvrk-dart: {exc}", file=sys.stderr)
-            return exc.exit_code
-    try:
-        _check_outputs_apart_from_inputs(args)
-        _check_arm_of_reference_runs(args)
-    except DvrkDartError as exc:
-        print(f"dvrk-dart: {exc}", file=sys.stderr)
-        return exc.exit_code
+    if getattr(args, "payload_at", None) is not None and getattr(args, "baseline", None) is None:
+        print("dvrk-dart: --payload-at: only with --baseline (the payload is what the runs have and their baseline has not)",
+              file=sys.stderr)
+        return 2
     interrupted.clear()  # (main may run several times in one process: the tests)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     # (an ignored SIGINT, as under nohup, stays ignored)
     previous_interrupt = signal.signal(signal.SIGINT, _interrupt) if main_thread and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN else None
     try:
+        if getattr(args, "executor", None) == "ray":
+            from dvrk_dart.runs.executors import check_ray_address
+
+            check_ray_address(args.ray_address)
+        _check_outputs_apart_from_inputs(args)
+        _check_arm_of_reference_runs(args)
         from dvrk_dart.model.description import resolve_arm_model, using_model
 
         with using_model(resolve_arm_model(getattr(args, "arm_model", None) or "psm")):
@@ -541,6 +538,11 @@ def main(argv: list[str] | None = None) -> int:
     except Terminated:
         print("dvrk-dart: terminated (partial outputs removed)", file=sys.stderr)
         return 143
+    except RuntimeError as exc:  # pathlib's "Symlink loop from '...'": a path given, not a fault of the tool
+        if not str(exc).startswith("Symlink loop"):
+            raise
+        print(f"dvrk-dart: {exc}: a symbolic link that leads back to itself", file=sys.stderr)
+        return 2
     except Exception:  # an interrupt that surfaced as another error (ImportError, SystemError) is an interrupt
         if not interrupted.is_set():
             raise

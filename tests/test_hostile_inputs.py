@@ -4,6 +4,7 @@ with what the data determine."""
 
 import json
 import os
+import re
 import shutil
 
 import numpy as np
@@ -11,6 +12,9 @@ import pytest
 
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
+from dvrk_dart.paths import PIPELINES_DIR
+
+SCENARIOS = PIPELINES_DIR / "scenarios"
 
 
 def cli(capsys, *argv) -> tuple[int, list[str], str]:
@@ -337,3 +341,80 @@ def test_outputs_record_versions_params_and_the_rate(tmp_path, capsys):
     assert cli(capsys, "identify", "--runs", "one", "--joints", "q1", "--out", out)[0] == 0
     record = json.loads((out / "identification.json").read_text())
     assert record["versions"] and record["runs"]["train"][0]["rate_hz"] == 200.0
+
+
+# ---------------------------------------------------------------- sixth fuzz
+def test_a_file_named_like_a_reference_run_is_not_read_as_it(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    values = _two_rows()
+    values[99, 0] = np.nan
+    np.savetxt(tmp_path / "one_results.csv", values, delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "one_results.csv")
+    assert code == 2 and "NaN" in lines[0]  # the user's file, not the reference file of that name
+    (tmp_path / "two").write_text("x")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "two")
+    assert code == 2 and "give ./two" in lines[0]
+
+
+def test_a_decimated_copy_is_the_same_recording(tmp_path, capsys):
+    folder = tmp_path / "dec"
+    folder.mkdir()
+    copy = folder / "one_105_grams_parallel_half_speed_results.csv"  # read at 100 Hz by its name
+    np.savetxt(copy, np.loadtxt(resolve_run("one"), delimiter=",")[::2], delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "session-floor", "--measured", "one", "--repeat", copy)
+    assert code == 2 and "same recording" in lines[0], lines
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (lambda c: c["extra"]["armature"].__setitem__(2, float("nan")), "not finite"),
+    (lambda c: c["extra"]["coulomb"].__setitem__(0, -5.0), "negative"),
+])
+def test_a_diagnosis_edited_into_nonsense_is_refused_as_dynamics(tmp_path, capsys, edit, fragment):
+    from dvrk_dart.sim.config import SimConfig
+
+    config = json.loads(json.dumps(SimConfig().to_dict()))
+    edit(config)
+    path = tmp_path / "diagnosis.json"
+    path.write_text(json.dumps({"sim_config": config}, allow_nan=True))
+    code, lines, _ = cli(capsys, "replay", "--measured", "two", "--duration", "1", "--dynamics", path, "--out", tmp_path / "r")
+    assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
+
+
+def test_odd_paths_and_spans_are_refused_in_one_line(tmp_path, capsys):
+    (tmp_path / "loopA").symlink_to(tmp_path / "loopB")
+    (tmp_path / "loopB").symlink_to(tmp_path / "loopA")
+    code, lines, _ = cli(capsys, "report", "--runs", tmp_path / "loopA", "--out", tmp_path / "x")
+    assert code == 2 and len(lines) == 1 and "Symlink loop" in lines[0]
+    code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--payload-at", "pitch:-0.165,0.02,0", "--out", tmp_path / "d")
+    assert code == 2 and "--payload-at: only with --baseline" in lines[0]
+    code, lines, _ = cli(capsys, "run", "rectilinear", "--duration", "1e-9", "--out", tmp_path / "r")
+    assert code == 2 and "--duration" in lines[0]
+    scenario = tmp_path / "long.toml"
+    scenario.write_text(re.sub(r"(?m)^duration_s\s*=.*$", "duration_s = 1e12", (SCENARIOS / "rectilinear.toml").read_text()))
+    code, lines, _ = cli(capsys, "run", scenario, "--out", tmp_path / "r")
+    assert code == 2 and "duration_s" in lines[0] and not (tmp_path / "r").exists()
+
+
+def test_import_writes_nothing_into_a_tool_folder(tmp_path, capsys):
+    run = tmp_path / "r"
+    assert cli(capsys, "replay", "--measured", "two", "--duration", "0.5", "--out", run)[0] == 0
+    bag = tmp_path / "bag"
+    assert cli(capsys, "export", run, "--bag", bag)[0] == 0
+    marker = (run / ".dvrk-dart").read_text()
+    for out in (run / ".dvrk-dart", run / "x.csv"):
+        code, lines, _ = cli(capsys, "import", bag, "--out", out, "--force")
+        assert code == 2 and "a folder dvrk-dart wrote" in lines[0], lines
+    assert (run / ".dvrk-dart").read_text() == marker and not (run / "x.csv").exists()
+
+
+def test_a_previous_folder_left_aside_is_cleaned_only_when_nothing_of_the_users_is_in_it(tmp_path):
+    from dvrk_dart.io.outputs import building_folder
+
+    target = tmp_path / "out"
+    empty, kept = tmp_path / ".out.old-0123abcd", tmp_path / ".out.old-4567abcd"
+    empty.mkdir()
+    kept.mkdir()
+    (kept / "mine.txt").write_text("the user's")
+    with building_folder(target, "run") as folder:
+        (folder / "a.txt").write_text("new")
+    assert not empty.exists() and (kept / "mine.txt").read_text() == "the user's"

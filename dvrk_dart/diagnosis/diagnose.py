@@ -149,8 +149,8 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
         offsets = problem.offset_joints if problem.offset_joints is not None else np.zeros(N_JOINTS, bool)
         at = effects[problem.at_index] if problem.at_index is not None else None
         candidates = [e for e in effects if isinstance(e, FirstMomentPayload)]
-        return [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at)
-                for _ in selected_moments[:1]], points
+        return [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
+                                        effects[i]) for i in selected_moments[:1]], points
     session_fit = _session_fit(problem, s)
     reports = [first_moment_report(problem.arm, s.selector, s.selected, i, s.final.params, s.cross_validated.fold_params, problem.at_index,
                                    session_fit) for i in selected_moments]

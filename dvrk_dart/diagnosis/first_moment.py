@@ -28,6 +28,8 @@ J2 efforts at 0.91 of the hand placement's prediction, correlation 0.98).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
@@ -194,8 +196,9 @@ def parse_payload_at(text: str, model: PsmModel) -> tuple[int, np.ndarray]:
     except DvrkDartError as exc:
         raise DvrkDartError(f"--payload-at {text!r}: {exc}") from None
     reach = arm_reach_m(model, key)
-    if float(np.linalg.norm(position)) > reach:
-        raise DvrkDartError(f"--payload-at {text!r}: ({', '.join(f'{v:g}' for v in position)}) m is {np.linalg.norm(position):.3g} m "
+    distance = math.hypot(*position)  # (no overflow for 1e200, unlike a norm through the squares)
+    if distance > reach:
+        raise DvrkDartError(f"--payload-at {text!r}: ({', '.join(f'{v:g}' for v in position)}) m is {distance:.3g} m "
                             f"from the link's origin, farther than any part of the arm ({reach:.2f} m): positions are in metres")
     return key, position
 

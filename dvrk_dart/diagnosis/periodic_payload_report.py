@@ -145,11 +145,12 @@ def _at_position(arm, at, fit_with) -> dict:
     return {"link": at.link_name, "position_m": at.position.tolist(), **values, "not_determined": reasons}
 
 
-def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offset_joints, at=None) -> dict:
+def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offset_joints, at=None, selected=None) -> dict:
     """The payload read from the runs minus their baseline on the harmonics (and
     the --repeat pair for the session scatter): the link of the lowest BIC among
     the FirstMomentPayload `candidates`, intervals spanning the tied links'; with
-    `at` (a PayloadAtPosition), the mass at that position."""
+    `at` (a PayloadAtPosition), the mass at that position; `selected`: the
+    payload the selection over time segments took (named where it differs)."""
     differences = [r for r in runs if r.role is RunRole.DIFFERENCE]
     if not differences:
         raise DvrkDartError("--processing periodic with --baseline: no run has the baseline's motion (a payload needs a run minus its "
@@ -172,6 +173,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     report = {"link": effect.link_name, "link_key": effect.link_key, "group": effect.group, "equivalent_links": list(effect.equivalent_links),
               "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
               "link_bic": dict(zip((e.link_name for e in candidates), costs.tolist())),
+              "selection_link": selected.link_name if selected is not None else None,
               **quantities, "not_determined": reasons,
               "first_moment_reference_link": arm.model.links[effect.reference_key].name,
               "mass_identified": quantities["mass_kg"] is not None, "position_m": None,
@@ -201,6 +203,11 @@ def _words(report: dict) -> list[str]:
     words.append(f"The efforts choose a payload on {report['link']} ({report['group']})" + (
         f"; payloads on {', '.join(report['tied_links'])} explain them as well (within {TIED_BIC:g} of BIC), and every interval "
         "spans theirs" if report["tied_links"] else "") + ".")
+    chosen = {report["link"], *report["tied_links"]}
+    if report["selection_link"] is not None and report["selection_link"] not in chosen:
+        words.append(f"The selection over time segments of the runs' residual (session changes included) took a payload on "
+                     f"{report['selection_link']}, which the simulation after carries; weighed against the session scatter on the "
+                     f"harmonics, the efforts choose {report['link']}: the numbers below are {report['link']}'s.")
     moment, intervals = report["first_moment_base_at_q0_kg_m"], report["first_moment_base_at_q0_kg_m_interval"]
     words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
                  + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")

@@ -231,6 +231,20 @@ def remove_stale_building(target: Path) -> None:
         if (match and int(match.group(1)) != os.getpid() and not _process_alive(int(match.group(1)))
                 and candidate.is_dir() and not candidate.is_symlink() and (candidate / BUILDING_SENTINEL).is_file()):
             shutil.rmtree(candidate, ignore_errors=True)
+    _remove_stale_old(target)
+
+
+def _remove_stale_old(target: Path) -> None:
+    """Previous folders of `target` moved aside by a swap that was cut short
+    (.NAME.old-HEX): removed when they hold nothing, or only what their marker
+    vouches for (a user's file in one is never removed)."""
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.old-[0-9a-f]{{8}}")
+    for candidate in target.parent.glob(f".{target.name}.old-*"):
+        if not pattern.fullmatch(candidate.name) or not candidate.is_dir() or candidate.is_symlink():
+            continue
+        marker = read_marker(candidate) or Marker("", {})
+        if all(((candidate / r).is_dir() and not (candidate / r).is_symlink()) or marker.owns(candidate, r) for r in _files(candidate)):
+            shutil.rmtree(candidate, ignore_errors=True)
 
 
 @contextlib.contextmanager

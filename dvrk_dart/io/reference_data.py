@@ -138,9 +138,12 @@ def resolve_run(name_or_path: str | Path) -> Path:
     """A measured run by shorthand ('two'), manifest name or path (a CSV or a
     ROS bag: a rosbag2 folder, an .mcap/.db3 file or a ROS 1 .bag)."""
     text = str(name_or_path)
+    here = Path(text).exists() or Path(text).is_symlink()
     if text in RUNS:
+        if here:
+            raise DvrkDartError(f"{text}: both the reference run '{text}' and a file here: give ./{text} for the file")
         return resolve(RUNS[text])
-    if text in manifest()["files"]:
+    if text in manifest()["files"] and not here:  # a file of that name where the user points wins
         return resolve(text)
     if is_bag(text):
         return Path(text)
@@ -161,21 +164,33 @@ def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
     recording in two roles, or twice in one, is refused in one line naming
     both: the same path or content, or the same positions however the file was
     written (line endings, digits, a trimmed copy)."""
-    seen: list[tuple[str, str, str, np.ndarray]] = []
+    seen: list[tuple[str, str, str, np.ndarray, float]] = []
     inputs = {}
     for option, spec in roles:
         path = Path(resolve_run(spec))
-        q = load_run(path).q
+        run = load_run(path)
         record = input_record(path)
         digest = record["sha256"]
-        for other_option, other, other_digest, other_q in seen:
-            if digest == other_digest or same_recording(q, other_q):
+        for other_option, other, other_digest, other_q, other_rate in seen:
+            if digest == other_digest or same_recording_at_rates(run.q, run.rate_hz, other_q, other_rate):
                 raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} "
                                     f"({'same content' if digest == other_digest else 'same positions'}): "
                                     "each role needs its own recording")
-        seen.append((option, str(spec), digest, q))
+        seen.append((option, str(spec), digest, run.q, run.rate_hz))
         inputs[str(spec)] = {"role": option, **record}
     return inputs
+
+
+def same_recording_at_rates(a: np.ndarray, rate_a: float, b: np.ndarray, rate_b: float) -> bool:
+    """`same_recording`, and a copy kept every k-th row (read at a k times
+    lower rate, or given as such by a manifest name) is the same recording too."""
+    if same_recording(a, b):
+        return True
+    (slow, slow_rate), (fast, fast_rate) = sorted(((a, rate_a), (b, rate_b)), key=lambda x: x[1])
+    k = round(fast_rate / slow_rate)
+    if k < 2 or abs(fast_rate / slow_rate - k) > 1e-6 * k:
+        k = 2  # a decimated copy read at the rate of its name: try every other row too
+    return any(same_recording(slow, fast[offset::k]) or same_recording(fast, slow[offset::k]) for offset in range(k))
 
 
 def same_recording(a: np.ndarray, b: np.ndarray) -> bool:

@@ -17,8 +17,10 @@ import json
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
+import numpy as np
+
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES
+from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES, MAX_DURATION_S  # noqa: F401  (the CLI's bound too)
 from dvrk_dart.sim.config import SimConfig
 
 #: the simulation step bounds a user may ask for (s): above 10 ms the closed
@@ -27,9 +29,8 @@ MAX_STEP_S = 0.01
 #: the smallest simulation step: 100 kHz, ten times any servo rate of the arm (a 1 ns step
 #: would hold 10^9 states per simulated second, more than the machine's memory)
 MIN_STEP_S = 1e-5
-#: the longest run (s): an hour of simulated time at 1 kHz is 3.6 M steps, whose
-#: logs still fit in memory; longer runs belong in several files
-MAX_DURATION_S = 3600.0
+#: the fewest simulated steps a run compares anything over
+MIN_STEPS = 10
 #: the most simulation steps of one run (the hour at 1 kHz above)
 MAX_STEPS = 3.6e6
 
@@ -55,6 +56,9 @@ class RunConfig:
             raise DvrkDartError(f"--dt: {self.dt_s} s is outside [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s")
         if self.duration_s is not None and not (0.0 < self.duration_s <= MAX_DURATION_S):
             raise DvrkDartError(f"--duration: {self.duration_s} s is outside (0, {MAX_DURATION_S:g}] s")
+        if self.duration_s is not None and self.duration_s < MIN_STEPS * self.dt_s:
+            raise DvrkDartError(f"--duration: {self.duration_s:g} s is fewer than {MIN_STEPS} steps of {self.dt_s:g} s: "
+                                "nothing to compare")
         if self.duration_s is not None and self.duration_s / self.dt_s > MAX_STEPS:
             raise DvrkDartError(f"--dt: {self.dt_s:g} s over {self.duration_s:g} s is {self.duration_s / self.dt_s:.3g} steps, "
                                 f"more than {MAX_STEPS:.3g}: a longer step or a shorter --duration")
@@ -106,6 +110,28 @@ def diagnosis_sim_config(path: Path) -> SimConfig:
     if not isinstance(raw, dict) or not isinstance(raw.get("sim_config"), dict):
         raise DvrkDartError(f"--dynamics: {path}: no 'sim_config' object (not written by dvrk-dart diagnose?)")
     try:
-        return SimConfig.from_dict(raw["sim_config"])
+        config = SimConfig.from_dict(raw["sim_config"])
     except (TypeError, ValueError, KeyError) as exc:
         raise DvrkDartError(f"--dynamics: {path}: malformed sim_config ({exc})") from None
+    _check_physical(config, path)
+    return config
+
+
+#: JointEffects fields that dissipate or store energy the physical way only when >= 0
+NON_NEGATIVE_EFFECTS = ("coulomb", "viscous", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
+
+
+def _check_physical(config: SimConfig, path: Path) -> None:
+    """A diagnosis's effects as the diagnosis can write them: finite numbers,
+    friction, armature and payload masses not negative (a file edited by hand
+    would otherwise run, and report NaN or energy from nowhere)."""
+    extra = config.extra
+    for name in extra.__dataclass_fields__:
+        values = np.asarray([x for v in getattr(extra, name) for x in (v if isinstance(v, tuple) else (v,))], dtype=float)
+        if not np.all(np.isfinite(values)):
+            raise DvrkDartError(f"--dynamics: {path}: sim_config.extra.{name} holds a value that is not finite")
+        if name in NON_NEGATIVE_EFFECTS and np.any(values < 0.0):
+            raise DvrkDartError(f"--dynamics: {path}: sim_config.extra.{name} holds a negative value (not physical)")
+    for payload in config.payloads:
+        if not (np.isfinite(payload.mass_kg) and payload.mass_kg >= 0.0 and np.all(np.isfinite(payload.position_m))):
+            raise DvrkDartError(f"--dynamics: {path}: a payload of sim_config is not a finite, non-negative mass at a finite position")

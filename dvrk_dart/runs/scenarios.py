@@ -102,6 +102,18 @@ def _positive(path: Path, table: dict, key: str, where: str) -> float:
     return float(value)
 
 
+#: the longest run (s): an hour of simulated time at 1 kHz is 3.6 M steps, whose
+#: logs still fit in memory; longer runs belong in several files
+MAX_DURATION_S = 3600.0
+
+
+def _duration(path: Path, raw: dict) -> float:
+    duration = _positive(path, raw, "duration_s", "")
+    if duration > MAX_DURATION_S:
+        _fail(path, f"duration_s {duration:g} s is above {MAX_DURATION_S:g} s (an hour: longer runs belong in several files)")
+    return duration
+
+
 def _string_list(path: Path, raw: dict, key: str, allowed: tuple[str, ...], default: tuple[str, ...] | None) -> tuple[str, ...]:
     value = raw.get(key, default)
     if not isinstance(value, (list, tuple)) or not value or any(not isinstance(v, str) or v not in allowed for v in value):
@@ -154,13 +166,13 @@ def load_scenario_file(path: Path) -> Scenario:
     if kind == "replay":
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
-        duration = _positive(path, raw, "duration_s", "") if "duration_s" in raw else None
+        duration = _duration(path, raw) if "duration_s" in raw else None
         arm_model = raw.get("arm_model")
         if arm_model is not None and not isinstance(arm_model, str):
             _fail(path, f"arm_model must be an arm's name (psm, mtm), got {arm_model!r}")
         return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics,
                         arm_model=arm_model)
-    duration = _positive(path, raw, "duration_s", "")
+    duration = _duration(path, raw)
     start = _vector(path, raw, "start_pose", N_JOINTS)
     lower, upper = joint_ranges()
     for j in np.flatnonzero((start < lower) | (start > upper)):
