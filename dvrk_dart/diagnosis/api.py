@@ -73,7 +73,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     start = time.perf_counter()
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     if band is not None:
-        band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline, *train, *holdout, repeat]))
+        _band_span(band, band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline,
+                                                            *train, *holdout, repeat])))
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
                       simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
@@ -89,6 +90,13 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if logs:
         log_replays(arm, measured, sim_config_of(result), out_dir)
     return result
+
+
+def _band_span(band: dict, run: str) -> None:
+    """The run's own duration beside the band's (a band replayed over the first
+    seconds of a run judges those seconds: said with the verdicts)."""
+    measured = load_run(resolve_run(run))
+    band["run_duration_s"] = float(measured.t[-1] - measured.t[0])
 
 
 def _runs_sha256(specs) -> dict[str, str]:

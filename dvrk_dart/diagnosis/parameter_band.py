@@ -21,6 +21,9 @@ from dvrk_dart.model.joints import JOINT_NAMES
 #: a 5-95 % band holds 90 % of the efforts the uncertain parameters produce: a
 #: run inside it less often than that is not explained by them alone
 BAND_COVERAGE = 0.90
+#: a replay of a whole run spans its duration less what the processing trims
+#: at the ends (2 s at 200 Hz) and a margin: a shorter band covers part of the run
+TRIMMED_ENDS_S = 2.5
 
 
 def load_band(folder: str | Path) -> dict:
@@ -66,6 +69,7 @@ def apply_band(result: dict, band: dict) -> dict:
         "run": band["run"],
         "sha256": band["sha256"],
         "replayed_s": band["replayed_s"],
+        "run_duration_s": band.get("run_duration_s"),
         "parameters": band.get("parameters"),
         "rule": f"an effect is unmodelled only on a joint whose measured efforts are inside the band less than "
                 f"{BAND_COVERAGE:.0%} of the time (the band's own coverage)",
@@ -86,5 +90,8 @@ def band_sentence(result: dict) -> str | None:
     unmodelled = ", ".join(band["unmodelled_effects"]) or "none"
     within = ", ".join(band["within_parameter_uncertainty"]) or "none"
     outside = ", ".join(band["joints_outside_band"]) or "no joint"
-    return (f"parameter band of '{band['run']}': measured efforts outside it on {outside}; "
+    duration = band.get("run_duration_s")
+    partial = duration and band["replayed_s"] < duration - TRIMMED_ENDS_S
+    span = f" (over its first {band['replayed_s']:.1f} s of {duration:.1f} s)" if partial else ""
+    return (f"parameter band of '{band['run']}'{span}: measured efforts outside it on {outside}; "
             f"unmodelled effects: {unmodelled}; within the parameters' uncertainty: {within}")
