@@ -19,9 +19,11 @@ white with the variance the periodic layer measures per harmonic
 harmonic: its variance at harmonic k is the power that the fit leaves around
 k (the residual's cos/sin coefficients within `VARIANCE_WINDOW_HARMONICS`,
 pooled over the pairs and the `--repeat` pair, never below the noise's),
-estimated and refitted `FEASIBLE_GLS_ITERATIONS` times. The parameters'
-covariance is then (Y' V^-1 Y)^-1, and every reported quantity (linear in p)
-gets a central interval of `INTERVAL_PROBABILITY` from it; a quantity the
+estimated and refitted `FEASIBLE_GLS_ITERATIONS` times. Every reported
+quantity (linear in p) gets a central interval of `INTERVAL_PROBABILITY`
+from its HC2 standard error with Bell and McCaffrey's degrees of freedom:
+the weights' own estimation error (a few harmonics per window) would make
+(Y' V^-1 Y)^-1 too narrow (coverage 0.77-0.88 measured). A quantity the
 efforts do not see is reported as null with the reason. That these intervals
 hold is shown by a coverage test on simulated pairs with noise and session
 scatter at the measured levels (tests/test_periodic_payload.py).
@@ -117,8 +119,8 @@ def session_variance(pair: Pair) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PayloadFit:
-    """The GLS fit: parameters, their covariance, the residual variance model,
-    and the Wald statistic of the payload against the session scatter."""
+    """The GLS fit: parameters, their model covariance, the residual variance
+    model, and what the robust intervals and tests are made from."""
 
     params: np.ndarray
     covariance: np.ndarray
