@@ -128,3 +128,53 @@ def test_a_periodic_diagnosis_with_a_baseline_reads_the_real_weight(arm, run, pl
         for value, interval in zip(payload[key], payload[f"{key}_interval"]):
             assert (value is None) == (interval is None) and (value is not None or key in payload["not_determined"])
             assert value is None or interval[0] <= value <= interval[1]
+
+
+#: the withheld weight against the supplied one (about twice: data README), and the tolerance of their ratio
+HEAVY_KG, WEIGHT_RATIO_TOLERANCE = 0.205, 0.15
+#: simulated pairs per weight: the mean of an estimate over them is what scales with the weight
+WEIGHT_PAIR_DRAWS = 100
+
+
+@pytest.mark.parametrize("placement", sorted(HAND_PLACEMENTS))
+def test_estimates_scale_with_the_weight(arm, pairs, placement):
+    """105 g and 205 g at the same place, each a simulated pair (same motion,
+    the measured noise and session scatter): every determined quantity's mean
+    scales with the weight within 15 %, and the mass at the hand position does
+    in every pair where it is determined to +-5 % (the insertion base's)."""
+    run, repeat = pairs["one-105g"], pairs["one"]
+    repeat_pair = make_pair("one", repeat.state, repeat.baseline.state, repeat.residual, None, 1)
+    session = session_variance(repeat_pair)
+    noise_run = make_pair("run", run.state, run.baseline.state, run.residual, None, 1).noise
+    key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
+    features = run_features(arm, run)
+    body = features.body_regressor[:, :, features.body_columns(key)]
+    effect, gravity = FirstMomentPayload(arm.model, key), _gravity_at_zero(arm, key)
+    X = harmonic_coefficients(run.state, run.state.in_band(rigid_payload_columns(features, key)))
+    X_point = harmonic_coefficients(run.state, run.state.in_band(point_payload_columns(features, key, position)))
+    maps = linear_map(lambda p: _quantities(arm, effect, rigid_as_first_moment(p), gravity), X.shape[-1])
+    rng = np.random.default_rng(11)
+    estimates = {0.105: [], HEAVY_KG: []}
+    for mass in estimates:
+        truth = harmonic_coefficients(run.state, run.state.in_band(body @ point_mass_parameters(mass, position)))
+        for _ in range(WEIGHT_PAIR_DRAWS):
+            y, y_repeat = truth + _draw(rng, noise_run, session), _draw(rng, repeat_pair.noise, session)
+            fit = fit_payload([Pair("run", y, X, noise_run), Pair("one", y_repeat, np.zeros_like(X), repeat_pair.noise)], np.eye(N_JOINTS, dtype=bool)[1])
+            point = fit_payload([Pair("run", y, X_point, noise_run), Pair("one", y_repeat, np.zeros_like(X_point), repeat_pair.noise)],
+                                np.eye(N_JOINTS, dtype=bool)[1])
+            at_mass, at_interval = point.interval(np.eye(X_point.shape[-1])[0])
+            quantities = {name: fit.interval(J)[0] for name, J in maps.items() if np.all(fit.determined(J[np.abs(J).max(axis=1) > 0]))}
+            estimates[mass].append((at_mass[0], (at_interval[1, 0] - at_interval[0, 0]) / 2, quantities))
+    expected = HEAVY_KG / 0.105
+    light, heavy = estimates[0.105], estimates[HEAVY_KG]
+    ratio = np.mean([h[0] for h in heavy]) / np.mean([l[0] for l in light])
+    assert abs(ratio / expected - 1.0) <= WEIGHT_RATIO_TOLERANCE, ratio
+    for name in set(light[0][2]) & set(heavy[0][2]):
+        draws_light = np.array([e[2][name] for e in light])
+        mean_light, mean_heavy = draws_light.mean(axis=0), np.mean([e[2][name] for e in heavy], axis=0)
+        # the components whose mean over the pairs the noise leaves within 3 % (a ratio then tests the scaling, not the noise)
+        settled = np.abs(mean_light) > 30.0 * draws_light.std(axis=0) / np.sqrt(len(light))
+        assert np.all(np.abs(mean_heavy[settled] / mean_light[settled] / expected - 1.0) <= WEIGHT_RATIO_TOLERANCE), name
+    if np.median([l[1] for l in light]) < 0.05 * 0.105:  # determined to +-5 %: each pair's ratio holds
+        per_pair = np.array([h[0] / l[0] for l, h in zip(light, heavy)]) / expected
+        assert np.all(np.abs(per_pair - 1.0) <= WEIGHT_RATIO_TOLERANCE), per_pair
