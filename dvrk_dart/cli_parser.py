@@ -310,6 +310,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
     p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "
                                             "only on joints whose measured efforts leave the parameters' band")
+    p.add_argument("--refit", action="store_true", help="also refit the identified parameters on the training runs (OUT/refit/) and "
+                                                          "replay the held-out runs with them: is a held-out gap the published fit's bias?")
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
     _add_processing_option(p, None)  # a payload diagnosis (--baseline) keeps upstream, where its checks were made

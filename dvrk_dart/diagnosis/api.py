@@ -12,6 +12,7 @@ from dvrk_dart.diagnosis.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
+from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
@@ -66,11 +67,16 @@ def images_of(folder: Path) -> list[Path]:
 
 def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
                   parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
-                  processing: str | None = "upstream") -> dict:
+                  processing: str | None = "upstream", refit: bool = False) -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs
     (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
-    folder of one of the runs: effects are unmodelled only outside its band."""
+    folder of one of the runs: effects are unmodelled only outside its band;
+    refit: the identified parameters refitted on the training runs and judged
+    on the held-out ones (`refit`)."""
     start = time.perf_counter()
+    training = [*(measured if isinstance(measured, (list, tuple)) else [measured]), *train]
+    if refit:
+        check_refit_inputs(training, holdout, baseline)
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     if band is not None:
         _band_span(band, band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline,
@@ -81,6 +87,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
                       processing=processing, base_config=base_sim_config(arm))
     if band is not None:
         apply_band(result, band)
+    if refit:
+        result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()

@@ -169,11 +169,19 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
     parts = [f"<h3>{e(title)}</h3>", f"<p class='summary'>{e(answer_sentence(result))}</p>"]
     parts += [f"<figure><img src='{e(s)}' alt='{PERIOD_FIGURE}'><figcaption>The residual (measured - simulated) over one period of the "
               "run the answer speaks of, before and after the selected effects; the band is ± the session floor.</figcaption></figure>" for s in period]
-    parts += _gap_table(result) + _effects_table(result)
+    parts += _gap_table(result) + _refit_html(result) + _effects_table(result)
     parts += _split_and_nuisance_html(result) + _band_html(result) + _payload_html(result)
     for source in (s for s in image_sources if s not in period):
         parts.append(f"<figure><img src='{e(source)}' alt='{e(Path(source).stem)}'><figcaption>{e(Path(source).stem)}</figcaption></figure>")
     return "\n".join(parts)
+
+
+def _refit_html(result: dict) -> list[str]:
+    """The refit of the identified parameters (`--refit`), in words."""
+    refit = result.get("refit")
+    if not refit:
+        return []
+    return [f"<p>{html.escape(refit['words'])} Parameters: <code>{html.escape(refit['params']['path'])}</code>.</p>"]
 
 
 def diagnosis_page(result: dict, image_sources: list[str], title: str) -> str:

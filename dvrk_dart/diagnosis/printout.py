@@ -20,7 +20,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
                            repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
                            parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
                            jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
-                           processing=getattr(args, "processing", None))
+                           processing=getattr(args, "processing", None), refit=getattr(args, "refit", False))
     print(answer_sentence(result))
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
@@ -28,6 +28,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
                 print(f"{key} ({split}): {np.array2string(np.asarray(values), precision=4)}")
     selected = [e["name"] for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
+    if result.get("refit"):
+        print(result["refit"]["words"])
     if band_sentence(result):
         print(band_sentence(result))
     if result.get("payload"):

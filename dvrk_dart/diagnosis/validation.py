@@ -78,7 +78,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     train, *others = spec["train"]
     processing = spec.get("processing", "upstream")
     result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
-                           processing=processing)
+                           processing=processing, refit=bool(spec.get("refit", False)))
     # the bar: the full identified model on the held-out run, in the same band
     identified = []
     for name in spec["holdout"]:
@@ -95,7 +95,20 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
                  "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
     write_json_atomic(out_dir / "diagnosis.json", result)
-    return result, verdicts
+    return result, verdicts + _refit_verdicts(result, spec)
+
+
+def _refit_verdicts(result: dict, spec: dict) -> list[dict]:
+    """The refit on the training runs, replayed on the held-out ones, at least
+    as close as the arm's parameters (a refit that generalises worse is not a finding)."""
+    refit = result.get("refit")
+    if not refit:
+        return []
+    before, after = refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]
+    return [{"check": f"held-out {', '.join(spec['holdout'])}: the identified parameters refitted on {', '.join(spec['train'])} at least as close "
+                      f"as the published ones on {j} (both replayed with every identified term)",
+             "passed": bool(after[i] <= before[i]), "value": f"{after[i]:.4f} vs {before[i]:.4f} {effort_unit(j)}"}
+            for i, j in enumerate(JOINT_NAMES[:3])]
 
 
 def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
