@@ -50,3 +50,14 @@ def test_refit_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not out.exists()
+
+
+def test_the_answer_names_the_joints_whose_gap_the_refit_halves(refit):
+    """The sentence at the top names a joint only where the refit at least halves its held-out gap in squares."""
+    from dvrk_dart.diagnosis.page import _refit_clause
+
+    result, _ = refit
+    clause = _refit_clause({"refit": result})
+    assert "q1" in clause and "q3" not in clause
+    flat = {"refit": {**result, "gap_holdout_refit": result["gap_holdout_arm_params"]}}
+    assert "does not halve" in _refit_clause(flat)

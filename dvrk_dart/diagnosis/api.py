@@ -79,8 +79,7 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
         check_refit_inputs(training, holdout, baseline)
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     if band is not None:
-        _band_span(band, band_run(band, _runs_sha256([*(measured if isinstance(measured, (list, tuple)) else [measured]), baseline,
-                                                            *train, *holdout, repeat])))
+        _band_span(band, band_run(band, _runs_sha256([*training, baseline, *holdout, repeat])))
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
                       simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,

@@ -115,10 +115,22 @@ def answer_sentence(result: dict) -> str:
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
     floor = result.get("session_floor")
     if floor is None:
-        return sentence + "."
+        return sentence + "." + _refit_clause(result)
     above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
     return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                       if above else ". What is left is at the session floor: no fixed effect can remove more.")
+                       if above else ". What is left is at the session floor: no fixed effect can remove more.") + _refit_clause(result)
+
+
+def _refit_clause(result: dict) -> str:
+    """With --refit: the joints whose held-out gap the refit at least halves (the published fit's bias)."""
+    refit = result.get("refit")
+    if not refit:
+        return ""
+    pairs = list(zip(JOINT_NAMES[:ANSWER_JOINTS], refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]))
+    biased = [f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in pairs if a * a <= 0.5 * b * b]
+    if not biased:
+        return " Refitting the identified parameters on the training runs does not halve any held-out gap in squares."
+    return f" The published fit's bias: the identified parameters refitted on the training runs leave {'; '.join(biased)} on the held-out runs."
 
 
 def _row(cells, tag="td") -> str:
