@@ -18,7 +18,7 @@ from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
 from dvrk_dart.io.signal import process
 from dvrk_dart.model.arm import Arm
-from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
 IMAGE_SUFFIXES = (".png", ".svg")
 
@@ -38,7 +38,7 @@ def sim_config_of(result: dict) -> SimConfig:
 def base_sim_config(arm: Arm) -> SimConfig:
     """What the diagnosis simulates before any effect (the model card's [diagnosis] base)."""
     if arm.model.diagnosis_base == "identified":
-        return SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+        return IDENTIFIED_PHYSICS
     return SimConfig()
 
 

@@ -12,7 +12,8 @@ from dvrk_dart.runs.executors import run_tasks
 from dvrk_dart.sim.config import SimConfig
 
 
-def _replay(task: tuple[Arm, SimConfig, ProcessedRun]):
+def replay_task(task: tuple[Arm, SimConfig, ProcessedRun]):
+    """One DART velocity replay: (arm, config, state) -> efforts (a task an executor can ship)."""
     from dvrk_dart.runs.replay import simulate_efforts
 
     return simulate_efforts(*task)
@@ -31,7 +32,7 @@ class BatchSimulate:
         if len(todo) < 2:  # nothing to run side by side
             return
         tasks = [(self.arm, config, state) for (config, _), state in todo.items()]
-        for (_, config, state), efforts, error in run_tasks(_replay, tasks, self.executor, self.jobs, self.ray_address,
+        for (_, config, state), efforts, error in run_tasks(replay_task, tasks, self.executor, self.jobs, self.ray_address,
                                                               desc="diagnosis replays", unit="replay"):
             if error is not None:
                 raise DvrkDartError(f"diagnosis: a re-simulation failed ({error})")

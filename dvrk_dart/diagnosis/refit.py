@@ -12,9 +12,9 @@ identified term as physics, once with the arm's parameters and once with the
 refit. Per joint: both held-out gaps, and the share of the repeatable gap
 (above the session floor, with `--repeat`) that the refit removes.
 
-On "one" -> "two" (periodic), replayed: J1 0.046 -> 0.025 N·m, so J1's
-repeatable gap is mostly the published fit's bias; J2 0.096 -> 0.078; J3
-hardly moves (0.135 -> 0.131): what J3 misses is not in the identified
+On "one" -> "two" (periodic), replayed: J1 0.047 -> 0.025 N·m, so J1's
+repeatable gap is mostly the published fit's bias; J2 0.095 -> 0.077; J3
+hardly moves (0.136 -> 0.131): what J3 misses is not in the identified
 model's structure (docs/diagnosis.md lists what was tested)."""
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.batch import replay_task
 from dvrk_dart.diagnosis.page import repeatable_share
 from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
@@ -34,13 +35,10 @@ from dvrk_dart.io.reference_data import resolve_run
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.executors import run_tasks
-from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 
 #: the refit's identification outputs, inside the diagnosis's folder
 REFIT_FOLDER = "refit"
-#: every identified term simulated as physics (the realistic arm): the refit
-#: changes friction, offsets and springs as much as the bodies
-IDENTIFIED_PHYSICS = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
 
 
 def check_refit_inputs(train, holdout, baseline) -> None:
@@ -53,17 +51,13 @@ def check_refit_inputs(train, holdout, baseline) -> None:
         raise DvrkDartError("--refit: training runs must be files or reference names")
 
 
-def _replay(task: tuple[Arm, SimConfig, object]):
-    from dvrk_dart.runs.replay import simulate_efforts
-
-    return simulate_efforts(*task)
-
-
 def _held_out_gaps(arms: list[Arm], states: list, executor: str, jobs: int, ray_address: str | None) -> list[list[float]]:
-    """Per arm, the RMS gap (measured - replayed, in band) over the held-out runs."""
+    """Per arm, the RMS gap (measured - replayed, in band) over the held-out
+    runs, every identified term simulated (the refit moves friction, offsets
+    and springs as much as the bodies)."""
     tasks = [(arm, IDENTIFIED_PHYSICS, state) for arm in arms for state in states]
     residuals = []
-    for (_, _, state), efforts, error in run_tasks(_replay, tasks, executor, jobs, ray_address, desc="refit replays", unit="replay"):
+    for (_, _, state), efforts, error in run_tasks(replay_task, tasks, executor, jobs, ray_address, desc="refit replays", unit="replay"):
         if error is not None:
             raise DvrkDartError(f"--refit: a held-out replay failed ({error})")
         residuals.append(state.tau - state.in_band(np.asarray(efforts, dtype=float)))

@@ -21,7 +21,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES, MAX_DURATION_S  # noqa: F401  (the CLI's bound too)
-from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
 #: the simulation step bounds a user may ask for (s): above 10 ms the closed
 #: chain's constraint stabilisation no longer holds the loops
@@ -93,7 +93,7 @@ def sim_config_for(config: RunConfig) -> SimConfig:
     if config.dynamics == "inertial":
         sim = SimConfig()
     elif config.dynamics == "identified":
-        sim = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+        sim = IDENTIFIED_PHYSICS
     else:
         sim = diagnosis_sim_config(Path(config.dynamics))
     return replace(sim, dt_s=config.dt_s, counterweight=config.counterweight)

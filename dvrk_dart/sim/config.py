@@ -78,6 +78,10 @@ class SimConfig:
         return cls(**raw)
 
 
+#: every identified term simulated as physics (the realistic arm, `--dynamics identified`)
+IDENTIFIED_PHYSICS = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
+
+
 def simulated_terms(config: SimConfig) -> tuple[str, ...]:
     """The identified-model terms a simulation with this config includes:
     what its efforts are compared with (sim vs model)."""
