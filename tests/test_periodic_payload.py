@@ -41,6 +41,8 @@ def pairs(arm):
     processing = choose_processing(["one-105g", "one-no-weight", "one"], "periodic")
     baseline = prepare_run("one-no-weight", arm, processing=processing)
     runs = {name: prepare_run(name, arm, baseline=baseline, processing=processing) for name in ("one-105g", "one")}
+    # the half-speed run has no baseline of its own motion: its state (its own period, the same cutoff), noise and features only
+    runs["one-105g-half"] = prepare_run("one-105g-half", arm, processing=processing)
     return runs
 
 
@@ -109,19 +111,21 @@ def test_the_mass_at_the_hand_position_on_the_real_105g_runs(arm, pairs):
     assert abs(value[0] / 0.105 - 1.0) < 0.20 and interval[0, 0] <= 0.105 <= interval[1, 0], (value, interval)
 
 
-@pytest.mark.parametrize("run, placement", [("one-105g", "parallelogram"), ("one-105g-insertion", "insertion_base")])
+@pytest.mark.parametrize("run, placement", [(["one-105g", "one-105g-half"], "parallelogram"), ("one-105g-insertion", "insertion_base")])
 def test_a_periodic_diagnosis_with_a_baseline_reads_the_real_weight(arm, run, placement):
     """`diagnose --processing periodic --baseline one-no-weight --repeat one
     --payload-at <hand>` on the real 105 g runs: the parallelogram group, the
     payload found against the session scatter, the mass at the hand position
     within 20 % with the scale's 105 g inside its interval; every quantity
-    reported with an interval or as not determined with its reason."""
+    reported with an interval or as not determined with its reason. The
+    half-speed run (no baseline of its motion) is named as left out."""
     from dvrk_dart.diagnosis.diagnose import diagnose
 
     key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
     payload = diagnose(run, baseline="one-no-weight", repeat="one", processing="periodic", payload_at=(key, position), arm=arm,
                        figures=False)["payload"]
     assert payload["group"] == "parallelogram" and payload["found"], payload["words"]
+    assert payload["left_out"] == (["one_105_grams_parallel_half_speed_results"] if isinstance(run, list) else [])
     at = payload["payload_at"]
     assert abs(at["mass_kg"] / 0.105 - 1.0) <= 0.20 and at["mass_kg_interval"][0] <= 0.105 <= at["mass_kg_interval"][1], at
     for key in ("gravity_efforts_at_q0", "first_moment_base_at_q0_kg_m"):
@@ -136,16 +140,27 @@ HEAVY_KG, WEIGHT_RATIO_TOLERANCE = 0.205, 0.15
 WEIGHT_PAIR_DRAWS = 100
 
 
+@pytest.mark.parametrize("speed", ["full", "half"])
 @pytest.mark.parametrize("placement", sorted(HAND_PLACEMENTS))
-def test_estimates_scale_with_the_weight(arm, pairs, placement):
+def test_estimates_scale_with_the_weight(arm, pairs, placement, speed):
     """105 g and 205 g at the same place, each a simulated pair (same motion,
-    the measured noise and session scatter): every determined quantity's mean
-    scales with the weight within 15 %, and the mass at the hand position does
-    in every pair where it is determined to +-5 % (the insertion base's)."""
-    run, repeat = pairs["one-105g"], pairs["one"]
+    the measured noise and session scatter) at full and at half speed (the
+    real half-speed run's motion and its own measured noise, twice: the run and
+    a baseline of the same motion): every determined quantity's mean scales
+    with the weight within 15 %, and so does the mean mass at the hand
+    position; each pair's mass ratio lies inside the band its two intervals
+    give it (measured: 93 / 96 % at the insertion base, full / half speed, band
+    +-12 / 17 %; 86 / 82 % at the parallelogram, where the band is +-100 %: the
+    mass of a point on a link turning about fixed axes is barely seen)."""
+    repeat = pairs["one"]
     repeat_pair = make_pair("one", repeat.state, repeat.baseline.state, repeat.residual, None, 1)
     session = session_variance(repeat_pair)
-    noise_run = make_pair("run", run.state, run.baseline.state, run.residual, None, 1).noise
+    if speed == "full":
+        run = pairs["one-105g"]
+        noise_run = make_pair("run", run.state, run.baseline.state, run.residual, None, 1).noise
+    else:
+        run = pairs["one-105g-half"]
+        noise_run = make_pair("run", run.state, run.state, run.residual, None, 1).noise
     key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
     features = run_features(arm, run)
     body = features.body_regressor[:, :, features.body_columns(key)]
@@ -175,6 +190,11 @@ def test_estimates_scale_with_the_weight(arm, pairs, placement):
         # the components whose mean over the pairs the noise leaves within 3 % (a ratio then tests the scaling, not the noise)
         settled = np.abs(mean_light) > 30.0 * draws_light.std(axis=0) / np.sqrt(len(light))
         assert np.all(np.abs(mean_heavy[settled] / mean_light[settled] / expected - 1.0) <= WEIGHT_RATIO_TOLERANCE), name
-    if np.median([l[1] for l in light]) < 0.05 * 0.105:  # determined to +-5 %: each pair's ratio holds
-        per_pair = np.array([h[0] / l[0] for l, h in zip(light, heavy)]) / expected
-        assert np.all(np.abs(per_pair - 1.0) <= WEIGHT_RATIO_TOLERANCE), per_pair
+    # each pair's mass ratio against the band its two 90 % intervals give it
+    # (first order): inside it as often as the intervals claim, within twice
+    # the binomial standard deviation over the draws (3 %)
+    masses = np.array([[l[0], h[0]] for l, h in zip(light, heavy)])
+    half_widths = np.array([[l[1], h[1]] for l, h in zip(light, heavy)])
+    per_pair = masses[:, 1] / masses[:, 0] / expected
+    band = per_pair * np.sqrt(np.sum((half_widths / masses) ** 2, axis=1))
+    assert np.mean(np.abs(per_pair - 1.0) <= band) >= INTERVAL_PROBABILITY - 0.05 - 0.06, (per_pair, band)

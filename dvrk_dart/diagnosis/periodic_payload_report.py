@@ -179,6 +179,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
               "mass_identified": quantities["mass_kg"] is not None, "position_m": None,
               "payload_p_value": p_value, "found": bool(p_value < PAYLOAD_TEST_LEVEL),
               "pairs": [r.name for r in pair_runs], "session_pair": pair_runs[-1].name if len(pair_runs) > len(differences) else None,
+              "left_out": [r.name for r in runs if r.role is RunRole.OTHER_MOTION],
               "interval_method": INTERVAL_METHOD}
     moment = report["first_moment_base_at_q0_kg_m"]
     report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
@@ -225,6 +226,9 @@ def _words(report: dict) -> list[str]:
         words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
                      f"{_interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')}.")
     words.append(f"Intervals: {report['interval_method']}.")
+    if report["left_out"]:
+        words.append(f"Left out of this fit: {', '.join(report['left_out'])} (another motion than the baseline's: the model's error "
+                     "changes with the speed by more than a small weight's signal; a baseline of its own motion would let it in).")
     if report["session_pair"] is None:
         words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
                      "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
