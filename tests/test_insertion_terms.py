@@ -1,0 +1,68 @@
+"""J3's repeatable gap (diagnosis/insertion_terms.py): three terms fitted on
+trajectory "one" carry to trajectory "two" and to "one" in another session;
+each term carries part of it, at any reasonable setting; a stroke table
+coarser than the residual's bumps loses the gain."""
+
+import pytest
+
+from dvrk_dart.diagnosis import insertion_terms
+from dvrk_dart.diagnosis.insertion_terms import (
+    TERMS,
+    fit_insertion_terms,
+    insertion_gap,
+    insertion_residual,
+)
+from dvrk_dart.diagnosis.runs import choose_processing, loaded_states
+from dvrk_dart.metrics import rms
+
+#: the issue's bar for J3 on held-out "two" (N); the identified model leaves 0.134
+J3_TARGET_N = 0.090
+
+
+@pytest.fixture(scope="module")
+def states():
+    names = ["one", "two", "one-no-weight"]
+    return dict(zip(names, loaded_states(names, choose_processing(names, "periodic"))))
+
+
+def test_the_three_terms_fitted_on_one_carry_to_two(arm, states):
+    """Measured: J3 on "two" 0.134 N (identified model), 0.117 after J3's own
+    friction refitted on "one", 0.081 with the three terms."""
+    own = insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], ()), states["two"])
+    full = insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], TERMS), states["two"])
+    assert rms(insertion_residual(arm, states["two"])) > 0.12
+    assert full <= J3_TARGET_N and full < 0.75 * own, (full, own)
+
+
+def test_each_term_carries_part_of_the_gap(arm, states):
+    """Without any one of the terms, "two" is at least 0.008 N worse (measured
+    0.0806 with all; 0.090 / 0.0945 / 0.095 without the pitch load, the effort
+    in ddq3 sign(dq3), the stroke's Coulomb level)."""
+    full = insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], TERMS), states["two"])
+    for term in TERMS:
+        without = insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], tuple(t for t in TERMS if t != term)), states["two"])
+        assert without >= full + 0.008, (term, without, full)
+
+
+def test_the_terms_repeat_in_another_session(arm, states):
+    """Fitted on "one", the same motion recorded in another session is left
+    at about half of its residual: the bumps along the stroke are the arm's."""
+    fitted = fit_insertion_terms(arm, [states["one"]], TERMS)
+    before = rms(insertion_residual(arm, states["one-no-weight"]))
+    assert insertion_gap(arm, fitted, states["one-no-weight"]) < 0.55 * before
+
+
+@pytest.mark.parametrize("spacing_m, ridge", [(0.0025, 10.0), (0.0025, 100.0), (0.01, 10.0), (0.01, 100.0), (0.02, 10.0), (0.02, 100.0)])
+def test_the_result_is_not_a_tuned_setting(arm, states, monkeypatch, spacing_m, ridge):
+    """Any knot spacing from 2.5 to 20 mm and ridge from 10 to 100 samples
+    leaves "two" under the bar (measured 0.081-0.086 N)."""
+    monkeypatch.setattr(insertion_terms, "STROKE_KNOT_SPACING_M", spacing_m)
+    monkeypatch.setattr(insertion_terms, "STROKE_RIDGE_SAMPLES", ridge)
+    assert insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], TERMS), states["two"]) <= J3_TARGET_N
+
+
+def test_stroke_knots_coarser_than_the_bumps_lose_the_gain(arm, states, monkeypatch):
+    """On 40 mm knots the stroke's table blurs the 5-10 mm bumps: "two" is
+    left above the bar (measured 0.097 N against 0.081 on 5 mm knots)."""
+    monkeypatch.setattr(insertion_terms, "STROKE_KNOT_SPACING_M", 0.04)
+    assert insertion_gap(arm, fit_insertion_terms(arm, [states["one"]], TERMS), states["two"]) > J3_TARGET_N
