@@ -12,6 +12,7 @@ from dvrk_dart.diagnosis.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
+from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
@@ -88,6 +89,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
         apply_band(result, band)
     if refit:
         result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
+    if insertion_applies(arm, result, holdout, baseline):
+        result["insertion_terms"] = insertion_check(arm, training, holdout, result, executor, jobs, ray_address)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()

@@ -5,6 +5,8 @@ independent, so `prefetch` runs each group at once and the diagnosis's
 
 from __future__ import annotations
 
+import numpy as np
+
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.model.arm import Arm
@@ -17,6 +19,16 @@ def replay_task(task: tuple[Arm, SimConfig, ProcessedRun]):
     from dvrk_dart.runs.replay import simulate_efforts
 
     return simulate_efforts(*task)
+
+
+def replayed_residuals(tasks: list, executor: str = "local", jobs: int = 2, ray_address: str | None = None, what: str = "replays") -> list[np.ndarray]:
+    """measured - replayed (in the run's band) of each (arm, config, state) task, in order."""
+    residuals = []
+    for (_, _, state), efforts, error in run_tasks(replay_task, tasks, executor, jobs, ray_address, desc=what, unit="replay"):
+        if error is not None:
+            raise DvrkDartError(f"{what}: a replay failed ({error})")
+        residuals.append(state.tau - state.in_band(np.asarray(efforts, dtype=float)))
+    return residuals
 
 
 class BatchSimulate:

@@ -164,6 +164,9 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
         coeffs = arm.model.links[int(key)].variable.coeffs
         rate = features.dq @ coeffs
         total = total + np.outer(fc * friction.reversal(features.q @ coeffs, rate, distance) + fv * rate, coeffs)
+    total = total + np.asarray(x.directional_armature) * np.sign(features.dq) * features.ddq
+    for target, source, c_sin, c_cos in x.angle_load:
+        total[:, int(target)] += c_sin * np.sin(features.q[:, int(source)]) + c_cos * np.cos(features.q[:, int(source)])
     for entry in x.position_friction:
         j, distance, values = int(entry[0]), entry[1], entry[2:]
         half = len(values) // 2

@@ -115,10 +115,10 @@ def answer_sentence(result: dict) -> str:
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
     floor = result.get("session_floor")
     if floor is None:
-        return sentence + "." + _refit_clause(result)
+        return sentence + "." + _refit_clause(result) + _insertion_clause(result)
     above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
     return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                       if above else ". What is left is at the session floor: no fixed effect can remove more.") + _refit_clause(result)
+                       if above else ". What is left is at the session floor: no fixed effect can remove more.") + _refit_clause(result) + _insertion_clause(result)
 
 
 def _refit_clause(result: dict) -> str:
@@ -181,11 +181,25 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> str:
     parts = [f"<h3>{e(title)}</h3>", f"<p class='summary'>{e(answer_sentence(result))}</p>"]
     parts += [f"<figure><img src='{e(s)}' alt='{PERIOD_FIGURE}'><figcaption>The residual (measured - simulated) over one period of the "
               "run the answer speaks of, before and after the selected effects; the band is ± the session floor.</figcaption></figure>" for s in period]
-    parts += _gap_table(result) + _refit_html(result) + _effects_table(result)
+    parts += _gap_table(result) + _refit_html(result) + _insertion_html(result) + _effects_table(result)
     parts += _split_and_nuisance_html(result) + _band_html(result) + _payload_html(result)
     for source in (s for s in image_sources if s not in period):
         parts.append(f"<figure><img src='{e(source)}' alt='{e(Path(source).stem)}'><figcaption>{e(Path(source).stem)}</figcaption></figure>")
     return "\n".join(parts)
+
+
+def _insertion_clause(result: dict) -> str:
+    """On a PSM's periodic held-out runs: what J3's repeatable gap is made of, simulated."""
+    study = result.get("insertion_terms")
+    if not study:
+        return ""
+    return (f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at "
+            f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N).")
+
+
+def _insertion_html(result: dict) -> list[str]:
+    study = result.get("insertion_terms")
+    return [f"<p>{html.escape(study['words'])}</p>"] if study else []
 
 
 def _refit_html(result: dict) -> list[str]:

@@ -30,6 +30,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     print(f"selected effects: {', '.join(selected) or 'none'}")
     if result.get("refit"):
         print(result["refit"]["words"])
+    if result.get("insertion_terms"):
+        print(result["insertion_terms"]["words"])
     if band_sentence(result):
         print(band_sentence(result))
     if result.get("payload"):

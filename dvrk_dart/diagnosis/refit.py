@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.batch import replay_task
+from dvrk_dart.diagnosis.batch import replayed_residuals
 from dvrk_dart.diagnosis.page import repeatable_share
 from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
@@ -34,7 +34,6 @@ from dvrk_dart.io.provenance import sha256_of
 from dvrk_dart.io.reference_data import resolve_run
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.runs.executors import run_tasks
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 
 #: the refit's identification outputs, inside the diagnosis's folder
@@ -56,11 +55,7 @@ def _held_out_gaps(arms: list[Arm], states: list, executor: str, jobs: int, ray_
     runs, every identified term simulated (the refit moves friction, offsets
     and springs as much as the bodies)."""
     tasks = [(arm, IDENTIFIED_PHYSICS, state) for arm in arms for state in states]
-    residuals = []
-    for (_, _, state), efforts, error in run_tasks(replay_task, tasks, executor, jobs, ray_address, desc="refit replays", unit="replay"):
-        if error is not None:
-            raise DvrkDartError(f"--refit: a held-out replay failed ({error})")
-        residuals.append(state.tau - state.in_band(np.asarray(efforts, dtype=float)))
+    residuals = replayed_residuals(tasks, executor, jobs, ray_address, "--refit: held-out replays")
     n = len(states)
     return [gaps(residuals[k * n:(k + 1) * n]) for k in range(len(arms))]
 

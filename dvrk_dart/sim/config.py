@@ -46,6 +46,13 @@ class JointEffects:
     # Coulomb friction piecewise linear along a coordinate, reversing over a
     # pre-sliding distance: (coordinate index, distance, knots..., Fc at the knots...)
     position_friction: tuple[tuple[float, ...], ...] = ()
+    # an armature that takes the sign of the coordinate's velocity (kg or
+    # kg m^2, either sign): effort value·sign(dq)·ddq, more or less inertia
+    # while speeding up than while slowing down (J3's, diagnosis/insertion_terms.py)
+    directional_armature: tuple[float, ...] = (0.0,) * 7
+    # an effort on one coordinate set by another's angle: (target index,
+    # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)
+    angle_load: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -88,13 +88,21 @@ class ExplicitEffects:
     linkage_springs: tuple[Link, ...] = ()
     #: Coulomb frictions that reverse over a pre-sliding distance (Fc times their Dahl state)
     presliding: tuple[PreslidingFriction, ...] = ()
+    #: per coordinate, the armature that takes the sign of its velocity (JointEffects.directional_armature)
+    directional_armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    #: (target, source, c_sin, c_cos) efforts set by another coordinate's angle
+    angle_loads: tuple[tuple[float, ...], ...] = ()
+
+    def armature_at(self, dq: np.ndarray) -> np.ndarray:
+        """The armature of the step (the directional part takes the velocity's sign)."""
+        return self.armature + self.directional_armature * np.sign(dq)
 
     @property
     def any_effort(self) -> bool:
         """Whether `effort` can be non-zero (the armature is applied apart)."""
         return bool(
             np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
-            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding
+            or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding or self.angle_loads
         )
 
     def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray | None = None) -> np.ndarray:
@@ -110,6 +118,8 @@ class ExplicitEffects:
         for friction, state in zip(self.presliding, presliding if presliding is not None else ()):
             coulomb = friction.coulomb_at(float(q @ friction.coeffs))
             effort = effort + (coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
+        for target, source, c_sin, c_cos in self.angle_loads:
+            effort[int(target)] += c_sin * np.sin(q[int(source)]) + c_cos * np.cos(q[int(source)])
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -214,6 +224,7 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
     explicit = ExplicitEffects(
         coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
-        tuple(linkage_springs), tuple(presliding),
+        tuple(linkage_springs), tuple(presliding), np.asarray(extra.directional_armature, dtype=float),
+        tuple(tuple(float(v) for v in entry) for entry in extra.angle_load),
     )
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)

@@ -133,7 +133,7 @@ class PsmSimulator(ClosedChainReadout):
         self._range_half = 0.5 * (model.joint_upper - model.joint_lower)
         self._tendon_ideal = config.counterweight == "on"
         e = self._explicit
-        self._has_armature = bool(np.any(e.armature))
+        self._has_armature = bool(np.any(e.armature) or np.any(e.directional_armature))
         self._has_coulomb = bool(np.any(self._coulomb_x))
         self._has_explicit = e.any_effort
         self._presliding: list[PreslidingState] = []
@@ -251,7 +251,7 @@ class PsmSimulator(ClosedChainReadout):
         q, dq = self._coordinates(), self._coordinate_rates()
         Mz, bz = self._reduced_dynamics(x, v)
         n = N_JOINTS
-        Ia = self._explicit.armature
+        Ia = self._explicit.armature_at(dq)
         if self._has_armature:
             Mz[self._diag_q] += Ia
         explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
@@ -323,7 +323,7 @@ class PsmSimulator(ClosedChainReadout):
         Mz, bz = self._reduced_dynamics(x, v)
         n = N_JOINTS
         if self._has_armature:
-            Mz[self._diag_q] += self._explicit.armature
+            Mz[self._diag_q] += self._explicit.armature_at(dq)
         explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
         if self._free_dofs and self._tendon_ideal:  # the counterweight follows q3: x_cw = ratio q3
             T = np.zeros((n + 1, n))
@@ -365,7 +365,7 @@ class PsmSimulator(ClosedChainReadout):
             F += column * xdd[cw]
         tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
         if self._has_armature:
-            tau += self._explicit.armature * ddq
+            tau += self._explicit.armature_at(dq) * ddq
         if self._has_explicit:
             tau += self._explicit.effort(q, dq, self._presliding_z)
         if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
