@@ -10,9 +10,9 @@ from pathlib import Path
 
 from dvrk_dart.diagnosis.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
-from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions

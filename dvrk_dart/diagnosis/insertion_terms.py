@@ -168,16 +168,19 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
     after J3's own friction refitted on the training runs, after the three
     terms (regression, and replayed in DART with them as physics), and
     without each one of them; the fitted coefficients."""
-    def gap(terms) -> float:
-        fitted = fit_insertion_terms(arm, train, terms)
+    def gap(fitted: InsertionTerms) -> float:
         return float(np.mean([insertion_gap(arm, fitted, s) for s in holdout]))
 
-    fitted = fit_insertion_terms(arm, train, TERMS)
+    def fit(terms) -> InsertionTerms:
+        return fit_insertion_terms(arm, train, terms)
+
+    fitted = fit(TERMS)
     config = replace(IDENTIFIED_PHYSICS, extra=simulation_effects(arm, fitted))
     residuals = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "insertion terms: held-out replays")
-    return {"gap_holdout_simulated": float(np.mean([rms(r[:, INSERTION]) for r in residuals])),"gap_holdout_identified": float(np.mean([rms(insertion_residual(arm, s)) for s in holdout])),
-            "gap_holdout_own_friction": gap(()), "gap_holdout_terms": gap(TERMS),
-            "gap_holdout_without": {term: gap(tuple(t for t in TERMS if t != term)) for term in TERMS},
+    return {"gap_holdout_identified": float(np.mean([rms(insertion_residual(arm, s)) for s in holdout])),
+            "gap_holdout_own_friction": gap(fit(())), "gap_holdout_terms": gap(fitted),
+            "gap_holdout_simulated": float(np.mean([rms(r[:, INSERTION]) for r in residuals])),
+            "gap_holdout_without": {term: gap(fit(tuple(t for t in TERMS if t != term))) for term in TERMS},
             "coefficients": fitted.named_coefficients(),
             "stroke_coulomb_n": {"knots_m": fitted.knots.tolist(), "values": fitted.stroke_coulomb.tolist()},
             "sim_config": config.to_dict(),

@@ -198,6 +198,7 @@ def _insertion_clause(result: dict) -> str:
 
 
 def _insertion_html(result: dict) -> list[str]:
+    """What J3's repeatable gap is made of (`insertion_terms`), in words."""
     study = result.get("insertion_terms")
     return [f"<p>{html.escape(study['words'])}</p>"] if study else []
 

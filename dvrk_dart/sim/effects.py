@@ -35,6 +35,10 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
       -I_a·ddq, with ddq of the step solved implicitly from DART's closed-chain
       inertia (M_c + I_a) ddq = tau - b: exactly an armature (and the identified
       negative values too).
+    - a directional armature (JointEffects.directional_armature: more or less
+      inertia while speeding up than while slowing down, J3's) is the same
+      armature with the sign of the step's velocity; an effort set by another
+      coordinate's angle (JointEffects.angle_load) is an explicit effort.
 """
 
 from __future__ import annotations
