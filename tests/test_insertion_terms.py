@@ -93,3 +93,24 @@ def test_the_terms_are_simulated_as_fitted(arm, states):
     # the simulated positions), the formula 1e-16; J1, J2 1e-11 N·m, the light wrist 5e-4 N·m RMS
     assert rms(by_formula[:, 2] - expected) < 1e-9 and rms(added[:, 2] - expected) < 0.01
     assert np.max(np.abs(added[:, :2])) < 1e-6 and np.all(rms(added[:, 3:]) < 2e-3)
+
+
+def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
+    """On the PSM's periodic held-out runs: J3 under the bar simulated, the
+    words and the answer's clause; not on the MTM (no insertion), not with a
+    baseline, not on the upstream processing."""
+    from pathlib import Path
+
+    from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
+    from dvrk_dart.diagnosis.page import _insertion_clause
+    from dvrk_dart.model.arm import load_arm
+
+    periodic = {"processing": {"processing": "periodic", "harmonics": 30}, "session_floor": [0.011, 0.05, 0.028]}
+    study = insertion_check(arm, ["one"], ["two"], periodic)
+    assert study["gap_holdout_simulated"] <= J3_TARGET_N and 0.5 < study["repeatable_gap_removed_share"] < 1.0
+    assert "ddq3·sign(dq3)" in study["words"] and f"{study['gap_holdout_simulated']:.3g} N" in _insertion_clause({"insertion_terms": study})
+    assert insertion_applies(arm, periodic, ["one"], ["two"], None)
+    mtm = load_arm(Path(__file__).parents[1] / "models" / "mtm" / "mtm.toml")
+    assert not insertion_applies(mtm, periodic, ["mtm-one"], ["mtm-two"], None)
+    assert not insertion_applies(arm, periodic, ["one"], ["two"], "one-no-weight")
+    assert not insertion_applies(arm, {"processing": {"processing": "upstream"}}, ["one"], ["two"], None)

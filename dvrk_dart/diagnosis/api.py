@@ -89,7 +89,7 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
         apply_band(result, band)
     if refit:
         result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
-    if insertion_applies(arm, result, holdout, baseline):
+    if insertion_applies(arm, result, training, holdout, baseline):
         result["insertion_terms"] = insertion_check(arm, training, holdout, result, executor, jobs, ray_address)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}

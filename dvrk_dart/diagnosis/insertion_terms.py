@@ -37,6 +37,7 @@ and the held-out runs replayed with them.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -188,9 +189,12 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
                       "the fitted terms as DART physics on top of every identified term, replayed"}
 
 
-def insertion_applies(arm: Arm, result: dict, holdout, baseline) -> bool:
-    """The terms are studied on a PSM diagnosis of raw periodic runs with held-out runs."""
-    return bool(holdout) and baseline is None and has_insertion(arm) and result["processing"]["processing"] == "periodic"
+def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
+    """The terms are studied on a PSM diagnosis of raw periodic runs (files,
+    names or processed runs) with held-out runs."""
+    loadable = all(isinstance(spec, (str, Path, ProcessedRun)) for spec in [*train, *holdout])
+    return (bool(holdout) and baseline is None and loadable and has_insertion(arm)
+            and result["processing"]["processing"] == "periodic")
 
 
 def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
