@@ -186,8 +186,31 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     if at is not None:
         report["payload_at"] = _at_position(arm, at, fit_with)
         report["position_m"] = at.position.tolist()
+    if report["session_pair"] is not None:
+        report["session_change_as_payload"] = _session_as_payload(arm, effect, at, pair_runs[-1], features_of, offset_joints, report)
     report["words"] = _words(report)
     return report
+
+
+def _session_as_payload(arm, effect, at, repeat_run, features_of, offset_joints, report: dict) -> dict:
+    """What the --repeat pair alone (two sessions, no weight) reads as the same
+    payload: a session change of the payload's shape at that size, which the
+    intervals (session scatter harmonic by harmonic) do not count; `exceeds`
+    names the quantities where it is larger than the interval's half-width."""
+    def fit_with(columns) -> PayloadFit:
+        x = repeat_run.state.in_band(columns(features_of(repeat_run)))
+        return fit_payload([make_pair(repeat_run.name, repeat_run.state, repeat_run.baseline.state, repeat_run.residual, x, x.shape[-1])],
+                           offset_joints)
+
+    rigid = _rigid_report(arm, effect, fit_with)[0]
+    read = {key: rigid[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0")}
+    mine = {key: report[f"{key}_interval"] for key in read}
+    if at is not None:
+        read["mass_kg_at_position"] = [_at_position(arm, at, fit_with)["mass_kg"]]
+        mine["mass_kg_at_position"] = [report["payload_at"]["mass_kg_interval"]]
+    exceeds = [f"{key}[{k}]" for key, values in read.items() for k, (value, interval) in enumerate(zip(values, mine[key]))
+               if value is not None and interval is not None and abs(value) > (interval[1] - interval[0]) / 2]
+    return {**read, "exceeds_interval_half_width": exceeds}
 
 
 def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
@@ -229,6 +252,11 @@ def _words(report: dict) -> list[str]:
     if report["left_out"]:
         words.append(f"Left out of this fit: {', '.join(report['left_out'])} (another motion than the baseline's: the model's error "
                      "changes with the speed by more than a small weight's signal; a baseline of its own motion would let it in).")
+    session = report.get("session_change_as_payload")
+    if session and session["exceeds_interval_half_width"]:
+        words.append(f"The --repeat pair alone (two sessions, no weight) reads as a payload larger than the interval's half-width on "
+                     f"{', '.join(session['exceeds_interval_half_width'])}: a session change of the payload's shape, which the intervals do "
+                     "not count; if the runs with the weight were not recorded in the baseline's session, those intervals may not hold.")
     if report["session_pair"] is None:
         words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
                      "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
