@@ -212,11 +212,12 @@ def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "loc
 
 
 def insertion_sentence(study: dict) -> str:
+    """The terms, their sizes and the held-out gaps, in words."""
     c = study["coefficients"]
     share = study["repeatable_gap_removed_share"]
-    removed = "" if share is None else f", {share:.0%} of its repeatable gap"
+    removed = "" if share is None else f" ({share:.0%} of its repeatable gap removed)"
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
             f"({c['acceleration_along_motion_kg']:+.3f} kg: less effort than the model while speeding up, more while slowing down) and "
             f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2), fitted on the training runs and simulated in DART, leave J3 at "
-            f"{study['gap_holdout_simulated']:.3f} N on the held-out runs (identified model {study['gap_holdout_identified']:.3f} N; "
-            f"J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N{removed}).")
+            f"{study['gap_holdout_simulated']:.3f} N on the held-out runs{removed}; the identified model leaves "
+            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N.")
