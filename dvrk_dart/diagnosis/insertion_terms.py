@@ -48,10 +48,10 @@ from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
-from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.description import prismatic_coordinates_of
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects
 
-PITCH = JOINT_NAMES.index("q2")
 #: the stroke's Coulomb level on hats this far apart (m): finer than the
 #: residual's bumps (5-10 mm), so they are resolved, not blurred
 STROKE_KNOT_SPACING_M = 0.005
@@ -160,7 +160,7 @@ def simulation_effects(arm: Arm, fitted: InsertionTerms) -> JointEffects:
 
 def has_insertion(arm: Arm) -> bool:
     """Whether the arm has the PSM's prismatic insertion (the MTM has none)."""
-    return any(link.joint_type == "prismatic" for link in arm.model.links.values())
+    return JOINT_NAMES[INSERTION] in prismatic_coordinates_of(arm.model.source)
 
 
 def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[ProcessedRun], executor: str = "local", jobs: int = 2,
