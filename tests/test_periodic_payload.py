@@ -165,12 +165,9 @@ def test_estimates_scale_with_the_weight(arm, pairs, placement, speed):
     repeat = pairs["one"]
     repeat_pair = make_pair("one", repeat.state, repeat.baseline.state, repeat.residual, None, 1)
     session = session_variance(repeat_pair)
-    if speed == "full":
-        run = pairs["one-105g"]
-        noise_run = make_pair("run", run.state, run.baseline.state, run.residual, None, 1).noise
-    else:
-        run = pairs["one-105g-half"]
-        noise_run = make_pair("run", run.state, run.state, run.residual, None, 1).noise
+    run = pairs["one-105g" if speed == "full" else "one-105g-half"]
+    # the half-speed run's baseline would be a recording of its own motion: its noise once more
+    noise_run = make_pair("run", run.state, (run.baseline or run).state, run.residual, None, 1).noise
     key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
     features = run_features(arm, run)
     body = features.body_regressor[:, :, features.body_columns(key)]
