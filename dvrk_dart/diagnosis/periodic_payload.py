@@ -23,10 +23,14 @@ estimated and refitted `FEASIBLE_GLS_ITERATIONS` times. Every reported
 quantity (linear in p) gets a central interval of `INTERVAL_PROBABILITY`
 from its HC2 standard error with Bell and McCaffrey's degrees of freedom:
 the weights' own estimation error (a few harmonics per window) would make
-(Y' V^-1 Y)^-1 too narrow (coverage 0.77-0.88 measured). A quantity the
-efforts do not see is reported as null with the reason. That these intervals
-hold is shown by a coverage test on simulated pairs with noise and session
-scatter at the measured levels (tests/test_periodic_payload.py).
+(Y' V^-1 Y)^-1 too narrow (coverage 0.77-0.88 measured). A session change of the payload's own shape
+(gravity-shaped: an offset of q2's zero, the counterweight's cable) is not
+random per harmonic: it reads as a payload. With `--repeat`, the same design
+fitted on the --repeat pair alone reads its size, and the intervals count it
+(`interval_with_session`). A quantity the efforts do not see is reported as
+null with the reason. That these intervals hold is shown by a coverage test
+on simulated pairs with noise, session scatter and a session change of the
+payload's shape at the measured levels (tests/test_periodic_payload.py).
 """
 
 from __future__ import annotations
@@ -158,11 +162,11 @@ class PayloadFit:
         statistic = float(value @ np.linalg.pinv(covariance, hermitian=True) @ value)
         return float(chi2.sf(statistic, max(rank, 1)))
 
-    def interval(self, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Value and (2, ...) central interval of the linear quantity `jacobian`
-        @ p: the HC2 standard error with Bell and McCaffrey's degrees of freedom
-        (Imbens and Kolesar 2016): robust to a session spectrum the weights
-        got wrong, and wide where few harmonics carry the quantity."""
+    def standard_error(self, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Value, HC2 standard error and Bell and McCaffrey's degrees of freedom
+        (Imbens and Kolesar 2016) of the linear quantity `jacobian` @ p: robust
+        to a session spectrum the weights got wrong, and few degrees of freedom
+        where few harmonics carry the quantity."""
         jacobian = np.atleast_2d(jacobian)
         value = jacobian @ self.params
         # rows the fit matches exactly (a run's offset on its mean) carry no information
@@ -172,8 +176,37 @@ class PayloadFit:
         weights = a**2 / self.one_minus_leverage
         dof = np.sum(weights * self.one_minus_leverage, axis=1) ** 2 / np.maximum(
             np.einsum("ki,ij,kj->k", weights, self.annihilator_squared, weights), 1e-300)
-        t = student_t.ppf(0.5 + INTERVAL_PROBABILITY / 2.0, np.maximum(dof, 1.0))
-        return value, np.stack([value - t * se, value + t * se])
+        return value, se, np.maximum(dof, 1.0)
+
+    def interval(self, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Value and (2, ...) central interval of the linear quantity `jacobian` @ p (`standard_error`)."""
+        value, se, dof = self.standard_error(jacobian)
+        return value, central_interval(value, se, dof)
+
+
+def central_interval(value: np.ndarray, se: np.ndarray, dof: np.ndarray) -> np.ndarray:
+    """(2, ...) the central Student-t interval of `INTERVAL_PROBABILITY`."""
+    t = student_t.ppf(0.5 + INTERVAL_PROBABILITY / 2.0, dof)
+    return np.stack([value - t * se, value + t * se])
+
+
+def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Value, (2, ...) interval and the --repeat pair's reading of the linear
+    quantity `jacobian` @ p. `session_fit`: the same design fitted on the
+    --repeat pair alone (two sessions, no payload): what it reads, r, is a
+    session change of the payload's own shape (an offset of q2's zero, the
+    counterweight's cable), which the harmonic-by-harmonic session variance
+    does not count. Its variance r^2 - se(r)^2 (never negative) is added to
+    the fit's; one pair knows it to one degree of freedom, so the degrees of
+    freedom are Satterthwaite's with r^2's variance as a one-degree
+    estimate's: wide where the session change dominates."""
+    value, se, dof = fit.standard_error(jacobian)
+    if session_fit is None:
+        return value, central_interval(value, se, dof), None
+    read, read_se, _ = session_fit.standard_error(jacobian)
+    total = se**2 + np.maximum(read**2 - read_se**2, 0.0)
+    dof = total**2 / np.maximum(se**4 / dof + read**4, 1e-300)
+    return value, central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), read
 
 
 def _design(pairs: list[Pair], offset_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[slice]]:

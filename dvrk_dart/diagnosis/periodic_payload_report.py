@@ -4,7 +4,7 @@ interval that holds or None with the reason, and the sentences."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from dvrk_dart.diagnosis.periodic_payload import (
     Pair,
     PayloadFit,
     fit_payload,
+    interval_with_session,
     linear_map,
     make_pair,
     point_payload_columns,
@@ -37,7 +38,8 @@ TIED_BIC = 10.0
 SCALAR_QUANTITIES = {"mass_kg", "q1_gravity_slope_at_q0_nm_per_rad"}
 INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squares on the harmonics of the runs minus their baseline "
                    "(weights: measured noise plus the session scatter the fit leaves, per harmonic), HC2 standard errors with "
-                   "Bell-McCaffrey degrees of freedom; coverage shown on simulated pairs at the measured noise and session scatter")
+                   "Bell-McCaffrey degrees of freedom, plus the session change of the payload's shape that the --repeat pair reads "
+                   "(one degree of freedom); coverage shown on simulated pairs at the measured noise, session scatter and session change")
 MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
                  "mass is below the noise: give --payload-at LINK:x,y,z to turn the first moment into a mass")
 
@@ -76,29 +78,50 @@ def link_costs(candidates: list, pair_runs, differences, features_of, offset_joi
     return np.array(costs)
 
 
-def _report_quantities(fit: PayloadFit, maps: dict[str, np.ndarray], not_seen: dict[str, str]) -> tuple[dict, dict]:
+@dataclass(frozen=True)
+class Fits:
+    """One payload design fitted on the runs minus their baseline (`main`) and
+    on the --repeat pair alone (`session`: what two sessions read as that payload; None without --repeat)."""
+
+    main: PayloadFit
+    session: PayloadFit | None
+
+
+def _repeat_alone(repeat_run, columns: np.ndarray, offset_joints) -> PayloadFit:
+    """The payload design fitted on the --repeat pair alone (two sessions without the payload)."""
+    x = repeat_run.state.in_band(columns)
+    return fit_payload([make_pair(repeat_run.name, repeat_run.state, repeat_run.baseline.state, repeat_run.residual, x, x.shape[-1])],
+                       offset_joints)
+
+
+def _report_quantities(fits: Fits, maps: dict[str, np.ndarray], not_seen: dict[str, str]) -> tuple[dict, dict, dict]:
     """Each quantity with its interval where the efforts determine it, else
-    None and the reason (`not_seen`: reasons known beforehand, by key)."""
-    report, reasons = {}, {}
+    None and the reason (`not_seen`: reasons known beforehand, by key); and
+    what the --repeat pair alone reads of each (None without it)."""
+    report, reasons, session = {}, {}, {}
     for key, jacobian in maps.items():
-        value, interval = fit.interval(jacobian)
-        determined = fit.determined(jacobian) & (key not in not_seen)
+        value, interval, read = interval_with_session(fits.main, fits.session, jacobian)
+        determined = fits.main.determined(jacobian) & (key not in not_seen)
         values = [float(v) if d else None for v, d in zip(value, determined)]
         intervals = [[float(lo), float(hi)] if d else None for lo, hi, d in zip(*interval, determined)]
+        reads = [float(v) if d and read is not None else None for v, d in zip(value if read is None else read, determined)]
         scalar = key in SCALAR_QUANTITIES
         report[key], report[f"{key}_interval"] = (values[0], intervals[0]) if scalar else (values, intervals)
+        session[key] = reads[0] if scalar else reads
         if not determined.all():
             reasons[key] = not_seen.get(key, "the efforts do not determine it (the runs' motion does not excite it)")
-    return report, reasons
+    return report, reasons, session
 
 
-def _rigid_report(arm, effect, fit_with) -> tuple[dict, dict, PayloadFit, dict]:
-    """A rigid body on the effect's link: its quantities, the reasons of those not determined, the fit and the maps."""
+def _rigid_report(arm, effect, fit_with) -> tuple[dict, dict, PayloadFit, dict, dict]:
+    """A rigid body on the effect's link: its quantities, the reasons of those
+    not determined, the fit, the maps and what the --repeat pair reads."""
     gravity = _gravity_at_zero(arm, effect.link_key)
-    fit = fit_with(lambda r: rigid_payload_columns(r, effect.link_key))
+    fits = fit_with(lambda r: rigid_payload_columns(r, effect.link_key))
     maps = linear_map(lambda p: _quantities(arm, effect, rigid_as_first_moment(p), gravity), 2 * BODY_PARAMETERS)
-    quantities, reasons = _report_quantities(fit, maps, {} if mass_seen_by_gravity(arm, effect.link_key) else {"mass_kg": MASS_NOT_SEEN})
-    return quantities, reasons, fit, maps
+    not_seen = {} if mass_seen_by_gravity(arm, effect.link_key) else {"mass_kg": MASS_NOT_SEEN}
+    quantities, reasons, session = _report_quantities(fits, maps, not_seen)
+    return quantities, reasons, fits.main, maps, session
 
 
 #: a first moment "as a body on" a link means something else on another link
@@ -130,8 +153,9 @@ def _span_ties(report: dict, reasons: dict, tied: list[tuple[object, dict]], eff
         report[name] = values[0] if scalar else values
 
 
-def _at_position(arm, at, fit_with) -> dict:
-    """A point mass at the given position: its mass and gravity efforts, with intervals."""
+def _at_position(arm, at, fit_with) -> tuple[dict, dict]:
+    """A point mass at the given position: its mass and gravity efforts, with
+    intervals; and what the --repeat pair reads of them."""
     fit = fit_with(lambda r: point_payload_columns(r, at.link_key, at.position))
     gravity = _gravity_at_zero(arm, at.link_key)
     unit = point_mass_parameters(1.0, at.position)[:FIRST_MOMENT_COLUMNS]
@@ -141,8 +165,8 @@ def _at_position(arm, at, fit_with) -> dict:
         return {"mass_kg": p[0], "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :, :FIRST_MOMENT_COLUMNS], p[0] * unit, yaw_path),
                 "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, yaw_path)}
 
-    values, reasons = _report_quantities(fit, linear_map(quantities, 1 + BODY_PARAMETERS), {})
-    return {"link": at.link_name, "position_m": at.position.tolist(), **values, "not_determined": reasons}
+    values, reasons, session = _report_quantities(fit, linear_map(quantities, 1 + BODY_PARAMETERS), {})
+    return {"link": at.link_name, "position_m": at.position.tolist(), **values, "not_determined": reasons}, session
 
 
 def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offset_joints, at=None, selected=None) -> dict:
@@ -155,15 +179,17 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     if not differences:
         raise DvrkDartError("--processing periodic with --baseline: no run has the baseline's motion (a payload needs a run minus its "
                             "baseline of the same motion on the harmonics)")
-    pair_runs = differences + ([repeat_run] if repeat_run is not None and repeat_run.role is RunRole.DIFFERENCE else [])
+    repeat = repeat_run if repeat_run is not None and repeat_run.role is RunRole.DIFFERENCE else None
+    pair_runs = differences + ([repeat] if repeat is not None else [])
 
-    def fit_with(columns) -> PayloadFit:
-        return fit_payload(_pairs(pair_runs, differences, lambda r: columns(features_of(r))), offset_joints)
+    def fit_with(columns) -> Fits:
+        main = fit_payload(_pairs(pair_runs, differences, lambda r: columns(features_of(r))), offset_joints)
+        return Fits(main, None if repeat is None else _repeat_alone(repeat, columns(features_of(repeat)), offset_joints))
 
     costs = link_costs(candidates, pair_runs, differences, features_of, offset_joints)
     best = int(np.argmin(costs))
     effect = candidates[best]
-    quantities, reasons, fit, maps = _rigid_report(arm, effect, fit_with)
+    quantities, reasons, fit, maps, session = _rigid_report(arm, effect, fit_with)
     tied_effects = [e for e, c in zip(candidates, costs) if e is not effect and c - costs[best] <= TIED_BIC]
     _span_ties(quantities, reasons, [(e, _rigid_report(arm, e, fit_with)[0]) for e in tied_effects], effect)
     # the payload against none: its gravity signature the efforts determine (first moment, J1's slope)
@@ -178,39 +204,21 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
               "first_moment_reference_link": arm.model.links[effect.reference_key].name,
               "mass_identified": quantities["mass_kg"] is not None, "position_m": None,
               "payload_p_value": p_value, "found": bool(p_value < PAYLOAD_TEST_LEVEL),
-              "pairs": [r.name for r in pair_runs], "session_pair": pair_runs[-1].name if len(pair_runs) > len(differences) else None,
+              "pairs": [r.name for r in pair_runs], "session_pair": repeat.name if repeat is not None else None,
               "left_out": [r.name for r in runs if r.role is RunRole.OTHER_MOTION],
               "interval_method": INTERVAL_METHOD}
     moment = report["first_moment_base_at_q0_kg_m"]
     report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
     if at is not None:
-        report["payload_at"] = _at_position(arm, at, fit_with)
+        report["payload_at"], session_at = _at_position(arm, at, fit_with)
         report["position_m"] = at.position.tolist()
-    if report["session_pair"] is not None:
-        report["session_change_as_payload"] = _session_as_payload(arm, effect, at, pair_runs[-1], features_of, offset_joints, report)
+        session["mass_kg_at_position"] = session_at["mass_kg"]
+    if repeat is not None:
+        # what the --repeat pair alone reads as this payload: a session change of its shape, counted in every interval
+        report["session_change_as_payload"] = {key: session[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0",
+                                                                             "mass_kg_at_position") if key in session}
     report["words"] = _words(report)
     return report
-
-
-def _session_as_payload(arm, effect, at, repeat_run, features_of, offset_joints, report: dict) -> dict:
-    """What the --repeat pair alone (two sessions, no weight) reads as the same
-    payload: a session change of the payload's shape at that size, which the
-    intervals (session scatter harmonic by harmonic) do not count; `exceeds`
-    names the quantities where it is larger than the interval's half-width."""
-    def fit_with(columns) -> PayloadFit:
-        x = repeat_run.state.in_band(columns(features_of(repeat_run)))
-        return fit_payload([make_pair(repeat_run.name, repeat_run.state, repeat_run.baseline.state, repeat_run.residual, x, x.shape[-1])],
-                           offset_joints)
-
-    rigid = _rigid_report(arm, effect, fit_with)[0]
-    read = {key: rigid[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0")}
-    mine = {key: report[f"{key}_interval"] for key in read}
-    if at is not None:
-        read["mass_kg_at_position"] = [_at_position(arm, at, fit_with)["mass_kg"]]
-        mine["mass_kg_at_position"] = [report["payload_at"]["mass_kg_interval"]]
-    exceeds = [f"{key}[{k}]" for key, values in read.items() for k, (value, interval) in enumerate(zip(values, mine[key]))
-               if value is not None and interval is not None and abs(value) > (interval[1] - interval[0]) / 2]
-    return {**read, "exceeds_interval_half_width": exceeds}
 
 
 def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
@@ -253,10 +261,11 @@ def _words(report: dict) -> list[str]:
         words.append(f"Left out of this fit: {', '.join(report['left_out'])} (another motion than the baseline's: the model's error "
                      "changes with the speed by more than a small weight's signal; a baseline of its own motion would let it in).")
     session = report.get("session_change_as_payload")
-    if session and session["exceeds_interval_half_width"]:
-        words.append(f"The --repeat pair alone (two sessions, no weight) reads as a payload larger than the interval's half-width on "
-                     f"{', '.join(session['exceeds_interval_half_width'])}: a session change of the payload's shape, which the intervals do "
-                     "not count; if the runs with the weight were not recorded in the baseline's session, those intervals may not hold.")
+    if session:
+        j2 = session["gravity_efforts_at_q0"][1]
+        size = "" if j2 is None else f" (J2's effort at q = 0 {j2:+.3f} N·m)"
+        words.append(f"The --repeat pair alone (two sessions, no weight) reads as a payload of its own{size}: a session change of the payload's shape. Every interval counts "
+                     "it, known to one degree of freedom from one pair: where it is large the intervals are wide.")
     if report["session_pair"] is None:
         words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
                      "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
