@@ -104,7 +104,7 @@ def _report_quantities(fits: Fits, maps: dict[str, np.ndarray], not_seen: dict[s
         determined = fits.main.determined(jacobian) & (key not in not_seen)
         values = [float(v) if d else None for v, d in zip(value, determined)]
         intervals = [[float(lo), float(hi)] if d else None for lo, hi, d in zip(*interval, determined)]
-        reads = [float(v) if d and read is not None else None for v, d in zip(value if read is None else read, determined)]
+        reads = [None] * len(values) if read is None else [float(v) if d else None for v, d in zip(read, determined)]
         scalar = key in SCALAR_QUANTITIES
         report[key], report[f"{key}_interval"] = (values[0], intervals[0]) if scalar else (values, intervals)
         session[key] = reads[0] if scalar else reads
@@ -156,7 +156,7 @@ def _span_ties(report: dict, reasons: dict, tied: list[tuple[object, dict]], eff
 def _at_position(arm, at, fit_with) -> tuple[dict, dict]:
     """A point mass at the given position: its mass and gravity efforts, with
     intervals; and what the --repeat pair reads of them."""
-    fit = fit_with(lambda r: point_payload_columns(r, at.link_key, at.position))
+    fits = fit_with(lambda r: point_payload_columns(r, at.link_key, at.position))
     gravity = _gravity_at_zero(arm, at.link_key)
     unit = point_mass_parameters(1.0, at.position)[:FIRST_MOMENT_COLUMNS]
 
@@ -165,7 +165,7 @@ def _at_position(arm, at, fit_with) -> tuple[dict, dict]:
         return {"mass_kg": p[0], "gravity_efforts_at_q0": _gravity_efforts(gravity[:, :, :FIRST_MOMENT_COLUMNS], p[0] * unit, yaw_path),
                 "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, yaw_path)}
 
-    values, reasons, session = _report_quantities(fit, linear_map(quantities, 1 + BODY_PARAMETERS), {})
+    values, reasons, session = _report_quantities(fits, linear_map(quantities, 1 + BODY_PARAMETERS), {})
     return {"link": at.link_name, "position_m": at.position.tolist(), **values, "not_determined": reasons}, session
 
 
