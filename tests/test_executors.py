@@ -84,3 +84,19 @@ def test_an_unreachable_ray_address_fails_in_seconds(tmp_path, capsys):
         assert len(err) == 1 and "--ray-address" in err[0] and "no Ray head" in err[0]
     assert time.perf_counter() - start < 30.0
     assert not any(tmp_path.iterdir())
+
+
+def test_replayed_residuals_come_back_in_the_tasks_order():
+    """A long replay given first finishes after a short one: the residuals
+    still line up with their tasks (the refit's published and refitted arms
+    are told apart by position)."""
+    from dvrk_dart.diagnosis.batch import replayed_residuals
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.sim.config import SimConfig
+
+    arm, state = load_arm(), process(load_run(resolve_run("two")))
+    lengths = [3000, 100]  # 15 s, then 0.5 s
+    residuals = replayed_residuals([(arm, SimConfig(), state.head(n)) for n in lengths], "local", jobs=2)
+    assert [len(r) for r in residuals] == lengths

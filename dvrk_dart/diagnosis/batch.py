@@ -22,12 +22,14 @@ def replay_task(task: tuple[Arm, SimConfig, ProcessedRun]):
 
 
 def replayed_residuals(tasks: list, executor: str = "local", jobs: int = 2, ray_address: str | None = None, what: str = "replays") -> list[np.ndarray]:
-    """measured - replayed (in the run's band) of each (arm, config, state) task, in order."""
-    residuals = []
-    for (_, _, state), efforts, error in run_tasks(replay_task, tasks, executor, jobs, ray_address, desc=what, unit="replay"):
+    """measured - replayed (in the run's band) of each (arm, config, state) task, in the tasks' order."""
+    position = {id(task): k for k, task in enumerate(tasks)}  # the executor yields them as they finish
+    residuals = [None] * len(tasks)
+    for task, efforts, error in run_tasks(replay_task, tasks, executor, jobs, ray_address, desc=what, unit="replay"):
         if error is not None:
             raise DvrkDartError(f"{what}: a replay failed ({error})")
-        residuals.append(state.tau - state.in_band(np.asarray(efforts, dtype=float)))
+        state = task[2]
+        residuals[position[id(task)]] = state.tau - state.in_band(np.asarray(efforts, dtype=float))
     return residuals
 
 
