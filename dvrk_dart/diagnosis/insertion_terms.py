@@ -43,6 +43,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.batch import replayed_residuals
 from dvrk_dart.diagnosis.page import repeatable_share
+from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
@@ -50,7 +51,7 @@ from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import prismatic_coordinates_of
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
-from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects, SimConfig
 
 #: the stroke's Coulomb level on hats this far apart (m): finer than the
 #: residual's bumps (5-10 mm), so they are resolved, not blurred
@@ -118,8 +119,10 @@ class InsertionTerms:
         return out
 
 
-def fit_insertion_terms(arm: Arm, train: list[ProcessedRun], terms: tuple[str, ...] = TERMS) -> InsertionTerms:
-    """Least squares of J3's residual on the training runs (one set of terms)."""
+def fit_insertion_terms(arm: Arm, train: list[ProcessedRun], terms: tuple[str, ...] = TERMS,
+                        residuals: list[np.ndarray] | None = None) -> InsertionTerms:
+    """Least squares of J3's residual on the training runs (one set of terms);
+    `residuals`: J3's per run (default: against the identified model)."""
     knots = np.empty(0)
     if "stroke_coulomb" in terms:
         low = min(s.q[:, INSERTION].min() for s in train)
@@ -127,7 +130,7 @@ def fit_insertion_terms(arm: Arm, train: list[ProcessedRun], terms: tuple[str, .
         knots = np.arange(low + STROKE_KNOT_SPACING_M / 2, high, STROKE_KNOT_SPACING_M)
     G = np.vstack([_global_columns(s, terms) for s in train])
     S = np.vstack([_stroke_columns(s, knots) for s in train])
-    y = np.concatenate([insertion_residual(arm, s) for s in train])
+    y = np.concatenate(residuals if residuals is not None else [insertion_residual(arm, s) for s in train])
     ridge = np.hstack([np.zeros((len(knots), G.shape[1])), np.sqrt(STROKE_RIDGE_SAMPLES) * np.eye(len(knots))])
     solution, *_ = np.linalg.lstsq(np.vstack([np.hstack([G, S]), ridge]), np.r_[y, np.zeros(len(knots))], rcond=None)
     return InsertionTerms(tuple(terms), solution[: G.shape[1]], knots, solution[G.shape[1]:])
@@ -156,6 +159,21 @@ def simulation_effects(arm: Arm, fitted: InsertionTerms) -> JointEffects:
     return JointEffects(offset=tuple(unit * c["offset"]), viscous=tuple(unit * c["viscous"]),
                         position_friction=tuple(tuple(float(v) for v in f) for f in frictions),
                         directional_armature=tuple(unit * c.get("acceleration_along_motion_kg", 0.0)), angle_load=angle_load)
+
+
+def with_the_diagnosis(arm: Arm, effects: SimConfig, train: list[ProcessedRun], holdout: list[ProcessedRun], executor: str = "local",
+                       jobs: int = 2, ray_address: str | None = None) -> dict:
+    """One DART configuration for every joint: the diagnosis's selected effects
+    (`effects`, its sim_config) plus J3's terms fitted on top of them (on J3's
+    residual of the training runs replayed with those effects); the held-out
+    runs replayed with both."""
+    trained = replayed_residuals([(arm, effects, s) for s in train], executor, jobs, ray_address, "insertion terms: training replays")
+    fitted = fit_insertion_terms(arm, train, TERMS, [r[:, INSERTION] for r in trained])
+    config = replace(effects, extra=effects.extra.plus(simulation_effects(arm, fitted)))
+    held = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "insertion terms: held-out replays, one configuration")
+    return {"gap_holdout": gaps(held), "coefficients": fitted.named_coefficients(), "sim_config": config.to_dict(),
+            "method": "the diagnosis's selected effects and J3's terms fitted on top of them (training runs replayed with the effects), "
+                      "one DART configuration replayed on the held-out runs"}
 
 
 def has_insertion(arm: Arm) -> bool:
@@ -199,9 +217,12 @@ def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
 
 def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
     """`insertion_study` on the diagnosis's runs and processing, with the share
-    of J3's repeatable gap (above the session floor) the simulated terms remove, and words."""
+    of J3's repeatable gap (above the session floor) the simulated terms
+    remove, the terms on top of the diagnosis's effects (`with_the_diagnosis`), and words."""
     processing = RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"))
-    study = insertion_study(arm, loaded_states(list(train), processing), loaded_states(list(holdout), processing), executor, jobs, ray_address)
+    train, holdout = loaded_states(list(train), processing), loaded_states(list(holdout), processing)
+    study = insertion_study(arm, train, holdout, executor, jobs, ray_address)
+    study["with_diagnosis_effects"] = with_the_diagnosis(arm, SimConfig.from_dict(result["sim_config"]), train, holdout, executor, jobs, ray_address)
     floor = result.get("session_floor")
     share = None
     if floor is not None:
@@ -220,4 +241,13 @@ def insertion_sentence(study: dict) -> str:
             f"({c['acceleration_along_motion_kg']:+.3f} kg: less effort than the model while speeding up, more while slowing down) and "
             f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2), fitted on the training runs and simulated in DART, leave J3 at "
             f"{study['gap_holdout_simulated']:.3f} N on the held-out runs{removed}; the identified model leaves "
-            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N.")
+            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N."
+            + _one_configuration_clause(study.get("with_diagnosis_effects")))
+
+
+def _one_configuration_clause(combined: dict | None) -> str:
+    if not combined:
+        return ""
+    gap = combined["gap_holdout"]
+    return (" With the diagnosis's selected effects, one DART configuration leaves "
+            + " / ".join(f"{name} {gap[j]:.3f}" for j, name in enumerate(JOINT_NAMES[:3])) + " on the held-out runs.")

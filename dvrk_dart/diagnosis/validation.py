@@ -108,7 +108,20 @@ def _insertion_verdicts(result: dict, spec: dict) -> list[dict]:
                       f"{', '.join(spec['train'])} and simulated in DART closer than J3's own friction refitted alone",
              "passed": bool(study["gap_holdout_simulated"] < study["gap_holdout_own_friction"]),
              "value": f"{study['gap_holdout_simulated']:.4f} vs {study['gap_holdout_own_friction']:.4f} N "
-                      f"(identified model {study['gap_holdout_identified']:.4f} N; regression {study['gap_holdout_terms']:.4f} N)"}]
+                      f"(identified model {study['gap_holdout_identified']:.4f} N; regression {study['gap_holdout_terms']:.4f} N)"},
+            *_one_configuration_verdicts(result, spec)]
+
+
+def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
+    """The diagnosis's effects with J3's terms on top, one DART configuration:
+    closer than the identified model on J1..J3 of the held-out runs."""
+    combined = result["insertion_terms"].get("with_diagnosis_effects")
+    if not combined:
+        return []
+    gap, bar = combined["gap_holdout"], result["identified_model_gap_holdout"]
+    return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects and J3's terms) closer than the "
+                      f"identified model on {j}", "passed": bool(gap[i] <= bar[i]), "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}"}
+            for i, j in enumerate(JOINT_NAMES[:3])]
 
 
 def _refit_verdicts(result: dict, spec: dict) -> list[dict]:

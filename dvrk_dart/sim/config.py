@@ -4,7 +4,7 @@ bodies carry the identified inertial parameters only."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 #: the identified model's rigid-body terms, always simulated (names of identified_model.TERMS)
 INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
@@ -53,6 +53,26 @@ class JointEffects:
     # an effort on one coordinate set by another's angle: (target index,
     # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)
     angle_load: tuple[tuple[float, ...], ...] = ()
+
+    def plus(self, other: "JointEffects") -> "JointEffects":
+        """Both sets of effects at once: per-coordinate values added, entries
+        joined. A Coulomb reversal law (velocity scale, pre-sliding) is one per
+        coordinate: where both carry a Coulomb level they must share it."""
+        laws = ("coulomb_reversal_velocity", "coulomb_presliding")
+        for name in laws:
+            for mine, theirs, a, b in zip(getattr(self, name), getattr(other, name), self.coulomb, other.coulomb):
+                if a and b and mine != theirs:
+                    raise ValueError(f"JointEffects.plus: two Coulomb levels with different {name} ({mine} and {theirs}) on one coordinate")
+        merged = {}
+        for f in fields(self):
+            mine, theirs = getattr(self, f.name), getattr(other, f.name)
+            if f.name in laws:
+                merged[f.name] = tuple(b if not a_level else a for a, b, a_level in zip(mine, theirs, self.coulomb))
+            elif f.default == ():  # entries (link and position frictions, angle loads)
+                merged[f.name] = tuple(mine) + tuple(theirs)
+            else:
+                merged[f.name] = tuple(float(a + b) for a, b in zip(mine, theirs))
+        return JointEffects(**merged)
 
 
 @dataclass(frozen=True)
