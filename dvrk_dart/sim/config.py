@@ -54,7 +54,7 @@ class JointEffects:
     # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)
     angle_load: tuple[tuple[float, ...], ...] = ()
 
-    def plus(self, other: "JointEffects") -> "JointEffects":
+    def plus(self, other: JointEffects) -> JointEffects:
         """Both sets of effects at once: per-coordinate values added, entries
         joined. A Coulomb reversal law (velocity scale, pre-sliding) is one per
         coordinate: where both carry a Coulomb level they must share it."""
