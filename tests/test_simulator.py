@@ -200,3 +200,24 @@ def test_smooth_coulomb_reversal_is_simulated(model, params, identified, process
     # DART's damping acts at the end-of-step velocity: Fv dt ddq apart at most
     assert np.sqrt(np.mean((record.effort_sim[:, 2] - expected) ** 2)) < 0.01
     assert np.std(friction) > 0.1  # the law is exercised
+
+
+def test_two_sets_of_effects_at_once_add_their_efforts(arm, processed_two):
+    """JointEffects.plus: replayed on the measured motion, the efforts of both
+    sets at once are the sum of each set's change (friction, offsets, tables
+    and loads act on the coordinates, not on one another), to 1e-3 N; two
+    Coulomb levels with different reversal laws on one coordinate are refused."""
+    from dvrk_dart.runs.replay import simulate_efforts
+    from dvrk_dart.sim.config import JointEffects
+
+    state = processed_two.head(600)  # 3 s
+    unit = np.eye(7)[INSERTION]
+    a = JointEffects(coulomb=tuple(0.4 * unit), viscous=tuple(0.8 * unit), coulomb_presliding=tuple(1e-4 * unit))
+    b = JointEffects(offset=tuple(0.05 * unit), position_friction=((INSERTION, 0.0, -0.01, 0.2, 0.1, -0.1),),
+                     angle_load=((INSERTION, 1, 0.04, 0.0),), directional_armature=tuple(-0.04 * unit))
+    base = simulate_efforts(arm, SimConfig(), state)
+    change = {name: simulate_efforts(arm, SimConfig(extra=e), state) - base for name, e in (("a", a), ("b", b), ("both", a.plus(b)))}
+    assert np.abs(change["a"][:, INSERTION]).max() > 0.3 and np.abs(change["b"][:, INSERTION]).max() > 0.05
+    assert np.abs(change["both"] - change["a"] - change["b"]).max() < 1e-3
+    with pytest.raises(ValueError, match="coulomb_presliding"):
+        a.plus(JointEffects(coulomb=tuple(0.1 * unit), coulomb_presliding=tuple(1e-3 * unit)))
