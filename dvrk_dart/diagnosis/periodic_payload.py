@@ -23,12 +23,12 @@ estimated and refitted `FEASIBLE_GLS_ITERATIONS` times. Every reported
 quantity (linear in p) gets a central interval of `INTERVAL_PROBABILITY`
 from its HC2 standard error with Bell and McCaffrey's degrees of freedom:
 the weights' own estimation error (a few harmonics per window) would make
-(Y' V^-1 Y)^-1 too narrow (coverage 0.77-0.88 measured). A session change of the payload's own shape
-(gravity-shaped: an offset of q2's zero, the counterweight's cable) is not
-random per harmonic: it reads as a payload. With `--repeat`, the same design
-fitted on the --repeat pair alone reads its size, and the intervals count it
-(`interval_with_session`). A quantity the efforts do not see is reported as
-null with the reason. That these intervals hold is shown by a coverage test
+(Y' V^-1 Y)^-1 too narrow (coverage 0.77-0.88 measured). A session change
+of the payload's own shape (gravity-shaped: an offset of q2's zero, the
+counterweight's cable) is not random per harmonic: it reads as a payload.
+With `--repeat`, the same design fitted on the --repeat pair alone reads its
+size, and the intervals count it (`interval_with_session`). A quantity the
+efforts do not see is reported as null with the reason. That these intervals hold is shown by a coverage test
 on simulated pairs with noise, session scatter and a session change of the
 payload's shape at the measured levels (tests/test_periodic_payload.py).
 """

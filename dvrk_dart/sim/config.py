@@ -67,7 +67,7 @@ class JointEffects:
         for f in fields(self):
             mine, theirs = getattr(self, f.name), getattr(other, f.name)
             if f.name in laws:
-                merged[f.name] = tuple(b if not a_level else a for a, b, a_level in zip(mine, theirs, self.coulomb))
+                merged[f.name] = tuple(a if level else b for a, b, level in zip(mine, theirs, self.coulomb))
             elif f.default == ():  # entries (link and position frictions, angle loads)
                 merged[f.name] = tuple(mine) + tuple(theirs)
             else:
