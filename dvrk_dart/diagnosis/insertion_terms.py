@@ -222,7 +222,9 @@ def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "loc
     processing = RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"))
     train, holdout = loaded_states(list(train), processing), loaded_states(list(holdout), processing)
     study = insertion_study(arm, train, holdout, executor, jobs, ray_address)
-    study["with_diagnosis_effects"] = with_the_diagnosis(arm, SimConfig.from_dict(result["sim_config"]), train, holdout, executor, jobs, ray_address)
+    if result.get("sim_config"):  # the diagnosis's selected effects
+        study["with_diagnosis_effects"] = with_the_diagnosis(arm, SimConfig.from_dict(result["sim_config"]), train, holdout, executor, jobs,
+                                                             ray_address)
     floor = result.get("session_floor")
     share = None
     if floor is not None:
