@@ -11,6 +11,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from dvrk_dart.diagnosis.api import ONE_CONFIGURATION_FILE
 from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.validation import (
     WITHHELD_FILE,
@@ -20,6 +21,8 @@ from dvrk_dart.diagnosis.validation import (
     validate_synthetic,
 )
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.runs.config import diagnosis_sim_config
+from dvrk_dart.sim.config import SimConfig
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +44,8 @@ def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
     gap = np.array(combined["gap_holdout"][:3])
     assert gap[:2] == pytest.approx(after[:2], abs=5e-4) and gap[2] < after[2] - 0.02, (gap, after)
     assert combined["repeatable_gap_explained_share"][2] > result["repeatable_gap_explained_share"][2] + 0.2
+    # written beside diagnosis.json as a file `--dynamics` runs
+    assert diagnosis_sim_config(tmp_path / ONE_CONFIGURATION_FILE) == SimConfig.from_dict(combined["sim_config"])
     # the held-out gap split: explained, session-to-session (floor from one vs one-no-weight), left over
     for row in result["gap_split"]["joints"][:3]:
         assert row["session_to_session"] is not None and row["session_to_session"] <= row["after"] + 1e-12
