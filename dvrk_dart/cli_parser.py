@@ -10,9 +10,13 @@ import re
 from pathlib import Path
 import sys
 
+from dvrk_dart.io.reference_data import RUNS, reference_run_arm
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
+
+#: the PSM's reference runs by their short names, as the help lists them
+PSM_RUN_NAMES = "|".join(name for name in RUNS if reference_run_arm(name) == "psm")
 
 
 def non_empty(text: str) -> str:
@@ -175,7 +179,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
-    p.add_argument("--measured", type=measured_run, required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+    p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
     _add_processing_option(p, "upstream")
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
@@ -194,7 +198,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_session_floor)
 
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
-    p.add_argument("--runs", type=measured_run, nargs="+", required=True, help="training runs: paths, or one|two|one-no-weight|one-105g")
+    p.add_argument("--runs", type=measured_run, nargs="+", required=True, help=f"training runs: paths, or {PSM_RUN_NAMES}")
     p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs, scored only")
     p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
     p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
@@ -258,7 +262,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     for name in ("replay", *REPLAY_SHORTHANDS):
         p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
         if name == "replay":
-            p.add_argument("--measured", type=measured_run, required=True, help="measured run: path (CSV or ROS bag), or one|two|one-no-weight|one-105g")
+            p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
             _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
@@ -302,7 +306,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
 
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
     p.add_argument("--measured", type=measured_run, required=True, nargs="+",
-                   help="measured run(s): path, or one|two|one-no-weight|one-105g|one-105g-half|one-105g-insertion; several: one set of effects for all")
+                   help=f"measured run(s): path, or {PSM_RUN_NAMES}; several: one set of effects for all")
     p.add_argument("--baseline", type=measured_run, help="same trajectory without the withheld effect (isolates a payload)")
     p.add_argument("--train", type=measured_run, nargs="*", default=[], help="training runs (default: the measured run)")
     p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs scored with the effects fitted on training")

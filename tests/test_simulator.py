@@ -214,10 +214,22 @@ def test_two_sets_of_effects_at_once_add_their_efforts(arm, processed_two):
     unit = np.eye(7)[INSERTION]
     a = JointEffects(coulomb=tuple(0.4 * unit), viscous=tuple(0.8 * unit), coulomb_presliding=tuple(1e-4 * unit))
     b = JointEffects(offset=tuple(0.05 * unit), position_friction=((INSERTION, 0.0, -0.01, 0.2, 0.1, -0.1),),
-                     angle_load=((INSERTION, 1, 0.04, 0.0),), directional_armature=tuple(-0.04 * unit))
+                     angle_load=((INSERTION, 1, 0.04, 0.0),), directional_armature=tuple(-0.04 * unit),
+                     position_load=((INSERTION, 1, -1.0, 0.0, 1.0, 0.0, 0.1, 0.0),))
     base = simulate_efforts(arm, SimConfig(), state)
     change = {name: simulate_efforts(arm, SimConfig(extra=e), state) - base for name, e in (("a", a), ("b", b), ("both", a.plus(b)))}
     assert np.abs(change["a"][:, INSERTION]).max() > 0.3 and np.abs(change["b"][:, INSERTION]).max() > 0.05
     assert np.abs(change["both"] - change["a"] - change["b"]).max() < 1e-3
     with pytest.raises(ValueError, match="coulomb_presliding"):
         a.plus(JointEffects(coulomb=tuple(0.1 * unit), coulomb_presliding=tuple(1e-3 * unit)))
+
+
+@pytest.mark.parametrize("entry", [(1, 1, -0.5, 0.5, 0.1), (1, 1, 0.5, -0.5, 0.1, 0.2), (9, 1, -0.5, 0.5, 0.1, 0.2)])
+def test_a_malformed_position_load_is_refused_in_one_line(arm, processed_two, entry):
+    """A table with a value missing, knots not increasing, or a coordinate that does not exist."""
+    from dvrk_dart.errors import DvrkDartError
+    from dvrk_dart.runs.replay import simulate_efforts
+    from dvrk_dart.sim.config import JointEffects
+
+    with pytest.raises(DvrkDartError, match="position_load"):
+        simulate_efforts(arm, SimConfig(extra=JointEffects(position_load=(entry,))), processed_two.head(20))

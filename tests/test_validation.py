@@ -11,7 +11,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.api import ONE_CONFIGURATION_FILE
+from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE
 from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.validation import (
     WITHHELD_FILE,
@@ -37,13 +37,13 @@ def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
     before = np.array(result["gap_before"]["holdout"][:3])
     assert np.all(after <= bar), (after, bar)
     assert np.all(after < 0.5 * before)  # most of the inertial-only gap is closed
-    # one configuration, the effects with J3's terms on top: J3 closes (0.080 N
-    # against the effects' 0.116 at writing) and J1, J2 stay the effects' own
-    # (the replay follows the measured motion: J3's friction moves no other joint's effort)
-    combined = result["insertion_terms"]["with_diagnosis_effects"]
+    # one configuration, the effects with J3's terms and the pitch-angle loads on
+    # top: measured at writing J1..J3 0.035 / 0.060 / 0.080 against the effects'
+    # 0.041 / 0.0745 / 0.116 and the issue's bar 0.035 / 0.075 / 0.090
+    combined = result["one_configuration"]
     gap = np.array(combined["gap_holdout"][:3])
-    assert gap[:2] == pytest.approx(after[:2], abs=5e-4) and gap[2] < after[2] - 0.02, (gap, after)
-    assert combined["repeatable_gap_explained_share"][2] > result["repeatable_gap_explained_share"][2] + 0.2
+    assert np.all(gap <= [0.0365, 0.065, 0.085]) and np.all(gap < after - [0.004, 0.01, 0.02]), (gap, after)
+    assert np.all(np.array(combined["repeatable_gap_explained_share"][:3]) > np.array(result["repeatable_gap_explained_share"][:3]) + 0.1)
     # written beside diagnosis.json as a file `--dynamics` runs
     assert diagnosis_sim_config(tmp_path / ONE_CONFIGURATION_FILE) == SimConfig.from_dict(combined["sim_config"])
     # the held-out gap split: explained, session-to-session (floor from one vs one-no-weight), left over

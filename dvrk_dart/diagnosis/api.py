@@ -11,6 +11,7 @@ from pathlib import Path
 from dvrk_dart.diagnosis.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
+from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
@@ -91,7 +92,8 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
         result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
     if insertion_applies(arm, result, training, holdout, baseline):
         result["insertion_terms"] = insertion_check(arm, training, holdout, result, executor, jobs, ray_address)
-        _write_one_configuration(result["insertion_terms"].get("with_diagnosis_effects"), out_dir)
+        result["one_configuration"] = one_configuration_check(arm, training, holdout, result, executor, jobs, ray_address)
+        _write_one_configuration(result["one_configuration"], out_dir)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()
@@ -103,16 +105,11 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     return result
 
 
-#: the one configuration for every joint (`insertion_terms.with_the_diagnosis`), as
-#: `--dynamics` reads it: `dvrk-dart replay --measured two --dynamics OUT/one_configuration.json`
-ONE_CONFIGURATION_FILE = "one_configuration.json"
-
-
 def _write_one_configuration(combined: dict | None, out_dir: Path) -> None:
     if combined:
         write_json_atomic(out_dir / ONE_CONFIGURATION_FILE, {
             "sim_config": combined["sim_config"], "gap_holdout": combined["gap_holdout"], "method": combined["method"],
-            "diagnosis": "diagnosis.json (insertion_terms.with_diagnosis_effects: its inputs, versions and figures)"})
+            "diagnosis": "diagnosis.json (one_configuration: its inputs, versions and figures)"})
 
 
 def _band_span(band: dict, run: str) -> None:

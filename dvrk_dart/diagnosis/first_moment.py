@@ -188,9 +188,9 @@ def parse_payload_at(text: str, model: PsmModel) -> tuple[int, np.ndarray]:
         try:
             key = model.link_by_name(name).key
         except (KeyError, DvrkDartError):
-            raise DvrkDartError(f"--payload-at {text!r}: unknown link '{name}'") from None
+            raise DvrkDartError(f"--payload-at {text!r}: unknown link '{name}' (links with a body: {_body_link_names(model)})") from None
     if key not in model.links:
-        raise DvrkDartError(f"--payload-at {text!r}: unknown link {key}")
+        raise DvrkDartError(f"--payload-at {text!r}: unknown link {key} (links with a body: {_body_link_names(model)})")
     try:
         _moving_body_link(model, key)
     except DvrkDartError as exc:
@@ -221,3 +221,7 @@ def check_mass_determinable(arm, key: int, position: np.ndarray, text: str) -> N
     if np.max(np.abs(gravity)) < MIN_GRAVITY_EFFORT_PER_KG:
         raise DvrkDartError(f"--payload-at {text!r}: mass not determinable: gravity does not load any joint through a mass at "
                             "that point (it lies on the axes that move the link)")
+
+
+def _body_link_names(model) -> str:
+    return ", ".join(link.name for link in model.links.values() if link.inertia)

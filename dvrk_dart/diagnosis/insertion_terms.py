@@ -43,7 +43,6 @@ import numpy as np
 
 from dvrk_dart.diagnosis.batch import replayed_residuals
 from dvrk_dart.diagnosis.page import repeatable_share
-from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
@@ -51,7 +50,7 @@ from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import prismatic_coordinates_of
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
-from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects, SimConfig
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects
 
 #: the stroke's Coulomb level on hats this far apart (m): finer than the
 #: residual's bumps (5-10 mm), so they are resolved, not blurred
@@ -161,21 +160,6 @@ def simulation_effects(arm: Arm, fitted: InsertionTerms) -> JointEffects:
                         directional_armature=tuple(unit * c.get("acceleration_along_motion_kg", 0.0)), angle_load=angle_load)
 
 
-def with_the_diagnosis(arm: Arm, effects: SimConfig, train: list[ProcessedRun], holdout: list[ProcessedRun], executor: str = "local",
-                       jobs: int = 2, ray_address: str | None = None) -> dict:
-    """One DART configuration for every joint: the diagnosis's selected effects
-    (`effects`, its sim_config) plus J3's terms fitted on top of them (on J3's
-    residual of the training runs replayed with those effects); the held-out
-    runs replayed with both."""
-    trained = replayed_residuals([(arm, effects, s) for s in train], executor, jobs, ray_address, "insertion terms: training replays")
-    fitted = fit_insertion_terms(arm, train, TERMS, [r[:, INSERTION] for r in trained])
-    config = replace(effects, extra=effects.extra.plus(simulation_effects(arm, fitted)))
-    held = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "insertion terms: held-out replays, one configuration")
-    return {"gap_holdout": gaps(held), "coefficients": fitted.named_coefficients(), "sim_config": config.to_dict(),
-            "method": "the diagnosis's selected effects and J3's terms fitted on top of them (training runs replayed with the effects), "
-                      "one DART configuration replayed on the held-out runs"}
-
-
 def has_insertion(arm: Arm) -> bool:
     """Whether the arm has the PSM's prismatic insertion (the MTM has none)."""
     return JOINT_NAMES[INSERTION] in prismatic_coordinates_of(arm.model.source)
@@ -218,13 +202,10 @@ def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
 def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
     """`insertion_study` on the diagnosis's runs and processing, with the share
     of J3's repeatable gap (above the session floor) the simulated terms
-    remove, the terms on top of the diagnosis's effects (`with_the_diagnosis`), and words."""
+    remove, and words."""
     processing = RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"))
     train, holdout = loaded_states(list(train), processing), loaded_states(list(holdout), processing)
     study = insertion_study(arm, train, holdout, executor, jobs, ray_address)
-    if result.get("sim_config"):  # the diagnosis's selected effects
-        study["with_diagnosis_effects"] = with_the_diagnosis(arm, SimConfig.from_dict(result["sim_config"]), train, holdout, executor, jobs,
-                                                             ray_address)
     floor = result.get("session_floor")
     share = None
     if floor is not None:
@@ -243,13 +224,5 @@ def insertion_sentence(study: dict) -> str:
             f"({c['acceleration_along_motion_kg']:+.3f} kg: less effort than the model while speeding up, more while slowing down) and "
             f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2), fitted on the training runs and simulated in DART, leave J3 at "
             f"{study['gap_holdout_simulated']:.3f} N on the held-out runs{removed}; the identified model leaves "
-            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N."
-            + _one_configuration_clause(study.get("with_diagnosis_effects")))
+            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N.")
 
-
-def _one_configuration_clause(combined: dict | None) -> str:
-    if not combined:
-        return ""
-    gap = combined["gap_holdout"]
-    return (" With the diagnosis's selected effects, one DART configuration leaves "
-            + " / ".join(f"{name} {gap[j]:.3f}" for j, name in enumerate(JOINT_NAMES[:3])) + " on the held-out runs.")

@@ -42,7 +42,7 @@ from dvrk_dart.model import friction
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
-from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, simulated_terms
+from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, position_load_effort, position_load_table, simulated_terms
 
 #: the joints whose friction may change along their range (the arm joints: a
 #: guide or a capstan; the wrist's cables run over pulleys at fixed radius)
@@ -167,6 +167,9 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
     total = total + np.asarray(x.directional_armature) * np.sign(features.dq) * features.ddq
     for target, source, c_sin, c_cos in x.angle_load:
         total[:, int(target)] += c_sin * np.sin(features.q[:, int(source)]) + c_cos * np.cos(features.q[:, int(source)])
+    for entry in x.position_load:
+        target, source, _, _ = position_load_table(entry)
+        total[:, target] += position_load_effort(entry, features.q[:, source])
     for entry in x.position_friction:
         j, distance, values = int(entry[0]), entry[1], entry[2:]
         half = len(values) // 2

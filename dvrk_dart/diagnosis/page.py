@@ -193,18 +193,18 @@ def _insertion_clause(result: dict) -> str:
     study = result.get("insertion_terms")
     if not study:
         return ""
-    combined = study.get("with_diagnosis_effects")
+    combined = result.get("one_configuration")
     together = "" if not combined else (
-        "; with the effects above, in one simulation: " + ", ".join(f"{name} {gap:.3g} {effort_unit(name)}"
-                                                                   for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
+        "; with the effects above and the loads the pitch angle sets on q1 and q2, in one simulation: "
+        + ", ".join(f"{name} {gap:.3g} {effort_unit(name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
     return (f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at "
             f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N){together}.")
 
 
 def _insertion_html(result: dict) -> list[str]:
-    """What J3's repeatable gap is made of (`insertion_terms`), in words."""
-    study = result.get("insertion_terms")
-    return [f"<p>{html.escape(study['words'])}</p>"] if study else []
+    """What J3's repeatable gap is made of (`insertion_terms`) and the one
+    configuration (`one_configuration`), in words."""
+    return [f"<p>{html.escape(result[key]['words'])}</p>" for key in ("insertion_terms", "one_configuration") if result.get(key)]
 
 
 def _refit_html(result: dict) -> list[str]:

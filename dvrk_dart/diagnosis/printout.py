@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from dvrk_dart.diagnosis.api import run_diagnosis
 from dvrk_dart.diagnosis.page import answer_sentence, offset_joints_sentence
 from dvrk_dart.diagnosis.parameter_band import band_sentence
 from dvrk_dart.model.arm import load_arm
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 
 def run_diagnosis_cli(args: argparse.Namespace) -> int:
@@ -22,21 +21,24 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
                            jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
                            processing=getattr(args, "processing", None), refit=getattr(args, "refit", False))
     print(answer_sentence(result))
+    print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
-                print(f"{key} ({split}): {np.array2string(np.asarray(values), precision=4)}")
+                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {effort_unit(j)}" for j, v in zip(JOINT_NAMES, values)))
     selected = [e["name"] for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
     if result.get("refit"):
         print(result["refit"]["words"])
     if result.get("insertion_terms"):
         print(result["insertion_terms"]["words"])
+    if result.get("one_configuration"):
+        print(result["one_configuration"]["words"])
     if band_sentence(result):
         print(band_sentence(result))
     if result.get("payload"):
         p = result["payload"]
-        mass = "mass not determined" if p["mass_kg"] is None else f"{p['mass_kg']:.3f} kg"
+        mass = "mass not determined" if p["mass_kg"] is None or not p.get("mass_identified", True) else f"{p['mass_kg']:.3f} kg"
         print(f"payload: {mass} on {p['link']} ({p['group']})")
         for sentence in p.get("words", []):
             print(f"  {sentence}")

@@ -90,7 +90,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     floor = result.get("session_floor")
     share = None if floor is None else repeatable_share(bar, after, floor)  # of the identified model's repeatable gap
     result["repeatable_gap_explained_share"] = None if share is None else share.tolist()
-    combined = (result.get("insertion_terms") or {}).get("with_diagnosis_effects")
+    combined = result.get("one_configuration")
     if combined and floor is not None:  # the one configuration's share, likewise
         combined["repeatable_gap_explained_share"] = repeatable_share(bar, combined["gap_holdout"], floor).tolist()
     shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
@@ -116,15 +116,16 @@ def _insertion_verdicts(result: dict, spec: dict) -> list[dict]:
 
 
 def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
-    """The diagnosis's effects with J3's terms on top, one DART configuration:
-    closer than the identified model on J1..J3 of the held-out runs."""
-    combined = result["insertion_terms"].get("with_diagnosis_effects")
+    """The diagnosis's effects with the terms on top (J3's, the pitch-angle
+    loads on J1 and J2), one DART configuration: closer than the identified
+    model on J1..J3 of the held-out runs."""
+    combined = result.get("one_configuration")
     if not combined:
         return []
     gap, bar = combined["gap_holdout"], result["identified_model_gap_holdout"]
     share = combined.get("repeatable_gap_explained_share")
     shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
-    return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects and J3's terms) closer than the "
+    return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects, J3's terms and the pitch-angle loads) closer than the "
                       f"identified model on {j}", "passed": bool(gap[i] <= bar[i]),
              "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
             for i, j in enumerate(JOINT_NAMES[:3])]

@@ -14,6 +14,8 @@ PRISMATIC_JOINTS = ("q3",)
 INSERTION = JOINT_NAMES.index("q3")
 #: the coordinate that pitches the arm (both arms' q2): the reference of a hand-measured payload position
 PITCH = JOINT_NAMES.index("q2")
+#: the coordinate that turns the arm about its first axis (both arms' q1)
+YAW = JOINT_NAMES.index("q1")
 
 
 def prismatic_coordinates() -> tuple[str, ...]:

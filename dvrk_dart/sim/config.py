@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
 
+import numpy as np
+
 #: the identified model's rigid-body terms, always simulated (names of identified_model.TERMS)
 INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
 COUNTERWEIGHT_VARIANTS = ("on", "off", "pid")
@@ -53,6 +55,10 @@ class JointEffects:
     # an effort on one coordinate set by another's angle: (target index,
     # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)
     angle_load: tuple[tuple[float, ...], ...] = ()
+    # an effort on one coordinate, piecewise linear in a coordinate's position
+    # and zero outside its knots (a load that changes along the range, not with
+    # the direction of motion): (target index, source index, knots..., values...)
+    position_load: tuple[tuple[float, ...], ...] = ()
 
     def plus(self, other: JointEffects) -> JointEffects:
         """Both sets of effects at once: per-coordinate values added, entries
@@ -68,7 +74,7 @@ class JointEffects:
             mine, theirs = getattr(self, f.name), getattr(other, f.name)
             if f.name in laws:
                 merged[f.name] = tuple(a if level else b for a, b, level in zip(mine, theirs, self.coulomb))
-            elif f.default == ():  # entries (link and position frictions, angle loads)
+            elif f.default == ():  # entries (link and position frictions, angle and position loads)
                 merged[f.name] = tuple(mine) + tuple(theirs)
             else:
                 merged[f.name] = tuple(float(a + b) for a, b in zip(mine, theirs))
@@ -114,3 +120,17 @@ def simulated_terms(config: SimConfig) -> tuple[str, ...]:
     what its efforts are compared with (sim vs model)."""
     flags = {"friction": config.friction, "offset": config.offsets, "spring": config.spring, "motor_inertia": config.motor_inertia}
     return INERTIAL_TERMS + tuple(term for term, on in flags.items() if on)
+
+
+def position_load_table(entry: tuple[float, ...]) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """(target, source, knots, values) of a JointEffects.position_load entry."""
+    target, source, table = int(entry[0]), int(entry[1]), np.asarray(entry[2:], dtype=float)
+    half = len(table) // 2
+    return target, source, table[:half], table[half:]
+
+
+def position_load_effort(entry: tuple[float, ...], source_positions: np.ndarray) -> np.ndarray:
+    """The entry's effort at these positions of its source coordinate: the table
+    interpolated, zero outside the knots."""
+    _, _, knots, values = position_load_table(entry)
+    return np.interp(source_positions, knots, values, left=0.0, right=0.0)

@@ -53,7 +53,7 @@ from dvrk_dart.model.identified import spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim.builder import DartPsm
-from dvrk_dart.sim.config import SimConfig
+from dvrk_dart.sim.config import SimConfig, position_load_effort, position_load_table
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,8 @@ class ExplicitEffects:
     directional_armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     #: (target, source, c_sin, c_cos) efforts set by another coordinate's angle
     angle_loads: tuple[tuple[float, ...], ...] = ()
+    #: efforts piecewise linear in a coordinate's position (JointEffects.position_load entries)
+    position_loads: tuple[tuple[float, ...], ...] = ()
 
     def armature_at(self, dq: np.ndarray) -> np.ndarray:
         """The armature of the step (the directional part takes the velocity's sign)."""
@@ -107,6 +109,7 @@ class ExplicitEffects:
         return bool(
             np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stiffness) or np.any(self.offset)
             or np.any(self.smooth_coulomb) or self.friction_links or self.linkage_springs or self.presliding or self.angle_loads
+            or self.position_loads
         )
 
     def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray | None = None) -> np.ndarray:
@@ -124,6 +127,9 @@ class ExplicitEffects:
             effort = effort + (coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
         for target, source, c_sin, c_cos in self.angle_loads:
             effort[int(target)] += c_sin * np.sin(q[int(source)]) + c_cos * np.cos(q[int(source)])
+        for entry in self.position_loads:
+            target, source, _, _ = position_load_table(entry)
+            effort[target] += float(position_load_effort(entry, q[source]))
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -230,5 +236,21 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
         coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
         tuple(linkage_springs), tuple(presliding), np.asarray(extra.directional_armature, dtype=float),
         tuple(tuple(float(v) for v in entry) for entry in extra.angle_load),
+        tuple(_checked_position_loads(extra.position_load)),
     )
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)
+
+
+def _checked_position_loads(entries) -> list[tuple[float, ...]]:
+    """JointEffects.position_load entries as floats: coordinates in range, as
+    many values as knots, knots increasing."""
+    out = []
+    for entry in entries:
+        entry = tuple(float(v) for v in entry)
+        if len(entry) < 6 or len(entry) % 2:
+            raise DvrkDartError("SimConfig.extra.position_load: (target, source, knots..., values...) with as many values as knots expected")
+        target, source, knots, _ = position_load_table(entry)
+        if not (0 <= target < N_JOINTS and 0 <= source < N_JOINTS and np.all(np.diff(knots) > 0.0)):
+            raise DvrkDartError(f"SimConfig.extra.position_load: coordinates 0..{N_JOINTS - 1} and increasing knots expected (got {entry[:2]})")
+        out.append(entry)
+    return out
