@@ -311,9 +311,12 @@ def _run_and_write(config, out: Path | None) -> int:
         write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
+    terms = metrics.get("model_terms_compared")
+    said = {"rms_sim_vs_model": " (N·m, N for the prismatic joint" + (f"; the model's {', '.join(terms)})" if terms else ")"),
+            "rms_sim_vs_measured": " (N·m, N for the prismatic joint)", "rms_model_vs_measured": " (N·m, N for the prismatic joint; the full model)"}
     for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position", "tracking_rms_orientation"):
         if metrics.get(key) is not None:
-            print(f"  {key}: {np.array2string(np.asarray(metrics[key]), precision=5)}")
+            print(f"  {key}{said.get(key, '')}: {np.array2string(np.asarray(metrics[key]), precision=5)}")
     if "error" in metrics:
         print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
         return 2

@@ -68,6 +68,18 @@ def _size_words(entry: dict) -> str:
     return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
 
 
+def _payload_size_words(payload: dict) -> str:
+    """The payload's mass where the efforts determine it, at the hand position
+    when one was given, else its gravity effort on J2 at q = 0."""
+    at = payload.get("payload_at") or {}
+    if at.get("mass_kg") is not None:
+        return f", {at['mass_kg']:.3g} kg at the hand position"
+    if payload.get("mass_identified") and payload.get("mass_kg") is not None:
+        return f", {payload['mass_kg']:.3g} kg"
+    efforts = payload.get("gravity_efforts_at_q0")
+    return "" if not efforts or efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+
+
 def repeatable_share(before, after, floor):
     """The share of a gap's repeatable part (above the session floor, in
     squares) that is gone after: 1 - (after^2 - floor^2) / (before^2 - floor^2),
@@ -98,7 +110,7 @@ def answer_sentence(result: dict) -> str:
     entries = {e["name"]: e for e in result.get("effects", [])}
     payload = result.get("payload")
     if payload:  # the effect under study first
-        lead = f"a payload on {payload['link']} ({payload['group']})"
+        lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload)})"
         others = [n for n in selected if not n.startswith("payload")]
     elif selected:
         first = entries.get(selected[0], {"name": selected[0]})

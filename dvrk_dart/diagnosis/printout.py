@@ -46,7 +46,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         print(offset_joints_sentence(result["nuisance_offset_joints"]))
     if result.get("nuisance_offsets"):
         for run, offsets in result["nuisance_offsets"].items():
-            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
+            joints = (result.get("nuisance_offset_joints") or {}).get("joints") or list(offsets)
+            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {effort_unit(j)}" for j in joints if j in offsets))
     for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
