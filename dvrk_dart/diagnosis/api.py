@@ -93,10 +93,10 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if insertion_applies(arm, result, training, holdout, baseline):
         result["insertion_terms"] = insertion_check(arm, training, holdout, result, executor, jobs, ray_address)
         result["one_configuration"] = one_configuration_check(arm, training, holdout, result, executor, jobs, ray_address)
-        _write_one_configuration(result["one_configuration"], out_dir)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()
+    _write_one_configuration(result, out_dir)
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], f"diagnosis of {measured}"))
@@ -105,11 +105,16 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     return result
 
 
-def _write_one_configuration(combined: dict | None, out_dir: Path) -> None:
+def _write_one_configuration(result: dict, out_dir: Path) -> None:
+    """The one configuration with what its held-out gaps belong to: the runs,
+    their processing (replay them with the same) and the arm's parameters."""
+    combined = result.get("one_configuration")
     if combined:
         write_json_atomic(out_dir / ONE_CONFIGURATION_FILE, {
-            "sim_config": combined["sim_config"], "gap_holdout": combined["gap_holdout"], "method": combined["method"],
-            "diagnosis": "diagnosis.json (one_configuration: its inputs, versions and figures)"})
+            "sim_config": combined["sim_config"], "joints": result["joints"], "units": result["units"],
+            "gap_holdout": combined["gap_holdout"], "train_runs": result.get("train_runs"), "holdout_runs": result.get("holdout_runs"),
+            "processing": {k: result["processing"].get(k) for k in ("processing", "harmonics")}, "params": result["params"],
+            "method": combined["method"], "diagnosis": "diagnosis.json (one_configuration: its inputs, versions and figures)"})
 
 
 def _band_span(band: dict, run: str) -> None:

@@ -167,12 +167,13 @@ def has_insertion(arm: Arm) -> bool:
 
 def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[ProcessedRun], executor: str = "local", jobs: int = 2,
                     ray_address: str | None = None) -> dict:
-    """J3's gap on the held-out runs (mean over them): the identified model's,
+    """J3's gap on the held-out runs (RMS over their samples together, as
+    every held-out gap of the diagnosis): the identified model's,
     after J3's own friction refitted on the training runs, after the three
     terms (regression, and replayed in DART with them as physics), and
     without each one of them; the fitted coefficients."""
     def gap(fitted: InsertionTerms) -> float:
-        return float(np.mean([insertion_gap(arm, fitted, s) for s in holdout]))
+        return float(rms(np.concatenate([insertion_residual(arm, s) - fitted.predict(s) for s in holdout])))
 
     def fit(terms) -> InsertionTerms:
         return fit_insertion_terms(arm, train, terms)
@@ -180,9 +181,9 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
     fitted = fit(TERMS)
     config = replace(IDENTIFIED_PHYSICS, extra=simulation_effects(arm, fitted))
     residuals = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "insertion terms: held-out replays")
-    return {"gap_holdout_identified": float(np.mean([rms(insertion_residual(arm, s)) for s in holdout])),
+    return {"gap_holdout_identified": float(rms(np.concatenate([insertion_residual(arm, s) for s in holdout]))),
             "gap_holdout_own_friction": gap(fit(())), "gap_holdout_terms": gap(fitted),
-            "gap_holdout_simulated": float(np.mean([rms(r[:, INSERTION]) for r in residuals])),
+            "gap_holdout_simulated": float(rms(np.concatenate([r[:, INSERTION] for r in residuals]))),
             "gap_holdout_without": {term: gap(fit(tuple(t for t in TERMS if t != term))) for term in TERMS},
             "coefficients": fitted.named_coefficients(),
             "stroke_coulomb_n": {"knots_m": fitted.knots.tolist(), "values": fitted.stroke_coulomb.tolist()},
@@ -220,9 +221,11 @@ def insertion_sentence(study: dict) -> str:
     c = study["coefficients"]
     share = study["repeatable_gap_removed_share"]
     removed = "" if share is None else f" ({share:.0%} of its repeatable gap removed)"
+    less, more = ("less", "more") if c["acceleration_along_motion_kg"] < 0.0 else ("more", "less")
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
-            f"({c['acceleration_along_motion_kg']:+.3f} kg: less effort than the model while speeding up, more while slowing down) and "
-            f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2), fitted on the training runs and simulated in DART, leave J3 at "
+            f"({c['acceleration_along_motion_kg']:+.3f} kg: {less} effort than the model while speeding up, {more} while slowing down) and "
+            f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2 {c['pitch_load_cos_q2']:+.3f} N cos q2), fitted on the training runs "
+            "and simulated in DART, leave J3 at "
             f"{study['gap_holdout_simulated']:.3f} N on the held-out runs{removed}; the identified model leaves "
             f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N.")
 

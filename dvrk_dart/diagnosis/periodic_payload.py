@@ -115,10 +115,15 @@ def beyond_noise(squared: np.ndarray, noise: np.ndarray) -> np.ndarray:
     return _window_mean(squared) - _window_mean(noise)
 
 
-def session_variance(pair: Pair) -> np.ndarray:
+def session_variance(pair: Pair, offset_joints: np.ndarray | None = None) -> np.ndarray:
     """(R, 7) the session term's variance per coefficient that a pair without
-    the payload (two sessions of one motion) shows, never negative."""
-    return np.maximum(beyond_noise(pair.y**2, pair.noise), 0.0)
+    the payload (two sessions of one motion) shows, never negative; the mean's
+    row of `offset_joints` left out (a per-pair offset takes it whole in a fit)."""
+    squared, noise = pair.y**2, pair.noise.copy()
+    if offset_joints is not None:
+        squared[0, np.asarray(offset_joints, bool)] = 0.0
+        noise[0, np.asarray(offset_joints, bool)] = 0.0
+    return np.maximum(beyond_noise(squared, noise), 0.0)
 
 
 @dataclass(frozen=True)

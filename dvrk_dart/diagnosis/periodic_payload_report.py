@@ -60,7 +60,7 @@ def _common_variance(pairs: list[Pair], n_differences: int, offset_joints) -> li
     """One variance model to compare links by: the --repeat pair's session
     scatter (no payload there) plus each pair's noise; without it, what no payload leaves."""
     if len(pairs) > n_differences:
-        session = session_variance(pairs[-1])
+        session = session_variance(pairs[-1], offset_joints)
         return [session + p.noise for p in pairs]
     return fit_payload([replace(p, X=np.zeros_like(p.X)) for p in pairs], offset_joints).variance
 

@@ -32,6 +32,7 @@ from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.payload_checks import validate_real_payload
+from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
@@ -79,12 +80,13 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     processing = spec.get("processing", "upstream")
     result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
                            processing=processing, refit=bool(spec.get("refit", False)))
-    # the bar: the full identified model on the held-out run, in the same band
+    # the bar: the full identified model on the held-out runs, in the same band,
+    # pooled over their samples as the simulation's gaps are (result.gaps)
     identified = []
     for name in spec["holdout"]:
         pr = process(load_run(resolve_run(name)), processing, result["processing"].get("harmonics"))
-        identified.append(rms(pr.tau - pr.in_band(arm.identified.predict(pr.q, pr.dq, pr.ddq, "all"))))
-    bar = np.mean(identified, axis=0)
+        identified.append(pr.tau - pr.in_band(arm.identified.predict(pr.q, pr.dq, pr.ddq, "all")))
+    bar = np.asarray(gaps(identified))
     after = np.asarray(result["gap_after"]["holdout"])
     result["identified_model_gap_holdout"] = bar.tolist()
     floor = result.get("session_floor")
