@@ -154,19 +154,16 @@ class _ReducedDynamics:
         idx = self._index
         x = q[idx] + self.offset if self._unit else self.scale * q[idx] + self.offset
         v = dq[idx] if self._unit else self.scale * dq[idx]
-        M, b, g = np.zeros((self.n, self.n)), np.zeros(self.n), np.zeros(self.n)
         # WORLD convention: pin 4.1's default (LOCAL) CRBA on mimic joints keeps
         # state between calls (a second identical call differs by 1e-2)
         Mr = pin.crba(self.model, self.data, x, pin.Convention.WORLD)
-        b[idx] = pin.nonLinearEffects(self.model, self.data, x, v)
-        g[idx] = pin.computeGeneralizedGravity(self.model, self.data, x)
-        b[idx] -= g[idx]
+        nle = pin.nonLinearEffects(self.model, self.data, x, v)
+        g_r = pin.computeGeneralizedGravity(self.model, self.data, x)
+        M, b, g = np.zeros((self.n, self.n)), np.zeros(self.n), np.zeros(self.n)
         if self._unit:
-            M[self._block] = Mr
+            M[self._block], b[idx], g[idx] = Mr, nle - g_r, g_r
         else:
-            M[self._block] = Mr * self._outer
-            b[idx] *= self.scale
-            g[idx] *= self.scale
+            M[self._block], b[idx], g[idx] = Mr * self._outer, (nle - g_r) * self.scale, g_r * self.scale
         return M, b, g
 
 
