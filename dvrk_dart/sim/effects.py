@@ -53,7 +53,7 @@ from dvrk_dart.model.identified import spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim.builder import DartPsm
-from dvrk_dart.sim.config import SimConfig, position_load_effort, position_load_table
+from dvrk_dart.sim.config import SimConfig, position_load_table
 
 
 @dataclass(frozen=True)
@@ -96,8 +96,8 @@ class ExplicitEffects:
     directional_armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     #: (target, source, c_sin, c_cos) efforts set by another coordinate's angle
     angle_loads: tuple[tuple[float, ...], ...] = ()
-    #: efforts piecewise linear in a coordinate's position (JointEffects.position_load entries)
-    position_loads: tuple[tuple[float, ...], ...] = ()
+    #: efforts piecewise linear in a coordinate's position: (target, source, knots, values) of JointEffects.position_load
+    position_loads: tuple[tuple[int, int, np.ndarray, np.ndarray], ...] = ()
 
     def armature_at(self, dq: np.ndarray) -> np.ndarray:
         """The armature of the step (the directional part takes the velocity's sign)."""
@@ -127,9 +127,8 @@ class ExplicitEffects:
             effort = effort + (coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
         for target, source, c_sin, c_cos in self.angle_loads:
             effort[int(target)] += c_sin * np.sin(q[int(source)]) + c_cos * np.cos(q[int(source)])
-        for entry in self.position_loads:
-            target, source, _, _ = position_load_table(entry)
-            effort[target] += float(position_load_effort(entry, q[source]))
+        for target, source, knots, values in self.position_loads:
+            effort[target] += float(np.interp(q[source], knots, values, left=0.0, right=0.0))
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
@@ -241,16 +240,15 @@ def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConf
     return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)
 
 
-def _checked_position_loads(entries) -> list[tuple[float, ...]]:
-    """JointEffects.position_load entries as floats: coordinates in range, as
-    many values as knots, knots increasing."""
+def _checked_position_loads(entries) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+    """JointEffects.position_load entries as (target, source, knots, values):
+    coordinates in range, as many values as knots, knots increasing."""
     out = []
     for entry in entries:
-        entry = tuple(float(v) for v in entry)
         if len(entry) < 6 or len(entry) % 2:
             raise DvrkDartError("SimConfig.extra.position_load: (target, source, knots..., values...) with as many values as knots expected")
-        target, source, knots, _ = position_load_table(entry)
+        target, source, knots, values = position_load_table(entry)
         if not (0 <= target < N_JOINTS and 0 <= source < N_JOINTS and np.all(np.diff(knots) > 0.0)):
             raise DvrkDartError(f"SimConfig.extra.position_load: coordinates 0..{N_JOINTS - 1} and increasing knots expected (got {entry[:2]})")
-        out.append(entry)
+        out.append((target, source, knots, values))
     return out
