@@ -7,8 +7,8 @@ every run: about +0.1 N·m at the lower end of the pitch range, -0.05 around
 q2 = 0.5 rad, whatever the direction of motion. J1's residual follows q2 too
 (within +-0.035 N·m). Fitted on "one" as a table in q2 (hat functions
 `KNOT_SPACING_RAD` apart over the training runs' pitch range, pulled towards
-zero by a ridge), each load carries to "two" (J2 0.0745 -> 0.060 N·m, J1
-0.041 -> 0.035, replayed in DART on top of the selected effects) and to
+zero by a ridge), each load carries to "two" (J2 0.075 -> 0.060 N·m, J1
+0.041 -> 0.0345, replayed in DART on top of the selected effects) and to
 "one" in another session. The bodies' gravity does not make this shape
 (sin q2, cos q2 and q3 on J2's gravity row leave "two" at 0.074); a load that
 depends on the pitch angle and not on the motion's direction is what a cable
