@@ -333,6 +333,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
+    from dvrk_dart.runs.config import recorded_processing
+
+    if args.processing is None:
+        recorded = recorded_processing(args.dynamics)
+        args.processing = recorded or "upstream"
+        print(f"processing: {args.processing} ({'the one ' + args.dynamics + ' was fitted on' if recorded else 'the default'})")
     if args.command in REPLAY_SHORTHANDS:
         config = _run_config(args, args.command, args.mode)
     else:

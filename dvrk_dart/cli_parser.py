@@ -139,8 +139,8 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rate", type=RATE_HZ, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
 
 
-def _add_processing_option(p: argparse.ArgumentParser, default: str | None) -> None:
-    said = default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
+def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said: str | None = None) -> None:
+    said = said or default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
     p.add_argument("--processing", default=default, choices=("upstream", "periodic"),
                    help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
                         f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
@@ -266,7 +266,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
             _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
-        _add_processing_option(p, "upstream")
+        _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else upstream")
         sim_options(p)
         p.set_defaults(func=commands.cmd_replay)
 

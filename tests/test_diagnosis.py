@@ -567,3 +567,11 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     assert "above the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
     result["session_floor"] = [0.06, 0.1, 0.15]
     assert "at the session floor" in answer_sentence(result)
+
+
+def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
+    from dvrk_dart.diagnosis.page import repeatable_share, share_words
+
+    shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
+    assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")
+    assert share_words(float(shares[1])) == f"{1 - (0.1**2 - 0.05**2) / (0.3**2 - 0.05**2):.0%}"

@@ -151,7 +151,7 @@ def test_a_periodic_diagnosis_with_a_baseline_reads_the_real_weight(arm, run, pl
     payload = diagnose(run, baseline="one-no-weight", repeat="one", processing="periodic", payload_at=(key, position), arm=arm,
                        figures=False)["payload"]
     assert payload["group"] == "parallelogram" and payload["found"], payload["words"]
-    assert payload["left_out"] == (["one_105_grams_parallel_half_speed_results"] if isinstance(run, list) else [])
+    assert payload["left_out"] == (["one-105g-half"] if isinstance(run, list) else [])
     if placement == "insertion_base":
         # the no-weight baseline's own session change reads as first moment y
         # (the --repeat pair alone: about 0.026 kg·m, against the hand's 0.105 kg

@@ -97,3 +97,18 @@ def test_a_scenario_file_names_its_arm_and_the_command_line_overrides_it(tmp_pat
     scenario.write_text(scenario.read_text().replace('"identified"', '"realistic"'))
     assert main(["run", str(scenario), "--out", str(tmp_path / "bad")]) == 2
     assert "dynamics must be one of inertial, identified" in capsys.readouterr().err
+
+
+def test_a_replay_with_a_diagnosis_file_takes_the_processing_it_was_fitted_on(tmp_path, capsys):
+    from dvrk_dart.sim.config import SimConfig
+
+    path = tmp_path / "one_configuration.json"
+    path.write_text(json.dumps({"sim_config": SimConfig().to_dict(), "processing": {"processing": "periodic", "harmonics": 30}}))
+    for extra, expected in (([], "periodic"), (["--processing", "upstream"], "upstream")):
+        out = tmp_path / expected
+        assert main(["replay", "--measured", "two", "--duration", "1", "--dynamics", str(path), "--out", str(out), *extra]) == 0
+        assert json.loads((out / "metrics.json").read_text())["processing"] == expected
+    assert f"processing: periodic (the one {path} was fitted on)" in capsys.readouterr().out
+    path.write_text(json.dumps({"sim_config": SimConfig().to_dict()}))  # a file from before the processing was recorded
+    assert main(["replay", "--measured", "two", "--duration", "1", "--dynamics", str(path), "--out", str(tmp_path / "old")]) == 0
+    assert json.loads((tmp_path / "old" / "metrics.json").read_text())["processing"] == "upstream"

@@ -117,7 +117,7 @@ def test_parallelogram_weight(parallelogram):
     result, verdicts, _ = parallelogram
     payload = result["payload"]
     assert payload and payload["group"] == "parallelogram"
-    assert payload["left_out"] == ["one_105_grams_parallel_half_speed_results"]
+    assert payload["left_out"] == ["one-105g-half"]
     assert _verdict(verdicts, "--payload-at")["passed"], verdicts
     hand_j2 = -0.105 * 9.81 * 0.165  # the hand lever, N·m
     at = payload["payload_at"]

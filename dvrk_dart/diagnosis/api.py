@@ -17,7 +17,7 @@ from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
-from dvrk_dart.io.reference_data import load_run, resolve_run, sha256_of
+from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import process
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
@@ -55,7 +55,7 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path)
     processed = process(load_run(resolve_run(measured)))
     for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
         record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
-        record.name = f"diagnosis-{Path(str(measured)).stem}_{label}"
+        record.name = f"diagnosis-{run_label(measured)}_{label}"
         record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
                          "counterweight": config.counterweight, "sim": config.to_dict()}
         record.markers.setdefault("rcm", rcm_position(arm))

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.batch import replayed_residuals
-from dvrk_dart.diagnosis.page import repeatable_share
+from dvrk_dart.diagnosis.page import repeatable_share, share_words
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
@@ -220,7 +220,7 @@ def insertion_sentence(study: dict) -> str:
     """The terms, their sizes and the held-out gaps, in words."""
     c = study["coefficients"]
     share = study["repeatable_gap_removed_share"]
-    removed = "" if share is None else f" ({share:.0%} of its repeatable gap removed)"
+    removed = "" if share is None else f" ({share_words(share)} of its repeatable gap removed)"
     less, more = ("less", "more") if c["acceleration_along_motion_kg"] < 0.0 else ("more", "less")
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
             f"({c['acceleration_along_motion_kg']:+.3f} kg: {less} effort than the model while speeding up, {more} while slowing down) and "

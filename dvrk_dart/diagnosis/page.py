@@ -90,6 +90,11 @@ def repeatable_share(before, after, floor):
     return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
 
 
+def share_words(share: float | None) -> str:
+    """A repeatable_share in words: a percentage, or why there is none."""
+    return "not determined (no repeatable gap above the session floor)" if share is None or math.isnan(share) else f"{share:.0%}"
+
+
 def _row_share(split_row: dict) -> float | None:
     """repeatable_share of a row of diagnosis.json's gap_split (None without a floor)."""
     if split_row.get("session_floor") is None:

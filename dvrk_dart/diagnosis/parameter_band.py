@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import run_label
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: a 5-95 % band holds 90 % of the efforts the uncertain parameters produce: a
@@ -42,7 +43,7 @@ def load_band(folder: str | Path) -> dict:
     for key, n in lengths.items():
         if n != len(JOINT_NAMES):
             raise DvrkDartError(f"--parameter-band: {path}: {n} joints in {key}, expected {len(JOINT_NAMES)}")
-    return {**band, "folder": str(folder), "run": Path(str(measured)).stem, "sha256": digest, "replayed_s": replayed}
+    return {**band, "folder": str(folder), "run": run_label(measured), "sha256": digest, "replayed_s": replayed}
 
 
 def band_run(band: dict, runs_sha256: dict[str, str]) -> str:

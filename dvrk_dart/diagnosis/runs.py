@@ -15,7 +15,7 @@ from dvrk_dart.diagnosis.library import (
     config_effort_by_formula,
 )
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process, process_periodic
 from dvrk_dart.model.arm import Arm
 from dvrk_dart.sim.config import SimConfig
@@ -150,14 +150,14 @@ def _load_state(spec, processing: RunProcessing) -> tuple[str, ProcessedRun]:
         return "run", spec
     path = Path(resolve_run(spec))
     stat = path.stat()
-    return _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing)
+    return run_label(spec), _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing)
 
 
 @lru_cache(maxsize=8)
-def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing) -> tuple[str, ProcessedRun]:
+def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing) -> ProcessedRun:
     """One processing per file version: the batch re-simulation prefetches the
     states that prepare_run then meets again (keyed by the file's version)."""
-    return Path(path).stem, process(load_run(path), processing.name, processing.harmonics)
+    return process(load_run(path), processing.name, processing.harmonics)
 
 
 def loaded_states(specs, processing: RunProcessing = RunProcessing()) -> list[ProcessedRun]:

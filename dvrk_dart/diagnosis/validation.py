@@ -29,7 +29,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     JointStiffness,
 )
 from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share
+from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share, share_words
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.payload_checks import validate_real_payload
 from dvrk_dart.diagnosis.result import gaps
@@ -95,7 +95,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     combined = result.get("one_configuration")
     if combined and floor is not None:  # the one configuration's share, likewise
         combined["repeatable_gap_explained_share"] = repeatable_share(bar, combined["gap_holdout"], floor).tolist()
-    shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
+    shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
                  "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
@@ -126,7 +126,7 @@ def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
         return []
     gap, bar = combined["gap_holdout"], result["identified_model_gap_holdout"]
     share = combined.get("repeatable_gap_explained_share")
-    shares = [""] * 3 if share is None else [f"; {v:.0%} of the identified model's repeatable gap explained" for v in share[:3]]
+    shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
     return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects, J3's terms and the pitch-angle loads) closer than the "
                       f"identified model on {j}", "passed": bool(gap[i] <= bar[i]),
              "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}

@@ -152,6 +152,13 @@ def resolve_run(name_or_path: str | Path) -> Path:
     return resolve(text, explicit=text)
 
 
+def run_label(name_or_path: str | Path) -> str:
+    """How outputs name a run: its reference name as given ('two'), else its
+    file's or bag's stem ('two_results' for two_results.csv)."""
+    text = str(name_or_path)
+    return text if text in RUNS else Path(text).stem
+
+
 #: two recordings whose positions agree to this on a whole window are one
 #: recording (rad, m): two sessions differ by the encoders' noise, 1e-4 and
 #: more; a copy with noise added below a tenth of that is still the same recording

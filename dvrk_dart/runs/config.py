@@ -117,6 +117,20 @@ def diagnosis_sim_config(path: Path) -> SimConfig:
     return config
 
 
+def recorded_processing(dynamics: str | None) -> str | None:
+    """The processing a diagnosis file's effects were fitted on (its
+    `processing`), so that a replay with them finds the diagnosis's figures;
+    None for a keyword, a file without it, or one that cannot be read (the
+    replay's own reading of the file says why)."""
+    if dynamics in (None, "inertial", "identified"):
+        return None
+    try:
+        recorded = json.loads(Path(dynamics).read_text(encoding="utf-8")).get("processing", {}).get("processing")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return None
+    return recorded if recorded in ("upstream", "periodic") else None
+
+
 #: JointEffects fields that dissipate or store energy the physical way only when >= 0
 NON_NEGATIVE_EFFECTS = ("coulomb", "viscous", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
 

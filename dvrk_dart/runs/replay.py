@@ -18,7 +18,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
+from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel, load_model
@@ -41,11 +41,6 @@ TORQUE_REPLAY_BANDWIDTH_HZ = 10.0
 #: late (inertia x jerk x dt/2: 0.002 N·m RMS on J1 of the excitation runs,
 #: tests/test_replay.py)
 VELOCITY_TARGET_STAGGER_STEPS = 0.5
-
-
-def _scenario_name(measured: str | Path) -> str:
-    text = str(measured)
-    return text if "/" not in text and not text.endswith(".csv") else Path(text).stem
 
 
 def replay(
@@ -174,7 +169,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
 
     tau_meas, q_meas, dq_meas = (at_logged_times(x) for x in (processed.tau, processed.q, processed.dq))
     record = RunRecord(
-        name=f"replay-{_scenario_name(measured)}_{mode}_cw-{config.counterweight}",
+        name=f"replay-{run_label(measured)}_{mode}_cw-{config.counterweight}",
         config={**config.to_dict(), "mode": mode, "measured": str(measured)},
         t=t,
         q=q,
@@ -194,7 +189,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
     sim_terms = simulated_terms(config)
     dynamic = mode != "kinematic" and len(t) > 0
     metrics = {
-        "scenario": _scenario_name(measured),
+        "scenario": run_label(measured),
         "mode": mode,
         "counterweight": config.counterweight,
         "dt_s": dt,
