@@ -338,7 +338,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.processing is None:
         recorded = recorded_processing(args.dynamics)
         args.processing = recorded or "upstream"
-        print(f"processing: {args.processing} ({'the one ' + args.dynamics + ' was fitted on' if recorded else 'the default'})")
+        why = f"the one {args.dynamics} was fitted on" if recorded else "the default"
+        print(f"processing: {args.processing} ({why})")
     if args.command in REPLAY_SHORTHANDS:
         config = _run_config(args, args.command, args.mode)
     else:
