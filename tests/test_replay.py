@@ -142,7 +142,9 @@ def test_kinematic_replay_follows_the_measured_pose():
 def test_torque_mode_tracks_the_excitation(measured, tmp_path, capsys):
     """The paper's torque controller (Eq. 6-7) with the simulated arm's own
     inertia tracks every supplied excitation in DART: no divergence, the joint
-    tracking RMS of J1..J7 in metrics.json, J1..J3 below 1e-3 rad (m for J3)."""
+    tracking RMS of J1..J7 in metrics.json. With the simulated arm's own inertia
+    and velocities staggered like DART's, J1..J3 follow the positions to about
+    1e-7 rad (m for J3); damping against unstaggered velocities left 7e-5."""
     from dvrk_dart.cli import main
 
     out = tmp_path / measured
@@ -150,5 +152,5 @@ def test_torque_mode_tracks_the_excitation(measured, tmp_path, capsys):
     metrics = json.loads((out / "metrics.json").read_text())
     assert "error" not in metrics and metrics["duration_s"] > 27.0
     tracking = np.array(metrics["rms_q_sim_vs_measured"])
-    assert tracking.shape == (7,) and np.all(tracking[:3] < 1e-3), tracking
+    assert tracking.shape == (7,) and np.all(tracking[:3] < 1e-5), tracking
     assert metrics["closure_residual_max_m"] < 1e-9

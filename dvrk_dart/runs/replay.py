@@ -33,13 +33,14 @@ from dvrk_dart.sim.simulator import PsmSimulator
 #: paper's Eq. 6-7 with the simulated arm's own inertia, critically damped,
 #: every joint alike: kp = w^2, kd = 2 w)
 TORQUE_REPLAY_BANDWIDTH_HZ = 10.0
-#: velocity replay: the servo's velocity targets sit half a step before the
-#: position grid. DART integrates semi-implicitly (x_k+1 = x_k + dt v_k+1), so v_k+1 is
-#: the velocity over [t_k, t_k+1], at its midpoint, and the step's acceleration
-#: (v_k+1 - v_k) / dt is then centred on t_k, where the state's positions and
-#: the logged effort are. Targets at t_k+1 put the inertial effort half a step
-#: late (inertia x jerk x dt/2: 0.002 N·m RMS on J1 of the excitation runs,
-#: tests/test_replay.py)
+#: velocity and torque replays: the velocity references sit half a step before
+#: the position grid. DART integrates semi-implicitly (x_k+1 = x_k + dt v_k+1), so
+#: v_k+1 is the velocity over [t_k, t_k+1], at its midpoint, and the step's
+#: acceleration (v_k+1 - v_k) / dt is then centred on t_k, where the state's
+#: positions and the logged effort are. Velocity targets at t_k+1 put the
+#: inertial effort half a step late (inertia x jerk x dt/2: 0.002 N·m RMS on J1
+#: of the excitation runs, tests/test_replay.py); the torque mode's damping
+#: against unstaggered velocities tracked the positions to 7e-5 rad, not 3e-8
 VELOCITY_TARGET_STAGGER_STEPS = 0.5
 
 
@@ -106,17 +107,18 @@ def replay_processed(
     dt = config.dt_s
     steps = int(round(duration / dt)) + (1 if through_last_sample else 0)
     q_ref = CubicSpline(t_meas, processed.q)
-    dq_ref = CubicSpline(t_meas, processed.dq)
-    # references on the simulation grid, evaluated once (t_k = k dt, k = 0..steps)
+    # torque mode: the measured positions' spline and its derivatives (a consistent trajectory:
+    # the measured velocities differ from d/dt q by 0.01-0.08 rad/s, which costs tracking)
+    dq_ref = q_ref.derivative() if mode == "torque" else CubicSpline(t_meas, processed.dq)
+    # references on the simulation grid, evaluated once (t_k = k dt, k = 0..steps); the
+    # simulated velocities are staggered half a step (VELOCITY_TARGET_STAGGER_STEPS)
     grid = np.arange(steps + 1) * dt
-    velocity_grid = grid - VELOCITY_TARGET_STAGGER_STEPS * dt if mode == "velocity" else grid
+    velocity_grid = grid if mode == "kinematic" else grid - VELOCITY_TARGET_STAGGER_STEPS * dt
     sim = PsmSimulator(model, params, config)
     sim.reset(q_ref(0.0), dq_ref(velocity_grid[0]))
     driver = ReplayDriver(mode, q_ref(grid), dq_ref(velocity_grid), dt)
     if mode == "torque":
-        # the reference is the measured positions' spline and its derivatives (a consistent trajectory:
-        # the measured velocities differ from d/dt q by 0.01-0.08 rad/s, which costs tracking)
-        driver.dq_grid, driver.ddq_grid = q_ref(grid, 1), q_ref(grid, 2)
+        driver.ddq_grid = q_ref(grid, 2)
         omega = 2.0 * np.pi * TORQUE_REPLAY_BANDWIDTH_HZ
         driver.kp, driver.kd = omega**2, 2.0 * omega
     wall_start = time.perf_counter()
