@@ -67,7 +67,10 @@ class CartesianDriver:
         T_d, twist_d, acc_d = self.reference(t)
         q, dq = sim.q, sim.dq
         if self.mode == "velocity":
-            sim.step_velocity(self.kinematic.joint_velocity(q, T_d, twist_d))
+            # the step's velocity is its mean over [t, t + dt] (semi-implicit Euler, below):
+            # feed forward the reference's velocity there, centred at t + dt/2
+            _, v_half, _ = self.path.position_velocity_acceleration(t + self.dt / 2)
+            sim.step_velocity(self.kinematic.joint_velocity(q, T_d, np.r_[v_half, np.zeros(3)]))
         else:
             # semi-implicit Euler: q_k = q_(k-1) + dt dq_k, so the sampled velocity is the
             # mean over the previous step, centred at t - dt/2: compare it with the
