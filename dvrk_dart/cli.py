@@ -286,7 +286,7 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
                                     "use --mode velocity or torque")
     dynamics = args.dynamics or spec.dynamics
     return RunConfig(scenario, mode, args.counterweight or "on", dynamics, args.dt, args.duration, args.params, measured,
-                     getattr(args, "processing", "upstream"))
+                     getattr(args, "processing", "upstream"), getattr(args, "harmonics", None))
 
 
 def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
@@ -333,18 +333,38 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    from dvrk_dart.runs.config import recorded_processing
-
-    if args.processing is None:
-        recorded = recorded_processing(args.dynamics)
-        args.processing = recorded or "upstream"
-        why = f"the one {args.dynamics} was fitted on" if recorded else "the default"
-        print(f"processing: {args.processing} ({why})")
+    recorded = _replay_processing(args)
     if args.command in REPLAY_SHORTHANDS:
         config = _run_config(args, args.command, args.mode)
     else:
         config = _run_config(args, "replay", args.mode, measured=args.measured)
-    return _run_and_write(config, Path(args.out) if args.out else None)
+    try:
+        return _run_and_write(config, Path(args.out) if args.out else None)
+    except DvrkDartError as exc:
+        if recorded and "--processing periodic" in str(exc):  # the user did not ask for it: say where it came from
+            raise DvrkDartError(f"{exc}; --dynamics {args.dynamics} records the periodic processing: give --processing upstream") from None
+        raise
+
+
+def _replay_processing(args: argparse.Namespace) -> bool:
+    """Set a replay's processing (and harmonic cutoff) when --processing is not
+    given: the one a --dynamics diagnosis file was fitted on, so that the replay
+    finds its figures; upstream otherwise. True when it came from the file."""
+    from dvrk_dart.runs.config import recorded_processing
+
+    args.harmonics = None
+    if args.processing is not None:
+        return False
+    recorded = recorded_processing(args.dynamics)
+    if recorded is None or args.duration is not None:
+        args.processing = "upstream"
+        why = ("--duration replays a part of the run, which has no projection of its own" if recorded else "the default")
+        print(f"processing: upstream ({why})")
+        return False
+    args.processing, args.harmonics = recorded
+    cutoff = "" if args.harmonics is None else f", {args.harmonics} harmonics"
+    print(f"processing: {args.processing}{cutoff} (the one {args.dynamics} was fitted on)")
+    return True
 
 
 def cmd_validate(args: argparse.Namespace) -> int:

@@ -126,9 +126,9 @@ def test_efforts_are_read_at_their_samples(arm):
     simulated = simulate_efforts(arm, config, processed)
     model = arm.identified.predict(processed.q, processed.dq, processed.ddq, simulated_terms(config))
     half_step_lag = np.gradient(model, processed.t, axis=0) * config.dt_s / 2
-    # a lag of a quarter step already fails (measured: 0.2 of the half step's, the
-    # velocity terms' own half step left by DART's staggered velocities)
-    assert np.all(rms((simulated - model)[:, :3]) <= 0.5 * rms(half_step_lag[:, :3])), rms(simulated - model)
+    # measured: 0.2 of the half step's lag (the velocity terms' own half step left
+    # by DART's staggered velocities); a quarter step's lag gives 0.45, none 0.9
+    assert np.all(rms((simulated - model)[:, :3]) <= 0.3 * rms(half_step_lag[:, :3])), rms(simulated - model)
     assert np.max(np.abs(simulated - model)[:, :3]) <= 0.005
 
 

@@ -104,11 +104,21 @@ def test_a_replay_with_a_diagnosis_file_takes_the_processing_it_was_fitted_on(tm
 
     path = tmp_path / "one_configuration.json"
     path.write_text(json.dumps({"sim_config": SimConfig().to_dict(), "processing": {"processing": "periodic", "harmonics": 30}}))
-    for extra, expected in (([], "periodic"), (["--processing", "upstream"], "upstream")):
+    for extra, expected, harmonics in (([], "periodic", 30), (["--processing", "upstream"], "upstream", None)):
         out = tmp_path / expected
-        assert main(["replay", "--measured", "two", "--duration", "1", "--dynamics", str(path), "--out", str(out), *extra]) == 0
-        assert json.loads((out / "metrics.json").read_text())["processing"] == expected
-    assert f"processing: periodic (the one {path} was fitted on)" in capsys.readouterr().out
+        assert main(["replay", "--measured", "two", "--dynamics", str(path), "--out", str(out), *extra]) == 0
+        metrics = json.loads((out / "metrics.json").read_text())
+        assert metrics["processing"] == expected and metrics.get("harmonics") == harmonics  # "two" alone would take 35
+    assert f"processing: periodic, 30 harmonics (the one {path} was fitted on)" in capsys.readouterr().out
+    # a part of the run has no projection of its own
+    assert main(["replay", "--measured", "two", "--duration", "1", "--dynamics", str(path), "--out", str(tmp_path / "part")]) == 0
+    assert json.loads((tmp_path / "part" / "metrics.json").read_text())["processing"] == "upstream"
+    # a run that is not periodic: the one-line error says where the processing came from and the way out
+    lines = resolve("two_results.csv").read_text().splitlines()
+    (tmp_path / "part.csv").write_text("\n".join(lines[:1500]) + "\n")
+    assert main(["replay", "--measured", str(tmp_path / "part.csv"), "--dynamics", str(path), "--out", str(tmp_path / "np")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give --processing upstream" in err[0] and not (tmp_path / "np").exists(), err
     path.write_text(json.dumps({"sim_config": SimConfig().to_dict()}))  # a file from before the processing was recorded
     assert main(["replay", "--measured", "two", "--duration", "1", "--dynamics", str(path), "--out", str(tmp_path / "old")]) == 0
     assert json.loads((tmp_path / "old" / "metrics.json").read_text())["processing"] == "upstream"

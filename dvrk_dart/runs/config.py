@@ -48,6 +48,9 @@ class RunConfig:
     #: a replay's processing of the measured run (io/signal.py): its reference
     #: for the servo and the band its efforts are compared in
     processing: str = "upstream"
+    #: the periodic processing's harmonic cutoff (None: the run's own), as a
+    #: diagnosis that compared several runs on their smallest one recorded it
+    harmonics: int | None = None
 
     def __post_init__(self) -> None:
         if self.processing not in ("upstream", "periodic"):
@@ -117,18 +120,21 @@ def diagnosis_sim_config(path: Path) -> SimConfig:
     return config
 
 
-def recorded_processing(dynamics: str | None) -> str | None:
-    """The processing a diagnosis file's effects were fitted on (its
-    `processing`), so that a replay with them finds the diagnosis's figures;
-    None for a keyword, a file without it, or one that cannot be read (the
-    replay's own reading of the file says why)."""
-    if dynamics in (None, "inertial", "identified"):
+def recorded_processing(dynamics: str | None) -> tuple[str, int | None] | None:
+    """(processing, harmonic cutoff) a diagnosis file's effects were fitted on
+    (its `processing`), so that a replay with them finds the diagnosis's
+    figures; None for a keyword, a file without it, or one that cannot be read
+    (the replay's own reading of the file says why)."""
+    if dynamics in (None, *DYNAMICS_CHOICES):
         return None
     try:
-        recorded = json.loads(Path(dynamics).read_text(encoding="utf-8")).get("processing", {}).get("processing")
+        recorded = json.loads(Path(dynamics).read_text(encoding="utf-8")).get("processing", {})
+        name, harmonics = recorded.get("processing"), recorded.get("harmonics")
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
         return None
-    return recorded if recorded in ("upstream", "periodic") else None
+    if name not in ("upstream", "periodic"):
+        return None
+    return name, harmonics if name == "periodic" and isinstance(harmonics, int) and harmonics > 0 else None
 
 
 #: JointEffects fields that dissipate or store energy the physical way only when >= 0

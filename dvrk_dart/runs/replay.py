@@ -53,6 +53,7 @@ def replay(
     model: PsmModel | None = None,
     params: IdentifiedParameters | None = None,
     processing: str = "upstream",
+    harmonics: int | None = None,
 ) -> RunRecord:
     """Replay a measured run ('two', a manifest name or a CSV path).
 
@@ -64,7 +65,7 @@ def replay(
         raise DvrkDartError("log_every must be >= 1")
     model = model or load_model()
     params = params or load_parameters(resolve(model.default_parameters), model)
-    processed = process(load_run(resolve_run(measured)), processing)
+    processed = process(load_run(resolve_run(measured)), processing, harmonics)
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 
@@ -99,7 +100,8 @@ def replay_processed(
     """The replay of an already processed run (`measured` names it).
 
     through_last_sample: one more step so that the logged samples cover every
-    measured sample (the last step's reference is extrapolated by 1 step)."""
+    measured sample (the last step's position reference is extrapolated by a
+    step, its velocity reference by half a step)."""
     identified = IdentifiedModel(model, params)
     t_meas = processed.t - processed.t[0]
     duration = replay_duration(processed, duration_s)

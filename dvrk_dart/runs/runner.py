@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
-from dvrk_dart.io.reference_data import resolve_run, sha256_of
+from dvrk_dart.io.reference_data import resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import TORQUE_TRANSIENT_S, rms
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.identified import TERMS
@@ -70,7 +70,7 @@ def scenario_of(config: RunConfig) -> Scenario:
     if config.measured is not None:
         if scenario.kind != "replay":
             raise DvrkDartError(f"--measured: scenario '{scenario.name}' is not a replay")
-        scenario = Scenario(f"replay-{Path(config.measured).stem}", "replay", scenario.modes, scenario.counterweights,
+        scenario = Scenario(f"replay-{run_label(config.measured)}", "replay", scenario.modes, scenario.counterweights,
                             scenario.duration_s, measured=config.measured, dynamics=scenario.dynamics, arm_model=scenario.arm_model)
     return scenario
 
@@ -104,7 +104,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
 
         try:
             record = replay(scenario.measured, mode=mode, config=sim_config, duration_s=duration, model=arm.model, params=arm.params,
-                            processing=config.processing)
+                            processing=config.processing, harmonics=config.harmonics)
         except SimulationDiverged as exc:  # keep what was logged up to the divergence
             record = exc.record
     else:
