@@ -11,6 +11,7 @@ from pathlib import Path
 import sys
 
 from dvrk_dart.io.reference_data import RUNS, reference_run_arm
+from dvrk_dart.io.signal import PROCESSINGS
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
@@ -141,7 +142,7 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
 
 def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said: str | None = None) -> None:
     said = said or default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
-    p.add_argument("--processing", default=default, choices=("upstream", "periodic"),
+    p.add_argument("--processing", default=default, choices=PROCESSINGS,
                    help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
                         f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.signal import PROCESSINGS
 from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES, MAX_DURATION_S  # noqa: F401  (the CLI's bound too)
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
@@ -53,7 +54,7 @@ class RunConfig:
     harmonics: int | None = None
 
     def __post_init__(self) -> None:
-        if self.processing not in ("upstream", "periodic"):
+        if self.processing not in PROCESSINGS:
             raise DvrkDartError(f"--processing: '{self.processing}' is not upstream or periodic")
         if not (MIN_STEP_S <= self.dt_s <= MAX_STEP_S):
             raise DvrkDartError(f"--dt: {self.dt_s} s is outside [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s")
@@ -132,9 +133,10 @@ def recorded_processing(dynamics: str | None) -> tuple[str, int | None] | None:
         name, harmonics = recorded.get("processing"), recorded.get("harmonics")
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
         return None
-    if name not in ("upstream", "periodic"):
+    if name not in PROCESSINGS:
         return None
-    return name, harmonics if name == "periodic" and isinstance(harmonics, int) and harmonics > 0 else None
+    cutoff = harmonics if name == "periodic" and isinstance(harmonics, int) and harmonics > 0 else None
+    return name, cutoff
 
 
 #: JointEffects fields that dissipate or store energy the physical way only when >= 0
