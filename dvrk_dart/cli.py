@@ -188,13 +188,15 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     from dvrk_dart.io.atomic import json_text
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.metrics import relative_error, rms
+    from dvrk_dart.io.excitation_design import read_design
+    from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.arm import load_arm
     from dvrk_dart.model.identified import parse_terms
 
     arm = load_arm(params_file=args.params)
     terms = parse_terms(args.terms)
-    processed = process(load_run(resolve_run(args.measured)), args.processing)
+    design = read_design(args.excitation) if getattr(args, "excitation", None) else None
+    processed = process(load_run(resolve_run(args.measured)), args.processing, design=design)
     with np.errstate(over="ignore", invalid="ignore"):
         predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
         sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
@@ -208,8 +210,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
             raise DvrkDartError(f"--first-period: {args.measured} has {len(measured)} processed samples, fewer than one period ({n})")
         predicted, measured = predicted[:n], measured[:n]
     result = {
-        "relative_error": relative_error(predicted, measured).tolist(),
-        "rms": rms(predicted - measured).tolist(),
+        "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
+        "rms": per_measured_joint(rms(predicted - measured), processed.measured),
         "samples": len(measured),
         "terms": args.terms,
         **processed.summary(),
@@ -219,12 +221,17 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     else:
         print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {args.processing} processing")
         if processed.periodic is not None:
-            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['harmonics']} harmonics, "
-                  f"{result['whole_periods']} whole periods")
-        print(f"{'joint':>6} {'relative':>9} {'rms':>10}")
-        for name, rel, r in zip(JOINT_NAMES, result["relative_error"], result["rms"]):
+            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['whole_periods']} whole periods, "
+                  f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
+                  f"from {result['design_from']})")
+        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if processed.periodic is not None else ""))
+        for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
+            if r is None:
+                print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record {name})")
+                continue
+            cutoff = f" {result['joint_cutoffs'][j]:9d}" if processed.periodic is not None else ""
             why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
-            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}{why}")
+            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}{cutoff}{why}")
     return 0
 
 

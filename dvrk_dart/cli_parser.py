@@ -145,6 +145,9 @@ def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said
     p.add_argument("--processing", default=default, choices=PROCESSINGS,
                    help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
                         f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
+    p.add_argument("--excitation", default=None, type=measured_run, metavar="FILE",
+                   help="the commanded excitation (a *_commanded.csv of q, dq, ddq rows, or `dvrk-dart excitation`'s CSV): "
+                        "the periodic processing takes its period and harmonics from it instead of reading them from the run")
 
 
 REPLAY_SHORTHANDS = {

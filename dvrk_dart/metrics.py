@@ -20,6 +20,11 @@ def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> 
         return np.where(size > 0.0, np.linalg.norm(actual - reference, axis=axis) / size, np.nan)
 
 
+def per_measured_joint(values, measured) -> list:
+    """Per-joint figures as a list, `None` (not measured) where the run did not record the joint."""
+    return [float(v) if m else None for v, m in zip(np.asarray(values, dtype=float), measured)]
+
+
 #: torque-mode tracking is judged after the closed loop's initial transient (s)
 TORQUE_TRANSIENT_S = 1.0
 

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import N_JOINTS, column_names
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
 from dvrk_dart.paths import PROJECT_DIR
 
 MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
@@ -94,10 +94,18 @@ def check_glitches(values: np.ndarray, rate_hz: float, where: str) -> None:
 
 @dataclass(frozen=True)
 class MeasuredRun:
-    """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7."""
+    """A measured run: named, typed columns t, q1..q7, dq1..dq7, tau1..tau7.
+    `measured`: the joints the run recorded; the others' columns hold zeros
+    (the arm held at zero) and carry no figure, fit or cutoff."""
 
     path: Path
     data: pd.DataFrame
+    measured: tuple[str, ...] = JOINT_NAMES
+
+    @property
+    def measured_mask(self) -> np.ndarray:
+        """(7,) bool: which of q1..q7 the run recorded."""
+        return np.array([name in self.measured for name in JOINT_NAMES])
 
     @property
     def name(self) -> str:

@@ -18,12 +18,20 @@ differentiating (io/signal.py, upstream's processing):
 - a model's prediction is projected on the same harmonics (`ProcessedRun.in_band`),
   so that both sides of a comparison see the same band.
 
-The cutoff: the efforts' harmonics stand above their noise up to some order,
-then sink into it. `cutoff` is the last harmonic before the first run of
-`CUTOFF_RUN` consecutive harmonics whose power is less than `CUTOFF_SNR` times
-the local noise power, on the joint where that comes first: every joint's
-efforts are then clearly above their noise in the kept band, and the analytic
-accelerations (which weigh harmonic k by k^2) carry little position noise.
+The cutoff: a joint's efforts' harmonics stand above their noise up to some
+order, then sink into it. Each joint's cutoff is read from its own spectrum:
+the last harmonic before the first run of `CUTOFF_RUN` consecutive harmonics
+whose power is less than `CUTOFF_SNR` times the local noise power. The run's
+band (`harmonics`) is the smallest cutoff of the joints that move and were
+recorded: every such joint's efforts are then clearly above their noise in
+the kept band, and the analytic accelerations (which weigh harmonic k by k^2)
+carry little position noise. A joint the run did not record, or that does not
+move (a held wrist: its efforts are coupling and noise), has no say. One band
+for every joint, because a joint's efforts depend on every joint's motion:
+the regressor and the predictions are projected on the same harmonics as the
+measured efforts. A moving joint's efforts carry at least the excitation's
+design harmonics (its motion's own), so the band keeps at least those, known
+from `--excitation` or read from the positions (`design_harmonics`).
 """
 
 from __future__ import annotations
@@ -47,8 +55,18 @@ MIN_EXPLAINED_VARIANCE = 0.99
 #: joint at unit variance) reaches this; trajectories "one" and "two": > 0.99
 MIN_REPEAT_CORRELATION = 0.8
 #: harmonics of the positions in the coarse-to-fine period search (the
-#: identification's excitations are 6-harmonic series)
+#: identification's excitations are 5- and 6-harmonic series)
 SEARCH_HARMONICS = 6
+#: a joint moves when its positions' standard deviation is at least this
+#: fraction of the most moving joint's (rad and m alike: a held joint's servo
+#: error is < 0.1 % of a moving one's, an excited insertion ~5 %)
+MOTION_FRACTION = 0.01
+#: the design's harmonics read from the positions: the fewest whose series
+#: explains the moving joints' positions (each at unit variance) to this
+#: fraction of their variance (the supplied excitations: 0.2-0.9 below their
+#: 5 or 6 harmonics, 0.9997-0.99997 at them: the tracking error is the rest)
+DESIGN_EXPLAINED_VARIANCE = 0.999
+DESIGN_MAX_HARMONICS = 20
 #: harmonics of the positions in the final Gauss-Newton fit of the period (the
 #: measured positions of "one" and "two" stand above their noise up to ~30-60),
 #: and its iterations (it converges in two or three)
@@ -207,13 +225,24 @@ def _fit_frequency(t: np.ndarray, x: np.ndarray, rate_hz: float, start_hz: float
     return frequency, standard_error
 
 
-def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str) -> Period:
-    """The base period of a run's positions, checked: periodic, two whole periods or more, stable."""
+def moving_joints(q: np.ndarray, measured: np.ndarray | None = None) -> np.ndarray:
+    """(n,) bool: the measured joints whose positions move (`MOTION_FRACTION`)."""
+    spread = np.std(q, axis=0)
+    if measured is not None:
+        spread = np.where(measured, spread, 0.0)
+    return (spread > 0) & (spread >= MOTION_FRACTION * spread.max())
+
+
+def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_period_s: float | None = None) -> Period:
+    """The base period of a run's positions (the moving joints' columns),
+    checked: periodic, two whole periods or more, stable. `start_period_s`:
+    the design's period, where it is known (refined on the data)."""
     x = _unit_variance(q)
     if x.shape[1] == 0:
         raise DvrkDartError(f"{where}: the arm does not move: not a periodic excitation")
     try:
-        frequency, standard_error = _fit_frequency(t, x, rate_hz)
+        start_hz = None if start_period_s is None else 1.0 / start_period_s
+        frequency, standard_error = _fit_frequency(t, x, rate_hz, start_hz)
     except DvrkDartError as exc:
         raise DvrkDartError(f"{where}: {exc}") from None
     whole = int(math.floor((t[-1] - t[0]) * frequency + 1e-9))
@@ -266,17 +295,27 @@ def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _
     return _Spectrum(power, noise, lines[noise_line].mean(axis=0))
 
 
-def choose_cutoff(spectrum: _Spectrum, limit: int | None = None) -> int:
-    """The module docstring's cutoff rule on the efforts' spectrum."""
+def joint_cutoffs(spectrum: _Spectrum) -> np.ndarray:
+    """(n,) the module docstring's cutoff rule on each column's own spectrum (at least 1)."""
     ratio = spectrum.harmonic_power[1:] / np.maximum(spectrum.noise_power[1:], np.finfo(float).tiny)
     below = (ratio < CUTOFF_SNR).astype(int)
     runs = np.apply_along_axis(lambda b: np.convolve(b, np.ones(CUTOFF_RUN, dtype=int), "valid"), 0, below)
-    cutoffs = []
+    cutoffs = np.empty(ratio.shape[1], dtype=int)
     for j in range(ratio.shape[1]):
         sunk = np.flatnonzero(runs[:, j] >= CUTOFF_RUN)
-        cutoffs.append(int(sunk[0]) if len(sunk) else ratio.shape[0])
-    cutoff = max(1, min(cutoffs))
-    return cutoff if limit is None else min(cutoff, limit)
+        cutoffs[j] = max(1, int(sunk[0]) if len(sunk) else ratio.shape[0])
+    return cutoffs
+
+
+def design_harmonics(t: np.ndarray, q_moving: np.ndarray, period: Period) -> int:
+    """The fewest harmonics whose series explains the moving joints' positions
+    to `DESIGN_EXPLAINED_VARIANCE` (the excitation's design, read from the run)."""
+    x = _unit_variance(q_moving)
+    total = float(np.sum(x**2))
+    for k in range(1, DESIGN_MAX_HARMONICS + 1):
+        if 1.0 - _residual_energy(period.frequency_hz, t, x, k) / total >= DESIGN_EXPLAINED_VARIANCE:
+            return k
+    return DESIGN_MAX_HARMONICS
 
 
 def _noise(spectrum: _Spectrum, harmonics: int, samples: int, periods: int) -> Noise:
@@ -339,37 +378,69 @@ class PeriodicAnalysis:
     effort_noise: Noise
     position_noise: Noise
     projector: Projector
+    #: each joint's own cutoff (0: not recorded); which joints move (they set the band)
+    joint_cutoffs: tuple[int, ...] = ()
+    moving: tuple[bool, ...] = ()
+    design_harmonics: int = 0
+    design_from: str = ""
+
+    @property
+    def measured(self) -> tuple[bool, ...]:
+        return tuple(k > 0 for k in self.joint_cutoffs)
 
     def summary(self) -> dict:
-        """The figures every output records."""
+        """The figures every output records (per joint: `None` where the run did not record it)."""
+        def per_joint(values):
+            return [v if recorded else None for v, recorded in zip(values, self.measured)]
+
         return {
             "processing": "periodic",
             "period_s": self.period.period_s,
             "period_standard_error_s": self.period.standard_error_s,
             "whole_periods": self.period.whole_periods,
             "harmonics": self.harmonics,
-            "cutoff_rule": f"last harmonic before {CUTOFF_RUN} consecutive harmonics of a joint's efforts "
-                           f"below {CUTOFF_SNR:g} x their local noise power",
-            "noise_rms": self.effort_noise.projected_rms.tolist(),
-            "noise_per_sample_rms": self.effort_noise.per_sample_rms.tolist(),
-            "position_noise_per_sample_rms": self.position_noise.per_sample_rms.tolist(),
+            "joint_cutoffs": per_joint(self.joint_cutoffs),
+            "moving_joints": [bool(m) for m in self.moving],
+            "design_harmonics": self.design_harmonics,
+            "design_from": self.design_from,
+            "cutoff_rule": f"per joint: the last harmonic before {CUTOFF_RUN} consecutive harmonics of its efforts below "
+                           f"{CUTOFF_SNR:g} x their local noise power; the band: the smallest of the moving, recorded joints', "
+                           "at least the design's harmonics",
+            "noise_rms": per_joint(self.effort_noise.projected_rms.tolist()),
+            "noise_per_sample_rms": per_joint(self.effort_noise.per_sample_rms.tolist()),
+            "position_noise_per_sample_rms": per_joint(self.position_noise.per_sample_rms.tolist()),
             "noise_periods": self.effort_noise.whole_periods,
         }
 
 
-def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where: str, harmonics: int | None = None) -> PeriodicAnalysis:
+def band_harmonics(cutoffs: np.ndarray, deciding: np.ndarray, floor: int) -> int:
+    """The run's band: the smallest cutoff of the `deciding` joints (moving and recorded), at least `floor`."""
+    if not deciding.any():
+        return max(1, floor)
+    return max(int(cutoffs[deciding].min()), floor)
+
+
+def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where: str, harmonics: int | None = None,
+            measured: np.ndarray | None = None, design=None) -> PeriodicAnalysis:
     """The periodic layer on one run (raises a one-line DvrkDartError naming `where` if it is not periodic).
-    `harmonics` imposes the cutoff (runs compared with each other share the smaller one)."""
+    `harmonics` imposes the band (runs compared with each other share the
+    smaller one); `measured` (n,) bool: the joints the run recorded (default
+    all); `design`: an ExcitationDesign (the commanded period and harmonics) where it is known."""
     t = np.asarray(t, dtype=float) - float(t[0])
-    period = fit_period(t, q, rate_hz, where)
+    measured = np.ones(q.shape[1], bool) if measured is None else np.asarray(measured, bool)
+    moving = moving_joints(q, measured)
+    period = fit_period(t, q[:, moving], rate_hz, where, None if design is None else design.period_s)
+    floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)
     effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
-    cutoff = choose_cutoff(effort_spectrum) if harmonics is None else min(int(harmonics), top)
-    projector = Projector(t, period.frequency_hz, cutoff)
+    cutoffs = np.where(measured, np.minimum(joint_cutoffs(effort_spectrum), top), 0)
+    band = band_harmonics(cutoffs, moving, min(floor, top)) if harmonics is None else min(int(harmonics), top)
+    projector = Projector(t, period.frequency_hz, band)
     position_spectrum = _spectrum(t, q, period, rate_hz)
     return PeriodicAnalysis(
-        period, cutoff, projector.series(q), projector.series(tau),
-        _noise(effort_spectrum, cutoff, len(t), period.whole_periods),
-        _noise(position_spectrum, cutoff, len(t), period.whole_periods),
-        projector,
+        period, band, projector.series(q), projector.series(tau),
+        _noise(effort_spectrum, band, len(t), period.whole_periods),
+        _noise(position_spectrum, band, len(t), period.whole_periods),
+        projector, tuple(int(k) for k in cutoffs), tuple(bool(m) for m in moving), int(floor),
+        "--excitation " + design.source if design is not None else "the positions",
     )

@@ -16,6 +16,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.io.bags import current_topics, is_bag, load_bag_run
+from dvrk_dart.io.csv_run import read_csv_run
 from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers' names)
     CSV_COLUMNS,
     MANIFEST_FILE,
@@ -52,14 +53,16 @@ def reference_run_arm(name: str) -> str:
     return RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
 
 
-def rate_of(path: Path) -> tuple[float, str]:
-    """(rows per second, where it comes from) of a CSV: --rate, else the
-    manifest's entry of that file name, else the reference data's default."""
+def rate_of(path: Path, time_column_hz: float | None = None) -> tuple[float, str]:
+    """(rows per second, where it comes from) of a CSV: --rate, else its time
+    column's, else the manifest's entry of that file name, else the reference data's default."""
     explicit = current_topics().rate_hz
     if explicit is not None:
         if not (np.isfinite(explicit) and explicit > 0):
             raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
         return float(explicit), "--rate"
+    if time_column_hz is not None:
+        return time_column_hz, "its time column"
     entry = manifest()["files"].get(Path(path).name, {})
     if "sample_rate_hz" in entry:
         return float(entry["sample_rate_hz"]), f"{MANIFEST_FILE.name} [{Path(path).name}]"
@@ -75,8 +78,15 @@ def input_record(path: str | Path) -> dict:
         topics = current_topics()
         entry["bag_topics"] = {"arm": topics.arm, "topic": topics.joint_topic, "jaw_topic": topics.jaw, "rate_hz": topics.rate}
     else:
-        entry["rate_hz"], entry["rate_from"] = rate_of(path)
+        entry["rate_hz"], entry["rate_from"] = rate_of(path, _time_column_rate(path))
     return entry
+
+
+def _time_column_rate(path: Path) -> float | None:
+    from dvrk_dart.model.description import load_model
+
+    model = load_model()
+    return read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names).rate_hz
 
 
 def _checked(path: Path, name: str) -> Path:
@@ -213,50 +223,23 @@ def same_recording(a: np.ndarray, b: np.ndarray) -> bool:
     return window_of(a, b) or window_of(b, a)
 
 
-def _numbers_or_error(path: Path) -> np.ndarray:
-    """Read the CSV as text to name the first cell that is not a number."""
-    try:
-        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False)
-    except pd.errors.EmptyDataError:
-        raise DvrkDartError(f"{path}: file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]})") from None
-    if raw.shape[1] != len(CSV_COLUMNS):
-        raise DvrkDartError(f"{path}: {raw.shape[1]} columns, expected {len(CSV_COLUMNS)} (q1..q7, dq1..dq7, tau1..tau7)")
-    numeric = raw.apply(pd.to_numeric, errors="coerce")
-    bad = numeric.isna() & raw.notna()
-    if bad.to_numpy().any():
-        row, col = np.argwhere(bad.to_numpy())[0]
-        raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: '{raw.iat[row, col]}' is not a number")
-    return numeric.to_numpy(dtype=float)
-
-
 def load_run(path: Path | str) -> MeasuredRun:
-    """Load a measured run (the upstream CSV format, or a ROS bag read with the
-    command's topics: io/bags.py), with one-line errors."""
+    """Load a measured run (a CSV in any layout of io/csv_run.py, or a ROS bag
+    read with the command's topics: io/bags.py), with one-line errors."""
+    from dvrk_dart.model.description import load_model
+
     path = Path(path)
     if is_bag(path):
         return load_bag_run(path)
-    if not path.is_file():
-        raise DvrkDartError(f"{path}: file not found")
-    if not os.access(path, os.R_OK):
-        raise DvrkDartError(f"{path}: not readable (permission denied)")
-    try:
-        values = pd.read_csv(path, header=None, dtype=float, skip_blank_lines=True, index_col=False).to_numpy()
-    except (ValueError, pd.errors.ParserError, UnicodeDecodeError):  # a well-formed file reads as numbers at once
-        values = _numbers_or_error(path)
-    if values.shape[1] != len(CSV_COLUMNS):
-        raise DvrkDartError(f"{path}: {values.shape[1]} columns, expected {len(CSV_COLUMNS)} (q1..q7, dq1..dq7, tau1..tau7)")
-    if not np.all(np.isfinite(values)):
-        row, col = np.argwhere(~np.isfinite(values))[0]
-        raise DvrkDartError(f"{path}: row {row + 1}, column {CSV_COLUMNS[col]}: missing, NaN or infinite value")
+    model = load_model()
+    read = read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names)
+    values = read.values
     if len(values) < MIN_ROWS:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
     check_joint_ranges(values[:, :N_JOINTS], path)
-    rate, source = rate_of(path)
+    rate, source = rate_of(path, read.rate_hz)
     check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)
-    assert data.shape[1] == 1 + 3 * N_JOINTS
-    return MeasuredRun(path=path, data=data)
+    return MeasuredRun(path=path, data=data, measured=read.measured)

@@ -47,6 +47,12 @@ class ProcessedRun:
     periodic: PeriodicAnalysis | None = field(default=None, compare=False)
     #: upstream's first period of this arm (samples)
     upstream_first_period: int = field(default=FIRST_PERIOD_SAMPLES, compare=False)
+    #: (7,) bool: the joints the run recorded (the others carry no figure, fit or cutoff)
+    measured: np.ndarray | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        if self.measured is None:
+            object.__setattr__(self, "measured", np.ones(self.tau.shape[1], bool))
 
     def __len__(self) -> int:
         return len(self.t)
@@ -72,7 +78,8 @@ class ProcessedRun:
 
     def head(self, n: int) -> "ProcessedRun":
         """The first n samples (a periodic run's band no longer applies: project before)."""
-        return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), upstream_first_period=self.upstream_first_period)
+        return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), upstream_first_period=self.upstream_first_period,
+                            measured=self.measured)
 
     def window(self, start: int, n: int) -> "ProcessedRun":
         """Samples start..start+n; a periodic run's band is then that of the
@@ -82,7 +89,8 @@ class ProcessedRun:
         if self.periodic is not None:
             projector = self.periodic.projector
             periodic = replace(self.periodic, projector=type(projector)(projector.t[part], projector.frequency_hz, projector.harmonics))
-        return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic, self.upstream_first_period)
+        return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic, self.upstream_first_period,
+                            self.measured)
 
     def summary(self) -> dict:
         """What every output records of the processing."""
@@ -117,12 +125,13 @@ def zero_phase_lowpass(x: np.ndarray, cutoff_parameter_hz: float = CUTOFF_PARAME
     return y[::-1][edge - 1 : -edge + 1]
 
 
-def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | None = None) -> ProcessedRun:
+def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, design=None) -> ProcessedRun:
     """q, dq, ddq, tau of a measured run: filtered and trimmed like upstream (with
     the current arm's fc and first period, its model card's [processing]), or
-    through the periodic layer (`harmonics` imposes its cutoff)."""
+    through the periodic layer (`harmonics` imposes its cutoffs, `design` the
+    excitation's period and harmonics where known)."""
     if processing == "periodic":
-        return process_periodic(run, harmonics)
+        return process_periodic(run, harmonics, design)
     if processing != "upstream":
         raise DvrkDartError(f"--processing {processing}: one of {', '.join(PROCESSINGS)}")
     h = 1.0 / run.rate_hz
@@ -138,27 +147,28 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics: int | Non
     ddq = zero_phase_lowpass(central_difference(run.dq, h), fc)
     tau = zero_phase_lowpass(run.tau - model.cable_efforts(run.q), fc)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
-    return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep], upstream_first_period=upstream.first_period_samples)
+    return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep], upstream_first_period=upstream.first_period_samples,
+                        measured=run.measured_mask)
 
 
-def process_periodic(run: MeasuredRun, harmonics: int | None = None) -> ProcessedRun:
+def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> ProcessedRun:
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
     from dvrk_dart.model.description import load_model
 
     tau = run.tau - load_model().cable_efforts(run.q)  # what the identification removed before fitting
-    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics)
+    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design)
     t = run.t - run.t[0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
-    return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis)
+    return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
 
 
-def process_all(runs: list[MeasuredRun], processing: str | None) -> tuple[list[ProcessedRun], str | None]:
+def process_all(runs: list[MeasuredRun], processing: str | None, design=None) -> tuple[list[ProcessedRun], str | None]:
     """Runs through one processing, and a note when the choice was not the user's:
     `None` is periodic where every run is a periodic excitation, else upstream
     (the note says which run is not periodic and why)."""
     if processing is not None:
-        return [process(run, processing) for run in runs], None
+        return [process(run, processing, design=design) for run in runs], None
     try:
-        return [process_periodic(run) for run in runs], None
+        return [process_periodic(run, design=design) for run in runs], None
     except DvrkDartError as exc:
         return [process(run) for run in runs], f"upstream processing: {exc}"

@@ -1,0 +1,213 @@
+"""Measured runs from CSV files in the layouts users have (io/ leaf reader):
+
+- no header, 21 columns: q1..q7, dq1..dq7, tau1..tau7 (the `wpi/` identification logs);
+- no header, 9 columns: q1..q3, dq1..dq3, tau1..tau3 (the dVRK Python API's
+  3-joint logs, `wpi-2018/`: joints 4..7 not recorded);
+- a header row naming its columns: `t` (or `time`, s) optional; `q1..q7`,
+  `dq1..dq7`, `tau1..tau7` in the model's coordinates, or
+  `position|velocity|effort` + `.`/`_`/`/` + the dVRK's joint name
+  (`position.outer_yaw`, the arm's model card [dvrk_topics]) in the dVRK's;
+  any subset of joints, each with its position, velocity and effort.
+
+A joint that is not recorded is *not measured* (`MeasuredRun.measured`): its
+columns hold zeros (the arm held at zero) and no figure, fit or cutoff uses it.
+A time column gives the file its own rate (rows must be evenly spaced)."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
+
+FIELDS = ("q", "dq", "tau")
+#: the header's words for the dVRK's JointState fields
+DVRK_FIELDS = {"position": "q", "velocity": "dq", "effort": "tau"}
+TIME_NAMES = ("t", "time", "time_s")
+#: headerless layouts: column count -> the joints recorded (each with q, dq, tau)
+HEADERLESS_JOINTS = {3 * N_JOINTS: JOINT_NAMES, 9: JOINT_NAMES[:3]}
+#: rows of a time column may be this far from even spacing (a fraction of the step)
+TIME_JITTER = 0.05
+
+
+@dataclass(frozen=True)
+class CsvLayout:
+    """Where each quantity is in the file: `columns[(field, joint)]` -> column index."""
+
+    columns: dict
+    time_column: int | None
+    joints: tuple[str, ...]  # the recorded joints, in the model's order
+    dvrk_names: bool  # the header names the dVRK's joints (wrist values need the coupling)
+
+    def describe(self) -> str:
+        return f"{' '.join(self.joints)} recorded" + (", time column" if self.time_column is not None else "")
+
+
+def _read_text(path: Path) -> pd.DataFrame:
+    if not path.is_file():
+        raise DvrkDartError(f"{path}: file not found")
+    if not os.access(path, os.R_OK):
+        raise DvrkDartError(f"{path}: not readable (permission denied)")
+    try:
+        return pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False)
+    except pd.errors.EmptyDataError:
+        raise DvrkDartError(f"{path}: file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]})") from None
+
+
+def _is_number(text) -> bool:
+    try:
+        float(text)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def _has_header(raw: pd.DataFrame) -> bool:
+    """A first row with a cell that is a name (not a number, not empty)."""
+    first = raw.iloc[0]
+    return any(isinstance(cell, str) and re.search(r"[A-Za-z]", cell) and not _is_number(cell) for cell in first)
+
+
+def _header_key(name: str, dvrk_joints: tuple[str, ...]) -> tuple[str, str, bool] | None:
+    """(field, joint, is a dVRK joint name) of a header cell, or None."""
+    text = name.strip().lower()
+    match = re.fullmatch(r"(q|dq|tau)([1-7])", text)
+    if match:
+        return match.group(1), f"q{match.group(2)}", False
+    match = re.fullmatch(r"(position|velocity|effort)[._/](.+)", text)
+    if match and match.group(2) in dvrk_joints:
+        return DVRK_FIELDS[match.group(1)], JOINT_NAMES[dvrk_joints.index(match.group(2))], True
+    return None
+
+
+def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ...]) -> CsvLayout:
+    """The layout a header row names; one line naming a cell it cannot place."""
+    columns, time_column, kinds = {}, None, set()
+    for index, cell in enumerate(header):
+        name = str(cell).strip()
+        if name.lower() in TIME_NAMES:
+            time_column = index
+            continue
+        key = _header_key(name, dvrk_joints)
+        if key is None:
+            known = "t, q1..q7, dq1..dq7, tau1..tau7" + (f", position.<joint> (joints: {', '.join(dvrk_joints)})" if dvrk_joints else "")
+            raise DvrkDartError(f"{path}: header column {index + 1} '{name}' is not a known name ({known})")
+        field, joint, dvrk = key
+        if (field, joint) in columns:
+            raise DvrkDartError(f"{path}: header column {index + 1} '{name}': {field} of {joint} given twice")
+        columns[(field, joint)] = index
+        kinds.add(dvrk)
+    if len(kinds) > 1:
+        raise DvrkDartError(f"{path}: the header mixes the model's names (q1, ...) and the dVRK's joint names: use one")
+    joints = tuple(j for j in JOINT_NAMES if any((f, j) in columns for f in FIELDS))
+    for joint in joints:
+        missing = [f for f in FIELDS if (f, joint) not in columns]
+        if missing:
+            raise DvrkDartError(f"{path}: the header has {joint} without {', '.join(missing)}: a joint needs its position, velocity and effort")
+    if not joints:
+        raise DvrkDartError(f"{path}: the header names no joint")
+    return CsvLayout(columns, time_column, joints, kinds == {True})
+
+
+def headerless_layout(width: int, path: Path) -> CsvLayout:
+    if width not in HEADERLESS_JOINTS:
+        layouts = "; ".join(f"{n} columns ({', '.join(column_names_of(joints))})" for n, joints in HEADERLESS_JOINTS.items())
+        raise DvrkDartError(f"{path}: {width} columns without a header row; known layouts: {layouts}; "
+                            "or a header row naming the columns (t, q1, dq1, tau1, ...)")
+    joints = HEADERLESS_JOINTS[width]
+    columns = {(field, joint): i * len(joints) + k for i, field in enumerate(FIELDS) for k, joint in enumerate(joints)}
+    return CsvLayout(columns, None, joints, False)
+
+
+def column_names_of(joints: tuple[str, ...]) -> list[str]:
+    first, last = joints[0][1:], joints[-1][1:]
+    return [f"{field}{first}..{field}{last}" for field in FIELDS]
+
+
+def _numbers(raw: pd.DataFrame, names: list[str], path: Path, first_row: int) -> np.ndarray:
+    """The cells as numbers; one line naming the first that is not a finite number."""
+    numeric = raw.apply(pd.to_numeric, errors="coerce")
+    bad = numeric.isna() & raw.notna()
+    if bad.to_numpy().any():
+        row, col = np.argwhere(bad.to_numpy())[0]
+        raise DvrkDartError(f"{path}: row {row + first_row}, column {names[col]}: '{raw.iat[row, col]}' is not a number")
+    values = numeric.to_numpy(dtype=float)
+    if not np.all(np.isfinite(values)):
+        row, col = np.argwhere(~np.isfinite(values))[0]
+        raise DvrkDartError(f"{path}: row {row + first_row}, column {names[col]}: missing, NaN or infinite value")
+    return values
+
+
+def rate_of_time_column(t: np.ndarray, path: Path) -> float:
+    """Rows per second of an evenly spaced time column (s); one line naming the row that is not."""
+    step = np.diff(t)
+    if len(step) == 0 or not np.median(step) > 0:
+        raise DvrkDartError(f"{path}: the time column does not increase")
+    median = float(np.median(step))
+    uneven = np.flatnonzero(np.abs(step - median) > TIME_JITTER * median)
+    if len(uneven):
+        row = int(uneven[0]) + 2
+        raise DvrkDartError(f"{path}: time column, row {row}: a step of {step[uneven[0]]:.6g} s where the rows are "
+                            f"{median:.6g} s apart (rows must be evenly spaced: resample first)")
+    return 1.0 / median
+
+
+@dataclass(frozen=True)
+class CsvValues:
+    """A CSV's values in the model's coordinates: (N, 21) q, dq, tau (zeros where not measured)."""
+
+    values: np.ndarray
+    measured: tuple[str, ...]
+    rate_hz: float | None  # from the time column, None without one
+
+
+def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValues:
+    """Read a measured-run CSV in any of the module's layouts."""
+    raw = _read_text(path)
+    header = _has_header(raw)
+    if header:
+        layout = layout_from_header(list(raw.iloc[0]), path, dvrk_joints)
+        raw = raw.iloc[1:].reset_index(drop=True)
+    else:
+        layout = headerless_layout(raw.shape[1], path)
+    names = [str(c) for c in range(raw.shape[1])]
+    for (field, joint), index in layout.columns.items():
+        names[index] = f"{field}{joint[1:]}"
+    if layout.time_column is not None:
+        names[layout.time_column] = "t"
+    file_values = _numbers(raw, names, path, 2 if header else 1)
+    values = np.zeros((len(file_values), 3 * N_JOINTS))
+    for (field, joint), index in layout.columns.items():
+        values[:, FIELDS.index(field) * N_JOINTS + JOINT_NAMES.index(joint)] = file_values[:, index]
+    if layout.dvrk_names:
+        values = _dvrk_to_model(values, layout.joints, motor_map, path)
+    rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path)
+    return CsvValues(values, layout.joints, rate)
+
+
+def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, path: Path) -> np.ndarray:
+    """The dVRK's joint values -> the model's coordinates (the coupled columns need each other)."""
+    coupled = [JOINT_NAMES[i] for i in range(N_JOINTS)[motor_map.columns]] if isinstance(motor_map.columns, slice) \
+        else [JOINT_NAMES[i] for i in motor_map.columns]
+    present = [j for j in coupled if j in joints]
+    if present and len(present) != len(coupled):
+        raise DvrkDartError(f"{path}: the dVRK's {', '.join(present)} without the joints coupled to them: "
+                            "the model's coordinates need every coupled joint")
+    q, dq, tau = (values[:, i * N_JOINTS:(i + 1) * N_JOINTS] for i in range(3))
+    return np.hstack([motor_map.positions_to_model(q), motor_map.positions_to_model(dq), motor_map.efforts_to_model(tau)])
+
+
+def measured_mask(measured: tuple[str, ...]) -> np.ndarray:
+    """(7,) bool: which of q1..q7 a run recorded."""
+    return np.array([name in measured for name in JOINT_NAMES])
+
+
+__all__ = ["CsvValues", "read_csv_run", "measured_mask", "column_names", "HEADERLESS_JOINTS"]

@@ -1,0 +1,81 @@
+"""An excitation's design (period, harmonics) read from the commanded
+trajectory (`--excitation FILE`), for the periodic layer (io/periodic.py):
+
+- `dvrk-dart excitation`'s CSV: a header row (`time`, the dVRK's joint names),
+  positions in rows;
+- the dVRK Python API's commanded logs (`*_commanded.csv`, `wpi-2018/`): no
+  header, one row per quantity (q1..qn, then their velocities and
+  accelerations), one column per sample at the default rate (200 Hz).
+
+The period is fitted on the positions like a measured run's; the harmonics
+are the fewest that explain them (`periodic.design_harmonics`): a commanded
+Fourier series is exact at its own order."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.measured_run import sample_rate_hz
+from dvrk_dart.io.periodic import design_harmonics, fit_period, moving_joints
+
+#: a commanded log's rows: positions, velocities, accelerations of each joint
+QUANTITIES_PER_JOINT = 3
+
+
+@dataclass(frozen=True)
+class ExcitationDesign:
+    period_s: float
+    harmonics: int
+    source: str
+
+    def summary(self) -> dict:
+        return {"period_s": self.period_s, "harmonics": self.harmonics, "from": self.source}
+
+
+def _positions(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(t, q) of a commanded trajectory file."""
+    try:
+        raw = pd.read_csv(path, header=None, dtype=str)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError, OSError) as exc:
+        raise DvrkDartError(f"--excitation {path}: not a CSV file ({str(exc).splitlines()[0]})") from None
+    header = any(not _is_number(cell) for cell in raw.iloc[0])
+    body = raw.iloc[1:] if header else raw
+    values = body.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        raise DvrkDartError(f"--excitation {path}: a cell that is not a finite number")
+    if header:  # dvrk-dart excitation: time, then positions in columns
+        names = [str(c).strip().lower() for c in raw.iloc[0]]
+        if names[0] not in ("t", "time"):
+            raise DvrkDartError(f"--excitation {path}: a header row whose first column is not time")
+        return values[:, 0], values[:, 1:]
+    if values.shape[0] % QUANTITIES_PER_JOINT or values.shape[0] > values.shape[1]:
+        raise DvrkDartError(f"--excitation {path}: {values.shape[0]} rows x {values.shape[1]} columns; a commanded log has "
+                            f"{QUANTITIES_PER_JOINT} rows per joint (q, dq, ddq) and one column per sample")
+    joints = values.shape[0] // QUANTITIES_PER_JOINT
+    q = values[:joints].T
+    return np.arange(len(q)) / sample_rate_hz(), q
+
+
+def _is_number(text) -> bool:
+    try:
+        float(text)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def read_design(path: str | Path) -> ExcitationDesign:
+    """The design of the commanded excitation in `path`."""
+    path = Path(path)
+    if not path.is_file():
+        raise DvrkDartError(f"--excitation {path}: file not found")
+    t, q = _positions(path)
+    moving = moving_joints(q)
+    rate = 1.0 / float(t[1] - t[0])
+    period = fit_period(t - t[0], q[:, moving], rate, f"--excitation {path}")
+    return ExcitationDesign(period.period_s, design_harmonics(t - t[0], q[:, moving], period), str(path))
