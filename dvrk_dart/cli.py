@@ -423,6 +423,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from dvrk_dart.identification.identify import IdentificationConfig
     from dvrk_dart.identification.outputs import identify_into_folder
     from dvrk_dart.identification.regressor import FrictionLaw
+    from dvrk_dart.io.reference_data import run_label
 
     if args.reversal_velocity is not None and args.friction_law != "tanh":
         raise DvrkDartError(f"--reversal-velocity: only with --friction-law tanh (not {args.friction_law})")
@@ -432,15 +433,22 @@ def cmd_identify(args: argparse.Namespace) -> int:
         prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing,
     )
     result, data = identify_into_folder(config, args.out)
-    if result.processing_note:
-        print(f"note: {result.processing_note}")
-    print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {', '.join(args.runs)}: "
-          f"condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
-    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (relative error; fitted: {' '.join(data['fitted_joints'])})")
+    processing = data["processing"]
+    print(f"processing: {processing['processing']} ({processing['chosen_because']})")
+    for line in data["left_out"]:
+        print(f"note: {line}")
+    extent = data["data"]
+    periods = f", {extent['whole_periods']} whole periods" if extent["whole_periods"] is not None else ""
+    print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {extent['runs']} run(s), "
+          f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
+    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m or N for q3; fitted: {' '.join(data['fitted_joints'])})")
     for kind, runs in data["errors"].items():
         for name, spans in runs.items():
             for span, e in spans.items():
-                print(f"{name + ' ' + span.replace('_run', ''):<22} " + " ".join(f"{v:7.4f}" for v in e["relative_error"]) + f"   {kind}")
+                label = f"{run_label(name)} {span.replace('_run', '')}"
+                print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"]) + f"   {kind}")
+    for line in data["warnings"]:
+        print(f"warning: {line}")
     print(f"friction law: {data['config']['friction_law']}")
     if args.friction_law == "tanh":
         print("note: errors above use the tanh law; params.json readers apply sign(v)")

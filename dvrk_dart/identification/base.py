@@ -71,13 +71,20 @@ def _combination_name(row: np.ndarray, standard_names: tuple[str, ...]) -> str:
     return text[2:] if text.startswith("+ ") else text
 
 
-def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray | None = None) -> BaseParameters:
-    """Structural base parameters of the rows `joints` (default: all seven)."""
+def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray | None = None,
+                         held: dict[int, float] | None = None) -> BaseParameters:
+    """Structural base parameters of the rows `joints` (default: all seven).
+    `held`: joints the runs hold still, at their positions: the random states
+    hold them there too, so that the parameters only their motion would
+    determine (a held wrist's own inertia, friction) leave the base, and the
+    links beyond them count as one body with the link that carries them."""
     model = regressor.model
     rng = np.random.default_rng(seed)
     q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
     dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
     ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
+    for j, position in (held or {}).items():
+        q[:, j], dq[:, j], ddq[:, j] = position, 0.0, 0.0
     rows = np.arange(N_JOINTS) if joints is None else np.asarray(joints)
     W = regressor(q, dq, ddq)[:, rows, :].reshape(-1, len(regressor.layout))
     norms = np.linalg.norm(W, axis=0)

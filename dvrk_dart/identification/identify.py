@@ -29,10 +29,13 @@ from dvrk_dart.identification.presliding import choose_distances, with_link_colu
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_vector
 from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_all
-from dvrk_dart.metrics import relative_error, rms
+from dvrk_dart.metrics import per_measured_joint, relative_error, rms
 from dvrk_dart.model.description import PsmModel, current_model_file, load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
+
+#: a held-out RMS this many times the training RMS on a fitted joint is a fit on too little data
+HOLDOUT_OVERFIT_RATIO = 2.0
 
 #: --prior values besides a file
 PRIOR_DEFAULT, PRIOR_NONE = "default", "none"
@@ -81,6 +84,8 @@ class IdentificationResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     #: link key -> the chosen pre-sliding distance and the training score of every candidate
     presliding_choice: dict = field(default_factory=dict)
+    #: one line per joint of --joints the runs do not let the fit use
+    left_out: list[str] = field(default_factory=list)
 
     @property
     def theta(self) -> np.ndarray:
@@ -94,11 +99,30 @@ class IdentificationResult:
         """Errors of the identified parameters (or `theta`: with `sign_law`, parameters of the sign law's model)."""
         n = run.processed.first_period_samples() if first_period else len(run.processed)
         predicted, measured = self.predicted(run, theta, sign_law)[:n], run.processed.tau[:n]
+        recorded = run.processed.measured
         return {
             "samples": int(len(measured)),
-            "relative_error": relative_error(predicted, measured).tolist(),
-            "rms": rms(predicted - measured).tolist(),
+            "relative_error": per_measured_joint(relative_error(predicted, measured), recorded),
+            "rms": per_measured_joint(rms(predicted - measured), recorded),
         }
+
+    def data_extent(self) -> dict:
+        """What the fit rests on: runs, seconds and (periodic) whole periods."""
+        periods = [run.processed.periodic.period.whole_periods for run in self.train if run.processed.periodic is not None]
+        return {"runs": len(self.train), "seconds": float(sum(run.processed.t[-1] - run.processed.t[0] for run in self.train)),
+                "whole_periods": int(sum(periods)) if len(periods) == len(self.train) else None}
+
+    def overfit_warnings(self) -> list[str]:
+        """A fitted joint whose held-out RMS is far above its training RMS: too little data for the parameters."""
+        def pooled(runs):
+            return np.sqrt(np.mean([np.square(np.array(self.errors(run)["rms"], dtype=float)) for run in runs], axis=0))
+
+        if not self.holdout:
+            return []
+        train, held = pooled(self.train), pooled(self.holdout)
+        return [f"{JOINT_NAMES[j]}: held-out RMS {held[j]:.3g} is {held[j] / train[j]:.1f}x the training RMS {train[j]:.3g}: "
+                "the training runs do not determine the arm (record more runs or periods)"
+                for j in self.wls.joints if held[j] > HOLDOUT_OVERFIT_RATIO * train[j]]
 
 
 def _joint_indices(names: tuple[str, ...]) -> np.ndarray:
@@ -109,6 +133,25 @@ def _joint_indices(names: tuple[str, ...]) -> np.ndarray:
     if repeated:
         raise DvrkDartError(f"--joints: {', '.join(repeated)} given twice")
     return np.array(sorted({JOINT_NAMES.index(n) for n in names}))
+
+
+def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, dict[int, float], list[str]]:
+    """(the joints fitted, the joints held still at their positions, one line
+    per joint left out): a joint is fitted where every training run recorded
+    it and some run moves it; a joint no run moves is held in the base
+    parameters' test (its own parameters are not determined)."""
+    from dvrk_dart.io.periodic import moving_joints
+
+    recorded = np.all([run.processed.measured for run in runs], axis=0)
+    moving = np.any([moving_joints(run.processed.q, run.processed.measured) for run in runs], axis=0)
+    held = {int(j): float(np.mean([run.processed.q[:, j].mean() for run in runs])) for j in np.flatnonzero(~moving)}
+    fitted = np.array([j for j in asked if recorded[j] and moving[j]], dtype=int)
+    notes = [f"{JOINT_NAMES[j]} left out: not recorded in every training run" for j in asked if not recorded[j]]
+    notes += [f"{JOINT_NAMES[j]} left out: no training run moves it (held at {held[j]:.4g}; its own inertia, friction "
+              "and offset are not determined)" for j in asked if recorded[j] and not moving[j]]
+    if not len(fitted):
+        raise DvrkDartError("--runs: no joint of --joints is recorded and moved by the training runs: nothing to fit")
+    return fitted, held, notes
 
 
 def _load_runs(names: tuple[str, ...], regressor: Regressor, processing: str | None) -> tuple[list[RunData], str | None]:
@@ -136,15 +179,12 @@ def _weighted_fit(train: list[RunData], base: BaseParameters, joints: np.ndarray
 
 
 def check_consistent_runs(runs: list[RunData]) -> None:
-    """Every run with the same columns and sampling rate: one line naming the odd one."""
+    """Every run with the same columns: one line naming the odd one (runs of
+    different rates go together: each is processed at its own)."""
     first = runs[0]
-    step = float(np.median(np.diff(first.processed.t)))
     for run in runs[1:]:
         if run.processed.tau.shape[1] != first.processed.tau.shape[1]:
             raise DvrkDartError(f"{run.path}: {run.processed.tau.shape[1]} joints, {first.path} has {first.processed.tau.shape[1]}")
-        other = float(np.median(np.diff(run.processed.t)))
-        if abs(other - step) > 1e-9 * step:
-            raise DvrkDartError(f"{run.path}: sampled at {1 / other:g} Hz, {first.path} at {1 / step:g} Hz: resample to one rate")
 
 
 def _prior(config: IdentificationConfig, model: PsmModel, regressor: Regressor) -> tuple[np.ndarray, str]:
@@ -176,7 +216,8 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     train, holdout = loaded[: len(config.runs)], loaded[len(config.runs):]
     check_consistent_runs(train + holdout)
     timings["load_and_regressor_s"] = time.perf_counter() - start
-    base = find_base_parameters(regressor, seed=config.seed, joints=joints)
+    joints, held, left_out = excited_joints(train, joints)
+    base = find_base_parameters(regressor, seed=config.seed, joints=joints, held=held)
     what = "--runs " + " ".join(config.runs)
     choice = {}
     if regressor.friction_law.kind == "presliding" and not regressor.friction_law.presliding:
@@ -190,7 +231,7 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     timings["convex_program_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - start
     return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings,
-                                choice)
+                                choice, left_out)
 
 
 def _with_law(run: RunData, regressor: Regressor) -> RunData:
