@@ -111,7 +111,7 @@ def diagnose(
     after = resimulate(problem, selection, simulate, base_config)
     floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)
+    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)  # zeros where not recorded
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None).to_json()
     if out_dir is not None:
@@ -197,7 +197,10 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
 def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floor, split, first_moments: list[dict],
                points: list[dict], simulated: bool) -> Diagnosis:
     train_runs, holdout_runs = problem.train_runs, problem.holdout_runs
-    offsets = problem.offset_joints
+    offsets, recorded = problem.offset_joints, problem.recorded
+    # a payload-shaped fit names a payload only where a baseline run without it isolates it
+    fits = first_moments + points
+    payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0]) if fits else None)
     return Diagnosis(
         joints=list(JOINT_NAMES),
         units=[effort_unit(j) for j in JOINT_NAMES],
@@ -218,8 +221,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         residual_definition="measured - simulated" + (" - (baseline measured - baseline simulated)" if problem.has_baseline else "")
         + (" - a constant per run on the joints whose constant moves between sessions (nuisance)" if problem.nuisance else ""),
         simulated_source="simulation" if simulated else "identified model at the measured state (stand-in for the DART replay)",
-        gap_before={"train": gaps([r.residual for r in train_runs]), "holdout": gaps([r.residual for r in holdout_runs])},
-        gap_after={"train": gaps(after.train_after), "holdout": gaps(after.holdout_after)},
+        gap_before={"train": gaps([r.residual for r in train_runs], recorded), "holdout": gaps([r.residual for r in holdout_runs], recorded)},
+        gap_after={"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)},
         gap_after_source=after.source,
         explained_fraction={
             "train": train_fraction(problem, s.final.beta),
@@ -229,12 +232,29 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         },
         effects=entries,
         selection={"method": s.method(), "steps": s.steps, "selected": [problem.effects[i].name for i in s.selected]},
-        payload=first_moments[0] if first_moments else (points[0] if points else None),
-        payloads=first_moments + points,
+        payload=payload_fits[0] if payload_fits else None,
+        payloads=payload_fits,
         payload_candidates=_payload_candidates(problem, s),
         sim_config=after.sim_config.to_dict(),
         not_in_simulation=after.not_in_simulation,
+        recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
+        gravity_mismatch=mismatch,
     )
+
+
+def gravity_mismatch_of(fit: dict) -> dict:
+    """A payload-shaped fit without a baseline: the arm's own gravity against
+    the parameters (its mass distribution: another arm, instrument or session),
+    reported by its efforts, not as a mass that was attached."""
+    keep = ("link", "group", "gravity_efforts_at_q0", "gravity_efforts_at_q0_interval", "position_m", "first_moment_kg_m")
+    efforts = fit.get("gravity_efforts_at_q0")
+    return {**{k: fit[k] for k in keep if k in fit},
+            "equivalent_mass_kg": fit.get("mass_kg"),
+            "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
+                       "gravity (mass distribution) against the parameters, not a payload: record a baseline to isolate one",
+            "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
+                      + ("" if not efforts or efforts[1] is None else f": {efforts[1]:+.3g} N·m on q2 at q = 0")
+                      + "; without a baseline run this is the arm's mass distribution, not a payload."]}
 
 
 def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple) -> None:

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 from dvrk_dart.diagnosis import insertion_terms, pitch_load
 from dvrk_dart.diagnosis.batch import replayed_residuals
 from dvrk_dart.diagnosis.result import gaps
@@ -42,7 +44,7 @@ def one_configuration(arm: Arm, effects: SimConfig, train: list[ProcessedRun], h
     extra = effects.extra.plus(insertion_terms.simulation_effects(arm, terms)).plus(pitch_load.simulation_effects(loads))
     config = replace(effects, extra=extra)
     held = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "one configuration: held-out replays")
-    gap = gaps(held)
+    gap = gaps(held, np.all([s.measured for s in holdout], axis=0))
     return {"gap_holdout": gap, "insertion_terms": terms.named_coefficients(), "pitch_loads": loads.to_dict(),
             "sim_config": config.to_dict(), "method": METHOD, "words": one_configuration_sentence(gap)}
 

@@ -109,13 +109,19 @@ def answer_sentence(result: dict) -> str:
     the share of the repeatable gap removed, and what is left against the
     session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    before, after = result["gap_before"][split][:ANSWER_JOINTS], result["gap_after"][split][:ANSWER_JOINTS]
-    joints = JOINT_NAMES[:ANSWER_JOINTS]
+    shown = [j for j in range(ANSWER_JOINTS) if result["gap_before"][split][j] is not None]  # the joints the runs recorded
+    before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
+    joints = [JOINT_NAMES[j] for j in shown]
     selected = list(result["selection"]["selected"])
     entries = {e["name"]: e for e in result.get("effects", [])}
-    payload = result.get("payload")
+    payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
     if payload:  # the effect under study first
         lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload)})"
+        others = [n for n in selected if not n.startswith("payload")]
+    elif mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
+        efforts = mismatch.get("gravity_efforts_at_q0") or [None, None]
+        size = "" if efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+        lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
         others = [n for n in selected if not n.startswith("payload")]
     elif selected:
         first = entries.get(selected[0], {"name": selected[0]})
@@ -128,6 +134,7 @@ def answer_sentence(result: dict) -> str:
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     sentence = f"The gap is mostly explained by {lead}{more}: {where}, {gaps}"
     shares = [_row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
+    shares = [shares[j] for j in shown] if shares else shares
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
     floor = result.get("session_floor")
@@ -169,7 +176,7 @@ def _gap_table(result: dict) -> list[str]:
         for split in ("train", "holdout"):
             values = (result.get(key) or {}).get(split)
             if values is not None:
-                parts.append(_row([f"{key.replace('gap_', '')}, {split}", *(fmt(v) for v in values)]))
+                parts.append(_row([f"{key.replace('gap_', '')}, {split}", *("not measured" if v is None else fmt(v) for v in values)]))
     return parts + ["</table>", f"<p class='note'>after: {html.escape(str(result.get('gap_after_source', '')))}</p>"]
 
 

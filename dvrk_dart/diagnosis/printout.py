@@ -25,7 +25,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
-                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {effort_unit(j)}" for j, v in zip(JOINT_NAMES, values)))
+                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {effort_unit(j)}" for j, v in zip(JOINT_NAMES, values) if v is not None))
     selected = [e["name"] for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
     if result.get("refit"):
@@ -42,6 +42,9 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         print(f"payload: {mass} on {p['link']} ({p['group']})")
         for sentence in p.get("words", []):
             print(f"  {sentence}")
+    if result.get("gravity_mismatch"):
+        for sentence in result["gravity_mismatch"]["words"]:
+            print(sentence)
     if result.get("nuisance_offset_joints"):
         print(offset_joints_sentence(result["nuisance_offset_joints"]))
     if result.get("nuisance_offsets"):

@@ -66,6 +66,12 @@ class Problem:
     joint_weights: np.ndarray | None = None
 
     @property
+    def recorded(self) -> np.ndarray:
+        """(7,) bool: the joints every run recorded (the others have no weight and no figure)."""
+        runs = self.train_runs + self.holdout_runs + [r for r in (self.baseline_run, self.repeat_run) if r is not None]
+        return np.all([r.state.measured for r in runs], axis=0)
+
+    @property
     def has_baseline(self) -> bool:
         return self.baseline_run is not None
 
@@ -183,5 +189,5 @@ def _add_grams(problem: Problem) -> None:
     problem.holdout_columns = [problem.columns_of(r) for r in problem.holdout_runs]
     parts = [problem.grams_of(r, Phi, problem.folds) for r, Phi in zip(problem.train_runs, problem.train_columns)]
     problem.holdout_grams = [problem.grams_of(r, Phi, 1) for r, Phi in zip(problem.holdout_runs, problem.holdout_columns)]
-    problem.joint_weights = _joint_weights(np.vstack([r.residual for r in problem.train_runs]))
+    problem.joint_weights = _joint_weights(np.vstack([r.residual for r in problem.train_runs])) * problem.recorded
     problem.train_grams = Grams.concat([part.scaled(weight) for part, weight in zip(parts, _run_weights(parts))])

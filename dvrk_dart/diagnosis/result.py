@@ -20,7 +20,7 @@ from dvrk_dart.diagnosis.selection import (
     CvResult,
     Selector,
 )
-from dvrk_dart.metrics import rms
+from dvrk_dart.metrics import rms, per_measured_joint
 from dvrk_dart.sim.config import SimConfig
 
 
@@ -155,11 +155,13 @@ def _after_replays(run: DiagnosisRun, sim_config: SimConfig, shared_config: SimC
     return [(shared_config if run.role is RunRole.BASELINE else sim_config, run.state)]
 
 
-def gaps(residuals: list[np.ndarray]) -> list[float] | None:
-    """RMS per joint over the runs' residuals, or None without runs."""
+def gaps(residuals: list[np.ndarray], recorded: np.ndarray | None = None) -> list[float | None] | None:
+    """RMS per joint over the runs' residuals (None for a joint the runs did
+    not record: no figure on it), or None without runs."""
     if not residuals:
         return None
-    return rms(np.vstack(residuals)).tolist()
+    values = rms(np.vstack(residuals))
+    return values.tolist() if recorded is None else per_measured_joint(values, recorded)
 
 
 # ------------------------------------------------------------------- result
@@ -195,6 +197,10 @@ class Diagnosis:
     payload_candidates: list
     sim_config: dict
     not_in_simulation: list
+    #: the joints every run recorded (the others carry no figure, weight or effect)
+    recorded_joints: list
+    #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
+    gravity_mismatch: dict | None
 
     def to_json(self) -> dict:
         """The diagnosis.json document (a fresh dict: the caller may add to it)."""

@@ -115,8 +115,8 @@ class DiagnosisRun:
 
     @property
     def gap(self) -> np.ndarray:
-        """measured - simulated (N, 7)."""
-        return self.state.tau - self.simulated
+        """measured - simulated (N, 7); zero on a joint the run did not record (nothing to explain)."""
+        return np.where(self.state.measured, self.state.tau - self.simulated, 0.0)
 
     @property
     def baseline_effort(self) -> np.ndarray:
