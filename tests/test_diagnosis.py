@@ -74,7 +74,7 @@ DIAGNOSIS_KEYS = {
     "joints", "units", "measured", "measured_runs", "baseline_source", "nuisance_offsets", "nuisance_offset_joints", "session_floor",
     "repeat", "gap_split", "baseline", "train_runs", "holdout_runs", "inputs", "processing", "residual_definition", "simulated_source",
     "gap_before", "gap_after", "gap_after_source", "explained_fraction", "effects", "selection", "payload", "payloads",
-    "payload_candidates", "sim_config", "not_in_simulation", "where",
+    "payload_candidates", "sim_config", "not_in_simulation", "where", "recorded_joints", "gravity_mismatch",
 }
 EFFECT_KEYS = {
     "rank", "name", "kind", "family", "joints", "parameters", "units", "size", "explained_fraction", "explained_fraction_per_joint",
@@ -215,12 +215,15 @@ def test_payload_links_the_efforts_cannot_tell_apart(arm, segment):
 def test_payload_mass_interval_when_only_its_moment_is_seen(arm, segment, noise_rms):
     """A payload on a link turning about the fixed pitch shaft: gravity sees m c
     only, so the diagnosis finds its family and reports a mass interval that
-    contains the truth, not a mass it cannot pin."""
+    contains the truth, not a mass it cannot pin. Without a baseline run it is
+    the arm's gravity against the parameters, not a payload, in the keys too."""
     key = arm.model.link_by_name("pitch_bottom").key
     truth = PointPayload(arm.model, key, equivalent_keys=equivalent_payload_links(arm)[key])
     measured = synthesize_measurement(arm, segment, [(truth, np.array([0.15, 0.05, -0.20, 0.0]))], noise_rms, seed=3)
     result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False)
-    payload = result["payload"]
+    assert result["payload"] is None and result["payloads"] == []
+    payload = result["gravity_mismatch"]
+    assert "not a payload" in payload["words"][0]
     assert payload["link"] in {truth.link_name, *truth.equivalent_links}
     lo, hi = payload["mass_interval_kg"]
     assert lo <= 0.15 <= hi and not payload["mass_profile"]["identifiable"]

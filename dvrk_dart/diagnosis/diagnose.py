@@ -246,10 +246,8 @@ def gravity_mismatch_of(fit: dict) -> dict:
     """A payload-shaped fit without a baseline: the arm's own gravity against
     the parameters (its mass distribution: another arm, instrument or session),
     reported by its efforts, not as a mass that was attached."""
-    keep = ("link", "group", "gravity_efforts_at_q0", "gravity_efforts_at_q0_interval", "position_m", "first_moment_kg_m")
     efforts = fit.get("gravity_efforts_at_q0")
-    return {**{k: fit[k] for k in keep if k in fit},
-            "equivalent_mass_kg": fit.get("mass_kg"),
+    return {**fit,
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
                        "gravity (mass distribution) against the parameters, not a payload: record a baseline to isolate one",
             "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"

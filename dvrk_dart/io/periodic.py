@@ -81,6 +81,10 @@ NOISE_FIT_HARMONICS = 80
 #: noise around a harmonic: the non-harmonic DFT lines within this many
 #: harmonics on either side
 NOISE_WINDOW_HARMONICS = 2
+#: ... and at least this many DFT lines on either side: a run of two or three
+#: periods has only one or two noise lines between harmonics, too few to
+#: average (four periods, as "one" and "two", already reach it)
+MIN_NOISE_WINDOW_LINES = 8
 #: the period fitted on each half of a run is unstable when the halves differ
 #: by more than this many combined standard errors and by enough to drift the
 #: fundamental's phase by more than MAX_DRIFT_CYCLES over the run (harmonic k:
@@ -157,7 +161,9 @@ def _coarse_period_samples(x: np.ndarray) -> int:
     spectrum = np.fft.rfft(x, 2 * n, axis=0)
     acf = np.fft.irfft(np.abs(spectrum) ** 2, axis=0)[:n].sum(axis=1)
     acf = acf / (acf[0] * (n - np.arange(n)) / n)  # unbiased: each lag over its overlap
-    usable = acf[: n // MIN_PERIODS + 1]
+    # a little past half the run: a run of exactly two periods peaks at its middle,
+    # and a peak just beyond it is refused by the count of whole periods, with its figure
+    usable = acf[: int(n / MIN_PERIODS * 1.05) + 3]
     first_negative = np.flatnonzero(usable < 0)
     if not len(first_negative):
         raise DvrkDartError("its positions never decorrelate within half the run: not a periodic excitation of two periods or more")
@@ -245,12 +251,15 @@ def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_p
         frequency, standard_error = _fit_frequency(t, x, rate_hz, start_hz)
     except DvrkDartError as exc:
         raise DvrkDartError(f"{where}: {exc}") from None
-    whole = int(math.floor((t[-1] - t[0]) * frequency + 1e-9))
+    # N samples span N sample intervals: a run of exactly two periods holds two whole ones
+    span_s = len(t) / rate_hz
+    whole = int(math.floor(span_s * frequency + 1e-9))
     if whole < MIN_PERIODS:
-        raise DvrkDartError(f"{where}: {(t[-1] - t[0]) * frequency:.2f} periods of {1 / frequency:.3f} s, at least {MIN_PERIODS} needed")
-    explained = 1.0 - _residual_energy(frequency, t, x, SEARCH_HARMONICS) / float(np.sum(x**2))
+        raise DvrkDartError(f"{where}: {span_s * frequency:.2f} periods of {1 / frequency:.3f} s, at least {MIN_PERIODS} needed")
+    # as many harmonics as a design may have: an 8-harmonic excitation is periodic too
+    explained = 1.0 - _residual_energy(frequency, t, x, DESIGN_MAX_HARMONICS) / float(np.sum(x**2))
     if explained < MIN_EXPLAINED_VARIANCE:
-        raise DvrkDartError(f"{where}: a {SEARCH_HARMONICS}-harmonic series of period {1 / frequency:.3f} s explains "
+        raise DvrkDartError(f"{where}: a {DESIGN_MAX_HARMONICS}-harmonic series of period {1 / frequency:.3f} s explains "
                             f"{explained:.1%} of the positions' variance (< {MIN_EXPLAINED_VARIANCE:.0%}): not a periodic excitation")
     half = len(t) // 2
     halves = [_fit_frequency(t[part], x[part], rate_hz, frequency) for part in (slice(0, half), slice(half, None))]
@@ -277,7 +286,7 @@ def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _
     whole periods (the series removed first: a span of a non-integer number of
     samples per period would leak the strong harmonics into the noise lines)."""
     periods = period.whole_periods
-    span = int(round(periods * period.period_s * rate_hz))
+    span = min(int(round(periods * period.period_s * rate_hz)), len(t))
     harmonics = min(NOISE_FIT_HARMONICS, int(period.period_s * rate_hz) // 2 - 1)
     A = harmonic_design(t, period.frequency_hz, harmonics)
     coefficients = least_squares(A, x)
@@ -285,7 +294,7 @@ def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _
     lines = np.abs(np.fft.rfft(left - left.mean(axis=0), axis=0)) ** 2 / span
     index = np.arange(len(lines))
     noise_line = (index % periods != 0) & (index > 0)
-    window = NOISE_WINDOW_HARMONICS * periods
+    window = max(NOISE_WINDOW_HARMONICS * periods, MIN_NOISE_WINDOW_LINES)
     noise = np.empty((harmonics + 1, x.shape[1]))
     for k in range(harmonics + 1):
         around = slice(max(1, k * periods - window), k * periods + window + 1)
@@ -433,7 +442,8 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)
     effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
-    cutoffs = np.where(measured, np.minimum(joint_cutoffs(effort_spectrum), top), 0)
+    own = joint_cutoffs(effort_spectrum)
+    cutoffs = np.where(measured, np.minimum(np.where(moving, np.maximum(own, floor), own), top), 0)
     band = band_harmonics(cutoffs, moving, min(floor, top)) if harmonics is None else min(int(harmonics), top)
     projector = Projector(t, period.frequency_hz, band)
     position_spectrum = _spectrum(t, q, period, rate_hz)

@@ -1,0 +1,131 @@
+"""Every real recording, not only the development set: the 2018 dataset's
+9-column logs, CSVs with a header and a time column, joints not recorded, and
+what model-errors, identify and diagnose make of them."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dvrk_dart.cli import main
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import SHARED_ROOT, load_run, resolve_run
+
+DATA_2018 = SHARED_ROOT / "wpi-2018"
+TEST1, TEST2 = DATA_2018 / "psm1_fourier_test1.csv", DATA_2018 / "psm1_fourier_test2.csv"
+needs_2018 = pytest.mark.skipif(not TEST1.is_file(), reason="the 2018 dataset (../shared/reference_data/wpi-2018) is not here")
+
+
+def cli_json(capsys, *args) -> dict:
+    capsys.readouterr()
+    assert main([*args, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@needs_2018
+def test_a_three_joint_log_reads_as_it_is(capsys):
+    """No conversion: the data README's upstream figures, and no figure on the joints not recorded."""
+    upstream = cli_json(capsys, "model-errors", "--measured", str(TEST1))
+    assert np.allclose(upstream["rms"][:3], [0.1245, 0.1395, 0.5565], atol=5e-4), upstream["rms"][:3]
+    assert upstream["rms"][3:] == [None] * 4 and upstream["relative_error"][3:] == [None] * 4
+    periodic = cli_json(capsys, "model-errors", "--measured", str(TEST1), "--processing", "periodic")
+    assert all(k >= 5 for k in periodic["joint_cutoffs"][:3]) and periodic["harmonics"] >= 5, periodic["joint_cutoffs"]
+    assert periodic["joint_cutoffs"][3:] == [None] * 4 and periodic["rms"][3:] == [None] * 4
+    assert abs(periodic["period_s"] - 10.0) < 0.01
+
+
+@needs_2018
+def test_the_commanded_trajectory_gives_the_design(capsys):
+    from dvrk_dart.io.excitation_design import read_design
+
+    for run, period in ((1, 10.0), (2, 1 / 0.13)):
+        design = read_design(DATA_2018 / f"psm1_fourier_test{run}_commanded.csv")
+        assert design.harmonics == 5 and abs(design.period_s - period) < 1e-3 * period
+    given = cli_json(capsys, "model-errors", "--measured", str(TEST2), "--processing", "periodic",
+                     "--excitation", str(DATA_2018 / "psm1_fourier_test2_commanded.csv"))
+    assert given["design_harmonics"] == 5 and given["design_from"].startswith("--excitation")
+
+
+def _write_header_csv(path: Path, run, columns: list[str], t: bool = True) -> Path:
+    table = {"t": run.t}
+    for name in columns:
+        field, joint = name.rstrip("1234567"), int(name[-1]) - 1
+        table[name] = {"q": run.q, "dq": run.dq, "tau": run.tau}[field][:, joint]
+    import pandas as pd
+
+    frame = pd.DataFrame({k: v for k, v in table.items() if t or k != "t"})
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_a_header_names_any_subset_of_joints(tmp_path):
+    """q1, q2 with their velocities and efforts, a time column at 100 Hz: the
+    file's own rate, the rest not measured (zeros, no say)."""
+    two = load_run(resolve_run("two"))
+    half = type(two)(two.path, two.data.iloc[::2].reset_index(drop=True))  # every other row: 100 Hz
+    path = _write_header_csv(tmp_path / "two_q1q2.csv", half, ["q1", "q2", "dq1", "dq2", "tau1", "tau2"])
+    run = load_run(path)
+    assert run.measured == ("q1", "q2") and abs(run.rate_hz - 100.0) < 1e-6
+    assert np.allclose(run.q[:, :2], half.q[:, :2]) and not run.q[:, 2:].any() and not run.tau[:, 2:].any()
+
+
+def test_a_header_with_the_dvrk_joint_names(tmp_path):
+    """position.<joint>/velocity.<joint>/effort.<joint>: the dVRK's coordinates, mapped to the model's."""
+    import pandas as pd
+
+    from dvrk_dart.model.description import load_model
+
+    one = load_run(resolve_run("one"))
+    model = load_model()
+    names = model.dvrk_topics.joint_names
+    motor = model.motor_map
+    columns = {"time": one.t}
+    for field, values in (("position", motor.positions_to_dvrk(one.q)), ("velocity", motor.positions_to_dvrk(one.dq)),
+                          ("effort", motor.efforts_to_dvrk(one.tau))):
+        columns.update({f"{field}.{name}": values[:, j] for j, name in enumerate(names)})
+    path = tmp_path / "one_dvrk.csv"
+    pd.DataFrame(columns).to_csv(path, index=False)
+    run = load_run(path)
+    assert np.allclose(run.q, one.q, atol=1e-9) and np.allclose(run.tau, one.tau, atol=1e-9)
+
+
+@pytest.mark.parametrize("header, words", [
+    ("t,q1,dq1", "q1 without tau"),
+    ("t,q1,dq1,tau1,bogus", "'bogus' is not a known name"),
+    ("t,q1,q1,dq1,tau1", "q of q1 given twice"),
+])
+def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
+    width = len(header.split(","))
+    rows = "\n".join(",".join(str(0.001 * (i + j)) for j in range(width)) for i in range(500))
+    path = tmp_path / "bad.csv"
+    path.write_text(header + "\n" + rows + "\n")
+    with pytest.raises(DvrkDartError, match=words):
+        load_run(path)
+
+
+def test_an_uneven_time_column_is_refused(tmp_path):
+    two = load_run(resolve_run("two"))
+    path = _write_header_csv(tmp_path / "uneven.csv", two, ["q1", "dq1", "tau1"])
+    text = path.read_text().splitlines()
+    fields = text[300].split(",")
+    fields[0] = str(float(fields[0]) + 0.003)
+    text[300] = ",".join(fields)
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(DvrkDartError, match="time column, row"):
+        load_run(path)
+
+
+@needs_2018
+def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
+    """The 3-joint runs: the wrist left out with a line each, no refusal; one
+    short run warns that the held-out error is far above the training error."""
+    capsys.readouterr()
+    assert main(["identify", "--runs", str(TEST1), "--holdout", str(TEST2), "--out", str(tmp_path / "one_run")]) == 0
+    out = capsys.readouterr().out
+    assert "q5 left out: not recorded" in out and "warning:" in out and "1 run(s)" in out
+    summary = json.loads((tmp_path / "one_run" / "identification.json").read_text())
+    assert summary["fitted_joints"] == ["q1", "q2", "q3"] and summary["data"]["whole_periods"] == 2
+    assert main(["identify", "--runs", str(TEST1), str(TEST2), "--out", str(tmp_path / "two_runs"), "--processing", "upstream"]) == 0
+    summary = json.loads((tmp_path / "two_runs" / "identification.json").read_text())
+    assert summary["condition_number"] < 1e5 and summary["errors"]["train"]
