@@ -61,6 +61,14 @@ def _periodic_section(out_dir: Path, runs_dir: Path):
     return section
 
 
+def _datasets_section(out_dir: Path):
+    """Every real PSM dataset's held-out figures side by side (dvrk_dart/datasets.py)."""
+    from dvrk_dart.datasets import datasets_section
+    from dvrk_dart.model.arm import load_arm
+
+    return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis")
+
+
 UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"
 
 
@@ -110,13 +118,14 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty", jobs=jobs)
     identification = _identification_section(out_dir)
     periodic = _periodic_section(out_dir, runs_dir)
+    datasets = _datasets_section(out_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)
     summary["ran"] += after["ran"]
     summary["skipped_up_to_date"] += after["skipped_up_to_date"]
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section, periodic, identification, uncertainty])
+    index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, periodic, identification, uncertainty])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")

@@ -192,13 +192,13 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 
 #: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
 #: they run side by side, each in its own process
-WITHHELD_STEPS = ("payload", "mtm_holdout", "holdout", "synthetic", "insertion", "out_of_library")
+WITHHELD_STEPS = ("payload", "mtm_holdout", "holdout", "holdout_2018", "synthetic", "insertion", "out_of_library")
 
 
 def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], float]:
     """One validation of WITHHELD_STEPS in a worker: (its verdicts, its wall time)."""
     name, out_dir, parameter_band = task
-    step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout,
+    step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout, "holdout_2018": validate_holdout,
             "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library}[name]
     start = time.perf_counter()
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
@@ -242,6 +242,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     for name, title in (("payload", "withheld 105 g payload on the parallelogram, full and half speed together (baseline: the session's run without it)"),
                         ("insertion", "105 g on the insertion stage's base (baseline: the session's run without it)"),
                         ("holdout", "effects fitted on 'one', scored on held-out 'two'"),
+                        ("holdout_2018", "the 2018 dataset (joints 1..3): effects fitted on its trajectory 1, scored on its held-out trajectory 2"),
                         ("mtm_holdout", "the MTM: effects fitted on its 'one', scored on its held-out 'two', from its identified arm")):
         folder = out_dir / name
         if not (folder / "diagnosis.json").is_file():

@@ -47,10 +47,13 @@ RUNS = {
     "one-105g-insertion": "one_105_grams_insertion_results.csv",
     "mtm-one": "mtm/one_results.csv",
     "mtm-two": "mtm/two_results.csv",
+    "2018-test1": "2018/psm1_fourier_test1.csv",
+    "2018-test2": "2018/psm1_fourier_test2.csv",
 }
 def reference_run_arm(name: str) -> str:
     """The arm model a reference run was recorded on (its data folder: mtm/... is the MTM's)."""
-    return RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
+    folder = RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
+    return folder if folder == "mtm" else "psm"
 
 
 def rate_of(path: Path, time_column_hz: float | None = None) -> tuple[float, str]:
@@ -97,16 +100,25 @@ def _checked(path: Path, name: str) -> Path:
     return path
 
 
-def cache_dir() -> Path:
-    return Path(os.environ.get(ENV_CACHE_DIR, Path.home() / ".cache" / "dvrk_dart")) / manifest()["commit"][:12]
+def _source(name: str | None) -> tuple[str, str]:
+    """(repository, commit) a manifest file comes from: its entry's, else the manifest's."""
+    m = manifest()
+    entry = m["files"].get(name, {}) if name else {}
+    return entry.get("repository", m["repository"]), entry.get("commit", m["commit"])
+
+
+def cache_dir(name: str | None = None) -> Path:
+    """Where downloads of the pinned commit (of `name`'s repository) are kept."""
+    return Path(os.environ.get(ENV_CACHE_DIR, Path.home() / ".cache" / "dvrk_dart")) / _source(name)[1][:12]
 
 
 def _download(name: str) -> Path:
     m = manifest()
     entry = m["files"][name]
     template = os.environ.get(ENV_URL_TEMPLATE, m["url_template"])
-    url = template.format(repository=m["repository"], commit=m["commit"], path=entry["path"])
-    target = cache_dir() / name
+    repository, commit = _source(name)
+    url = template.format(repository=repository, commit=commit, path=entry["path"])
+    target = cache_dir(name) / name
     try:
         with atomic_path(target) as tmp:
             with urllib.request.urlopen(url, timeout=60) as response:
@@ -137,7 +149,7 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
             raise DvrkDartError(f"{ENV_DATA_DIR}={folder}: not a folder")
         candidates.append(folder)
     paths = [folder / name for folder in candidates]
-    paths += [SHARED_ROOT / manifest()["files"][name].get("local", f"wpi/{name}"), cache_dir() / name]
+    paths += [SHARED_ROOT / manifest()["files"][name].get("local", f"wpi/{name}"), cache_dir(name) / name]
     for path in paths:
         if path.is_file():
             return _checked(path, name)
