@@ -187,7 +187,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
     from dvrk_dart.io.atomic import json_text
     from dvrk_dart.io.reference_data import load_run, resolve_run
-    from dvrk_dart.io.signal import process
+    from dvrk_dart.io.signal import process_all
     from dvrk_dart.io.excitation_design import read_design
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.arm import load_arm
@@ -196,7 +196,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     arm = load_arm(params_file=args.params)
     terms = parse_terms(args.terms)
     design = read_design(args.excitation) if getattr(args, "excitation", None) else None
-    processed = process(load_run(resolve_run(args.measured)), args.processing, design=design)
+    [processed], note = process_all([load_run(resolve_run(args.measured))], args.processing, design)
+    why = f"--processing {args.processing}" if args.processing else (note or "the default: the run is a periodic excitation")
     with np.errstate(over="ignore", invalid="ignore"):
         predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
         sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
@@ -215,15 +216,17 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         "samples": len(measured),
         "terms": args.terms,
         **processed.summary(),
+        "chosen_because": why,
     }
     if args.json:
         print(json_text(result), end="")
     else:
-        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {args.processing} processing")
+        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {processed.processing} processing ({why})")
         if processed.periodic is not None:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['whole_periods']} whole periods, "
                   f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
                   f"from {result['design_from']})")
+        print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if processed.periodic is not None else ""))
         for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
             if r is None:
@@ -363,10 +366,18 @@ def _replay_processing(args: argparse.Namespace) -> bool:
     if args.processing is not None:
         return False
     recorded = recorded_processing(args.dynamics)
-    if recorded is None or args.duration is not None:
+    if args.duration is not None:
         args.processing = "upstream"
-        why = ("--duration replays a part of the run, which has no projection of its own" if recorded else "the default")
-        print(f"processing: upstream ({why})")
+        print("processing: upstream (--duration replays a part of the run, which has no projection of its own)")
+        return False
+    if recorded is None:  # the default of every command: periodic where the run is a periodic excitation
+        from dvrk_dart.io.reference_data import load_run, resolve_run
+        from dvrk_dart.io.signal import process_all
+
+        measured = getattr(args, "measured", None) or REPLAY_SHORTHANDS[args.command]
+        [processed], note = process_all([load_run(resolve_run(measured))], None)
+        args.processing = processed.processing
+        print(f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})")
         return False
     args.processing, args.harmonics = recorded
     cutoff = "" if args.harmonics is None else f", {args.harmonics} harmonics"

@@ -185,7 +185,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
-    _add_processing_option(p, "upstream")
+    _add_processing_option(p, None)
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)
@@ -270,7 +270,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
             _add_bag_options(p)
         p.add_argument("--mode", default="velocity", choices=MODES)
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
-        _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else upstream")
+        _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
+                                        "excitation, else upstream (said in the output)")
         sim_options(p)
         p.set_defaults(func=commands.cmd_replay)
 
@@ -322,7 +323,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
                                                           "replay the held-out runs with them: is a held-out gap the published fit's bias?")
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
-    _add_processing_option(p, None)  # a payload diagnosis (--baseline) keeps upstream, where its checks were made
+    _add_processing_option(p, None)
     p.add_argument("--out", required=True)
     _add_arm_options(p)
     _add_bag_options(p)

@@ -15,6 +15,7 @@ from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE, one_co
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
@@ -91,8 +92,12 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if refit:
         result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
     if insertion_applies(arm, result, training, holdout, baseline):
-        result["insertion_terms"] = insertion_check(arm, training, holdout, result, executor, jobs, ray_address)
-        result["one_configuration"] = one_configuration_check(arm, training, holdout, result, executor, jobs, ray_address)
+        for key, check in (("insertion_terms", insertion_check), ("one_configuration", one_configuration_check)):
+            try:
+                result[key] = check(arm, training, holdout, result, executor, jobs, ray_address)
+            except DvrkDartError as exc:  # its replay failed or drifted: dropped with the reason, the diagnosis stands
+                result[key] = None
+                result["dropped_effects"].append({"effect": key, "reason": str(exc)})
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()

@@ -32,10 +32,13 @@ from dvrk_dart.diagnosis.result import (
     resimulate,
     select,
     train_fraction,
+    without_last_effect,
 )
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.selection import CV_FOLDS
 from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
+from dvrk_dart.diagnosis.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.model.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
@@ -106,14 +109,22 @@ def diagnose(
                             effects=effects, payload_model=payload_model or ("first_moment" if baseline is not None else "point"),
                             payload_at=payload_at, nuisance=several if nuisance_offsets is None else bool(nuisance_offsets),
                             processing=processing, folds=folds)
-    selection = select(problem, max_effects)
+    selection, dropped = select(problem, max_effects), []
+    while True:  # a selected effect whose re-simulation fails or drifts is dropped with the reason; the diagnosis goes on
+        try:
+            after = resimulate(problem, selection, simulate, base_config)
+            break
+        except DvrkDartError as exc:
+            if not selection.selected:
+                raise
+            dropped.append({"effect": problem.effects[selection.selected[-1]].name, "reason": str(exc)})
+            selection = without_last_effect(selection)
     entries = effect_entries(problem, selection)
-    after = resimulate(problem, selection, simulate, base_config)
     floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
     split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)  # zeros where not recorded
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
-    result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None).to_json()
+    result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
     if out_dir is not None:
         period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
         _write_outputs(Path(out_dir), result, problem.train_runs[0], after.train_after[0], figures, period)
@@ -195,12 +206,14 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
 
 
 def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floor, split, first_moments: list[dict],
-               points: list[dict], simulated: bool) -> Diagnosis:
+               points: list[dict], simulated: bool, dropped: list[dict]) -> Diagnosis:
     train_runs, holdout_runs = problem.train_runs, problem.holdout_runs
     offsets, recorded = problem.offset_joints, problem.recorded
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
     payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0]) if fits else None)
+    gap_before = {"train": gaps([r.residual for r in train_runs], recorded), "holdout": gaps([r.residual for r in holdout_runs], recorded)}
+    gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
     return Diagnosis(
         joints=list(JOINT_NAMES),
         units=[effort_unit(j) for j in JOINT_NAMES],
@@ -221,8 +234,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         residual_definition="measured - simulated" + (" - (baseline measured - baseline simulated)" if problem.has_baseline else "")
         + (" - a constant per run on the joints whose constant moves between sessions (nuisance)" if problem.nuisance else ""),
         simulated_source="simulation" if simulated else "identified model at the measured state (stand-in for the DART replay)",
-        gap_before={"train": gaps([r.residual for r in train_runs], recorded), "holdout": gaps([r.residual for r in holdout_runs], recorded)},
-        gap_after={"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)},
+        gap_before=gap_before,
+        gap_after=gap_after,
         gap_after_source=after.source,
         explained_fraction={
             "train": train_fraction(problem, s.final.beta),
@@ -239,6 +252,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         not_in_simulation=after.not_in_simulation,
         recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
         gravity_mismatch=mismatch,
+        dropped_effects=dropped,
+        explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")]),
     )
 
 

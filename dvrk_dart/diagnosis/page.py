@@ -132,7 +132,13 @@ def answer_sentence(result: dict) -> str:
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
-    sentence = f"The gap is mostly explained by {lead}{more}: {where}, {gaps}"
+    words = (result.get("explanation") or {}).get("words") or "not explained"
+    if lead == "no effect":
+        sentence = f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
+    elif words == "not explained":
+        sentence = f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
+    else:
+        sentence = f"The gap is {words} by {lead}{more}: {where}, {gaps}"
     shares = [_row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
     shares = [shares[j] for j in shown] if shares else shares
     if shares and any(s is not None for s in shares):
@@ -245,6 +251,13 @@ def diagnosis_page(result: dict, image_sources: list[str], title: str) -> str:
             + diagnosis_html(result, image_sources, title) + "</body></html>\n")
 
 
+def _value_interval(value, interval) -> str:
+    """A value with its interval; 'not determined' where the data do not give one."""
+    if value is None:
+        return "not determined"
+    return fmt(value) + ("" if not interval or None in interval else f" ({fmt(interval[0])} .. {fmt(interval[1])})")
+
+
 def _payload_html(result: dict) -> list[str]:
     e = html.escape
     payload = result.get("payload")
@@ -252,7 +265,7 @@ def _payload_html(result: dict) -> list[str]:
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
         return ["<p>" + " ".join(e(w) for w in payload["words"]) + "</p>", "<table>",
                 _row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
-                _row(["gravity effort (interval)", *(f"{fmt(v)} ({fmt(lo)} .. {fmt(hi)})" for v, (lo, hi) in zip(g[:3], gi[:3]))]), "</table>"]
+                _row(["gravity effort (interval)", *(_value_interval(v, i) for v, i in zip(g[:3], gi[:3]))]), "</table>"]
     if not payload:
         return []
     text = (f"payload: {payload['mass_kg']:.3f} kg on {e(payload['link'])} ({e(payload['group'])}), "

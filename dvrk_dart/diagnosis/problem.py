@@ -145,9 +145,7 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
 
 
 def _processing(specs, processing: str | None, baseline) -> RunProcessing:
-    if processing is None and baseline is not None:
-        return RunProcessing(why="upstream: a payload diagnosis (with a baseline) keeps the upstream processing, "
-                                 "on which its payload checks were made")
+    """Every command's default (None): periodic where every run is a periodic excitation, else upstream."""
     return choose_processing(specs, processing)
 
 

@@ -51,6 +51,13 @@ def select(problem: Problem, max_effects: int) -> Selection:
     return Selection(selector, selected, final, steps, individual, selected_cv)
 
 
+def without_last_effect(selection: Selection) -> Selection:
+    """The selection less its last effect, refitted (its re-simulation failed)."""
+    chosen = selection.selected[:-1]
+    selector = selection.selector
+    return Selection(selector, chosen, selector.fit_all(chosen), selection.steps, selection.individual, selector.cross_validate(chosen))
+
+
 def train_fraction(problem: Problem, beta: np.ndarray) -> float:
     grams = problem.train_grams
     return weighted_fraction(sse(beta, grams.A.sum(0), grams.g.sum(0), grams.s.sum(0)), grams.s.sum(0), problem.joint_weights)
@@ -201,6 +208,10 @@ class Diagnosis:
     recorded_joints: list
     #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
     gravity_mismatch: dict | None
+    #: selected effects whose re-simulation failed or drifted: dropped, with the reason
+    dropped_effects: list
+    #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/wording.py)
+    explanation: dict
 
     def to_json(self) -> dict:
         """The diagnosis.json document (a fresh dict: the caller may add to it)."""

@@ -1,0 +1,81 @@
+"""No traceback for any combination of diagnose's options (--baseline,
+--processing, --payload-at, --repeat, --holdout): short periodic runs made
+in DART (a friction of 0.25 N·m on q2 in the measured run, none in its
+baseline and repeat), walked through a set of combinations that covers every
+pair of option values. A result or a one-line error, never a traceback."""
+
+import itertools
+import json
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+from test_periodic_designs import EFFORT_NOISE, design_run  # noqa: E402
+
+from dvrk_dart.cli import main  # noqa: E402
+from dvrk_dart.model.arm import load_arm  # noqa: E402
+from dvrk_dart.runs.replay import simulate_efforts  # noqa: E402
+from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects  # noqa: E402
+
+MOVING = np.array([True, True, True, False, False, False, False])
+FRICTION_Q2_N_M = 0.25
+
+
+def _write(path, state, efforts, seed):
+    noise = np.random.default_rng(seed).standard_normal(efforts.shape) * EFFORT_NOISE
+    np.savetxt(path, np.hstack([state.q, state.dq, efforts + noise]), delimiter=",")
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("combinations")
+    arm = load_arm()
+    state, base = design_run(arm, 3, 0.4, 5, MOVING, 200.0, 11)
+    friction = replace(IDENTIFIED_PHYSICS, extra=JointEffects(coulomb=(0.0, FRICTION_Q2_N_M) + (0.0,) * 5))
+    other, other_base = design_run(arm, 3, 0.35, 5, MOVING, 200.0, 12)
+    return {"measured": _write(folder / "measured.csv", state, simulate_efforts(arm, friction, state), 1),
+            "baseline": _write(folder / "baseline.csv", state, base, 2),
+            "repeat": _write(folder / "repeat.csv", state, base, 3),
+            "holdout": _write(folder / "holdout.csv", other, simulate_efforts(arm, friction, other), 4),
+            "folder": folder}
+
+
+OPTIONS = {"baseline": (False, True), "processing": ("upstream", "periodic"), "payload_at": (False, True),
+           "repeat": (False, True), "holdout": (False, True)}
+
+
+def _covering_pairs() -> list[dict]:
+    """Combinations that hold every pair of option values at least once (greedy)."""
+    names = list(OPTIONS)
+    wanted = {((a, va), (b, vb)) for a, b in itertools.combinations(names, 2) for va in OPTIONS[a] for vb in OPTIONS[b]}
+    chosen = []
+    candidates = [dict(zip(names, values)) for values in itertools.product(*OPTIONS.values())]
+    while wanted:
+        best = max(candidates, key=lambda c: len({p for p in wanted if all(c[k] == v for k, v in p)}))
+        chosen.append(best)
+        wanted -= {p for p in wanted if all(best[k] == v for k, v in p)}
+    return chosen
+
+
+@pytest.mark.parametrize("combination", _covering_pairs(), ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()))
+def test_every_combination_ends_in_a_result_or_one_line(runs, combination, capsys, tmp_path):
+    args = ["diagnose", "--measured", runs["measured"], "--out", str(tmp_path / "out"), "--processing", combination["processing"],
+            "--jobs", "1"]
+    for option in ("baseline", "repeat", "holdout"):
+        if combination[option]:
+            args += [f"--{option}", runs[option]]
+    if combination["payload_at"]:
+        args += ["--payload-at", "pitch:-0.165,0.02,0"]
+    code = main(args)
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    if code == 0:
+        result = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+        assert result["explanation"]["words"] in ("mostly explained", "partly explained", "not explained")
+        assert (tmp_path / "out" / "diagnosis.html").is_file()
+    else:
+        assert code == 2 and len(captured.err.strip().splitlines()) == 1, captured.err
