@@ -58,7 +58,7 @@ def test_every_arm_closes_its_loops_and_holds_its_gravity_in_dart(arm_of):
 def test_every_arm_reproduces_its_published_errors(name, capsys):
     run, published = PUBLISHED[name]
     capsys.readouterr()
-    assert main(["model-errors", "--arm-model", name, "--measured", run, "--first-period", "--json"]) == 0
+    assert main(["model-errors", "--arm-model", name, "--measured", run, "--first-period", "--json", "--processing", "upstream"]) == 0
     errors = json.loads(capsys.readouterr().out)["relative_error"]
     np.testing.assert_allclose(errors, published, atol=1e-3)
 
@@ -92,6 +92,6 @@ def test_an_mtm_bag_reads_like_its_csv(tmp_path, capsys):
         bag = write_bag(tmp_path / "mtm_two", states)
     assert [s.topic for s in states] == ["/MTML/measured_js"] and len(states[0].names) == 7
     capsys.readouterr()
-    assert main(["model-errors", "--arm-model", "mtm", "--measured", str(bag), "--first-period", "--json"]) == 0
+    assert main(["model-errors", "--arm-model", "mtm", "--measured", str(bag), "--first-period", "--json", "--processing", "upstream"]) == 0
     errors = json.loads(capsys.readouterr().out)["relative_error"]
     np.testing.assert_allclose(errors, PUBLISHED["mtm"][1], atol=1e-3)

@@ -51,7 +51,7 @@ def jittered_topics(run, seed=0, arm="PSM1", rows=slice(None)):
 
 
 def model_errors(bag, capsys, *extra):
-    assert main(["model-errors", "--measured", str(bag), "--first-period", "--json", *extra]) == 0
+    assert main(["model-errors", "--measured", str(bag), "--first-period", "--json", "--processing", "upstream", *extra]) == 0
     return np.array(json.loads(capsys.readouterr().out)["relative_error"])
 
 
@@ -93,7 +93,7 @@ def test_single_mcap_file_sqlite3_and_other_arm(tmp_path, capsys, run_two):
     n = 1500
     assert min(np.abs(a.q[:n] - run_two.q[k : n + k]).max() for k in (0, 1)) < 5e-4
     # the CLI's --arm reaches the loader
-    assert main(["model-errors", "--measured", str(sqlite), "--arm", "PSM2", "--json"]) == 0
+    assert main(["model-errors", "--measured", str(sqlite), "--arm", "PSM2", "--json", "--processing", "upstream"]) == 0
     capsys.readouterr()
 
 

@@ -216,7 +216,7 @@ def test_model_errors_reads_the_identified_file(result, tmp_path, capsys):
     DIR/params.json` gives the held-out numbers of identification.json."""
     data = write_outputs(result, tmp_path)
     capsys.readouterr()
-    assert main(["model-errors", "--measured", "two", "--first-period", "--json", "--params", str(tmp_path / "params.json")]) == 0
+    assert main(["model-errors", "--measured", "two", "--first-period", "--json", "--processing", "upstream", "--params", str(tmp_path / "params.json")]) == 0
     printed = json.loads(capsys.readouterr().out)
     expected = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
     assert np.allclose(printed["relative_error"], expected, rtol=1e-9)

@@ -17,7 +17,7 @@ MASSIVE = slice(0, 3)
 
 def test_cli_reproduces_published_relative_errors(arm):
     out = subprocess.run(
-        [sys.executable, "-m", "dvrk_dart.cli", "model-errors", "--measured", "two", "--first-period", "--json"],
+        [sys.executable, "-m", "dvrk_dart.cli", "model-errors", "--measured", "two", "--first-period", "--json", "--processing", "upstream"],
         capture_output=True, text=True, check=True,
     )
     result = json.loads(out.stdout)

@@ -45,7 +45,7 @@ def test_the_published_model_on_periodic_two(capsys):
     assert abs(periodic["period_s"] - 6.48) < 0.01 * 6.48
     assert periodic["processing"] == "periodic" and 6 <= periodic["harmonics"] <= 60
     assert len(periodic["noise_rms"]) == 7 and all(0 < n < 0.05 for n in periodic["noise_rms"][:3])
-    upstream = cli_json(capsys, "model-errors", "--measured", "two", "--first-period")
+    upstream = cli_json(capsys, "model-errors", "--measured", "two", "--first-period", "--processing", "upstream")
     assert np.allclose(upstream["relative_error"][:3], [0.0929, 0.1783, 0.1907], atol=5e-5)
     assert upstream["processing"] == "upstream" and upstream["period_s"] is None
 

@@ -26,7 +26,7 @@ def cli_json(capsys, *args) -> dict:
 @needs_2018
 def test_a_three_joint_log_reads_as_it_is(capsys):
     """No conversion: the data README's upstream figures, and no figure on the joints not recorded."""
-    upstream = cli_json(capsys, "model-errors", "--measured", str(TEST1))
+    upstream = cli_json(capsys, "model-errors", "--measured", str(TEST1), "--processing", "upstream")
     assert np.allclose(upstream["rms"][:3], [0.1245, 0.1395, 0.5565], atol=5e-4), upstream["rms"][:3]
     assert upstream["rms"][3:] == [None] * 4 and upstream["relative_error"][3:] == [None] * 4
     periodic = cli_json(capsys, "model-errors", "--measured", str(TEST1), "--processing", "periodic")

@@ -8,6 +8,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
+
 from dvrk_dart.diagnosis.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
@@ -15,6 +17,7 @@ from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE, one_co
 from dvrk_dart.diagnosis.page import diagnosis_page
 from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
+from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
@@ -98,6 +101,9 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
             except DvrkDartError as exc:  # its replay failed or drifted: dropped with the reason, the diagnosis stands
                 result[key] = None
                 result["dropped_effects"].append({"effect": key, "reason": str(exc)})
+    result["diagnosis_base"] = arm.model.diagnosis_base
+    if holdout:
+        result["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, result["processing"])
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()
@@ -108,6 +114,18 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     if logs:
         log_replays(arm, measured, sim_config_of(result), out_dir)
     return result
+
+
+def identified_model_gap(arm: Arm, holdout, processing: dict) -> list[float | None]:
+    """The identified model on the held-out runs, in the diagnosis's band,
+    pooled over their samples as the simulation's gaps are (result.gaps): what
+    the diagnosis is measured against."""
+    residuals, recorded = [], []
+    for name in holdout:
+        state = process(load_run(resolve_run(name)), processing["processing"], processing.get("harmonics"))
+        residuals.append(state.tau - state.in_band(arm.identified.predict(state.q, state.dq, state.ddq, "all")))
+        recorded.append(state.measured)
+    return gaps(residuals, np.all(recorded, axis=0))
 
 
 def _write_one_configuration(result: dict, out_dir: Path) -> None:

@@ -103,6 +103,22 @@ def _row_share(split_row: dict) -> float | None:
     return None if math.isnan(share) else share
 
 
+def beyond_identified_sentence(result: dict) -> str:
+    """What the data show beyond the identified model, first: its gap on the
+    held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
+    bar = result.get("identified_model_gap_holdout")
+    combined = result.get("one_configuration")
+    after, what = ((combined["gap_holdout"], "one DART configuration: the selected effects, J3's terms and the pitch-angle loads")
+                   if combined else ((result.get("gap_after") or {}).get("holdout"), "the selected effects simulated in DART"))
+    if not bar or not after:
+        return ""
+    shown = [j for j in range(ANSWER_JOINTS) if bar[j] is not None and after[j] is not None]
+    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {effort_unit(JOINT_NAMES[j])}" for j in shown)
+    processing = result.get("processing") or {}
+    band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
+    return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
+
+
 def answer_sentence(result: dict) -> str:
     """The diagnosis in one sentence: the main effect (what, where, how big),
     how far the gap shrinks on the main joints (held-out runs when there are),
@@ -133,12 +149,15 @@ def answer_sentence(result: dict) -> str:
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     words = (result.get("explanation") or {}).get("words") or "not explained"
+    beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
+    if beyond and result.get("diagnosis_base", "inertial") == "inertial":
+        where += ", against the simulation of the identified inertia alone"
     if lead == "no effect":
-        sentence = f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
+        sentence = beyond + f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
     elif words == "not explained":
-        sentence = f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
+        sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
     else:
-        sentence = f"The gap is {words} by {lead}{more}: {where}, {gaps}"
+        sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
     shares = [_row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
     shares = [shares[j] for j in shown] if shares else shares
     if shares and any(s is not None for s in shares):

@@ -80,15 +80,9 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     processing = spec.get("processing", "upstream")
     result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
                            processing=processing, refit=bool(spec.get("refit", False)))
-    # the bar: the full identified model on the held-out runs, in the same band,
-    # pooled over their samples as the simulation's gaps are (result.gaps)
-    identified = []
-    for name in spec["holdout"]:
-        pr = process(load_run(resolve_run(name)), processing, result["processing"].get("harmonics"))
-        identified.append(pr.tau - pr.in_band(arm.identified.predict(pr.q, pr.dq, pr.ddq, "all")))
-    bar = np.asarray(gaps(identified))
-    after = np.asarray(result["gap_after"]["holdout"])
-    result["identified_model_gap_holdout"] = bar.tolist()
+    # the bar: the full identified model on the held-out runs, in the same band (api.identified_model_gap)
+    bar = np.asarray(result["identified_model_gap_holdout"], dtype=float)
+    after = np.asarray(result["gap_after"]["holdout"], dtype=float)
     floor = result.get("session_floor")
     share = None if floor is None else repeatable_share(bar, after, floor)  # of the identified model's repeatable gap
     result["repeatable_gap_explained_share"] = None if share is None else share.tolist()
