@@ -27,6 +27,7 @@ TARGETS = {
     "diagnose_three_s": (120.0, "lower", "s", "diagnosis of three 30 s runs at once (two payload runs and their baseline), re-simulation included"),
     "bag_import_s": (1.0, "lower", "s", "read a 30 s, 200 Hz two-topic ROS 2 bag (MCAP) as a measured run"),
     "periodic_projection_s": (0.2, "lower", "s", "the periodic layer on one 30 s run: period, cutoff, projection of q and efforts, noise; best of 5"),
+    "force_estimation_s": (0.5, "lower", "s", "the force at the instrument from a 30 s run's effort gap: Jacobians and F = J^-T tau per sample; best of 5"),
     "replay_realtime_factor": (20.0, "higher", "x", "dvrk-dart replay --measured two end to end (28 s, logs written), imports excluded, best of 3"),
 }
 
@@ -67,6 +68,16 @@ def bench_periodic(repeat: int = 5) -> dict:
     run = load_run(resolve_run("two"))
     analyse(run.t, run.q, run.tau, sample_rate_hz(), "two")  # warm-up
     return {"periodic_projection_s": best_time(lambda: analyse(run.t, run.q, run.tau, sample_rate_hz(), "two"), repeat=repeat, number=1)}
+
+
+def bench_force(repeat: int = 5) -> dict:
+    from dvrk_dart.analysis.force import estimate_force
+
+    arm = load_arm()
+    run = load_run(resolve_run("two"))
+    ddq = central_difference(run.dq, 1.0 / sample_rate_hz())
+    gap = run.tau - arm.identified.predict(run.q, run.dq, ddq)
+    return {"force_estimation_s": best_time(lambda: estimate_force(arm.model, run.q, gap), repeat=repeat, number=1)}
 
 
 def bench_simulation() -> dict:
@@ -170,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     figures = {}
     # the end-to-end replay first: nothing else (Ray's daemons, worker pools) runs beside it yet
-    for part in (bench_replay, bench_model, bench_periodic, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
+    for part in (bench_replay, bench_model, bench_periodic, bench_force, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
                  bench_monte_carlo, bench_bag_import):
         figures.update(part())
     print(f"{'figure':<29} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")

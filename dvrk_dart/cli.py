@@ -238,6 +238,28 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_force(args: argparse.Namespace) -> int:
+    """The force at the instrument point (the arm's model card) the measured efforts imply."""
+    from dvrk_dart.instrument_force import ForceConfig, instrument_force
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
+    from dvrk_dart.model.arm import load_arm
+
+    check_output_folder(args.out, "force")
+    config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation)
+    with building_folder(args.out, "force") as folder:
+        s = instrument_force(load_arm(params_file=args.params), config, folder)
+    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}), {s['processing']} processing ({s['chosen_because']})")
+    if s["rms_n"] is None:
+        print(f"  not determined on any sample: the lever arm stays under {s['min_lever_m']} m")
+    else:
+        axes = " / ".join(f"{v:.3f}" for v in s["rms_per_axis_n"])
+        print(f"  |F| RMS {s['rms_n']:.3f} N, 95th percentile {s['p95_n']:.3f} N, per axis x / y / z {axes} N "
+              f"(over the {s['determined_fraction']:.0%} of samples with every lever >= {s['min_lever_m']} m)")
+        print(f"  every sample: |F| RMS {s['rms_all_samples_n']:.3f} N, 95th percentile {s['p95_all_samples_n']:.3f} N")
+    print(f"written {Path(args.out) / 'force.csv'}, force.json, force.mcap, force.rrd")
+    return 0
+
+
 def cmd_session_floor(args: argparse.Namespace) -> int:
     """The floor of the identified model's residual: two recordings of one trajectory."""
     from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
@@ -308,6 +330,21 @@ def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
         raise DvrkDartError(f"--arm-model {asked}: the scenario {spec.name} is the {spec.arm_model} arm's; leave --arm-model out")
 
 
+def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
+    """The replay's RMS figures as a labelled table, a row per joint with its unit."""
+    terms = metrics.get("model_terms_compared")
+    columns = [("rms_sim_vs_model", "sim vs model"),
+               ("rms_sim_vs_measured", "sim vs measured"), ("rms_model_vs_measured", "model (all terms) vs measured")]
+    columns = [(key, label) for key, label in columns if metrics.get(key) is not None]
+    if not columns:
+        return
+    print(f"  RMS per joint, simulated arm: {dynamics or 'the scenario default'} "
+          "(--dynamics identified: every identified term as physics)" + (f"; model terms compared: {', '.join(terms)}" if terms else ""))
+    print(f"  {'joint':>6}  " + "  ".join(f"{label:>22}" for _, label in columns))
+    for j, name in enumerate(JOINT_NAMES[:len(metrics[columns[0][0]])]):
+        print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {effort_unit(name):<3}" for key, _ in columns))
+
+
 def _run_and_write(config, out: Path | None) -> int:
     from dvrk_dart.io.outputs import check_output_folder
     from dvrk_dart.model.arm import load_arm
@@ -321,12 +358,10 @@ def _run_and_write(config, out: Path | None) -> int:
         write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
-    terms = metrics.get("model_terms_compared")
-    said = {"rms_sim_vs_model": " (N·m, N for the prismatic joint" + (f"; the model's {', '.join(terms)})" if terms else ")"),
-            "rms_sim_vs_measured": " (N·m, N for the prismatic joint)", "rms_model_vs_measured": " (N·m, N for the prismatic joint; the full model)"}
-    for key in ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_vs_measured", "tracking_rms_position", "tracking_rms_orientation"):
+    _print_effort_table(metrics, config.dynamics)
+    for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
         if metrics.get(key) is not None:
-            print(f"  {key}{said.get(key, '')}: {np.array2string(np.asarray(metrics[key]), precision=5)}")
+            print(f"  {key}: {float(np.max(metrics[key])):.3g} {unit}")
     if "error" in metrics:
         print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
         return 2

@@ -132,12 +132,13 @@ def _add_arm_options(p: argparse.ArgumentParser) -> None:
 
 def _add_bag_options(p: argparse.ArgumentParser) -> None:
     """Where a measured run that is a ROS bag keeps the PSM's joint states."""
-    g = p.add_argument_group("measured runs that are ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag)")
+    g = p.add_argument_group("reading measured runs: ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag) and CSVs")
     g.add_argument("--arm", default=None, type=arm_namespace,
                    help="the arm's namespace (default: the arm model's, PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js; MTML: /MTML/measured_js)")
     g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
     g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
-    g.add_argument("--rate", type=RATE_HZ, default=None, help="the uniform grid the messages are resampled on (Hz, default 200)")
+    g.add_argument("--rate", type=RATE_HZ, default=None,
+                   help="rows per second of a CSV without a time column, or the grid a bag's messages are resampled on (Hz, default 200)")
 
 
 def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said: str | None = None) -> None:
@@ -163,6 +164,13 @@ def _executor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ray-address", default=None, help="an existing Ray cluster (default: start a local Ray instance with --jobs CPUs)")
 
 
+DESCRIPTION = ("dvrk-dart: a DART simulation of the dVRK PSM (and MTM) with its identified dynamics, compared with the efforts "
+               "measured on a real arm. model-errors: the identified model against a recording; replay: the simulator against it; "
+               "identify: your arm's own parameters; diagnose: which unmodelled effect makes the simulation differ, and how much "
+               "of the gap it removes; validate: the whole campaign and its report. Reference runs by name: "
+               + ", ".join(RUNS) + "; or any CSV or ROS bag.")
+
+
 class OneLineParser(argparse.ArgumentParser):
     """Usage errors as every other error: one line naming the option, exit 2.
     No abbreviated options: `--dur 3 --duration 4` would give one option twice."""
@@ -179,7 +187,7 @@ class OneLineParser(argparse.ArgumentParser):
 
 def build_parser(commands) -> argparse.ArgumentParser:
     """The parser of every command; `commands` holds the cmd_* functions (dvrk_dart.cli)."""
-    parser = OneLineParser(prog="dvrk-dart", description=commands.__doc__)
+    parser = OneLineParser(prog="dvrk-dart", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
@@ -192,8 +200,19 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_model_errors)
 
+    p = sub.add_parser("force", help="the force at the instrument the measured efforts imply (in free motion: the model's phantom force)")
+    p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
+    p.add_argument("--dynamics", default="identified", metavar="inertial|identified|DIAGNOSIS.json",
+                   help="the model the efforts are compared with: the identified inertia, every identified term (default), "
+                        "or what a diagnosis selected (its diagnosis.json or one_configuration.json)")
+    p.add_argument("--out", required=True, help="output folder: force.csv, force.json, force.mcap, force.rrd")
+    _add_processing_option(p, None, "the one a --dynamics file records, else periodic where the run is a periodic excitation, else upstream")
+    _add_arm_options(p)
+    _add_bag_options(p)
+    p.set_defaults(func=commands.cmd_force)
+
     p = sub.add_parser("session-floor", help="the floor of the identified model's residual from two recordings of one trajectory")
-    p.add_argument("--measured", type=measured_run, required=True, help="a measured run: path (CSV or ROS bag), or one|two|one-no-weight|...")
+    p.add_argument("--measured", type=measured_run, required=True, help=f"a measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--repeat", type=measured_run, required=True, help="the same trajectory recorded in another session")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_processing_option(p, "periodic")
@@ -268,7 +287,9 @@ def build_parser(commands) -> argparse.ArgumentParser:
         if name == "replay":
             p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
             _add_bag_options(p)
-        p.add_argument("--mode", default="velocity", choices=MODES)
+        p.add_argument("--mode", default="velocity", choices=MODES,
+                       help="velocity: the simulator follows the recorded motion and its efforts are read (the paper's replay); "
+                            "torque: computed torque from the arm's own model; kinematic: poses imposed, no dynamics")
         p.add_argument("--out", help="output folder (default out/runs/<run name>)")
         _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
                                         "excitation, else upstream (said in the output)")
@@ -286,7 +307,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.set_defaults(func=commands.cmd_validate)
 
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
-    p.add_argument("--measured", type=measured_run, required=True, help="measured run: path, or one|two|...")
+    p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--samples", type=int_in(2, MAX_SAMPLES, "each is a replay; a band settles within hundreds"), default=64, help="parameter sets drawn (at least 2: a band)")
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
@@ -324,7 +345,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
     _add_processing_option(p, None)
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help="output folder: diagnosis.json, diagnosis.html, figures, the replays before and after")
     _add_arm_options(p)
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_diagnose)

@@ -83,21 +83,87 @@ def dataset_figures(arm: Arm, dataset: Dataset, out_dir: Path, diagnosis_dir: Pa
         "own_identification": {p: own_identification_rms(dataset, p, folder) for p in PROCESSINGS},
         "diagnosis": diagnosis_rms(diagnosis_dir, dataset.diagnosis_case),
     }
+    figures["phantom_force"] = phantom_forces(arm, dataset, folder, diagnosis_dir)
     write_json_atomic(folder / FIGURES_FILE, figures)
     return figures
 
 
-def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path) -> tuple[str, str]:
-    """(title, html) of the report: one table per dataset, the same rows."""
+def phantom_forces(arm: Arm, dataset: Dataset, folder: Path, diagnosis_dir: Path) -> dict:
+    """`dvrk-dart force` on the held-out run (periodic) under each model: the force it
+    implies in free motion, where the true force is zero; the figure of one period."""
+    from dvrk_dart.instrument_force import ForceConfig, instrument_force, one_period_forces
+    from dvrk_dart.model.arm import load_arm
+
+    models = {"published parameters": (arm, "identified"),
+              "own identification": (load_arm(params_file=folder / "identification-periodic" / "params.json"), "identified")}
+    combined = diagnosis_dir / dataset.diagnosis_case / "one_configuration.json"
+    if combined.is_file():
+        models["diagnosis: one configuration"] = (arm, str(combined))
+    forces = {label: instrument_force(model, ForceConfig(dataset.holdout, dynamics, "periodic"), None)
+              for label, (model, dynamics) in models.items()}
+    period = {label: one_period_forces(model, ForceConfig(dataset.holdout, dynamics, "periodic"))
+              for label, (model, dynamics) in models.items() if label != "own identification"}
+    plot_phantom_force(period, folder / PHANTOM_FIGURE, dataset.holdout)
+    keep = ("rms_n", "p95_n", "rms_per_axis_n", "determined_fraction", "rms_all_samples_n", "min_lever_m", "point")
+    return {label: {k: summary[k] for k in keep} for label, summary in forces.items()}
+
+
+PHANTOM_FIGURE = "phantom_force_one_period.png"
+
+
+def plot_phantom_force(period: dict, path: Path, run: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    for label, (t, force) in period.items():
+        ax.plot(t, np.linalg.norm(force, axis=1), label=label)
+    ax.set_xlabel("time in the period (s)")
+    ax.set_ylabel("|F| at the instrument (N)")
+    ax.set_title(f"phantom force on held-out {run}, free motion (gaps: lever under the limit)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path) -> tuple[str, str, list[Path]]:
+    """(title, html, figures) of the report: one table per dataset, the same rows."""
     parts = ["<p>Every figure is the RMS of measured minus predicted efforts on the held-out run, whole run "
              "(N·m, N for q3). The published parameters were identified on the 2019 runs; the project's own are trained on the "
              "dataset's training runs only; the diagnosis is fitted on them too (its band: the smallest cutoff of its runs).</p>"]
+    files = []
     for dataset in load_datasets():
         figures = dataset_figures(arm, dataset, out_dir, diagnosis_dir)
         print(f"dataset {dataset.name}: held-out {dataset.holdout}, " + "; ".join(
             f"{label} " + " ".join("-" if v is None else f"{v:.4f}" for v in values[:3]) for label, values in _rows(figures)))
-        parts.append(_table(dataset, figures))
-    return "Every real dataset: held-out figures side by side", "".join(parts)
+        print(f"dataset {dataset.name}: phantom force at the instrument on {dataset.holdout}, |F| RMS " + "; ".join(
+            f"{label} {f['rms_n']:.3f} N" for label, f in figures["phantom_force"].items() if f["rms_n"] is not None))
+        staged = out_dir / f"{dataset.name}_{PHANTOM_FIGURE}"  # the report copies extras by file name: keep them apart
+        staged.write_bytes((out_dir / dataset.name / PHANTOM_FIGURE).read_bytes())
+        files.append(staged)
+        parts += [_table(dataset, figures), _force_table(dataset, figures["phantom_force"]),
+                  f"<figure><img src='figures/extra/{staged.name}' alt='phantom force'><figcaption>The force the efforts imply at the "
+                  f"instrument over one period of held-out {dataset.holdout}, before (published parameters) and after the diagnosis "
+                  "(its one configuration); the true force is zero.</figcaption></figure>"]
+    return "Every real dataset: held-out figures side by side", "".join(parts), files
+
+
+def _force_table(dataset: Dataset, forces: dict) -> str:
+    """The phantom force per model: what the effort gap costs at the instrument."""
+    rows = []
+    for label, f in forces.items():
+        cells = [f["rms_n"], f["p95_n"], *(f["rms_per_axis_n"] or [None] * 3), f["determined_fraction"], f["rms_all_samples_n"]]
+        rows.append(f"<tr>{text_cell(label)}" + "".join(num_cell(v, dataset=dataset.name, row=f"phantom force: {label}") for v in cells) + "</tr>")
+    first = next(iter(forces.values()))
+    intro = (f"<p>The phantom force at the {first['point']} (<code>dvrk-dart force</code>, periodic): F = J^-T (measured - model) "
+             f"over q1..q3, in free motion where the true force is zero. Samples whose lever arm is under {first['min_lever_m']} m "
+             "(the instrument near the remote centre of motion) are not determined and left out; the last column keeps them.</p>")
+    return intro + table(["model", "|F| RMS (N)", "95th percentile (N)", "x RMS (N)", "y RMS (N)", "z RMS (N)",
+                          "determined samples", "|F| RMS, every sample (N)"], rows)
 
 
 def _rows(figures: dict) -> list[tuple[str, list]]:

@@ -110,7 +110,7 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     _write_one_configuration(result, out_dir)
     result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
-    write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], f"diagnosis of {measured}"))
+    write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], page_title(result)))
     if logs:
         log_replays(arm, measured, sim_config_of(result), out_dir)
     return result
@@ -126,6 +126,15 @@ def identified_model_gap(arm: Arm, holdout, processing: dict) -> list[float | No
         residuals.append(state.tau - state.in_band(arm.identified.predict(state.q, state.dq, state.ddq, "all")))
         recorded.append(state.measured)
     return gaps(residuals, np.all(recorded, axis=0))
+
+
+def page_title(result: dict) -> str:
+    """What the page scored: the held-out runs when there are, else the training runs."""
+    trained = ", ".join(result.get("train_runs") or [result.get("measured", "")])
+    if result.get("holdout_runs"):
+        return f"diagnosis: fitted on {trained}, scored on held-out {', '.join(result['holdout_runs'])}"
+    baseline = f" against the baseline {result['baseline']}" if result.get("baseline") else ""
+    return f"diagnosis of {trained}{baseline}"
 
 
 def _write_one_configuration(result: dict, out_dir: Path) -> None:

@@ -205,11 +205,23 @@ def _gap_table(result: dict) -> list[str]:
     return parts + ["</table>", f"<p class='note'>after: {html.escape(str(result.get('gap_after_source', '')))}</p>"]
 
 
+#: what the joint names mean (the identification model's coordinates)
+JOINT_WORDS = ("Joints: q1 yaw, q2 pitch, q3 insertion, q4 tool roll; q5, q6, q7 are the wrist pitch, wrist yaw and jaw "
+               "motor coordinates (the dVRK's wrist values through the instrument's coupling), not the wrist joints themselves.")
+
+
 def _effects_table(result: dict) -> list[str]:
     """The ranked effects: plain name, explained share as a bar; the parameters folded away."""
     e = html.escape
-    parts = ["<table>", _row(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", "explained (held out)"], "th")]
-    for rank, effect in enumerate(result.get("effects", [])[:SHOWN_EFFECTS], 1):
+    effects = result.get("effects", [])
+    # every selected effect, then the best of the others up to SHOWN_EFFECTS rows
+    shown = [x for x in effects if x.get("selected")]
+    shown += [x for x in effects if not x.get("selected")][:max(0, SHOWN_EFFECTS - len(shown))]
+    parts = [f"<p class='note'>{len([x for x in effects if x.get('selected')])} effects selected, all listed; {len(shown)} of "
+             f"{len(effects)} candidates shown. {JOINT_WORDS}</p>", "<table>",
+             _row(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", "explained (held out)"], "th")]
+    for effect in shown:
+        rank = effects.index(effect) + 1
         frac = effect.get("explained_fraction", {})
         parts.append(_row([rank, e(plain_name(effect)), f"<code>{e(effect['name'])}</code>", e(", ".join(effect.get("joints", []))),
                            "yes" if effect.get("selected") else "no", _ROLE_WORDS.get(effect.get("role"), "finding"),
@@ -217,7 +229,7 @@ def _effects_table(result: dict) -> list[str]:
     parts.append("</table>")
     dump = "".join(_row([f"<code>{e(effect['name'])}</code>", e(", ".join(
         f"{k} = {fmt(v) if isinstance(v, (int, float)) else v} {(effect.get('units') or {}).get(k, '')}".rstrip()
-        for k, v in effect.get("parameters", {}).items()))]) for effect in result.get("effects", [])[:SHOWN_EFFECTS])
+        for k, v in effect.get("parameters", {}).items()))]) for effect in shown)
     return parts + [f"<details><summary>fitted parameters of the ranked effects</summary><table>{_row(['effect', 'parameters'], 'th')}{dump}</table></details>"]
 
 

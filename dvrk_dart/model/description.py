@@ -212,6 +212,8 @@ class PsmModel:
     #: what the diagnosis simulates before adding effects ([diagnosis] base): the identified
     #: inertia only ("inertial"), or every identified term ("identified": effects then correct it)
     diagnosis_base: str = "inertial"
+    #: where `dvrk-dart force` estimates the external force ([force_point]): None when the card names none
+    force_point: "ForcePoint | None" = None
 
     @property
     def folder(self) -> Path:
@@ -331,6 +333,30 @@ def _require(table: dict, key: str, path: Path, where: str):
 DIAGNOSIS_BASES = ("inertial", "identified")
 
 
+@dataclass(frozen=True)
+class ForcePoint:
+    """The instrument point of a force estimate: the origin of `link`'s frame,
+    positioned by `joints`; a direction whose lever arm (singular value of the
+    positional Jacobian) is below `min_lever_m` is not determined."""
+
+    link: int
+    name: str
+    joints: tuple[int, ...]
+    min_lever_m: float
+
+
+def _force_point(raw: dict, path: Path, links: dict) -> ForcePoint | None:
+    table = raw.get("force_point")
+    if table is None:
+        return None
+    name = str(_require(table, "link", path, "[force_point]"))
+    keys = [k for k, link in links.items() if link.name == name]
+    if not keys:
+        raise DvrkDartError(f"{path}: [force_point] link '{name}' is not a link of the model")
+    joints = tuple(JOINT_NAMES.index(j) for j in _require(table, "joints", path, "[force_point]"))
+    return ForcePoint(keys[0], str(table.get("point", name)), joints, float(_require(table, "min_lever_m", path, "[force_point]")))
+
+
 def _diagnosis_base(raw: dict, path: Path) -> str:
     base = raw.get("diagnosis", {}).get("base", "inertial")
     if base not in DIAGNOSIS_BASES:
@@ -439,6 +465,7 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
         diagnosis_base=_diagnosis_base(raw, path),
+        force_point=_force_point(raw, path, links),
     )
 
 

@@ -1,0 +1,104 @@
+"""`dvrk-dart force`: the force at the instrument that a run's measured efforts
+imply under a model (analysis/force.py), written as CSV, MCAP and Rerun logs
+with a summary: in free motion, the model's phantom force."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.analysis.force import estimate_force, force_point_of, point_positions
+from dvrk_dart.diagnosis.library import config_effort_by_formula
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.excitation_design import read_design
+from dvrk_dart.io.force_log import force_table, write_force_logs
+from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
+from dvrk_dart.io.signal import ProcessedRun, process, process_all
+from dvrk_dart.model.arm import Arm
+from dvrk_dart.runs.config import DYNAMICS_CHOICES, RunConfig, recorded_processing, sim_config_for
+from dvrk_dart.sim.config import SimConfig
+
+
+@dataclass(frozen=True)
+class ForceConfig:
+    measured: str
+    dynamics: str = "identified"  # inertial | identified | a diagnosis.json / one_configuration.json
+    processing: str | None = None  # None: the file's recorded one, else periodic where the run is periodic
+    excitation: str | None = None
+
+
+def processed_run(config: ForceConfig) -> tuple[ProcessedRun, str]:
+    """The run through the processing the options, the --dynamics file or the default choose, and why."""
+    run = load_run(resolve_run(config.measured))
+    if config.processing is not None:
+        return process(run, config.processing), f"--processing {config.processing}"
+    recorded = recorded_processing(config.dynamics)
+    if recorded is not None:
+        return process(run, *recorded), f"the one {config.dynamics} was fitted on"
+    design = read_design(config.excitation) if config.excitation else None
+    [state], note = process_all([run], None, design)
+    return state, note or "the default: the run is a periodic excitation"
+
+
+def model_efforts(arm: Arm, config: ForceConfig, state: ProcessedRun) -> np.ndarray:
+    """The model's efforts at the run's samples, in the band of its measured efforts."""
+    return state.in_band(config_effort_by_formula(arm, model_config(config.dynamics), state.q, state.dq, state.ddq))
+
+
+def model_config(dynamics: str) -> SimConfig:
+    """The physics of --dynamics, evaluated by formula here (not simulated: a
+    diagnosis's explicit terms need not be a physical DART damping)."""
+    if dynamics in DYNAMICS_CHOICES:
+        return sim_config_for(RunConfig("replay", "velocity", dynamics=dynamics))
+    try:
+        return SimConfig.from_dict(json.loads(Path(dynamics).read_text(encoding="utf-8"))["sim_config"])
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise DvrkDartError(f"--dynamics: {dynamics}: not a diagnosis.json or one_configuration.json ({type(exc).__name__})") from None
+
+
+def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:
+    """Estimate, summarise and (with `out_dir`) write the logs and force.json."""
+    state, why = processed_run(config)
+    gap = state.tau - model_efforts(arm, config, state)
+    estimate = estimate_force(arm.model, state.q, gap)
+    point = force_point_of(arm.model)
+    every_sample = estimate_force_all(arm, state.q, gap)
+    summary = {
+        "measured": run_label(config.measured), "dynamics": config.dynamics, "processing": state.processing, "chosen_because": why,
+        "point": point.name, "point_link": arm.model.links[point.link].name, "min_lever_m": point.min_lever_m,
+        **estimate.summary(), "rms_all_samples_n": every_sample["rms_n"], "p95_all_samples_n": every_sample["p95_n"],
+        "rms_per_axis_all_samples_n": every_sample["rms_per_axis_n"],
+        "definition": "F = J^-T (tau_measured - tau_model) over the point's joints, base frame; a direction whose lever "
+                      "(singular value of J) is under min_lever_m is not determined (NaN in force.csv); the figures are "
+                      "over the determined samples, *_all_samples_* over every sample",
+        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured))}, "versions": software_versions(),
+    }
+    if out_dir is not None:
+        table = force_table(state.t, point_positions(arm.model, state.q, point.link), estimate.force, estimate.determined, estimate.lever_m)
+        write_force_logs(out_dir, table, summary["measured"])
+        write_json_atomic(out_dir / "force.json", summary)
+    return summary
+
+
+def one_period_forces(arm: Arm, config: ForceConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(t in the period, F) over the first period of a periodic run (NaN where not determined)."""
+    state, _ = processed_run(config)
+    if state.periodic is None:
+        raise DvrkDartError(f"{config.measured}: one period needs the periodic processing")
+    n = state.first_period_samples()
+    estimate = estimate_force(arm.model, state.q[:n], (state.tau - model_efforts(arm, config, state))[:n])
+    return state.t[:n] - state.t[0], estimate.force
+
+
+def estimate_force_all(arm: Arm, q: np.ndarray, gap: np.ndarray) -> dict:
+    """The same estimate with every direction kept (the figure to compare with published phantom forces)."""
+    from dataclasses import replace
+
+    point = force_point_of(arm.model)
+    model = replace(arm.model, force_point=replace(point, min_lever_m=0.0))
+    return estimate_force(model, q, gap).summary()
