@@ -69,6 +69,62 @@ def _datasets_section(out_dir: Path):
     return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis")
 
 
+#: the contact scenario: the held-out run replayed against a tissue-like surface (runs/contact.py)
+CONTACT = {"run": "two", "depth_m": 0.01, "stiffness_n_per_m": 500.0, "damping_n_s_per_m": 5.0, "duration_s": 27.0}
+#: the sim-to-sim bar of the force estimate (N RMS): the estimate is exact up to DART's integration
+CONTACT_SIM_TO_SIM_BAR_N = 1e-3
+
+
+def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
+    """DART's contact force against the estimate from the simulated efforts, and with each model's real residual added."""
+    import numpy as np
+
+    from dvrk_dart.analysis.html import num_cell, table, text_cell
+    from dvrk_dart.diagnosis.library import config_effort_by_formula
+    from dvrk_dart.instrument_force import ForceConfig, model_efforts
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.runs.contact import contact_check, simulate_contact, surface_under
+    from dvrk_dart.sim.config import SimConfig
+
+    arm = load_arm()
+    state = process(load_run(resolve_run(CONTACT["run"])), "periodic")
+    surface = surface_under(arm, state, CONTACT["depth_m"], stiffness_n_per_m=CONTACT["stiffness_n_per_m"],
+                            damping_n_s_per_m=CONTACT["damping_n_s_per_m"])
+    run = simulate_contact(arm, state, surface, CONTACT["duration_s"])
+    model = config_effort_by_formula(arm, SimConfig(), run.q, run.dq, run.ddq)
+    models = {"published parameters": "identified"}
+    combined = out_dir / "diagnosis" / "holdout" / "one_configuration.json"
+    if combined.is_file():
+        models["diagnosis: one configuration"] = str(combined)
+    results = {}
+    for label, dynamics in models.items():  # each model's real residual on the run, at the contact run's times
+        residual = state.tau - model_efforts(arm, ForceConfig(CONTACT["run"], dynamics, "periodic"), state)
+        at_steps = np.column_stack([np.interp(run.t, state.t - state.t[0], residual[:, j]) for j in range(residual.shape[1])])
+        results[label] = contact_check(arm, run, model, at_steps)
+    check = {**CONTACT, "surface_height_m": surface.height_m, "models": results, "bar_n": CONTACT_SIM_TO_SIM_BAR_N}
+    from dvrk_dart.io.atomic import write_json_atomic
+
+    write_json_atomic(out_dir / "contact" / "contact.json", check)
+    first = next(iter(results.values()))
+    verdict = {"check": f"contact in DART: the force estimated from the simulated efforts within {CONTACT_SIM_TO_SIM_BAR_N:g} N RMS of "
+                        "DART's applied contact force (sim-to-sim)", "passed": first["sim_to_sim_error_rms_n"] <= CONTACT_SIM_TO_SIM_BAR_N,
+               "value": f"{first['sim_to_sim_error_rms_n']:.2e} N RMS (contact force {first['contact_force_rms_n']:.3f} N RMS, in contact "
+                        f"{first['in_contact_fraction']:.0%} of the time)"}
+    rows = [f"<tr>{text_cell(label)}{num_cell(r['sim_to_sim_error_rms_n'])}{num_cell(r['with_real_residual_error_rms_n'])}"
+            + "".join(num_cell(v) for v in r["with_real_residual_error_per_axis_n"]) + "</tr>" for label, r in results.items()]
+    html = (f"<p>The arm replays '{CONTACT['run']}' in DART against a horizontal surface {CONTACT['depth_m'] * 1000:g} mm above the "
+            f"lowest point of the wrist centre's path (stiffness {CONTACT['stiffness_n_per_m']:g} N/m, damping "
+            f"{CONTACT['damping_n_s_per_m']:g} N s/m); DART's applied force is the truth. The estimate from the simulated efforts "
+            "(the model the simulation was built from) is the sim-to-sim error; with the real residual of each model on the run added "
+            "to the efforts, the error a user should expect on the real arm.</p>"
+            + table(["model", "sim-to-sim error (N RMS)", "with the real residual (N RMS)", "x (N)", "y (N)", "z (N)"], rows))
+    print(f"contact: {verdict['value']}; with the real residual: " + "; ".join(
+        f"{label} {r['with_real_residual_error_rms_n']:.3f} N" for label, r in results.items()))
+    return ("Force at the instrument: a contact in DART", html), verdict
+
+
 UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"
 
 
@@ -119,19 +175,20 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     identification = _identification_section(out_dir)
     periodic = _periodic_section(out_dir, runs_dir)
     datasets = _datasets_section(out_dir)
+    contact, contact_verdict = _contact_section(out_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)
     summary["ran"] += after["ran"]
     summary["skipped_up_to_date"] += after["skipped_up_to_date"]
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, periodic, identification, uncertainty])
+    index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, contact, periodic, identification, uncertainty])
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")
     for (check, title), status in verdicts.items():
         print(f"  [{status.upper():4}] {title}")
-    for verdict in json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()):
+    for verdict in [*json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()), contact_verdict]:
         print(f"  [{'PASS' if verdict['passed'] else 'FAIL'}] {verdict['check']}: {verdict['value']}")
     print(f"report: {index.resolve()}")
     for name, error in summary["failures"].items():

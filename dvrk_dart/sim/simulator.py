@@ -88,6 +88,10 @@ class PsmSimulator(ClosedChainReadout):
         self.config = config
         self.dt = float(config.dt_s)
         self.psm: DartPsm = build(model, params, config)
+        #: the environment's force on the instrument point, a function of its position and velocity
+        #: (base frame), or None; `last_external_force` is the one of the last step (runs/contact.py)
+        self.external_force = None
+        self.last_external_force = np.zeros(3)
         self.skeleton = self.psm.skeleton
         self.world = self.psm.world
         n = self.psm.n_dofs
@@ -353,7 +357,8 @@ class PsmSimulator(ClosedChainReadout):
             1.0 / POSITION_FEEDBACK_TIME_CONSTANT_S, self.dt, self.psm.G, ideal_cw, self.model.counterweight_ratio)
         skeleton = self.skeleton
         skeleton.setAccelerations(xdd)
-        skeleton.computeInverseDynamics(False, False, False)
+        touching = self._apply_external_force()
+        skeleton.computeInverseDynamics(touching, False, False)
         F = skeleton.getForces()
         if self._has_implicit:  # DART's implicit damping and springs at the end-of-step state
             F += self._implicit_diag * xdd + self._implicit_damping * v + self._implicit_stiffness * (x + self.dt * v)
@@ -378,6 +383,20 @@ class PsmSimulator(ClosedChainReadout):
         skeleton.setForces(forces)
         self.world.step()
         self._after_step(dq, tau, float(F[self._counterweight_dof]) if self._free_dofs else 0.0)
+
+    def _apply_external_force(self) -> bool:
+        """The environment's force on the force point's body (`external_force(point, velocity) -> F`, base frame,
+        N), set for this step; the actuators' efforts then hold the motion against it. True when one is set."""
+        if self.external_force is None:
+            return False
+        point = self.model.force_point
+        body = self.psm.bodies[point.link]
+        position = np.asarray(body.getWorldTransform().translation(), dtype=float)
+        velocity = np.asarray(body.getLinearVelocity(np.zeros(3)), dtype=float)
+        force = np.asarray(self.external_force(position, velocity), dtype=float)
+        body.setExtForce(force, np.zeros(3), False, True)  # base-frame force at the body frame's origin (the point)
+        self.last_external_force = force
+        return True
 
     def _after_step(self, dq_before: np.ndarray, effort: np.ndarray, counterweight_force: float) -> None:
         self.step_index += 1
