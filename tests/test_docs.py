@@ -34,7 +34,16 @@ def test_the_site_builds_strict(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     assert (site / "index.html").is_file() and (site / "api" / "index.html").is_file()
     assert "doc-function" in (site / "api" / "index.html").read_text()  # mkdocstrings rendered the docstrings
-    assert "not measured (run" in (site / "getting-started" / "index.html").read_text()
+    assert "not measured (run" in (site / "last-validation" / "index.html").read_text()
+
+
+@pytest.mark.parametrize("document", [*PROJECT_DIR.glob("docs/*.md"), PROJECT_DIR / "README.md"], ids=lambda p: p.name)
+def test_pages_read_as_checked_in(document):
+    """No figure placeholder in a page a browser of the repository opens, and no image link to a file the repository lacks."""
+    text = document.read_text(encoding="utf-8")
+    assert "{{ out" not in text
+    for image in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text):
+        assert image.startswith("http") or (document.parent / image).is_file(), image
 
 
 def test_figures_are_rendered_from_the_validation_outputs(tmp_path, monkeypatch):

@@ -1,6 +1,8 @@
-"""MkDocs hook: the figures a page quotes come from the last validation, never typed.
+"""MkDocs hook: the figures of the last validation, never typed.
 
-A page writes `{{ out: FILE : KEY.PATH }}`: the value at KEY.PATH of the JSON
+The pages (docs/*.md) explain without run figures, so that they read as
+checked in; this hook builds one more page, `last-validation.md`, from
+`last-validation.template` beside it. The template writes `{{ out: FILE : KEY.PATH }}`: the value at KEY.PATH of the JSON
 file FILE under the validation's output folder (`out/`, or $DVRK_DART_OUT),
 rendered at build time; the images of `IMAGES` are copied from there. A list shows its first three entries (J1..J3) as
 "a / b / c"; `KEY[i]` picks one entry. `{{ out-source }}` says which
@@ -73,9 +75,13 @@ def source() -> str:
     return f"the validation of {when} (`make validate`, folder `out/`)"
 
 
+TEMPLATE = Path(__file__).with_name("last-validation.template")
+
+
 def on_files(files, config):
     from mkdocs.structure.files import File
 
+    files.append(File.generated(config, "last-validation.md", content=TEMPLATE.read_text(encoding="utf-8")))
     for site_path, out_path in IMAGES.items():
         source = _out_dir() / out_path
         content = source.read_bytes() if source.is_file() else PLACEHOLDER_PNG
