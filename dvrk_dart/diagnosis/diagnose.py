@@ -212,6 +212,10 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
     payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0]) if fits else None)
+    not_distinguished = None
+    if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
+        not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}
+        payload_fits = []
     gap_before = {"train": gaps([r.residual for r in train_runs], recorded), "holdout": gaps([r.residual for r in holdout_runs], recorded)}
     gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
     return Diagnosis(
@@ -252,9 +256,25 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         not_in_simulation=after.not_in_simulation,
         recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
         gravity_mismatch=mismatch,
+        payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")]),
     )
+
+
+NOT_DISTINGUISHED = ("the payload-shaped fit is not a payload: its mass at the given position is not positive, or, without "
+                     "a position, every gravity effort at q = 0 on J1..J3 has an interval that contains zero")
+
+
+def payload_distinguished(fit: dict) -> bool:
+    """A payload is named where the data make one: a positive mass at the hand
+    position when one was given (a mass below zero is a session change read as a
+    payload), else a gravity effort at q = 0 on J1..J3 whose interval excludes zero."""
+    at = fit.get("payload_at") or {}
+    if at.get("mass_kg") is not None:
+        return at["mass_kg"] > 0.0
+    intervals = (fit.get("gravity_efforts_at_q0_interval") or [])[:3]
+    return any(i is not None and None not in i and (i[0] > 0.0 or i[1] < 0.0) for i in intervals)
 
 
 def gravity_mismatch_of(fit: dict) -> dict:

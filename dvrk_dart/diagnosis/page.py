@@ -140,6 +140,8 @@ def answer_sentence(result: dict) -> str:
         lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
         others = [n for n in selected if not n.startswith("payload")]
     elif selected:
+        if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
+            selected = [n for n in selected if not n.startswith("payload")] or selected
         first = entries.get(selected[0], {"name": selected[0]})
         lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
         others = selected[1:]
@@ -149,6 +151,8 @@ def answer_sentence(result: dict) -> str:
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     words = (result.get("explanation") or {}).get("words") or "not explained"
+    if result.get("payload_not_distinguished"):
+        where = "no payload is distinguished from none (every interval contains zero); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
     if beyond and result.get("diagnosis_base", "inertial") == "inertial":
         where += ", against the simulation of the identified inertia alone"

@@ -42,6 +42,8 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
         print(f"payload: {mass} on {p['link']} ({p['group']})")
         for sentence in p.get("words", []):
             print(f"  {sentence}")
+    if result.get("payload_not_distinguished"):
+        print(f"no payload: {result['payload_not_distinguished']['meaning']}")
     if result.get("gravity_mismatch"):
         for sentence in result["gravity_mismatch"]["words"]:
             print(sentence)

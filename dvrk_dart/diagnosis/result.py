@@ -208,6 +208,8 @@ class Diagnosis:
     recorded_joints: list
     #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
     gravity_mismatch: dict | None
+    #: with a baseline, a payload-shaped fit whose intervals all hold zero: no payload is named
+    payload_not_distinguished: dict | None
     #: selected effects whose re-simulation failed or drifted: dropped, with the reason
     dropped_effects: list
     #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/wording.py)
