@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart import cli_parser
-from dvrk_dart.cli_parser import REPLAY_SHORTHANDS
 from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
@@ -379,10 +378,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
     recorded = _replay_processing(args)
-    if args.command in REPLAY_SHORTHANDS:
-        config = _run_config(args, args.command, args.mode)
-    else:
-        config = _run_config(args, "replay", args.mode, measured=args.measured)
+    config = _run_config(args, "replay", args.mode, measured=args.measured)
     try:
         return _run_and_write(config, Path(args.out) if args.out else None)
     except DvrkDartError as exc:
@@ -409,8 +405,7 @@ def _replay_processing(args: argparse.Namespace) -> bool:
         from dvrk_dart.io.reference_data import load_run, resolve_run
         from dvrk_dart.io.signal import process_all
 
-        measured = getattr(args, "measured", None) or REPLAY_SHORTHANDS[args.command]
-        [processed], note = process_all([load_run(resolve_run(measured))], None)
+        [processed], note = process_all([load_run(resolve_run(args.measured))], None)
         args.processing = processed.processing
         print(f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})")
         return False

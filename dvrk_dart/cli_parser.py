@@ -151,14 +151,6 @@ def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said
                         "the periodic processing takes its period and harmonics from it instead of reading them from the run")
 
 
-REPLAY_SHORTHANDS = {
-    "replay-one": "one",
-    "replay-two": "two",
-    "replay-one-no-weight": "one-no-weight",
-    "replay-one-105g": "one-105g",
-}
-
-
 def _executor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--executor", default="local", choices=("local", "ray"), help="where the runs execute: local processes or Ray")
     p.add_argument("--ray-address", default=None, help="an existing Ray cluster (default: start a local Ray instance with --jobs CPUs)")
@@ -282,19 +274,17 @@ def build_parser(commands) -> argparse.ArgumentParser:
     sim_options(p)
     p.set_defaults(func=commands.cmd_run)
 
-    for name in ("replay", *REPLAY_SHORTHANDS):
-        p = sub.add_parser(name, help="replay a measured run in the simulator" if name == "replay" else f"replay of the reference run {REPLAY_SHORTHANDS[name]}")
-        if name == "replay":
-            p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
-            _add_bag_options(p)
-        p.add_argument("--mode", default="velocity", choices=MODES,
-                       help="velocity: the simulator follows the recorded motion and its efforts are read (the paper's replay); "
-                            "torque: computed torque from the arm's own model; kinematic: poses imposed, no dynamics")
-        p.add_argument("--out", help="output folder (default out/runs/<run name>)")
-        _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
-                                        "excitation, else upstream (said in the output)")
-        sim_options(p)
-        p.set_defaults(func=commands.cmd_replay)
+    p = sub.add_parser("replay", help="replay a measured run in the simulator")
+    p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
+    _add_bag_options(p)
+    p.add_argument("--mode", default="velocity", choices=MODES,
+                   help="velocity: the simulator follows the recorded motion and its efforts are read (the paper's replay); "
+                        "torque: computed torque from the arm's own model; kinematic: poses imposed, no dynamics")
+    p.add_argument("--out", help="output folder (default out/runs/<run name>)")
+    _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
+                                    "excitation, else upstream (said in the output)")
+    sim_options(p)
+    p.set_defaults(func=commands.cmd_replay)
 
     p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
     p.add_argument("--out", default="out", help="output folder (runs in OUT/runs)")
