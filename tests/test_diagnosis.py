@@ -25,7 +25,7 @@ from dvrk_dart.diagnosis.library import (
     config_effort_by_formula,
     effects_to_sim_config,
 )
-from dvrk_dart.diagnosis.out_of_library import LEFTOVER_ENERGY_RATIO, injected_effort
+from dvrk_dart.diagnosis.out_of_library import injected_effort
 from dvrk_dart.diagnosis.payload import (
     PointPayload,
     equivalent_payload_links,
@@ -500,12 +500,13 @@ def test_session_floor_splits_the_gap(arm, segment, noise_rms):
 
 
 def test_out_of_library_drift_is_not_claimed_explained(arm, segment, noise_rms):
-    """An offset drifting in time is no library effect: a leftover above the noise remains."""
+    """An offset drifting in time is no library effect: a leftover above the noise remains
+    (at least a tenth of the noise's energy on top of it, a physical margin, not the module's threshold)."""
     case = {"name": "drift", "physics": "offset_drift", "joint": "q3", "parameters": {"total": 0.4}}
     extra = injected_effort(arm, segment, case)
     measured = synthesize_measurement(arm, segment, [], noise_rms, seed=31, extra_effort=extra)
     result = diagnose(measured, arm=arm, figures=False, max_effects=3, profile_payload_mass=False)
-    assert result["gap_after"]["train"][2] ** 2 > LEFTOVER_ENERGY_RATIO * noise_rms[2] ** 2
+    assert result["gap_after"]["train"][2] ** 2 > 1.1 * noise_rms[2] ** 2
 
 
 def test_time_scaled_run_is_the_same_path(segment):

@@ -203,6 +203,8 @@ class PsmModel:
     inertia_tolerance: float = 0.0  # kg m^2, see [parameter_checks]
     max_link_mass_kg: float = float("inf")  # plausibility bounds of a parameter file
     max_com_distance_m: float = float("inf")
+    #: link key -> a mass bound of the published identification: a mass sitting on it is reported ([parameter_checks])
+    identification_mass_bounds_kg: dict[int, float] = field(default_factory=dict)
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
     groups: tuple[str, ...] = ()
@@ -458,6 +460,7 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         inertia_tolerance=float(checks.get("inertia_tolerance_kg_m2", 0.0)),
         max_link_mass_kg=float(checks.get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(checks.get("max_com_distance_m", float("inf"))),
+        identification_mass_bounds_kg={int(k): float(v) for k, v in checks.get("identification_mass_bounds_kg", {}).items()},
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
         groups=groups,

@@ -46,8 +46,7 @@ class IdentifiedParameters:
     def oddities(self, model: PsmModel) -> list[str]:
         """Physically feasible but implausible values, reported, never hidden."""
         notes = []
-        mass_bounds = {2: 10.0, 6: 0.1, 7: 0.5}  # identification bounds seen in the data README
-        for key, bound in mass_bounds.items():
+        for key, bound in model.identification_mass_bounds_kg.items():
             if key in self.links and abs(self.links[key].mass - bound) < 1e-3 * bound:
                 notes.append(f"link {key} ({model.links[key].name}): mass {self.links[key].mass:.4f} kg sits at the identification bound {bound} kg")
         for key, p in self.links.items():
