@@ -471,7 +471,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
-        prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing,
+        prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing, excitation=args.excitation,
     )
     result, data = identify_into_folder(config, args.out)
     processing = data["processing"]
@@ -482,7 +482,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     periods = f", {extent['whole_periods']} whole periods" if extent["whole_periods"] is not None else ""
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {extent['runs']} run(s), "
           f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
-    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m or N for q3; fitted: {' '.join(data['fitted_joints'])})")
+    print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m, N for a prismatic joint; fitted: {' '.join(data['fitted_joints'])})")
     for kind, runs in data["errors"].items():
         for name, spans in runs.items():
             for span, e in spans.items():

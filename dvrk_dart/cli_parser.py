@@ -141,11 +141,13 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
                    help="rows per second of a CSV without a time column, or the grid a bag's messages are resampled on (Hz, default 200)")
 
 
-def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said: str | None = None) -> None:
+def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said: str | None = None, excitation: bool = False) -> None:
     said = said or default or "periodic where every run is a periodic excitation, else upstream (said in the output)"
     p.add_argument("--processing", default=default, choices=PROCESSINGS,
                    help=f"upstream: filtered and differentiated as the identification did; periodic: projected on the "
                         f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
+    if not excitation:
+        return
     p.add_argument("--excitation", default=None, type=measured_run, metavar="FILE",
                    help="the commanded excitation (a *_commanded.csv of q, dq, ddq rows, or `dvrk-dart excitation`'s CSV): "
                         "the periodic processing takes its period and harmonics from it instead of reading them from the run")
@@ -185,7 +187,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
-    _add_processing_option(p, None)
+    _add_processing_option(p, None, excitation=True)
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)
@@ -198,7 +200,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
                    help="the model the efforts are compared with: the identified inertia, every identified term (default), "
                         "or what a diagnosis selected (its diagnosis.json or one_configuration.json)")
     p.add_argument("--out", required=True, help="output folder: force.csv, force.json, force.mcap, force.rrd")
-    _add_processing_option(p, None, "the one a --dynamics file records, else periodic where the run is a periodic excitation, else upstream")
+    _add_processing_option(p, None, "the one a --dynamics file records, else periodic where the run is a periodic excitation, else upstream",
+                           excitation=True)
     _add_arm_options(p)
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_force)
@@ -227,7 +230,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
                         "'default' (the model's default params.json) or a params file")
     p.add_argument("--seed", type=seed, default=0, help="seed of the random states of the base-parameter test")
     p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
-    _add_processing_option(p, None)
+    _add_processing_option(p, None, excitation=True)
     _add_bag_options(p)
     _add_arm_model_option(p)
     p.set_defaults(func=commands.cmd_identify)

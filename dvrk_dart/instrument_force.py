@@ -35,12 +35,12 @@ class ForceConfig:
 def processed_run(config: ForceConfig) -> tuple[ProcessedRun, str]:
     """The run through the processing the options, the --dynamics file or the default choose, and why."""
     run = load_run(resolve_run(config.measured))
+    design = read_design(config.excitation) if config.excitation else None
     if config.processing is not None:
-        return process(run, config.processing), f"--processing {config.processing}"
+        return process(run, config.processing, design=design), f"--processing {config.processing}"
     recorded = recorded_processing(config.dynamics)
     if recorded is not None:
         return process(run, *recorded), f"the one {config.dynamics} was fitted on"
-    design = read_design(config.excitation) if config.excitation else None
     [state], note = process_all([run], None, design)
     return state, note or "the default: the run is a periodic excitation"
 
@@ -64,6 +64,10 @@ def model_config(dynamics: str) -> SimConfig:
 def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:
     """Estimate, summarise and (with `out_dir`) write the logs and force.json."""
     state, why = processed_run(config)
+    missing = [f"q{j + 1}" for j in force_point_of(arm.model).joints if not state.measured[j]]
+    if missing:
+        raise DvrkDartError(f"--measured {config.measured}: {', '.join(missing)} not recorded: the force at the "
+                            f"{force_point_of(arm.model).name} needs every joint that positions it")
     gap = state.tau - model_efforts(arm, config, state)
     estimate = estimate_force(arm.model, state.q, gap)
     point = force_point_of(arm.model)

@@ -122,7 +122,8 @@ def test_a_divergence_at_the_first_step_says_why_and_keeps_strict_json(tmp_path,
 
     bad = measured_csv(tmp_path, "fling.csv", fling)
     out = tmp_path / "X"
-    code, lines = cli(capsys, "replay", "--measured", bad, "--out", out)
+    # upstream: the raw velocity column drives the replay (the periodic layer would smooth the fling away)
+    code, lines = cli(capsys, "replay", "--measured", bad, "--out", out, "--processing", "upstream")
     assert_one_line_error(code, lines, "step 1", "joint q1 at 1.6", "outside its range [-1.6, 1.6]")
     metrics = json.loads((out / "metrics.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in metrics.json"))
     assert "step 1" in metrics["error"] and metrics["samples"] == 0
@@ -294,7 +295,8 @@ def test_divergence_values_show_enough_digits(tmp_path, capsys):
         values[:, 1] = 0.8999999
         values[:, 8] = 0.5
 
-    code, lines = cli(capsys, "replay", "--measured", measured_csv(tmp_path, "edge.csv", edge), "--out", tmp_path / "x")
+    code, lines = cli(capsys, "replay", "--measured", measured_csv(tmp_path, "edge.csv", edge), "--out", tmp_path / "x",
+                      "--processing", "upstream")
     assert code == 2
     value, bounds = lines[0].split(" at ")[1].split(" outside its range ")
     low, high = (float(b) for b in bounds.split("]")[0].strip("[").split(","))

@@ -122,7 +122,8 @@ def diagnose(
     entries = effect_entries(problem, selection)
     floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)  # zeros where not recorded
+    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)
+    split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
     if out_dir is not None:

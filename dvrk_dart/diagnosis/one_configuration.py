@@ -61,4 +61,5 @@ def one_configuration_check(arm: Arm, train, holdout, result: dict, executor: st
 
 def one_configuration_sentence(gap: list[float]) -> str:
     return ("The selected effects with J3's terms and the loads the pitch angle sets on J1 and J2, in one DART configuration, leave "
-            + ", ".join(f"{name} {gap[j]:.3g} {effort_unit(name)}" for j, name in enumerate(JOINT_NAMES[:3])) + " on the held-out runs.")
+            + ", ".join(f"{name} {gap[j]:.3g} {effort_unit(name)}" for j, name in enumerate(JOINT_NAMES[:3]) if gap[j] is not None)
+            + " on the held-out runs.")

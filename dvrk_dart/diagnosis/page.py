@@ -162,8 +162,8 @@ def answer_sentence(result: dict) -> str:
         sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
     else:
         sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
-    shares = [_row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])[:ANSWER_JOINTS]]
-    shares = [shares[j] for j in shown] if shares else shares
+    by_joint = {r.get("joint"): _row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])}
+    shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
     floor = result.get("session_floor")

@@ -136,7 +136,7 @@ def resimulate(problem: Problem, selection: Selection, simulate: Simulate | None
     def simulated_after(run: DiagnosisRun, with_withheld: bool = True) -> np.ndarray:
         config, extra = full if with_withheld else shared
         simulated = np.asarray(simulate(config, run.state), dtype=float) + unsimulated_effort(extra, problem.features_of(run))
-        return run.state.tau - run.state.in_band(simulated)
+        return np.where(run.state.measured, run.state.tau - run.state.in_band(simulated), 0.0)  # nothing to explain where not recorded
 
     def after_residual(run: DiagnosisRun, columns: np.ndarray) -> np.ndarray:
         if simulate is None:

@@ -55,6 +55,8 @@ class IdentificationConfig:
     model_file: str | None = None  # None: the current arm's (--arm-model)
     #: upstream | periodic | None: periodic where every run is periodic, else upstream (noted)
     processing: str | None = None
+    #: the commanded excitation (--excitation): the periodic layer's design
+    excitation: str | None = None
 
 
 @dataclass
@@ -154,10 +156,14 @@ def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, 
     return fitted, held, notes
 
 
-def _load_runs(names: tuple[str, ...], regressor: Regressor, processing: str | None) -> tuple[list[RunData], str | None]:
+def _load_runs(names: tuple[str, ...], regressor: Regressor, processing: str | None, excitation: str | None = None
+               ) -> tuple[list[RunData], str | None]:
     """Every run through one processing (and the note of io/signal.process_all)."""
+    from dvrk_dart.io.excitation_design import read_design
+
     paths = [resolve_run(name) for name in names]
-    processed, note = process_all([load_run(path) for path in paths], processing)
+    design = read_design(excitation) if excitation else None
+    processed, note = process_all([load_run(path) for path in paths], processing, design)
     runs = [RunData(str(name), path, p, p.in_band(regressor(p.q, p.dq, p.ddq))) for name, path, p in zip(names, paths, processed)]
     return runs, note
 
@@ -212,7 +218,7 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     bounds = load_bounds(config.bounds_file, model)
     regressor = Regressor(model, config.friction_law)
     prior, prior_source = _prior(config, model, regressor)
-    loaded, note = _load_runs(config.runs + config.holdout, regressor, config.processing)
+    loaded, note = _load_runs(config.runs + config.holdout, regressor, config.processing, config.excitation)
     train, holdout = loaded[: len(config.runs)], loaded[len(config.runs):]
     check_consistent_runs(train + holdout)
     timings["load_and_regressor_s"] = time.perf_counter() - start

@@ -34,6 +34,8 @@ TIME_NAMES = ("t", "time", "time_s")
 HEADERLESS_JOINTS = {3 * N_JOINTS: JOINT_NAMES, 9: JOINT_NAMES[:3]}
 #: rows of a time column may be this far from even spacing (a fraction of the step)
 TIME_JITTER = 0.05
+#: fewer rows are no recording (the processing's own minimum is checked by the loader)
+MIN_TIME_ROWS = 3
 
 
 @dataclass(frozen=True)
@@ -71,9 +73,10 @@ def _is_number(text) -> bool:
 
 
 def _has_header(raw: pd.DataFrame) -> bool:
-    """A first row with a cell that is a name (not a number, not empty)."""
-    first = raw.iloc[0]
-    return any(isinstance(cell, str) and re.search(r"[A-Za-z]", cell) and not _is_number(cell) for cell in first)
+    """A first row of names: no cell of it is a number (a data row with one bad
+    cell is a data row, and its error names the cell)."""
+    first = [cell for cell in raw.iloc[0] if isinstance(cell, str)]
+    return bool(first) and not any(_is_number(cell) for cell in first) and any(re.search(r"[A-Za-z]", c) for c in first)
 
 
 def _header_key(name: str, dvrk_joints: tuple[str, ...]) -> tuple[str, str, bool] | None:
@@ -92,7 +95,9 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
     """The layout a header row names; one line naming a cell it cannot place."""
     columns, time_column, kinds = {}, None, set()
     for index, cell in enumerate(header):
-        name = str(cell).strip()
+        if not isinstance(cell, str) or not cell.strip():
+            raise DvrkDartError(f"{path}: header column {index + 1} is empty (a trailing comma?)")
+        name = cell.strip()
         if name.lower() in TIME_NAMES:
             time_column = index
             continue
@@ -146,15 +151,16 @@ def _numbers(raw: pd.DataFrame, names: list[str], path: Path, first_row: int) ->
     return values
 
 
-def rate_of_time_column(t: np.ndarray, path: Path) -> float:
-    """Rows per second of an evenly spaced time column (s); one line naming the row that is not."""
+def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
+    """Rows per second of an evenly spaced time column (s); one line naming the
+    row that is not (`first_row`: the file line of the first data row)."""
     step = np.diff(t)
     if len(step) == 0 or not np.median(step) > 0:
         raise DvrkDartError(f"{path}: the time column does not increase")
     median = float(np.median(step))
     uneven = np.flatnonzero(np.abs(step - median) > TIME_JITTER * median)
     if len(uneven):
-        row = int(uneven[0]) + 2
+        row = int(uneven[0]) + 1 + first_row
         raise DvrkDartError(f"{path}: time column, row {row}: a step of {step[uneven[0]]:.6g} s where the rows are "
                             f"{median:.6g} s apart (rows must be evenly spaced: resample first)")
     return 1.0 / median
@@ -189,7 +195,9 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
         values[:, FIELDS.index(field) * N_JOINTS + JOINT_NAMES.index(joint)] = file_values[:, index]
     if layout.dvrk_names:
         values = _dvrk_to_model(values, layout.joints, motor_map, path)
-    rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path)
+    if len(file_values) < MIN_TIME_ROWS:
+        raise DvrkDartError(f"{path}: {len(file_values)} data rows: not a recording")
+    rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
     return CsvValues(values, layout.joints, rate)
 
 

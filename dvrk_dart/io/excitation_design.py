@@ -52,12 +52,20 @@ def _positions(path: Path) -> tuple[np.ndarray, np.ndarray]:
         names = [str(c).strip().lower() for c in raw.iloc[0]]
         if names[0] not in ("t", "time"):
             raise DvrkDartError(f"--excitation {path}: a header row whose first column is not time")
+        rates = [n for n in names[1:] if n.startswith(("dq", "tau", "velocity", "effort"))]
+        if rates or len(names) < 2:
+            raise DvrkDartError(f"--excitation {path}: a trajectory's header is time and positions only "
+                                f"({'has ' + ', '.join(rates) if rates else 'no position column'}): is it a recording? give it as --measured")
+        if len(values) < 3 or not np.all(np.diff(values[:, 0]) > 0):
+            raise DvrkDartError(f"--excitation {path}: fewer than 3 rows, or a time column that does not increase")
         return values[:, 0], values[:, 1:]
     if values.shape[0] % QUANTITIES_PER_JOINT or values.shape[0] > values.shape[1]:
         raise DvrkDartError(f"--excitation {path}: {values.shape[0]} rows x {values.shape[1]} columns; a commanded log has "
                             f"{QUANTITIES_PER_JOINT} rows per joint (q, dq, ddq) and one column per sample")
     joints = values.shape[0] // QUANTITIES_PER_JOINT
     q = values[:joints].T
+    if len(q) < 3:
+        raise DvrkDartError(f"--excitation {path}: fewer than 3 samples")
     return np.arange(len(q)) / sample_rate_hz(), q
 
 
@@ -76,6 +84,8 @@ def read_design(path: str | Path) -> ExcitationDesign:
         raise DvrkDartError(f"--excitation {path}: file not found")
     t, q = _positions(path)
     moving = moving_joints(q)
+    if not moving.any():
+        raise DvrkDartError(f"--excitation {path}: no joint moves: not an excitation")
     rate = 1.0 / float(t[1] - t[0])
     period = fit_period(t - t[0], q[:, moving], rate, f"--excitation {path}")
     return ExcitationDesign(period.period_s, design_harmonics(t - t[0], q[:, moving], period), str(path))

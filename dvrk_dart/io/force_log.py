@@ -77,13 +77,14 @@ def _write_rrd(path: Path, table: pd.DataFrame, name: str) -> None:
 
 def _log_force(rec: rr.RecordingStream, table: pd.DataFrame) -> None:
     t = table["t_s"].to_numpy()
-    times = rr.TimeColumn(TIMELINE, duration=t)
     force, point = _vectors(table, "f", "_n"), _vectors(table, "point_", "_m")
     for i, axis in enumerate("xyz"):
         rec.log(f"force/{axis}", rr.SeriesLines(names=[f"F{axis} (N)"]), static=True)
-        rec.send_columns(f"force/{axis}", indexes=[times], columns=rr.Scalars.columns(scalars=np.nan_to_num(force[:, i])))
+        known = np.isfinite(force[:, i])  # a direction not determined has no value, not 0 N
+        rec.send_columns(f"force/{axis}", indexes=[rr.TimeColumn(TIMELINE, duration=t[known])], columns=rr.Scalars.columns(scalars=force[known, i]))
     rec.log("world/point_path", rr.LineStrips3D([point]), static=True)
     for k in range(0, len(t), ARROW_EVERY):
+        if not np.all(np.isfinite(force[k])):
+            continue
         rec.set_time(TIMELINE, duration=float(t[k]))
-        vector = np.nan_to_num(force[k]) * ARROW_M_PER_N
-        rec.log("world/force", rr.Arrows3D(origins=[point[k]], vectors=[vector]))
+        rec.log("world/force", rr.Arrows3D(origins=[point[k]], vectors=[force[k] * ARROW_M_PER_N]))

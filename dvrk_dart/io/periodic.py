@@ -67,6 +67,8 @@ MOTION_FRACTION = 0.01
 #: 5 or 6 harmonics, 0.9997-0.99997 at them: the tracking error is the rest)
 DESIGN_EXPLAINED_VARIANCE = 0.999
 DESIGN_MAX_HARMONICS = 20
+#: a run plays an --excitation when its fitted period is the design's within this fraction (a controller's clock: < 1e-4)
+DESIGN_PERIOD_TOLERANCE = 0.01
 #: harmonics of the positions in the final Gauss-Newton fit of the period (the
 #: measured positions of "one" and "two" stand above their noise up to ~30-60),
 #: and its iterations (it converges in two or three)
@@ -438,7 +440,10 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     t = np.asarray(t, dtype=float) - float(t[0])
     measured = np.ones(q.shape[1], bool) if measured is None else np.asarray(measured, bool)
     moving = moving_joints(q, measured)
-    period = fit_period(t, q[:, moving], rate_hz, where, None if design is None else design.period_s)
+    period = fit_period(t, q[:, moving], rate_hz, where)  # from the run itself: a design is checked against it, never imposed
+    if design is not None and abs(period.period_s / design.period_s - 1.0) > DESIGN_PERIOD_TOLERANCE:
+        raise DvrkDartError(f"--excitation {design.source}: its period {design.period_s:.4f} s is not the run's ({where}: "
+                            f"{period.period_s:.4f} s fitted from it): the run did not play this excitation")
     floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)
     effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
