@@ -13,7 +13,7 @@ import numpy as np
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import central_difference
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 
 #: (key, target, "lower" if smaller is better else "higher", unit, what the target stands for)
 TARGETS = {
@@ -71,7 +71,7 @@ def bench_periodic(repeat: int = 5) -> dict:
 
 
 def bench_force(repeat: int = 5) -> dict:
-    from dvrk_dart.analysis.force import estimate_force
+    from dvrk_dart.model.force import estimate_force
 
     arm = load_arm()
     run = load_run(resolve_run("two"))

@@ -189,7 +189,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     from dvrk_dart.io.signal import process_all
     from dvrk_dart.io.excitation_design import read_design
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.model.identified import parse_terms
 
     arm = load_arm(params_file=args.params)
@@ -241,7 +241,7 @@ def cmd_force(args: argparse.Namespace) -> int:
     """The force at the instrument point (the arm's model card) the measured efforts imply."""
     from dvrk_dart.instrument_force import ForceConfig, instrument_force
     from dvrk_dart.io.outputs import building_folder, check_output_folder
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     check_output_folder(args.out, "force")
     config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation)
@@ -262,7 +262,7 @@ def cmd_force(args: argparse.Namespace) -> int:
 def cmd_session_floor(args: argparse.Namespace) -> int:
     """The floor of the identified model's residual: two recordings of one trajectory."""
     from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     arm = load_arm(params_file=args.params)
     a, b = processed_pair((args.measured, args.repeat), args.processing)
@@ -288,7 +288,7 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
 
 def cmd_model_check(args: argparse.Namespace) -> int:
     """Print the model card facts: parameter oddities and basic model checks."""
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     arm = load_arm(params_file=args.params)
     print(f"model: {arm.model.name} ({arm.model.source})")
@@ -346,7 +346,7 @@ def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
 
 def _run_and_write(config, out: Path | None) -> int:
     from dvrk_dart.io.outputs import check_output_folder
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
     from dvrk_dart.runs.runner import arm_of_scenario, run
 

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.html import fmt, num_cell, table, text_cell
+from dvrk_dart.io.html import fmt, num_cell, table, text_cell
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import PROCESSINGS, process
 from dvrk_dart.metrics import per_measured_joint, rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 from dvrk_dart.paths import PIPELINES_DIR
 
@@ -92,7 +92,7 @@ def phantom_forces(arm: Arm, dataset: Dataset, folder: Path, diagnosis_dir: Path
     """`dvrk-dart force` on the held-out run (periodic) under each model: the force it
     implies in free motion, where the true force is zero; the figure of one period."""
     from dvrk_dart.instrument_force import ForceConfig, instrument_force, one_period_forces
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     models = {"published parameters": (arm, "identified"),
               "own identification": (load_arm(params_file=folder / "identification-periodic" / "params.json"), "identified")}

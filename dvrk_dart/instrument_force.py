@@ -1,5 +1,5 @@
 """`dvrk-dart force`: the force at the instrument that a run's measured efforts
-imply under a model (analysis/force.py), written as CSV, MCAP and Rerun logs
+imply under a model (model/force.py), written as CSV, MCAP and Rerun logs
 with a summary: in free motion, the model's phantom force."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.force import estimate_force, force_point_of, point_positions
+from dvrk_dart.model.force import estimate_force, force_point_of, point_positions
 from dvrk_dart.diagnosis.library import config_effort_by_formula
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
@@ -19,7 +19,7 @@ from dvrk_dart.io.force_log import force_table, write_force_logs
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process, process_all
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.runs.config import DYNAMICS_CHOICES, RunConfig, recorded_processing, sim_config_for
 from dvrk_dart.sim.config import SimConfig
 

@@ -25,6 +25,24 @@ def per_measured_joint(values, measured) -> list:
     return [float(v) if m else None for v, m in zip(np.asarray(values, dtype=float), measured)]
 
 
+#: the largest lag (samples) of an autocorrelation summed
+MAX_AUTOCORRELATION_LAG = 2000
+
+
+def integrated_autocorrelation_time(x: np.ndarray) -> float:
+    """1 + 2 sum of the autocorrelation up to its first non-positive value (samples)."""
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    n = len(x)
+    if n < 2 or not np.any(x):
+        return 1.0
+    spectrum = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    acf = acf / acf[0]
+    lags = acf[1:min(n, MAX_AUTOCORRELATION_LAG)]
+    stop = np.flatnonzero(lags <= 0.0)
+    return float(1.0 + 2.0 * np.sum(lags[: stop[0] if len(stop) else len(lags)]))
+
+
 #: torque-mode tracking is judged after the closed loop's initial transient (s)
 TORQUE_TRANSIENT_S = 1.0
 

@@ -50,7 +50,7 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
 def _periodic_section(out_dir: Path, runs_dir: Path):
     """Both processings side by side, the session floor and the repeatable gap (analysis/periodic_section.py)."""
     from dvrk_dart.analysis.periodic_section import periodic_section
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     section = periodic_section(load_arm(), out_dir / "periodic", runs_dir)
     figures = json.loads((out_dir / "periodic" / "periodic.json").read_text())
@@ -64,7 +64,7 @@ def _periodic_section(out_dir: Path, runs_dir: Path):
 def _datasets_section(out_dir: Path):
     """Every real PSM dataset's held-out figures side by side (dvrk_dart/datasets.py)."""
     from dvrk_dart.datasets import datasets_section
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis")
 
@@ -79,12 +79,12 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
     """DART's contact force against the estimate from the simulated efforts, and with each model's real residual added."""
     import numpy as np
 
-    from dvrk_dart.analysis.html import num_cell, table, text_cell
+    from dvrk_dart.io.html import num_cell, table, text_cell
     from dvrk_dart.diagnosis.library import config_effort_by_formula
     from dvrk_dart.instrument_force import ForceConfig, model_efforts
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.contact import contact_check, simulate_contact, surface_under
     from dvrk_dart.sim.config import SimConfig
 

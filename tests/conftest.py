@@ -6,7 +6,7 @@ import pytest
 
 from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
 from dvrk_dart.io.signal import process
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 
 
 @pytest.fixture(scope="session")

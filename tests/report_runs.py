@@ -10,7 +10,7 @@ import numpy as np
 
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.mcap_log import write_mcap
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 from dvrk_dart.sim.config import SimConfig
 
 #: synthetic torque run: the x error is this constant after the transient, so
@@ -107,7 +107,7 @@ def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
     """Short runs of the real simulator: kinematic, velocity with and without the
     counterweight, and replays of the measured run 'two' with the paper's arm
     and with every identified term simulated."""
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.runner import run
 

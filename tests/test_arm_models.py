@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dvrk_dart.cli import main
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.description import using_model
 from dvrk_dart.paths import MODELS_DIR
 from dvrk_dart.sim.config import SimConfig

@@ -16,7 +16,7 @@ sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 from test_periodic_designs import EFFORT_NOISE, design_run  # noqa: E402
 
 from dvrk_dart.cli import main  # noqa: E402
-from dvrk_dart.model.arm import load_arm  # noqa: E402
+from dvrk_dart.io.arm import load_arm  # noqa: E402
 from dvrk_dart.runs.replay import simulate_efforts  # noqa: E402
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects  # noqa: E402
 

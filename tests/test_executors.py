@@ -55,7 +55,7 @@ def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():
     from dvrk_dart.diagnosis.batch import BatchSimulate
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.replay import simulate_efforts
     from dvrk_dart.sim.config import SimConfig
 
@@ -93,7 +93,7 @@ def test_replayed_residuals_come_back_in_the_tasks_order():
     from dvrk_dart.diagnosis.batch import replayed_residuals
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.sim.config import SimConfig
 
     arm, state = load_arm(), process(load_run(resolve_run("two")))

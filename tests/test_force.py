@@ -1,14 +1,14 @@
-"""What the gap means at the instrument (analysis/force.py, `dvrk-dart force`)."""
+"""What the gap means at the instrument (model/force.py, `dvrk-dart force`)."""
 
 import json
 
 import numpy as np
 import pytest
 
-from dvrk_dart.analysis.force import estimate_force, point_positions, positional_jacobian
+from dvrk_dart.model.force import estimate_force, point_positions, positional_jacobian
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 
 #: measured independently (the issue): the published model's periodic residual on
 #: held-out "two" at the wrist centre, every sample: 1.10 N RMS, per axis 0.63 / 0.81 / 0.38 N

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 from dvrk_dart.runs.scenarios import SCENARIOS_DIR
 
 #: few examples each: the three properties together stay well under a minute

@@ -20,7 +20,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
 from dvrk_dart.io.signal import MIN_ROWS
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 
 
 def tree_digest(folder: Path) -> dict[str, str]:
@@ -309,7 +309,7 @@ def test_divergence_values_show_enough_digits(tmp_path, capsys):
 def _covariance_file(tmp_path: Path, damage: str) -> Path:
     from dvrk_dart.identification.outputs import COVARIANCE_FORMAT
     from dvrk_dart.identification.regressor import parameter_layout, standard_vector
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     arm = load_arm()
     layout = parameter_layout(arm.model)
@@ -349,7 +349,7 @@ def test_a_covariance_that_is_no_covariance_is_refused(tmp_path, capsys, damage,
 def test_a_large_relative_std_draws_real_bodies(tmp_path, capsys):
     """The help allows (0, 1): 0.99 draws bodies, projected where they must be, no traceback."""
     from dvrk_dart.identification.sampling import sample_parameters
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     drawn = sample_parameters(load_arm(), 8, seed=2, relative_std=0.99)
     assert len(drawn.samples) == 8 and drawn.projected_bodies >= 0

@@ -252,7 +252,7 @@ def test_periodic_identification_on_the_held_out_run(periodic_result):
     1-4 % worse: its friction reverses over about 0.1 mm (the pre-sliding law,
     chosen on "one"), which a model of the instantaneous velocity cannot follow."""
     result = periodic_result
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     own = np.array(result.errors(result.holdout[0])["rms"][:3])
     run = result.holdout[0].processed

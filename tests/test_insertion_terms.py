@@ -103,7 +103,7 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
 
     from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
     from dvrk_dart.diagnosis.page import _insertion_clause
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     periodic = {"processing": {"processing": "periodic", "harmonics": 30}, "session_floor": [0.011, 0.05, 0.028]}
     study = insertion_check(arm, ["one"], ["two"], periodic)

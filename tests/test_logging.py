@@ -19,7 +19,7 @@ from dvrk_dart.io import mcap_log as log_mcap
 from dvrk_dart.io.mcap_log import read_mcap, write_mcap
 from dvrk_dart.io.rerun_log import write_rrd
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 
 N_SAMPLES = 500
 BODIES = ("yaw", "pitch_back", "pitch_front", "insertion_carriage", "counterweight", "tool_roll")

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from dvrk_dart.io.periodic import analyse, harmonic_design
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.runs.replay import simulate_efforts
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS

@@ -9,7 +9,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.diagnosis.refit import REFIT_FOLDER, refit_check
 from dvrk_dart.identification.outputs import PARAMS_FILE
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.parameters import load_parameters
 
 

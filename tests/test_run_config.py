@@ -10,7 +10,7 @@ from dvrk_dart.analysis.tables import load_checks
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.model.arm import load_arm
+from dvrk_dart.io.arm import load_arm
 from dvrk_dart.runs.config import RunConfig, sim_config_for
 from dvrk_dart.runs.runner import run
 

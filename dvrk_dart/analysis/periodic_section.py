@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import _e, num_cell, table, text_cell
 from dvrk_dart.analysis.residual_floor import aligned_residuals, floor_table, processed_pair, residual
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import process
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 SHOWN_JOINTS = JOINT_NAMES[:3]

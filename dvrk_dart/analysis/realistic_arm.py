@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from dvrk_dart.analysis.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import _e, num_cell, table, text_cell
 from dvrk_dart.analysis.tables import (
     REGIME_DESCRIPTIONS,
     REGIME_HIGH_ACCELERATION,

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from dvrk_dart.analysis.html import (
+from dvrk_dart.io.html import (
     DIMENSIONLESS,
     INTEGER,
     RATIO_DIGITS,

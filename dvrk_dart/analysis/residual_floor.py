@@ -26,12 +26,11 @@ import math
 import numpy as np
 import scipy.optimize
 
-from dvrk_dart.diagnosis.runs import SAME_MOTION_POSITION_RMS, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import HarmonicSeries
-from dvrk_dart.io.signal import ProcessedRun
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 #: draws of the positions' noise through the model (the spread of their RMS is ~1/sqrt(2 x draws x samples))

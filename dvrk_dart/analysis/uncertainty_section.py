@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dvrk_dart.analysis.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import _e, num_cell, table, text_cell
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 SHOWN_JOINTS = JOINT_NAMES[:3]

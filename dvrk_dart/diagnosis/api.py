@@ -23,7 +23,7 @@ from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import process
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
 IMAGE_SUFFIXES = (".png", ".svg")

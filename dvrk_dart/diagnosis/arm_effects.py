@@ -6,7 +6,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.geometry import joints_moving_link
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: the largest base mounting tilt considered (rad, about 2.9 degrees): a

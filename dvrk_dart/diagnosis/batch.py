@@ -9,7 +9,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.signal import ProcessedRun
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.runs.executors import run_tasks
 from dvrk_dart.sim.config import SimConfig
 

@@ -40,7 +40,7 @@ from dvrk_dart.diagnosis.selection import CV_FOLDS
 from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
 from dvrk_dart.diagnosis.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 from dvrk_dart.sim.config import SimConfig
 

@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 
 #: coordinates of the 10 dynamic parameters of a body in Pinocchio's regressor

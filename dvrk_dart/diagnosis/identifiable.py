@@ -36,7 +36,7 @@ from dvrk_dart.diagnosis.selection import (
     Selector,
 )
 from dvrk_dart.io.reference_data import sample_rate_hz
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
 #: step of the central difference of J1's gravity effort in q1 (rad)

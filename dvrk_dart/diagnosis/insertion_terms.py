@@ -47,7 +47,7 @@ from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.model import friction
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import prismatic_coordinates_of
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects

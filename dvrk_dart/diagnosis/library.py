@@ -39,7 +39,7 @@ from dvrk_dart.diagnosis.payload import (
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, position_load_effort, position_load_table, simulated_terms

@@ -23,7 +23,7 @@ from dvrk_dart.diagnosis.batch import replayed_residuals
 from dvrk_dart.diagnosis.result import gaps
 from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
 from dvrk_dart.sim.config import SimConfig
 

@@ -35,7 +35,7 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, ProcessedRun, process
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
 
 #: a leftover counts as present when the gap after exceeds the noise by this

@@ -1,6 +1,6 @@
 """The diagnosis as a reader sees it: the answer in one sentence, effects by
 their plain names, the ranked effects as bars of explained share, and
-diagnosis.html in the report's page style (analysis/html.py).
+diagnosis.html in the report's page style (io/html.py).
 
 Everything here reads a `diagnosis.json` dict: the page can be rebuilt from
 the file alone (the report does so for the withheld-data diagnoses)."""
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.html import STYLE, fmt
+from dvrk_dart.io.html import STYLE, fmt
 from dvrk_dart.diagnosis.parameter_band import band_sentence
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 

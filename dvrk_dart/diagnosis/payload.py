@@ -12,7 +12,7 @@ from dvrk_dart.diagnosis.features import (
 )
 from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import Payload

@@ -23,7 +23,7 @@ from dvrk_dart.diagnosis.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 
 #: hand-measurement reference points

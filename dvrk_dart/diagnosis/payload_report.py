@@ -11,7 +11,7 @@ from dvrk_dart.diagnosis.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload import PointPayload, point_mass_parameters
 from dvrk_dart.diagnosis.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS, PITCH
 
 #: a payload's mass counts as identified when its interval's ends are within

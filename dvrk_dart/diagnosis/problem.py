@@ -28,7 +28,7 @@ from dvrk_dart.diagnosis.runs import (
 from dvrk_dart.diagnosis.session_floor import session_offset_joints
 from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 

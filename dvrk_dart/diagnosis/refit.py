@@ -32,7 +32,7 @@ from dvrk_dart.identification.identify import IdentificationConfig, identify
 from dvrk_dart.identification.outputs import PARAMS_FILE, write_outputs
 from dvrk_dart.io.provenance import sha256_of
 from dvrk_dart.io.reference_data import resolve_run
-from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 

@@ -16,16 +16,10 @@ from dvrk_dart.diagnosis.library import (
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
-from dvrk_dart.io.signal import ProcessedRun, process, process_periodic
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, process, process_periodic, same_motion  # noqa: F401
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.sim.config import SimConfig
 
-#: two runs share their motion (a baseline's gap is subtracted sample by sample)
-#: when their positions differ by less than this RMS (rad or m; two recordings
-#: of trajectory one differ by ~1e-3, the half-speed run by ~0.5) ...
-SAME_MOTION_POSITION_RMS = 0.01
-#: ... and their velocities by less than this fraction of the velocity RMS
-SAME_MOTION_VELOCITY_FRACTION = 0.1
 #: two recordings of one motion may start this far apart (a share of the shorter
 #: one): the baseline is aligned on the run by whole samples within it, then both
 #: cut to their common span (at least half the shorter run)
@@ -234,16 +228,6 @@ def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
     start_a, start_b = max(0, -offset), max(0, offset)
     span = min(len(a) - start_a, len(b) - start_b)
     return offset if same_motion(a.window(start_a, span), b.window(start_b, span)) else None
-
-
-def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
-    """Whether two runs of one length follow the same motion sample by sample
-    (a baseline's gap can then be subtracted as it is)."""
-    if len(a) != len(b):
-        return False
-    position = float(np.sqrt(np.mean((a.q - b.q) ** 2)))
-    velocity = float(np.sqrt(np.mean((a.dq - b.dq) ** 2)) / max(np.sqrt(np.mean(b.dq**2)), 1e-12))
-    return position < SAME_MOTION_POSITION_RMS and velocity < SAME_MOTION_VELOCITY_FRACTION
 
 
 def run_features(arm: Arm, run: DiagnosisRun) -> TrajectoryFeatures:

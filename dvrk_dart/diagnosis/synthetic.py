@@ -16,7 +16,7 @@ from dvrk_dart.diagnosis.library import (
 from dvrk_dart.diagnosis.runs import Simulate, simulated_efforts
 from dvrk_dart.io.signal import ProcessedRun, zero_phase_lowpass
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.sim.config import SimConfig
 
 

@@ -39,7 +39,7 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 from dvrk_dart.paths import PIPELINES_DIR
 

@@ -39,6 +39,7 @@ import cvxpy as cp
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.metrics import integrated_autocorrelation_time  # noqa: F401 (here since the fits use it)
 from dvrk_dart.identification.base import ZERO_COLUMN_TOLERANCE, BaseParameters
 from dvrk_dart.identification.regressor import PARAMETER_CLASSES, ParameterLayout
 from dvrk_dart.identification.presliding import PreslidingCandidates
@@ -61,8 +62,6 @@ PSD_MARGIN_KG_M2 = 1e-8
 MASS_MARGIN_KG = 1e-7
 #: sigma_j of a perfectly fitted joint (synthetic data) relative to its effort RMS
 SIGMA_FLOOR = 1e-9
-#: the largest lag (samples) of the residual autocorrelation summed
-MAX_AUTOCORRELATION_LAG = 2000
 SOLVERS = ("CLARABEL", "SCS")
 
 
@@ -120,20 +119,6 @@ def _presliding_candidates(raw: dict, path: Path) -> PreslidingCandidates:
             raise DvrkDartError(f"{path}: presliding.{name} must be a list of positive distances")
         lists[name] = tuple(float(v) for v in values)
     return PreslidingCandidates(**lists)
-
-
-def integrated_autocorrelation_time(x: np.ndarray) -> float:
-    """1 + 2 sum of the autocorrelation up to its first non-positive value (samples)."""
-    x = np.asarray(x, dtype=float) - np.mean(x)
-    n = len(x)
-    if n < 2 or not np.any(x):
-        return 1.0
-    spectrum = np.fft.rfft(x, 2 * n)
-    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
-    acf = acf / acf[0]
-    lags = acf[1:min(n, MAX_AUTOCORRELATION_LAG)]
-    stop = np.flatnonzero(lags <= 0.0)
-    return float(1.0 + 2.0 * np.sum(lags[: stop[0] if len(stop) else len(lags)]))
 
 
 def condition_number(A: np.ndarray) -> float:

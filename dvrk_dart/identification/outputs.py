@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.html import STYLE, fmt, num_cell, table, text_cell
+from dvrk_dart.io.html import STYLE, fmt, num_cell, table, text_cell
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.fit import MAX_CONDITION_NUMBER, PSD_MARGIN_KG_M2
 from dvrk_dart.identification.identify import (

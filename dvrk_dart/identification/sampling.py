@@ -27,7 +27,7 @@ from dvrk_dart.identification.regressor import (
     params_json,
     standard_vector,
 )
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.model.pseudo_inertia import (
     PSEUDO_INERTIA_BASIS,

@@ -52,7 +52,7 @@ from dvrk_dart.io.atomic import strict_json
 from dvrk_dart.io.mcap_bulk import BulkChannel, write_bulk
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 
 FORMAT = "dvrk_dart.run/1"
 

@@ -190,7 +190,7 @@ def _gauss_newton(frequency_hz: float, t: np.ndarray, x: np.ndarray, harmonics: 
     Gauss-Newton step of the variable-projection problem (the coefficients
     fitted at each frequency), each joint weighted by its residual variance,
     the information divided by the residuals' correlation time."""
-    from dvrk_dart.identification.fit import integrated_autocorrelation_time
+    from dvrk_dart.metrics import integrated_autocorrelation_time
 
     A = harmonic_design(t, frequency_hz, harmonics)
     factor = scipy.linalg.cho_factor(A.T @ A)

@@ -35,7 +35,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path as atomic_output
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 
 APPLICATION_ID = "dvrk_dart"
 TIMELINE = "sim_time"

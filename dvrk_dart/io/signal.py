@@ -172,3 +172,21 @@ def process_all(runs: list[MeasuredRun], processing: str | None, design=None) ->
         return [process_periodic(run, design=design) for run in runs], None
     except DvrkDartError as exc:
         return [process(run) for run in runs], f"upstream processing: {exc}"
+
+
+#: two runs share their motion (a baseline's gap is subtracted sample by sample)
+#: when their positions differ by less than this RMS (rad or m; two recordings
+#: of trajectory one differ by ~1e-3, the half-speed run by ~0.5) ...
+SAME_MOTION_POSITION_RMS = 0.01
+#: ... and their velocities by less than this fraction of the velocity RMS
+SAME_MOTION_VELOCITY_FRACTION = 0.1
+
+
+def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
+    """Whether two runs of one length follow the same motion sample by sample
+    (a baseline's gap can then be subtracted as it is)."""
+    if len(a) != len(b):
+        return False
+    position = float(np.sqrt(np.mean((a.q - b.q) ** 2)))
+    velocity = float(np.sqrt(np.mean((a.dq - b.dq) ** 2)) / max(np.sqrt(np.mean(b.dq**2)), 1e-12))
+    return position < SAME_MOTION_POSITION_RMS and velocity < SAME_MOTION_VELOCITY_FRACTION

@@ -24,7 +24,8 @@ from dvrk_dart.model import friction
 from dvrk_dart.model.description import DHFrame, Link, PsmModel, dh_transform
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
-from dvrk_dart.sim.config import INERTIAL_TERMS
+#: the rigid-body terms of the identified model (what the inertial arm simulates)
+INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
 
 NON_INERTIAL_TERMS = ("friction", "offset", "spring", "motor_inertia")
 TERMS = INERTIAL_TERMS + NON_INERTIAL_TERMS

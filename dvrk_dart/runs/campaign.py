@@ -115,7 +115,7 @@ def _execute(task: tuple[RunConfig, str | None, str]):
     """Worker: run one config. With a folder (local workers share the driver's
     file system) it writes the run there and returns its metrics; without, it
     returns the record for the driver to write (Ray)."""
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.runner import arm_of_scenario, run
 
     config, runs_dir, fingerprint = task
@@ -132,7 +132,7 @@ def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: b
                  executor: str = "local", ray_address: str | None = None) -> dict:
     """Run every spec not already up to date, on the executor; returns a summary
     with the failures by run name (a failed run does not stop the others)."""
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
 
     start = time.perf_counter()
     code = code_fingerprint()

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.runs.loop import simulate
-from dvrk_dart.runs.record import RunRecord, pose_vector
+from dvrk_dart.io.record import RunRecord, pose_vector
 from dvrk_dart.runs.scenarios import Scenario
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.controllers import CartesianTorqueController, KinematicController

@@ -5,7 +5,7 @@ replay controller) while a tissue-like surface, a horizontal plane under the
 lowest part of the instrument point's path, pushes back on the point with a
 spring-damper force (stiffness and damping stated, no adhesion). DART applies
 that force to the instrument's body; it is the truth. The estimate
-`F = J^-T (tau - tau_model)` (analysis/force.py) from the simulated efforts,
+`F = J^-T (tau - tau_model)` (model/force.py) from the simulated efforts,
 with the model the simulation was built from evaluated at the simulated
 states, must give it back (sim-to-sim); a held-out run's real residual added
 to the efforts gives the error a user should expect on the real arm."""
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from dvrk_dart.analysis.force import estimate_force, point_positions
+from dvrk_dart.model.force import estimate_force, point_positions
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.arm import Arm
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.runs.replay import VELOCITY_TARGET_STAGGER_STEPS, ReplayDriver
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.simulator import PsmSimulator

@@ -120,7 +120,7 @@ def fitted_excitation(name: str, rate_hz: float) -> Excitation:
 
 def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
     """A Cartesian scenario's joint trajectory (its kinematic mode), at rate_hz."""
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.cartesian import CartesianDriver
     from dvrk_dart.runs.scenarios import load_scenario
 

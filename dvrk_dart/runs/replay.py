@@ -25,7 +25,7 @@ from dvrk_dart.model.description import PsmModel, load_model
 from dvrk_dart.model.identified import TERMS, IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
 from dvrk_dart.runs.loop import LoopLog, simulate
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 from dvrk_dart.sim.config import MODES, SimConfig, simulated_terms
 from dvrk_dart.sim.simulator import PsmSimulator
 

@@ -16,11 +16,11 @@ import numpy as np
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.io.reference_data import resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import TORQUE_TRANSIENT_S, rms
-from dvrk_dart.model.arm import Arm, load_arm
+from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.identified import TERMS
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.runs.config import RunConfig, run_name, sim_config_for
-from dvrk_dart.runs.record import RunRecord
+from dvrk_dart.io.record import RunRecord
 from dvrk_dart.runs.scenarios import Scenario, load_scenario
 from dvrk_dart.sim.config import SimConfig, simulated_terms
 

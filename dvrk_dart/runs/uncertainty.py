@@ -110,7 +110,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
     from dvrk_dart.io.provenance import software_versions
     from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, sha256_of
     from dvrk_dart.io.signal import process
-    from dvrk_dart.model.arm import load_arm
+    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.model.description import current_model_file
     from dvrk_dart.runs.replay import replay_duration
 

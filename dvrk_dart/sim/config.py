@@ -8,8 +8,9 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
-#: the identified model's rigid-body terms, always simulated (names of identified_model.TERMS)
-INERTIAL_TERMS = ("inertia", "coriolis", "gravity")
+#: the identified model's rigid-body terms, always simulated
+from dvrk_dart.model.identified import INERTIAL_TERMS
+
 COUNTERWEIGHT_VARIANTS = ("on", "off", "pid")
 MODES = ("kinematic", "velocity", "torque")
 

@@ -1,0 +1,15 @@
+"""The layers import downward only: import-linter with pyproject.toml's contract."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from dvrk_dart.paths import PROJECT_DIR
+
+
+def test_the_layer_contract_holds():
+    lint = shutil.which("lint-imports") or str(Path(sys.executable).parent / "lint-imports")
+    done = subprocess.run([lint, "--config", str(PROJECT_DIR / "pyproject.toml")], cwd=PROJECT_DIR, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-2000:]
+    assert "0 broken" in done.stdout
