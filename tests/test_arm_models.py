@@ -73,6 +73,12 @@ def test_the_mtm_replays_two_in_dart(tmp_path, capsys):
         assert main(["replay", "--arm-model", "mtm", "--measured", "mtm-two", "--dynamics", dynamics, "--out", str(out)]) == 0
         metrics = json.loads((out / "metrics.json").read_text())
         assert metrics["closure_residual_max_m"] < 1e-9
+        # the report's rows of an MTM run carry the MTM's facts, whatever arm the report runs under
+        from dvrk_dart.analysis.tables import _load_and_measure
+
+        loaded, rows, error = _load_and_measure(str(out))
+        assert error is None and loaded.counterweight == "none"
+        assert set(rows[rows.joint == "q3"].unit) <= {"N·m", "rad", "1"}
         if dynamics == "inertial":
             assert np.all(np.array(metrics["rms_sim_vs_model"][:3]) <= 0.01), metrics["rms_sim_vs_model"]
         else:

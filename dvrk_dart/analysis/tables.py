@@ -45,6 +45,8 @@ from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysi
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path, write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import sha256_of
+from dvrk_dart.model.description import current_model_file, load_model, using_model
+from dvrk_dart.paths import MODELS_DIR
 from dvrk_dart.metrics import REGIME_ALL, TORQUE_TRANSIENT_S, relative_error, rms
 from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
@@ -78,11 +80,17 @@ MIN_REGIME_SAMPLES = 20
 #: (signal.FIRST_PERIOD_SAMPLES at the data's sample rate); replays only
 
 
+def run_model_file(config: dict) -> Path:
+    """The arm model a run was made with (its config.json `model_file`, a file of models/), else the current one."""
+    name = Path(str(config.get("model_file") or "")).name
+    candidate = MODELS_DIR / Path(name).stem / name if name else None
+    return candidate if candidate is not None and candidate.is_file() else current_model_file()
+
+
 def first_period_s() -> float:
     from dvrk_dart.io.reference_data import sample_rate_hz
-    from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES
 
-    return FIRST_PERIOD_SAMPLES / sample_rate_hz()
+    return load_model().processing.first_period_samples / sample_rate_hz()
 
 
 REGIME_DESCRIPTIONS = {
@@ -198,6 +206,8 @@ def _identity(name: str, config: dict) -> tuple[str, str, str]:
     scenario = scenario or (parts[0] if len(parts) == 3 else name)
     mode = config.get("mode") or (parts[1] if len(parts) == 3 else "")
     counterweight = config.get("counterweight") or (parts[2].removeprefix("cw-") if len(parts) == 3 else "")
+    if run_model_file(config).is_file() and load_model(run_model_file(config)).counterweight_link is None:
+        counterweight = "none"  # an arm without a counterweight (the MTM): no variant to name
     return str(scenario), str(mode), str(counterweight)
 
 
@@ -233,7 +243,8 @@ def _load_and_measure(run_dir: str) -> tuple[LoadedRun | None, pd.DataFrame | No
     """Worker: one run folder -> (loaded run, its metric rows) or an error message."""
     try:
         loaded = load_run_folder(run_dir)
-        return loaded, run_metrics(loaded), None
+        with using_model(run_model_file(loaded.config)):  # units, first period, counterweight: the run's own arm
+            return loaded, run_metrics(loaded), None
     except Exception as exc:  # one unreadable log must not hide the others
         return None, None, f"{type(exc).__name__}: {exc}".splitlines()[0]
 
