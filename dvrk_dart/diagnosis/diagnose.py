@@ -263,19 +263,17 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     )
 
 
-NOT_DISTINGUISHED = ("the payload-shaped fit is not a payload: its mass at the given position is not positive, or, without "
-                     "a position, every gravity effort at q = 0 on J1..J3 has an interval that contains zero")
+NOT_DISTINGUISHED = ("the payload-shaped fit is not a payload: the mass it gives (at the --payload-at position, or its own "
+                     "where the data identify one) is not positive: a session change read as a payload")
 
 
 def payload_distinguished(fit: dict) -> bool:
-    """A payload is named where the data make one: a positive mass at the hand
-    position when one was given (a mass below zero is a session change read as a
-    payload), else a gravity effort at q = 0 on J1..J3 whose interval excludes zero."""
+    """A payload is named unless the mass it gives is not positive: at the hand
+    position when one was given, else its own mass where the data identify one
+    (a mass at or below zero is a session change read as a payload)."""
     at = fit.get("payload_at") or {}
-    if at.get("mass_kg") is not None:
-        return at["mass_kg"] > 0.0
-    intervals = (fit.get("gravity_efforts_at_q0_interval") or [])[:3]
-    return any(i is not None and None not in i and (i[0] > 0.0 or i[1] < 0.0) for i in intervals)
+    mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
+    return mass is None or mass > 0.0
 
 
 def gravity_mismatch_of(fit: dict) -> dict:

@@ -15,6 +15,7 @@ import numpy as np
 
 from dvrk_dart.io.html import STYLE, fmt
 from dvrk_dart.diagnosis.parameter_band import band_sentence
+from dvrk_dart.diagnosis.wording import explanation
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -150,7 +151,8 @@ def answer_sentence(result: dict) -> str:
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
-    words = (result.get("explanation") or {}).get("words") or "not explained"
+    words = (result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
+                                                        [e for e in result.get("effects", []) if e["name"] in selected]))["words"]
     if result.get("payload_not_distinguished"):
         where = "no payload is distinguished from none (every interval contains zero); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
@@ -162,7 +164,7 @@ def answer_sentence(result: dict) -> str:
         sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
     else:
         sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
-    by_joint = {r.get("joint"): _row_share(r) for r in ((result.get("gap_split") or {}).get("joints") or [])}
+    by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"

@@ -195,8 +195,8 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
         values[:, FIELDS.index(field) * N_JOINTS + JOINT_NAMES.index(joint)] = file_values[:, index]
     if layout.dvrk_names:
         values = _dvrk_to_model(values, layout.joints, motor_map, path)
-    if len(file_values) < MIN_TIME_ROWS:
-        raise DvrkDartError(f"{path}: {len(file_values)} data rows: not a recording")
+    if layout.time_column is not None and len(file_values) < MIN_TIME_ROWS:
+        raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
     return CsvValues(values, layout.joints, rate)
 
