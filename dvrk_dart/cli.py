@@ -239,22 +239,15 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
 
 def cmd_force(args: argparse.Namespace) -> int:
     """The force at the instrument point (the arm's model card) the measured efforts imply."""
-    from dvrk_dart.instrument_force import ForceConfig, instrument_force
+    from dvrk_dart.instrument_force import ForceConfig, instrument_force, print_force_summary
     from dvrk_dart.io.outputs import building_folder, check_output_folder
     from dvrk_dart.io.arm import load_arm
 
     check_output_folder(args.out, "force")
     config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation)
     with building_folder(args.out, "force") as folder:
-        s = instrument_force(load_arm(params_file=args.params), config, folder)
-    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}), {s['processing']} processing ({s['chosen_because']})")
-    if s["rms_n"] is None:
-        print(f"  not determined on any sample: the lever arm stays under {s['min_lever_m']} m")
-    else:
-        axes = " / ".join(f"{v:.3f}" for v in s["rms_per_axis_n"])
-        print(f"  |F| RMS {s['rms_n']:.3f} N, 95th percentile {s['p95_n']:.3f} N, per axis x / y / z {axes} N "
-              f"(over the {s['determined_fraction']:.0%} of samples with every lever >= {s['min_lever_m']} m)")
-        print(f"  every sample: |F| RMS {s['rms_all_samples_n']:.3f} N, 95th percentile {s['p95_all_samples_n']:.3f} N")
+        summary = instrument_force(load_arm(params_file=args.params), config, folder)
+    print_force_summary(summary)
     print(f"written {Path(args.out) / 'force.csv'}, force.json, force.mcap, force.rrd")
     return 0
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.io.html import fmt, num_cell, table, text_cell
+from dvrk_dart.io.html import num_cell, table, text_cell
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import PROCESSINGS, process
@@ -194,5 +194,3 @@ def _table(dataset: Dataset, figures: dict) -> str:
              f"Figures in <code>{dataset.name}/{FIGURES_FILE}</code>.</p>")
     return intro + table(header, rows)
 
-
-__all__ = ["load_datasets", "dataset_figures", "datasets_section", "fmt", "np"]

@@ -106,3 +106,15 @@ def estimate_force_all(arm: Arm, q: np.ndarray, gap: np.ndarray) -> dict:
     point = force_point_of(arm.model)
     model = replace(arm.model, force_point=replace(point, min_lever_m=0.0))
     return estimate_force(model, q, gap).summary()
+
+
+def print_force_summary(s: dict) -> None:
+    """What `dvrk-dart force` prints: the figures of force.json with their units."""
+    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}), {s['processing']} processing ({s['chosen_because']})")
+    if s["rms_n"] is None:
+        print(f"  not determined on any sample: the lever arm stays under {s['min_lever_m']} m")
+        return
+    axes = " / ".join(f"{v:.3f}" for v in s["rms_per_axis_n"])
+    print(f"  |F| RMS {s['rms_n']:.3f} N, 95th percentile {s['p95_n']:.3f} N, per axis x / y / z {axes} N "
+          f"(over the {s['determined_fraction']:.0%} of samples with every lever >= {s['min_lever_m']} m)")
+    print(f"  every sample: |F| RMS {s['rms_all_samples_n']:.3f} N, 95th percentile {s['p95_all_samples_n']:.3f} N")

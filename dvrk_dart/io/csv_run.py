@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 FIELDS = ("q", "dq", "tau")
 #: the header's words for the dVRK's JointState fields
@@ -211,11 +211,3 @@ def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, path:
                             "the model's coordinates need every coupled joint")
     q, dq, tau = (values[:, i * N_JOINTS:(i + 1) * N_JOINTS] for i in range(3))
     return np.hstack([motor_map.positions_to_model(q), motor_map.positions_to_model(dq), motor_map.efforts_to_model(tau)])
-
-
-def measured_mask(measured: tuple[str, ...]) -> np.ndarray:
-    """(7,) bool: which of q1..q7 a run recorded."""
-    return np.array([name in measured for name in JOINT_NAMES])
-
-
-__all__ = ["CsvValues", "read_csv_run", "measured_mask", "column_names", "HEADERLESS_JOINTS"]
