@@ -129,3 +129,20 @@ def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
     assert main(["identify", "--runs", str(TEST1), str(TEST2), "--out", str(tmp_path / "two_runs"), "--processing", "upstream"]) == 0
     summary = json.loads((tmp_path / "two_runs" / "identification.json").read_text())
     assert summary["condition_number"] < 1e5 and summary["errors"]["train"]
+
+
+@needs_2018
+def test_a_three_joint_log_of_an_arm_that_couples_them_is_refused(tmp_path):
+    """The MTM's q2..q4 mix in the dVRK's values: joints 1..3 alone cannot be put in its coordinates."""
+    from dvrk_dart.model.description import resolve_arm_model, using_model
+
+    with using_model(resolve_arm_model("mtm")), pytest.raises(DvrkDartError, match="couples q2, q3, q4"):
+        load_run(TEST1)
+
+
+def test_rate_and_a_time_column_must_agree(tmp_path, capsys):
+    two = load_run(resolve_run("two"))
+    path = _write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
+    assert main(["model-errors", "--measured", str(path), "--rate", "100"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--rate 100" in err and "time column at 200 Hz" in err

@@ -122,12 +122,19 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
     return CsvLayout(columns, time_column, joints, kinds == {True})
 
 
-def headerless_layout(width: int, path: Path) -> CsvLayout:
+def headerless_layout(width: int, path: Path, coupled: tuple[int, ...] = ()) -> CsvLayout:
+    """The layout of a file without a header; `coupled`: the arm's joints whose
+    dVRK values mix (a partial log of them cannot be put in the model's coordinates)."""
     if width not in HEADERLESS_JOINTS:
         layouts = "; ".join(f"{n} columns ({', '.join(column_names_of(joints))})" for n, joints in HEADERLESS_JOINTS.items())
         raise DvrkDartError(f"{path}: {width} columns without a header row; known layouts: {layouts}; "
                             "or a header row naming the columns (t, q1, dq1, tau1, ...)")
     joints = HEADERLESS_JOINTS[width]
+    partly = [JOINT_NAMES[j] for j in coupled if JOINT_NAMES[j] in joints]
+    if partly and len(partly) < len(coupled):
+        raise DvrkDartError(f"{path}: {width} columns (joints {joints[0]}..{joints[-1]}), but this arm couples "
+                            f"{', '.join(JOINT_NAMES[j] for j in coupled)} in the dVRK's values: log every coupled joint, "
+                            "or give a header row")
     columns = {(field, joint): i * len(joints) + k for i, field in enumerate(FIELDS) for k, joint in enumerate(joints)}
     return CsvLayout(columns, None, joints, False)
 
@@ -183,7 +190,7 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
         layout = layout_from_header(list(raw.iloc[0]), path, dvrk_joints)
         raw = raw.iloc[1:].reset_index(drop=True)
     else:
-        layout = headerless_layout(raw.shape[1], path)
+        layout = headerless_layout(raw.shape[1], path, _coupled_joints(motor_map))
     names = [str(c) for c in range(raw.shape[1])]
     for (field, joint), index in layout.columns.items():
         names[index] = f"{field}{joint[1:]}"
@@ -199,6 +206,11 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
         raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
     return CsvValues(values, layout.joints, rate)
+
+
+def _coupled_joints(motor_map) -> tuple[int, ...]:
+    columns = motor_map.columns
+    return tuple(range(N_JOINTS)[columns]) if isinstance(columns, slice) else tuple(int(c) for c in columns)
 
 
 def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, path: Path) -> np.ndarray:

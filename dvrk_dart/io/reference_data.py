@@ -63,6 +63,8 @@ def rate_of(path: Path, time_column_hz: float | None = None) -> tuple[float, str
     if explicit is not None:
         if not (np.isfinite(explicit) and explicit > 0):
             raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
+        if time_column_hz is not None and abs(explicit / time_column_hz - 1.0) > 0.01:
+            raise DvrkDartError(f"--rate {explicit:g}: {path} has a time column at {time_column_hz:.6g} Hz (leave --rate out)")
         return float(explicit), "--rate"
     if time_column_hz is not None:
         return time_column_hz, "its time column"
