@@ -333,7 +333,11 @@ def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
     print(f"  RMS per joint, simulated arm: {dynamics or 'the scenario default'} "
           "(--dynamics identified: every identified term as physics)" + (f"; model terms compared: {', '.join(terms)}" if terms else ""))
     print(f"  {'joint':>6}  " + "  ".join(f"{label:>22}" for _, label in columns))
+    recorded = metrics.get("measured_joints") or list(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES[:len(metrics[columns[0][0]])]):
+        if name not in recorded:
+            print(f"  {name:>6}  not measured (the run did not record {name}; the simulation held it)")
+            continue
         print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {effort_unit(name):<3}" for key, _ in columns))
 
 

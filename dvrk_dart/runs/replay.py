@@ -21,6 +21,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.metrics import rms
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.description import PsmModel, load_model
 from dvrk_dart.model.identified import TERMS, IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
@@ -211,6 +212,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(t) else 0.0,
     }
     metrics |= processed.summary()
+    metrics["measured_joints"] = [name for name, on in zip(JOINT_NAMES, processed.measured) if on]
     if processed.periodic is not None and dynamic:
         metrics |= _in_band_metrics(processed, t, effort, full_model, in_window)
     if log.error is not None:
