@@ -64,7 +64,7 @@ def _read_text(path: Path) -> pd.DataFrame:
         raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]})") from None
 
 
-def _is_number(text) -> bool:
+def is_number(text) -> bool:
     try:
         float(text)
         return True
@@ -76,7 +76,7 @@ def _has_header(raw: pd.DataFrame) -> bool:
     """A first row of names: no cell of it is a number (a data row with one bad
     cell is a data row, and its error names the cell)."""
     first = [cell for cell in raw.iloc[0] if isinstance(cell, str)]
-    return bool(first) and not any(_is_number(cell) for cell in first) and any(re.search(r"[A-Za-z]", c) for c in first)
+    return bool(first) and not any(is_number(cell) for cell in first) and any(re.search(r"[A-Za-z]", c) for c in first)
 
 
 def _header_key(name: str, dvrk_joints: tuple[str, ...]) -> tuple[str, str, bool] | None:

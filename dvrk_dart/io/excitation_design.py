@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.csv_run import is_number
 from dvrk_dart.io.measured_run import sample_rate_hz
 from dvrk_dart.io.periodic import design_harmonics, fit_period, moving_joints
 
@@ -43,7 +44,7 @@ def _positions(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raw = pd.read_csv(path, header=None, dtype=str)
     except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError, OSError) as exc:
         raise DvrkDartError(f"--excitation {path}: not a CSV file ({str(exc).splitlines()[0]})") from None
-    header = any(not _is_number(cell) for cell in raw.iloc[0])
+    header = any(not is_number(cell) for cell in raw.iloc[0])
     body = raw.iloc[1:] if header else raw
     values = body.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
     if values.size == 0 or not np.all(np.isfinite(values)):
@@ -67,14 +68,6 @@ def _positions(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if len(q) < 3:
         raise DvrkDartError(f"--excitation {path}: fewer than 3 samples")
     return np.arange(len(q)) / sample_rate_hz(), q
-
-
-def _is_number(text) -> bool:
-    try:
-        float(text)
-        return True
-    except (TypeError, ValueError):
-        return False
 
 
 def read_design(path: str | Path) -> ExcitationDesign:

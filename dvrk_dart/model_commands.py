@@ -1,0 +1,125 @@
+"""The commands that compare the identified model with a measured run:
+`model-errors`, `force`, `session-floor`, `model-check` (the parser is cli_parser.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+
+def cmd_model_errors(args: argparse.Namespace) -> int:
+    """Per-joint relative and RMS error of the identified model on a measured run."""
+    from dvrk_dart.io.atomic import json_text
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process_all
+    from dvrk_dart.io.excitation_design import read_design
+    from dvrk_dart.metrics import per_measured_joint, relative_error, rms
+    from dvrk_dart.io.arm import load_arm
+    from dvrk_dart.model.identified import parse_terms
+
+    arm = load_arm(params_file=args.params)
+    terms = parse_terms(args.terms)
+    design = read_design(args.excitation) if getattr(args, "excitation", None) else None
+    [processed], note = process_all([load_run(resolve_run(args.measured))], args.processing, design)
+    why = f"--processing {args.processing}" if args.processing else (note or "the default: the run is a periodic excitation")
+    with np.errstate(over="ignore", invalid="ignore"):
+        predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
+        sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
+    if not sane:
+        raise DvrkDartError(f"--params {args.params or arm.params.source}: the model's efforts on {args.measured} are not finite "
+                            "(a parameter far out of any physical range)")
+    measured = processed.tau
+    if args.first_period:
+        n = processed.first_period_samples()
+        if len(measured) < n:
+            raise DvrkDartError(f"--first-period: {args.measured} has {len(measured)} processed samples, fewer than one period ({n})")
+        predicted, measured = predicted[:n], measured[:n]
+    result = {
+        "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
+        "rms": per_measured_joint(rms(predicted - measured), processed.measured),
+        "samples": len(measured),
+        "terms": args.terms,
+        **processed.summary(),
+        "chosen_because": why,
+    }
+    if args.json:
+        print(json_text(result), end="")
+    else:
+        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {processed.processing} processing ({why})")
+        if processed.periodic is not None:
+            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['whole_periods']} whole periods, "
+                  f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
+                  f"from {result['design_from']})")
+        print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
+        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if processed.periodic is not None else ""))
+        for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
+            if r is None:
+                print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record {name})")
+                continue
+            cutoff = f" {result['joint_cutoffs'][j]:9d}" if processed.periodic is not None else ""
+            why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
+            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}{cutoff}{why}")
+    return 0
+
+
+def cmd_force(args: argparse.Namespace) -> int:
+    """The force at the instrument point (the arm's model card) the measured efforts imply."""
+    from dvrk_dart.instrument_force import ForceConfig, instrument_force, print_force_summary
+    from dvrk_dart.io.outputs import building_folder, check_output_folder
+    from dvrk_dart.io.arm import load_arm
+
+    check_output_folder(args.out, "force")
+    config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation)
+    with building_folder(args.out, "force") as folder:
+        summary = instrument_force(load_arm(params_file=args.params), config, folder)
+    print_force_summary(summary)
+    print(f"written {Path(args.out) / 'force.csv'}, force.json, force.mcap, force.rrd")
+    return 0
+
+
+def cmd_session_floor(args: argparse.Namespace) -> int:
+    """The floor of the identified model's residual: two recordings of one trajectory."""
+    from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
+    from dvrk_dart.io.arm import load_arm
+
+    arm = load_arm(params_file=args.params)
+    a, b = processed_pair((args.measured, args.repeat), args.processing)
+    try:
+        check_repeat(a, b)
+        table = floor_table(arm, a, b)
+    except DvrkDartError as exc:
+        raise DvrkDartError(f"--repeat {args.repeat}: {exc}") from None
+    result = {"measured": args.measured, "repeat": args.repeat, **table,
+              "runs": {args.measured: a.summary(), args.repeat: b.summary()}}
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"identified model's residual, {args.measured} vs {args.repeat} ({args.processing} processing)")
+    print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
+    noise = table["noise_predicted_rms"] or [math.nan] * len(JOINT_NAMES)
+    verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
+    for j, name in enumerate(JOINT_NAMES):
+        print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]:9.4f}  "
+              f"{effort_unit(name)}: {verdicts[j]}")
+    return 0
+
+
+def cmd_model_check(args: argparse.Namespace) -> int:
+    """Print the model card facts: parameter oddities and basic model checks."""
+    from dvrk_dart.io.arm import load_arm
+
+    arm = load_arm(params_file=args.params)
+    print(f"model: {arm.model.name} ({arm.model.source})")
+    print(f"parameters: {arm.params.source}")
+    for note in arm.params.oddities(arm.model):
+        print(f"  oddity: {note}")
+    q = np.zeros(len(JOINT_NAMES))
+    print("g(0) =", np.array2string(arm.identified.gravity(q), precision=4))
+    return 0

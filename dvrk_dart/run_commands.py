@@ -1,0 +1,132 @@
+"""The commands that simulate: `run` (a scenario) and `replay` (a measured run),
+with their run configuration and printout (the parser is cli_parser.py)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+
+
+def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: str | None = None):
+    from dvrk_dart.runs.config import RunConfig
+    from dvrk_dart.runs.scenarios import load_scenario
+
+    spec = load_scenario(scenario)
+    _check_arm_of_scenario(args, spec)
+    if mode == "kinematic":  # poses imposed: no dynamics for these options to change
+        if args.dynamics is not None:  # an unknown value is named as such first
+            from dvrk_dart.runs.config import sim_config_for
+
+            sim_config_for(RunConfig("replay", "velocity", dynamics=args.dynamics))
+        for option, value in (("--counterweight", args.counterweight), ("--dynamics", args.dynamics)):
+            if value is not None:
+                raise DvrkDartError(f"{option} {value}: a kinematic run imposes the poses and simulates no dynamics; "
+                                    "use --mode velocity or torque")
+    dynamics = args.dynamics or spec.dynamics
+    return RunConfig(scenario, mode, args.counterweight or "on", dynamics, args.dt, args.duration, args.params, measured,
+                     getattr(args, "processing", "upstream"), getattr(args, "harmonics", None))
+
+
+def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
+    """A scenario written for one arm (its `arm_model`) is not run on another."""
+    from dvrk_dart.model.description import resolve_arm_model
+
+    asked = getattr(args, "arm_model", None)
+    if asked and spec.arm_model and resolve_arm_model(asked) != resolve_arm_model(spec.arm_model):
+        raise DvrkDartError(f"--arm-model {asked}: the scenario {spec.name} is the {spec.arm_model} arm's; leave --arm-model out")
+
+
+def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
+    """The replay's RMS figures as a labelled table, a row per joint with its unit."""
+    terms = metrics.get("model_terms_compared")
+    columns = [("rms_sim_vs_model", "sim vs model"),
+               ("rms_sim_vs_measured", "sim vs measured"), ("rms_model_vs_measured", "model (all terms) vs measured")]
+    columns = [(key, label) for key, label in columns if metrics.get(key) is not None]
+    if not columns:
+        return
+    print(f"  RMS per joint, simulated arm: {dynamics or 'the scenario default'} "
+          "(--dynamics identified: every identified term as physics)" + (f"; model terms compared: {', '.join(terms)}" if terms else ""))
+    print(f"  {'joint':>6}  " + "  ".join(f"{label:>22}" for _, label in columns))
+    recorded = metrics.get("measured_joints") or list(JOINT_NAMES)
+    for j, name in enumerate(JOINT_NAMES[:len(metrics[columns[0][0]])]):
+        if name not in recorded:
+            print(f"  {name:>6}  not measured (the run did not record {name}; the simulation held it)")
+            continue
+        print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {effort_unit(name):<3}" for key, _ in columns))
+
+
+def _run_and_write(config, out: Path | None) -> int:
+    from dvrk_dart.io.outputs import check_output_folder
+    from dvrk_dart.io.arm import load_arm
+    from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
+    from dvrk_dart.runs.runner import arm_of_scenario, run
+
+    out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
+    with arm_of_scenario(config):
+        arm = load_arm(params_file=config.params_file)
+        record = run(config, arm)
+        write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
+    metrics = record.metrics
+    print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
+    _print_effort_table(metrics, config.dynamics)
+    for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
+        if metrics.get(key) is not None:
+            print(f"  {key}: {float(np.max(metrics[key])):.3g} {unit}")
+    if "error" in metrics:
+        print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """One scenario variant -> its output folder."""
+    from dvrk_dart.runs.scenarios import load_scenario
+
+    mode = args.mode or load_scenario(args.scenario).modes[0]
+    return _run_and_write(_run_config(args, args.scenario, mode), Path(args.out))
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
+    recorded = _replay_processing(args)
+    config = _run_config(args, "replay", args.mode, measured=args.measured)
+    try:
+        return _run_and_write(config, Path(args.out) if args.out else None)
+    except DvrkDartError as exc:
+        if recorded and "--processing periodic" in str(exc):  # the user did not ask for it: say where it came from
+            raise DvrkDartError(f"{exc}; --dynamics {args.dynamics} records the periodic processing: give --processing upstream") from None
+        raise
+
+
+def _replay_processing(args: argparse.Namespace) -> bool:
+    """Set a replay's processing (and harmonic cutoff) when --processing is not
+    given: the one a --dynamics diagnosis file was fitted on, so that the replay
+    finds its figures; upstream otherwise. True when it came from the file."""
+    from dvrk_dart.runs.config import recorded_processing
+
+    args.harmonics = None
+    if args.processing is not None:
+        return False
+    recorded = recorded_processing(args.dynamics)
+    if args.duration is not None:
+        args.processing = "upstream"
+        print("processing: upstream (--duration replays a part of the run, which has no projection of its own)")
+        return False
+    if recorded is None:  # the default of every command: periodic where the run is a periodic excitation
+        from dvrk_dart.io.reference_data import load_run, resolve_run
+        from dvrk_dart.io.signal import process_all
+
+        [processed], note = process_all([load_run(resolve_run(args.measured))], None)
+        args.processing = processed.processing
+        print(f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})")
+        return False
+    args.processing, args.harmonics = recorded
+    cutoff = "" if args.harmonics is None else f", {args.harmonics} harmonics"
+    print(f"processing: {args.processing}{cutoff} (the one {args.dynamics} was fitted on)")
+    return True
