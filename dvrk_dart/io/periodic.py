@@ -44,6 +44,7 @@ import scipy.linalg
 import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.transient import TRANSIENT_RATIO, WINDOW_PERIOD_FRACTION, steady_span
 
 #: the fewest whole periods a run must hold (the noise is their scatter)
 MIN_PERIODS = 2
@@ -394,6 +395,8 @@ class PeriodicAnalysis:
     moving: tuple[bool, ...] = ()
     design_harmonics: int = 0
     design_from: str = ""
+    #: the run's samples analysed (start, stop): a start or end transient left out (`transient`)
+    kept: tuple[int, int] = (0, 0)
 
     @property
     def measured(self) -> tuple[bool, ...]:
@@ -421,6 +424,9 @@ class PeriodicAnalysis:
             "noise_per_sample_rms": per_joint(self.effort_noise.per_sample_rms.tolist()),
             "position_noise_per_sample_rms": per_joint(self.position_noise.per_sample_rms.tolist()),
             "noise_periods": self.effort_noise.whole_periods,
+            "samples_analysed": list(self.kept),
+            "transient_rule": f"a start or end window ({WINDOW_PERIOD_FRACTION:.3g} of a period) whose efforts differ from a period "
+                              f"away over {TRANSIENT_RATIO:g} x the run's median window is left out",
         }
 
 
@@ -441,6 +447,10 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     measured = np.ones(q.shape[1], bool) if measured is None else np.asarray(measured, bool)
     moving = moving_joints(q, measured)
     period = fit_period(t, q[:, moving], rate_hz, where)  # from the run itself: a design is checked against it, never imposed
+    steady = steady_span(tau[:, measured], int(round(period.period_s * rate_hz)))
+    if steady.stop - steady.start < len(t):  # a transient left out, the period fitted again without it
+        t, q, tau = t[steady] - t[steady.start], q[steady], tau[steady]
+        period = fit_period(t, q[:, moving], rate_hz, where)
     if design is not None and abs(period.period_s / design.period_s - 1.0) > DESIGN_PERIOD_TOLERANCE:
         raise DvrkDartError(f"--excitation {design.source}: its period {design.period_s:.4f} s is not the run's ({where}: "
                             f"{period.period_s:.4f} s fitted from it): the run did not play this excitation")
@@ -457,5 +467,5 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
         _noise(effort_spectrum, band, len(t), period.whole_periods),
         _noise(position_spectrum, band, len(t), period.whole_periods),
         projector, tuple(int(k) for k in cutoffs), tuple(bool(m) for m in moving), int(floor),
-        "--excitation " + design.source if design is not None else "the positions",
+        "--excitation " + design.source if design is not None else "the positions", (steady.start, steady.stop),
     )

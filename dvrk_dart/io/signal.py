@@ -157,9 +157,10 @@ def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> Processed
 
     tau = run.tau - load_model().cable_efforts(run.q)  # what the identification removed before fitting
     analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design)
-    t = run.t - run.t[0]
+    kept = slice(*analysis.kept)  # without a start or end transient (io/transient.py)
+    t = run.t[kept] - run.t[kept][0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
-    return ProcessedRun(run.t, q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
+    return ProcessedRun(run.t[kept], q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
 
 
 def process_all(runs: list[MeasuredRun], processing: str | None, design=None) -> tuple[list[ProcessedRun], str | None]:
