@@ -34,8 +34,12 @@ RIDGE_RELATIVE = 1e-9
 class Design:
     """Column layout of all candidate effects in one regressor."""
 
-    def __init__(self, effects: Sequence[Effect]):
+    def __init__(self, effects: Sequence[Effect], every_effect_a_change: bool = False):
+        """every_effect_a_change: the runs are compared with a baseline of
+        their own motion only, so any effect (not only a payload) may be what
+        the runs have and the baseline has not."""
         self.effects = list(effects)
+        self.every_effect_a_change = every_effect_a_change
         self.slices = []
         start = 0
         for e in self.effects:
@@ -46,13 +50,17 @@ class Design:
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
         return np.concatenate([e.columns(features) for e in self.effects], axis=2)
 
+    def is_withheld(self, effect: Effect) -> bool:
+        """Whether an effect is under study: in the runs, absent from their baseline."""
+        return self.every_effect_a_change or effect.kind in WITHHELD_KINDS
+
     @property
     def withheld(self) -> np.ndarray:
-        """Column mask of the effects under study (payloads): absent from a
-        baseline run, not cancelled by subtracting one."""
+        """Column mask of the effects under study (`is_withheld`): absent from
+        a baseline run, not cancelled by subtracting one."""
         mask = np.zeros(self.n_columns, dtype=bool)
         for e, sl in zip(self.effects, self.slices):
-            mask[sl] = e.kind in WITHHELD_KINDS
+            mask[sl] = self.is_withheld(e)
         return mask
 
     def run_columns(self, role: str, features: TrajectoryFeatures, baseline_features: TrajectoryFeatures | None = None,
@@ -76,7 +84,8 @@ class Design:
         return np.concatenate([np.arange(self.slices[i].start, self.slices[i].stop) for i in chosen]) if chosen else np.zeros(0, int)
 
 
-#: effect kinds under study when a baseline is given (`Design.withheld`)
+#: effect kinds under study when a baseline is given and runs of other motions
+#: are fitted with it (the other effects are then the errors all runs share)
 WITHHELD_KINDS = ("payload", "payload_at_position")
 
 

@@ -132,22 +132,22 @@ def answer_sentence(result: dict) -> str:
     selected = list(result["selection"]["selected"])
     entries = {e["name"]: e for e in result.get("effects", [])}
     payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
-    if payload:  # the effect under study first
+    if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
+        selected = [n for n in selected if not n.startswith("payload")] or selected
+    # the effect selected first (the largest gain) leads, a payload as any other
+    payload_first = bool(selected) and selected[0].startswith("payload")
+    if payload_first and payload:
         lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload)})"
-        others = [n for n in selected if not n.startswith("payload")]
-    elif mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
+    elif payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         efforts = mismatch.get("gravity_efforts_at_q0") or [None, None]
         size = "" if efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
         lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
-        others = [n for n in selected if not n.startswith("payload")]
     elif selected:
-        if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
-            selected = [n for n in selected if not n.startswith("payload")] or selected
         first = entries.get(selected[0], {"name": selected[0]})
         lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
-        others = selected[1:]
     else:
-        lead, others = "no effect", []
+        lead = "no effect"
+    others = selected[1:]
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"

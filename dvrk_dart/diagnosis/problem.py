@@ -175,7 +175,10 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     repeat_run = as_run(repeat, baseline_run) if repeat is not None else None
     offset_joints, offset_source = (session_offset_joints(arm.model, repeat_run, baseline_run or train_runs[0]) if nuisance
                                     else (None, None))
-    problem = Problem(arm, effects, Design(effects), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
+    # a baseline of the runs' own motion only: whatever differs may be any effect; runs of
+    # other motions fitted with the baseline need the shared errors apart from the change
+    every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
+    problem = Problem(arm, effects, Design(effects, every_effect_a_change), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
                       len(measured_list), at_index, nuisance, offset_joints, offset_source, folds)
     _add_grams(problem)
     return problem

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import BLOCK_DURATION_S, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
+from dvrk_dart.diagnosis.design import BLOCK_DURATION_S, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload_report import choose_within_families
 from dvrk_dart.diagnosis.problem import Problem
@@ -77,7 +77,7 @@ def effect_entries(problem: Problem, selection: Selection) -> list[dict]:
     s, effects = selection, problem.effects
     rank_order = s.selected + sorted((i for i in s.individual if i not in s.selected), key=lambda i: -s.individual[i].fraction)
     if problem.has_baseline:
-        rank_order = sorted(rank_order, key=lambda i: i not in s.selected or effects[i].kind not in WITHHELD_KINDS)
+        rank_order = sorted(rank_order, key=lambda i: i not in s.selected or not problem.design.is_withheld(effects[i]))
     return [_entry(problem, selection, rank, i) for rank, i in enumerate(rank_order, start=1)]
 
 
@@ -105,7 +105,7 @@ def _entry(problem: Problem, s: Selection, rank: int, i: int) -> dict:
         },
         "explained_fraction_per_joint": {"cross_validated": per_joint_fraction(cv.after, problem.train_grams.s)},
         "selected": i in s.selected,
-        "role": "finding" if not problem.has_baseline or e.kind in WITHHELD_KINDS else "common_model_error",
+        "role": "finding" if not problem.has_baseline or problem.design.is_withheld(e) else "common_model_error",
         "selection_step": s.selected.index(i) + 1 if i in s.selected else None,
         "in_simulation": e.sim_contribution(np.asarray(p)) is not None,
         "fully_in_simulation": e.fully_simulated(np.asarray(p)),
@@ -130,7 +130,7 @@ def resimulate(problem: Problem, selection: Selection, simulate: Simulate | None
     no withheld payload); without a simulation, the effects' regressors."""
     chosen = [(problem.effects[i], selection.final.params[i]) for i in selection.selected]
     full = (effects_to_sim_config(chosen, base_config), not_simulated(chosen))
-    shared_effects = [(e, p) for e, p in chosen if e.kind not in WITHHELD_KINDS]
+    shared_effects = [(e, p) for e, p in chosen if not problem.design.is_withheld(e)]
     shared = (effects_to_sim_config(shared_effects, base_config), not_simulated(shared_effects))
 
     def simulated_after(run: DiagnosisRun, with_withheld: bool = True) -> np.ndarray:
