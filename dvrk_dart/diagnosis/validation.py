@@ -32,7 +32,7 @@ from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share, share_words
 from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.payload_checks import validate_real_payload
-from dvrk_dart.diagnosis.result import gaps
+from dvrk_dart.diagnosis.blind_suite import validate_blind_suite
 from dvrk_dart.diagnosis.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
@@ -186,17 +186,23 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 
 #: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
 #: they run side by side, each in its own process
-WITHHELD_STEPS = ("payload", "mtm_holdout", "holdout", "holdout_2018", "synthetic", "insertion", "out_of_library")
+WITHHELD_STEPS = ("blind_suite_periodic", "blind_suite_upstream", "payload", "mtm_holdout", "holdout", "holdout_2018", "synthetic",
+                  "insertion", "out_of_library")
+#: the blind effect suite runs as one step per processing (side by side)
+BLIND_SUITE_STEPS = {"blind_suite_upstream": "upstream", "blind_suite_periodic": "periodic"}
 
 
 def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], float]:
     """One validation of WITHHELD_STEPS in a worker: (its verdicts, its wall time)."""
     name, out_dir, parameter_band = task
     step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout, "holdout_2018": validate_holdout,
-            "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library}[name]
+            "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library,
+            **dict.fromkeys(BLIND_SUITE_STEPS, validate_blind_suite)}[name]
     start = time.perf_counter()
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
-    _, found = step(load_arm(), tomllib.loads(WITHHELD_FILE.read_text())[name], out_dir / name, **extra)
+    tables = tomllib.loads(WITHHELD_FILE.read_text())
+    spec = {**tables["blind_suite"], "processings": [BLIND_SUITE_STEPS[name]]} if name in BLIND_SUITE_STEPS else tables[name]
+    _, found = step(load_arm(), spec, out_dir / name, **extra)
     return found, time.perf_counter() - start
 
 

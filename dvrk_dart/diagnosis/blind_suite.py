@@ -1,0 +1,160 @@
+"""The blind effect suite: every effect class of the library injected alone, as
+DART physics (never by the regressors the diagnosis fits), into two periods of
+a real excitation, with the measured noise and a session change of the
+constant efforts added, then diagnosed without knowing it: without and with a
+baseline (the same motion without the effect, another session), in both
+processings. Each case must rank the injected class on its joint first and
+leave that joint's gap within `gap_tolerance` times what the true physics
+leaves there (the noise through the processing); a class with no candidate
+in the library ("none") must not be claimed: "not explained", or an
+equivalent effect as close (`pipelines/withheld.toml` [blind_suite]).
+
+Classes the simulation has no physics for (the counterweight tendon's
+transmission error, a Stribeck drop, a time shift) are not in the suite: a run
+made with their regressor would test the regressor against itself.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.diagnosis.batch import BatchSimulate
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.runs import RunProcessing, Simulate, loaded_states, simulated_efforts
+from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.signal import ProcessedRun, process_periodic
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.sim.config import JointEffects, Payload, SimConfig
+
+#: JointEffects fields given per joint name in a case (the others are entries)
+PER_JOINT_FIELDS = ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_presliding", "coulomb_reversal_velocity")
+
+
+def case_physics(case: dict, base: SimConfig) -> SimConfig:
+    """The case's effect as simulation physics on top of `base`: per-joint
+    JointEffects fields ({"coulomb": {"q2": 0.15}}), entry fields
+    (position_friction, angle_load: lists) and point payloads."""
+    fields = {}
+    for name, value in case.get("physics", {}).items():
+        if name in PER_JOINT_FIELDS:
+            per_joint = np.zeros(N_JOINTS)
+            for joint, v in value.items():
+                per_joint[JOINT_NAMES.index(joint)] = float(v)
+            fields[name] = tuple(per_joint.tolist())
+        else:
+            fields[name] = tuple(tuple(float(x) for x in entry) for entry in value)
+    payloads = tuple(Payload(int(p["link"]), float(p["mass_kg"]), tuple(p["position_m"])) for p in case.get("payloads", []))
+    return replace(base, extra=base.extra.plus(JointEffects(**fields)), payloads=base.payloads + payloads)
+
+
+def suite_motion(spec: dict) -> ProcessedRun:
+    """`periods` whole periods of the spec's real run, its positions as the
+    periodic layer's series (exactly periodic: both processings apply)."""
+    state = process_periodic(load_run(resolve_run(spec["run"])))
+    return state.head(int(round(spec["periods"] * state.periodic.period.period_s * state.rate_hz)) + 2)
+
+
+def measured_noise(spec: dict, joints_with_session_offsets: np.ndarray) -> dict[str, np.ndarray]:
+    """The real runs' noise: per sample on the efforts and the positions (the
+    periodic layer's, on the suite's run), and the constant efforts that moved
+    between two sessions of it (`session_pair`) on the joints sessions move."""
+    summary = process_periodic(load_run(resolve_run(spec["run"]))).periodic.summary()
+    first, second = (load_run(resolve_run(name)).tau for name in spec["session_pair"])
+    span = min(len(first), len(second))
+    return {"effort": np.nan_to_num(np.array(summary["noise_per_sample_rms"], dtype=float)),
+            "position": np.nan_to_num(np.array(summary["position_noise_per_sample_rms"], dtype=float)),
+            "session_offsets": np.where(joints_with_session_offsets, first[:span].mean(axis=0) - second[:span].mean(axis=0), 0.0)}
+
+
+def _write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict, rng: np.random.Generator) -> Path:
+    q = state.q + rng.standard_normal(state.q.shape) * noise["position"]
+    np.savetxt(path, np.hstack([q, state.dq, efforts + rng.standard_normal(efforts.shape) * noise["effort"]]), delimiter=",")
+    return path
+
+
+def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, noise: dict, folder: Path, seed: int) -> dict:
+    """The case's measured run (effect, noise) and its baseline (no effect,
+    other noise, the other session's constant efforts), as CSV files, and the
+    case's physics."""
+    base = SimConfig()
+    rng = np.random.default_rng(seed)
+    config = case_physics(case, base)
+    clean = simulated_efforts(arm, motion, simulate, config)
+    clean_baseline = simulated_efforts(arm, motion, simulate, base) + noise["session_offsets"]
+    folder.mkdir(parents=True, exist_ok=True)
+    return {"measured": _write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
+            "baseline": _write_run(folder / f"{case['name']}_baseline.csv", motion, clean_baseline, noise, rng)}
+
+
+def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunProcessing, with_baseline: bool,
+                     session_joints: np.ndarray) -> np.ndarray:
+    """(7,) what the diagnosis's residual keeps when the injected effect is
+    known exactly: the processed run against its simulation with the case's
+    physics (minus, with a baseline, the baseline against the effect-free
+    simulation, each joint that sessions move demeaned as the diagnosis does):
+    the noise of efforts and positions through the processing, the floor."""
+    def gap(path: Path, config: SimConfig) -> np.ndarray:
+        state = loaded_states([str(path)], processing)[0]
+        return state.tau - simulated_efforts(arm, state, simulate, config)
+
+    residual = gap(runs["measured"], runs["config"])
+    if with_baseline:
+        difference = residual - gap(runs["baseline"], SimConfig())
+        residual = difference - session_joints * difference.mean(axis=0)
+    return rms(residual)
+
+
+def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) -> dict:
+    """The top finding against the injected class and joint, the gap it leaves against the noise."""
+    top = result["effects"][0] if result.get("effects") else {"name": None, "family": "", "parameters": {}}
+    joint = JOINT_NAMES.index(case["joint"])
+    gap = result["gap_after"]["train"][joint]
+    gap_ok = gap is not None and gap <= tolerance * floor[joint]
+    expected = case["expect"]
+    if expected == "none":  # no class of the library: no false claim (not explained, or an equivalent to within the noise)
+        named = result["explanation"]["words"] == "not explained" or bool(gap_ok)
+    elif expected.startswith("payload:"):  # a payload on a link group (links of a group can have identical efforts)
+        named = top.get("kind") in ("payload", "payload_at_position") and top["parameters"].get("group") == expected.split(":", 1)[1]
+    else:
+        named = top["family"] == expected
+    return {"top_effect": top["name"], "named": bool(named), "joint": case["joint"], "gap_after": gap,
+            "floor": float(floor[joint]), "gap_within_noise": bool(gap_ok)}
+
+
+def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, processing: str, with_baseline: bool) -> dict:
+    """One diagnosis of the suite, judged."""
+    result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
+                      max_effects=spec["max_effects"], figures=False, profile_payload_mass=False, processing=processing)
+    used = RunProcessing(processing, result["processing"].get("harmonics"))
+    floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
+    verdict = judge_case(case, result, floor, spec["gap_tolerance"])
+    return {"case": case["name"], "processing": processing, "baseline": with_baseline, **verdict,
+            "words": (result.get("explanation") or {}).get("words")}
+
+
+def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate | None = None) -> tuple[dict, list[dict]]:
+    """Every case of `spec` in every processing of `spec["processings"]`,
+    without and with a baseline (`spec["baselines"]`, default both;
+    `spec["subset"]`: the case names to run only)."""
+    simulate = simulate or BatchSimulate(arm, "local", 1)
+    motion = suite_motion(spec)
+    noise = measured_noise(spec, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
+    cases = [c for c in spec["cases"] if c["name"] in spec.get("subset", [c["name"] for c in spec["cases"]])]
+    outcomes = []
+    for case in cases:
+        runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
+        outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline)
+                     for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
+    verdicts = [{"check": f"blind {o['case']} ({o['processing']}, {'with' if o['baseline'] else 'without'} a baseline): "
+                          f"the injected class on {o['joint']} first, its gap within {spec['gap_tolerance']:g}x the noise",
+                 "passed": o["named"] and o["gap_within_noise"],
+                 "value": f"top = {o['top_effect']}; {o['joint']} {o['gap_after']:.4g} vs {o['floor']:.4g} with the true physics"}
+                for o in outcomes]
+    return {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
+            "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}, verdicts

@@ -1,0 +1,28 @@
+"""The blind effect suite's fixed subset (make validate runs all of it, both
+processings, without and with a baseline): one case per effect family, each
+in one variant, on two periods of "one" made in DART with the effect as
+physics and the measured noise. The top finding must be the injected class
+on its joint, and the joint's gap after within 1.5x what the true physics
+leaves (the issue's tolerance, not the project's)."""
+
+import tomllib
+
+import pytest
+
+from dvrk_dart.diagnosis.blind_suite import validate_blind_suite
+from dvrk_dart.diagnosis.validation import WITHHELD_FILE
+from dvrk_dart.io.arm import load_arm
+
+#: (case, processing, with a baseline): one per family of the library
+SUBSET = [("coulomb_q2", "upstream", True), ("offset_q1", "upstream", False), ("torsion_spring_q4", "periodic", False),
+          ("motor_inertia_q1", "periodic", False), ("payload_counterweight", "periodic", True)]
+
+
+@pytest.mark.parametrize("case, processing, baseline", SUBSET, ids=[c for c, _, _ in SUBSET])
+def test_the_injected_effect_is_found_blind(case, processing, baseline, tmp_path):
+    spec = {**tomllib.loads(WITHHELD_FILE.read_text())["blind_suite"], "subset": [case], "processings": [processing],
+            "baselines": [baseline]}
+    summary, _ = validate_blind_suite(load_arm(), spec, tmp_path)
+    (outcome,) = summary["cases"]
+    assert outcome["named"], outcome
+    assert outcome["gap_after"] <= 1.5 * outcome["floor"], outcome
