@@ -111,3 +111,23 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
                      "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
     write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts
+
+
+def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
+    """The same weight in runs of two speeds (spec["measured"]), each diagnosed
+    alone against the baseline with the hand position given: their masses at
+    the hand position must agree within their intervals (the intervals overlap)."""
+    key, position = hand_position_on_link(arm, spec)
+    estimates = {}
+    for run in spec["measured"]:
+        result = run_diagnosis(arm, run, out_dir / run, baseline=spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position),
+                               logs=False, processing=spec.get("processing", "upstream"))
+        at = (result.get("payload") or {}).get("payload_at") or {}
+        estimates[run] = {"mass_kg": at.get("mass_kg"), "interval": at.get("mass_kg_interval")}
+    known = [e for e in estimates.values() if e["mass_kg"] is not None and e["interval"] is not None]
+    agree = len(known) == len(estimates) and max(e["interval"][0] for e in known) <= min(e["interval"][1] for e in known)
+    value = "; ".join(f"{run} {e['mass_kg']:.3f} kg [{e['interval'][0]:.3f}, {e['interval'][1]:.3f}]" if e in known else f"{run}: no mass"
+                      for run, e in estimates.items())
+    return estimates, [{"check": f"the same {spec['expected_mass_kg'] * 1000:g} g at two speeds ({', '.join(spec['measured'])}), each "
+                                 "diagnosed alone: masses at the hand position agree within their intervals",
+                        "passed": bool(agree), "value": value}]
