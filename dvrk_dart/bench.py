@@ -95,7 +95,7 @@ def bench_campaign(out_dir: Path) -> dict:
 
 
 def bench_diagnosis() -> dict:
-    from dvrk_dart.diagnosis.validation import benchmark_diagnosis
+    from dvrk_dart.diagnosis.checks.validation import benchmark_diagnosis
 
     return {"diagnose_s": benchmark_diagnosis(), "diagnose_three_s": benchmark_diagnosis(("one-105g", "one-105g-half"), "one-no-weight")}
 

@@ -218,7 +218,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """The diagnosis folder is built beside --out and replaces it whole at the end."""
-    from dvrk_dart.diagnosis.printout import run_diagnosis_cli
+    from dvrk_dart.diagnosis.output.printout import run_diagnosis_cli
     from dvrk_dart.io.outputs import building_folder, check_output_folder
 
     check_output_folder(args.out, "diagnosis")

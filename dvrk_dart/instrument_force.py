@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.model.force import estimate_force, force_point_of, point_positions
-from dvrk_dart.diagnosis.library import config_effort_by_formula
+from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.excitation_design import read_design

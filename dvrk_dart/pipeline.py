@@ -80,7 +80,7 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
     import numpy as np
 
     from dvrk_dart.io.html import num_cell, table, text_cell
-    from dvrk_dart.diagnosis.library import config_effort_by_formula
+    from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
     from dvrk_dart.instrument_force import ForceConfig, model_efforts
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
@@ -167,7 +167,7 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     summary = _campaign([c for c in configs if not needs_diagnosis(c)], runs_dir, jobs, force, "campaign", executor, ray_address)
 
     from dvrk_dart.analysis.report import build_report
-    from dvrk_dart.diagnosis.validation import validation_section
+    from dvrk_dart.diagnosis.checks.validation import validation_section
 
     # the Monte Carlo first: the held-out diagnosis calls an effect unmodelled only outside its band
     uncertainty = _uncertainty_section(out_dir, jobs, executor, ray_address)

@@ -9,8 +9,8 @@ import tomllib
 
 import pytest
 
-from dvrk_dart.diagnosis.blind_suite import validate_blind_suite
-from dvrk_dart.diagnosis.validation import WITHHELD_FILE
+from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
+from dvrk_dart.diagnosis.checks.validation import WITHHELD_FILE
 from dvrk_dart.io.arm import load_arm
 
 #: (case, processing, with a baseline): one per family of the library

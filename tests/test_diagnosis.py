@@ -11,31 +11,31 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.arm_effects import GravityTilt, gravity_tilt_directions
+from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_directions
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.joint_effects import (
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.joint_effects import (
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
 )
-from dvrk_dart.diagnosis.library import (
+from dvrk_dart.diagnosis.effects.library import (
     candidate_effects,
     config_effort_by_formula,
     effects_to_sim_config,
 )
-from dvrk_dart.diagnosis.out_of_library import injected_effort
-from dvrk_dart.diagnosis.payload import (
+from dvrk_dart.diagnosis.checks.out_of_library import injected_effort
+from dvrk_dart.diagnosis.payload.payload import (
     PointPayload,
     equivalent_payload_links,
     point_mass_parameters,
 )
-from dvrk_dart.diagnosis.payload_checks import hand_position_on_link
-from dvrk_dart.diagnosis.regimes import residual_regimes
-from dvrk_dart.diagnosis.runs import DiagnosisRun, prepare_run
-from dvrk_dart.diagnosis.session_floor import moved_constants
-from dvrk_dart.diagnosis.synthetic import synthesize_measurement, time_scaled
+from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.output.regimes import residual_regimes
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
+from dvrk_dart.diagnosis.fit.session_floor import moved_constants
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
@@ -345,7 +345,7 @@ def test_payload_impostor_yields_to_offsets(arm):
 def test_smooth_friction_goes_into_the_simulation_whole(arm, segment):
     """A smooth Coulomb reversal is simulator physics (tanh law, viscous as
     damping): the SimConfig carries all of it and its effort equals the regressor."""
-    from dvrk_dart.diagnosis.library import not_simulated
+    from dvrk_dart.diagnosis.effects.library import not_simulated
 
     state = segment.head(300)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
@@ -554,7 +554,7 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
 
 
 def test_the_answer_sentence_says_what_how_far_and_what_is_left():
-    from dvrk_dart.diagnosis.page import answer_sentence
+    from dvrk_dart.diagnosis.output.page import answer_sentence
 
     friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
                 "units": {"coulomb": "N"}, "size": 0.5}
@@ -574,7 +574,7 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
 
 
 def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
-    from dvrk_dart.diagnosis.page import repeatable_share, share_words
+    from dvrk_dart.diagnosis.output.page import repeatable_share, share_words
 
     shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
     assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")

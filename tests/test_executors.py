@@ -52,7 +52,7 @@ def test_a_failed_campaign_run_is_named_and_the_others_land_on_ray(tmp_path):
 def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():
     import numpy as np
 
-    from dvrk_dart.diagnosis.batch import BatchSimulate
+    from dvrk_dart.diagnosis.fit.batch import BatchSimulate
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
     from dvrk_dart.io.arm import load_arm
@@ -90,7 +90,7 @@ def test_replayed_residuals_come_back_in_the_tasks_order():
     """A long replay given first finishes after a short one: the residuals
     still line up with their tasks (the refit's published and refitted arms
     are told apart by position)."""
-    from dvrk_dart.diagnosis.batch import replayed_residuals
+    from dvrk_dart.diagnosis.fit.batch import replayed_residuals
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
     from dvrk_dart.io.arm import load_arm

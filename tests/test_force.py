@@ -72,7 +72,7 @@ def test_force_refuses_a_bad_dynamics_file_in_one_line(tmp_path, capsys):
 def test_a_contact_in_dart_is_estimated_from_the_simulated_efforts(arm):
     """The sim-to-sim check: the instrument pressing 1 cm into a 500 N/m surface while
     replaying "two"; the estimate from DART's efforts with the model it was built from."""
-    from dvrk_dart.diagnosis.library import config_effort_by_formula
+    from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
     from dvrk_dart.io.signal import process
     from dvrk_dart.runs.contact import contact_check, simulate_contact, surface_under
     from dvrk_dart.sim.config import SimConfig

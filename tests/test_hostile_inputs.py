@@ -142,7 +142,7 @@ def test_an_input_inside_the_output_or_an_output_inside_an_input_is_refused(tmp_
 def test_the_report_figures_of_validate_leave_a_users_folder_there(tmp_path):
     """validate stages the diagnosis figures in report_figures/: a folder of
     the user's inside it stays (it used to be emptied whole)."""
-    from dvrk_dart.diagnosis.validation import report_section
+    from dvrk_dart.diagnosis.checks.validation import report_section
 
     mine = tmp_path / "report_figures" / "myreplay"
     mine.mkdir(parents=True)
@@ -169,7 +169,7 @@ def test_an_out_inside_another_output_or_empty_is_refused(tmp_path, capsys):
 def test_a_late_baseline_is_aligned_on_the_best_shift(arm):
     """A copy of one-no-weight started 499 samples late: aligned at 499 exactly
     (a shift one sample off leaves twice the position error)."""
-    from dvrk_dart.diagnosis.runs import motion_offset
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import motion_offset
     from dvrk_dart.io.reference_data import load_run
     from dvrk_dart.io.signal import process
 

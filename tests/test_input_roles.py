@@ -63,7 +63,7 @@ def test_the_cli_refuses_a_recording_in_two_roles(tmp_path, capsys, argv):
 def test_a_baseline_one_sample_longer_is_still_the_same_motion(arm, tmp_path):
     """Real recordings never have equal lengths: the baseline is put on the
     run's samples (common span) and subtracted, and the output says so."""
-    from dvrk_dart.diagnosis.runs import prepare_run
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
 
     values = np.loadtxt(resolve_run("one-no-weight"), delimiter=",")
     longer = tmp_path / "baseline_longer.csv"

@@ -1,4 +1,4 @@
-"""J3's repeatable gap (diagnosis/insertion_terms.py): three terms fitted on
+"""J3's repeatable gap (diagnosis/beyond/insertion_terms.py): three terms fitted on
 trajectory "one" carry to trajectory "two" and to "one" in another session;
 each term carries part of it, at any reasonable setting; a stroke table
 coarser than the residual's bumps loses the gain."""
@@ -6,14 +6,14 @@ coarser than the residual's bumps loses the gain."""
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis import insertion_terms
-from dvrk_dart.diagnosis.insertion_terms import (
+from dvrk_dart.diagnosis.beyond import insertion_terms
+from dvrk_dart.diagnosis.beyond.insertion_terms import (
     TERMS,
     fit_insertion_terms,
     insertion_gap,
     insertion_residual,
 )
-from dvrk_dart.diagnosis.runs import choose_processing, loaded_states
+from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing, loaded_states
 from dvrk_dart.metrics import rms
 
 #: the issue's bar for J3 on held-out "two" (N); the identified model leaves 0.134
@@ -77,8 +77,8 @@ def test_the_terms_are_simulated_as_fitted(arm, states):
     from dataclasses import replace
 
     from dvrk_dart.diagnosis.api import simulation_hook
-    from dvrk_dart.diagnosis.insertion_terms import simulation_effects
-    from dvrk_dart.diagnosis.library import config_effort_by_formula
+    from dvrk_dart.diagnosis.beyond.insertion_terms import simulation_effects
+    from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
     from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 
     state = states["two"]
@@ -101,8 +101,8 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     baseline, not on the upstream processing."""
     from pathlib import Path
 
-    from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
-    from dvrk_dart.diagnosis.page import _insertion_clause
+    from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
+    from dvrk_dart.diagnosis.output.page import _insertion_clause
     from dvrk_dart.io.arm import load_arm
 
     periodic = {"processing": {"processing": "periodic", "harmonics": 30}, "session_floor": [0.011, 0.05, 0.028]}

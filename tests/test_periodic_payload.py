@@ -1,4 +1,4 @@
-"""The payload on periodic difference signals (diagnosis/periodic_payload.py):
+"""The payload on periodic difference signals (diagnosis/payload/periodic_payload.py):
 its 90 % intervals hold on simulated pairs of runs (same motion, a known
 payload, the measured noise and session scatter), and on the real 105 g runs
 the mass at the hand position lands where the scale says."""
@@ -6,11 +6,11 @@ the mass at the hand position lands where the scale says."""
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.first_moment import FirstMomentPayload
-from dvrk_dart.diagnosis.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-from dvrk_dart.diagnosis.payload import point_mass_parameters
-from dvrk_dart.diagnosis.payload_checks import hand_position_on_link
-from dvrk_dart.diagnosis.periodic_payload import (
+from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
+from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.payload.periodic_payload import (
     INTERVAL_PROBABILITY,
     Pair,
     fit_payload,
@@ -23,7 +23,7 @@ from dvrk_dart.diagnosis.periodic_payload import (
     rigid_payload_columns,
     session_variance,
 )
-from dvrk_dart.diagnosis.runs import choose_processing, prepare_run, run_features
+from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing, prepare_run, run_features
 from dvrk_dart.model.joints import N_JOINTS
 
 #: simulated pairs per placement: the coverage's binomial standard deviation is 1.5 %

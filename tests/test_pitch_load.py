@@ -1,4 +1,4 @@
-"""The loads the pitch angle sets on J1 and J2 (diagnosis/pitch_load.py):
+"""The loads the pitch angle sets on J1 and J2 (diagnosis/beyond/pitch_load.py):
 fitted on trajectory "one" they carry to trajectory "two" and to "one" in
 another session, at any reasonable setting, where the bodies' gravity does
 not; in DART they add the table's effort to J1 and J2 and nothing elsewhere.
@@ -8,9 +8,9 @@ on top of the diagnosis's effects: tests/test_validation.py)."""
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis import pitch_load
-from dvrk_dart.diagnosis.pitch_load import fit_pitch_loads
-from dvrk_dart.diagnosis.runs import choose_processing, loaded_states
+from dvrk_dart.diagnosis.beyond import pitch_load
+from dvrk_dart.diagnosis.beyond.pitch_load import fit_pitch_loads
+from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing, loaded_states
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor
 from dvrk_dart.metrics import rms
 
@@ -83,8 +83,8 @@ def test_the_loads_are_simulated_as_fitted(arm, states, residuals):
     from dataclasses import replace
 
     from dvrk_dart.diagnosis.api import simulation_hook
-    from dvrk_dart.diagnosis.library import config_effort_by_formula
-    from dvrk_dart.diagnosis.pitch_load import simulation_effects
+    from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
+    from dvrk_dart.diagnosis.beyond.pitch_load import simulation_effects
     from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 
     state = states["two"]

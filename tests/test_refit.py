@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dvrk_dart.cli import main
-from dvrk_dart.diagnosis.refit import REFIT_FOLDER, refit_check
+from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, refit_check
 from dvrk_dart.identification.outputs import PARAMS_FILE
 from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.parameters import load_parameters
@@ -54,7 +54,7 @@ def test_refit_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
 
 def test_the_answer_names_the_joints_whose_gap_the_refit_halves(refit):
     """The sentence at the top names a joint only where the refit at least halves its held-out gap in squares."""
-    from dvrk_dart.diagnosis.page import _refit_clause
+    from dvrk_dart.diagnosis.output.page import _refit_clause
 
     result, _ = refit
     clause = _refit_clause({"refit": result})

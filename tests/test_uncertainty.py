@@ -92,7 +92,7 @@ def _diagnosis_result(runs=("two",)):  # a run is known by its content
 
 
 def test_an_effect_is_unmodelled_only_where_the_run_leaves_the_parameter_band(tmp_path):
-    from dvrk_dart.diagnosis.parameter_band import BAND_COVERAGE, apply_band, load_band
+    from dvrk_dart.diagnosis.payload.parameter_band import BAND_COVERAGE, apply_band, load_band
 
     inside = [0.99, 0.98, BAND_COVERAGE - 0.01, 0.5, 0.95, 0.95, 0.95]
     result = apply_band(_diagnosis_result(), load_band(_band_folder(tmp_path, inside)))
@@ -103,7 +103,7 @@ def test_an_effect_is_unmodelled_only_where_the_run_leaves_the_parameter_band(tm
 
 
 def test_a_band_of_another_run_is_refused(tmp_path):
-    from dvrk_dart.diagnosis.parameter_band import apply_band, load_band
+    from dvrk_dart.diagnosis.payload.parameter_band import apply_band, load_band
     from dvrk_dart.errors import DvrkDartError
 
     band = load_band(_band_folder(tmp_path, [1.0] * 7))

@@ -11,9 +11,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE
-from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.validation import (
+from dvrk_dart.diagnosis.beyond.one_configuration import ONE_CONFIGURATION_FILE
+from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
+from dvrk_dart.diagnosis.checks.validation import (
     WITHHELD_FILE,
     validate_holdout,
     validate_insertion,

@@ -1,10 +1,10 @@
-"""One rule for the diagnosis's words (diagnosis/wording.py), the same in the
+"""One rule for the diagnosis's words (diagnosis/output/wording.py), the same in the
 answer sentence, the page and diagnosis.json."""
 
 import pytest
 
-from dvrk_dart.diagnosis.page import answer_sentence
-from dvrk_dart.diagnosis.wording import explanation, words_for
+from dvrk_dart.diagnosis.output.page import answer_sentence
+from dvrk_dart.diagnosis.output.wording import explanation, words_for
 
 JOINTS = ["q1", "q2", "q3", "q4", "q5", "q6", "q7"]
 

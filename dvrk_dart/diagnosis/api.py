@@ -10,14 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.batch import BatchSimulate
+from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.insertion_terms import insertion_applies, insertion_check
-from dvrk_dart.diagnosis.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
-from dvrk_dart.diagnosis.page import diagnosis_page
-from dvrk_dart.diagnosis.parameter_band import apply_band, band_run, load_band
-from dvrk_dart.diagnosis.refit import check_refit_inputs, refit_check
-from dvrk_dart.diagnosis.result import gaps
+from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
+from dvrk_dart.diagnosis.beyond.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
+from dvrk_dart.diagnosis.output.page import diagnosis_page
+from dvrk_dart.diagnosis.payload.parameter_band import apply_band, band_run, load_band
+from dvrk_dart.diagnosis.beyond.refit import check_refit_inputs, refit_check
+from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions

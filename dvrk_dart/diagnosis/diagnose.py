@@ -12,17 +12,17 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from dvrk_dart.diagnosis.design import Grams
-from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.diagnosis.first_moment import FirstMomentPayload
-from dvrk_dart.diagnosis.identifiable import first_moment_report
-from dvrk_dart.diagnosis.page import PERIOD_FIGURE
-from dvrk_dart.diagnosis.payload import PointPayload
-from dvrk_dart.diagnosis.payload_report import describe_payload, mass_profile
-from dvrk_dart.diagnosis.periodic_payload_report import periodic_payload_report
-from dvrk_dart.diagnosis.problem import Problem, build_problem
-from dvrk_dart.diagnosis.regimes import plot_period, plot_residuals, residual_regimes
-from dvrk_dart.diagnosis.result import (
+from dvrk_dart.diagnosis.fit.design import Grams
+from dvrk_dart.diagnosis.effects.effect import Effect
+from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.payload.identifiable import first_moment_report
+from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
+from dvrk_dart.diagnosis.payload.payload import PointPayload
+from dvrk_dart.diagnosis.payload.payload_report import describe_payload, mass_profile
+from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
+from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
+from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
+from dvrk_dart.diagnosis.fit.result import (
     Diagnosis,
     Resimulation,
     Selection,
@@ -35,10 +35,10 @@ from dvrk_dart.diagnosis.result import (
     without_last_effect,
 )
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.diagnosis.runs import DiagnosisRun, RunRole, Simulate
-from dvrk_dart.diagnosis.selection import CV_FOLDS
-from dvrk_dart.diagnosis.session_floor import gap_split, session_floor
-from dvrk_dart.diagnosis.wording import explanation
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
+from dvrk_dart.diagnosis.fit.session_floor import gap_split, session_floor
+from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit

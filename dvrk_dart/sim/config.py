@@ -51,7 +51,7 @@ class JointEffects:
     position_friction: tuple[tuple[float, ...], ...] = ()
     # an armature that takes the sign of the coordinate's velocity (kg or
     # kg m^2, either sign): effort value·sign(dq)·ddq, more or less inertia
-    # while speeding up than while slowing down (J3's, diagnosis/insertion_terms.py)
+    # while speeding up than while slowing down (J3's, diagnosis/beyond/insertion_terms.py)
     directional_armature: tuple[float, ...] = (0.0,) * 7
     # an effort on one coordinate set by another's angle: (target index,
     # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)

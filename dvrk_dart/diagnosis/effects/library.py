@@ -7,16 +7,16 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 
-from dvrk_dart.diagnosis.arm_effects import (
+from dvrk_dart.diagnosis.effects.arm_effects import (
     CounterweightTransmission,
     GravityTilt,
     TimeShift,
 )
-from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.first_moment import FirstMomentPayload
-from dvrk_dart.diagnosis.geometry import ENVELOPE_MARGIN_M, link_envelope
-from dvrk_dart.diagnosis.joint_effects import (
+from dvrk_dart.diagnosis.effects.effect import Effect
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.effects.geometry import ENVELOPE_MARGIN_M, link_envelope
+from dvrk_dart.diagnosis.effects.joint_effects import (
     CABLE_ELASTICITY_JOINTS,
     REVERSAL_VELOCITIES,
     TORSION_SPRING_JOINT,
@@ -30,7 +30,7 @@ from dvrk_dart.diagnosis.joint_effects import (
     coupling_friction_links,
     presliding_distances,
 )
-from dvrk_dart.diagnosis.payload import (
+from dvrk_dart.diagnosis.payload.payload import (
     PointPayload,
     equivalent_payload_links,
     mass_seen_by_gravity,

@@ -6,10 +6,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import PAYLOAD_MASS_PRIOR_PER_KG2, Fit
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload import PointPayload, point_mass_parameters
-from dvrk_dart.diagnosis.selection import CvResult, Selector
+from dvrk_dart.diagnosis.fit.design import PAYLOAD_MASS_PRIOR_PER_KG2, Fit
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload.payload import PointPayload, point_mass_parameters
+from dvrk_dart.diagnosis.fit.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS, PITCH

@@ -8,12 +8,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import BLOCK_DURATION_S, Fit, per_joint_fraction, sse, weighted_fraction
-from dvrk_dart.diagnosis.library import effects_to_sim_config, not_simulated, unsimulated_effort
-from dvrk_dart.diagnosis.payload_report import choose_within_families
-from dvrk_dart.diagnosis.problem import Problem
-from dvrk_dart.diagnosis.runs import DiagnosisRun, RunRole, Simulate
-from dvrk_dart.diagnosis.selection import (
+from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, Fit, per_joint_fraction, sse, weighted_fraction
+from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
+from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
+from dvrk_dart.diagnosis.fit.problem import Problem
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.selection import (
     BOOTSTRAP_RESAMPLES,
     GAIN_FAILURE_QUANTILE,
     MIN_HELDOUT_GAIN,
@@ -212,7 +212,7 @@ class Diagnosis:
     payload_not_distinguished: dict | None
     #: selected effects whose re-simulation failed or drifted: dropped, with the reason
     dropped_effects: list
-    #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/wording.py)
+    #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/output/wording.py)
     explanation: dict
 
     def to_json(self) -> dict:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.features import (
+from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.effects.features import (
     BODY_PARAMETERS,
     FIRST_MOMENT_COLUMNS,
     TrajectoryFeatures,
 )
-from dvrk_dart.diagnosis.geometry import LinkEnvelope, joints_moving_link, link_envelope
+from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, joints_moving_link, link_envelope
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import PsmModel

@@ -6,14 +6,14 @@ from typing import Sequence
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.library import (
+from dvrk_dart.diagnosis.effects.effect import Effect
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.library import (
     effects_to_sim_config,
     not_simulated,
     unsimulated_effort,
 )
-from dvrk_dart.diagnosis.runs import Simulate, simulated_efforts
+from dvrk_dart.diagnosis.fit.diagnosis_runs import Simulate, simulated_efforts
 from dvrk_dart.io.signal import ProcessedRun, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm

@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.library import (
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.library import (
     config_effort_by_formula,
 )
 from dvrk_dart.errors import DvrkDartError

@@ -8,11 +8,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dvrk_dart.diagnosis.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
-from dvrk_dart.diagnosis.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-from dvrk_dart.diagnosis.payload import mass_seen_by_gravity, point_mass_parameters
-from dvrk_dart.diagnosis.payload_report import pitch_shaft_offsets
-from dvrk_dart.diagnosis.periodic_payload import (
+from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
+from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
+from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
+from dvrk_dart.diagnosis.payload.payload_report import pitch_shaft_offsets
+from dvrk_dart.diagnosis.payload.periodic_payload import (
     INTERVAL_PROBABILITY,
     Pair,
     PayloadFit,
@@ -25,7 +25,7 @@ from dvrk_dart.diagnosis.periodic_payload import (
     rigid_payload_columns,
     session_variance,
 )
-from dvrk_dart.diagnosis.runs import RunRole
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 

@@ -10,10 +10,10 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.first_moment import YAW_PATH_JOINT
-from dvrk_dart.diagnosis.payload import PointPayload
+from dvrk_dart.diagnosis.effects.effect import Effect
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
+from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.model.joints import N_JOINTS
 
 #: block length for the folds and the bootstrap (s): much longer than the

@@ -14,23 +14,23 @@ from typing import Callable
 import numpy as np
 from scipy.stats import norm
 
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.first_moment import (
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload.first_moment import (
     FIRST_MOMENT_COLUMNS,
     YAW_PATH_JOINT,
     FirstMomentPayload,
     PayloadAtPosition,
 )
-from dvrk_dart.diagnosis.payload import (
+from dvrk_dart.diagnosis.payload.payload import (
     first_moment_map,
     mass_seen_by_gravity,
     point_mass_parameters,
 )
-from dvrk_dart.diagnosis.payload_report import (
+from dvrk_dart.diagnosis.payload.payload_report import (
     MASS_IDENTIFIED_RATIO,
     pitch_shaft_offsets,
 )
-from dvrk_dart.diagnosis.selection import (
+from dvrk_dart.diagnosis.fit.selection import (
     GAIN_FAILURE_QUANTILE,
     INTERVAL_QUANTILES,
     Selector,

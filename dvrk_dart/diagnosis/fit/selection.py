@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import (
+from dvrk_dart.diagnosis.fit.design import (
     Design,
     Fit,
     Fitter,
@@ -49,7 +49,7 @@ from dvrk_dart.diagnosis.design import (
     sse,
     weighted_fraction,
 )
-from dvrk_dart.diagnosis.payload import PointPayload
+from dvrk_dart.diagnosis.payload.payload import PointPayload
 
 #: contiguous folds of the held-out scoring: a fold of a 28 s run is ~1 base
 #: period (5.6 s) of the excitation, so each fold holds a full trajectory cycle

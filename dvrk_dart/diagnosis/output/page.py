@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.io.html import STYLE, fmt
-from dvrk_dart.diagnosis.parameter_band import band_sentence
-from dvrk_dart.diagnosis.wording import explanation
+from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
+from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 
 #: the joints the answer sentence speaks of (the arm's main joints)

@@ -41,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.batch import replayed_residuals
-from dvrk_dart.diagnosis.page import repeatable_share, share_words
-from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.fit.batch import replayed_residuals
+from dvrk_dart.diagnosis.output.page import repeatable_share, share_words
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.model import friction
@@ -188,7 +188,7 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
             "coefficients": fitted.named_coefficients(),
             "stroke_coulomb_n": {"knots_m": fitted.knots.tolist(), "values": fitted.stroke_coulomb.tolist()},
             "sim_config": config.to_dict(),
-            "method": "least squares on the periodic signals (diagnosis/insertion_terms.py); gap_holdout_simulated: "
+            "method": "least squares on the periodic signals (diagnosis/beyond/insertion_terms.py); gap_holdout_simulated: "
                       "the fitted terms as DART physics on top of every identified term, replayed"}
 
 

@@ -20,20 +20,20 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.api import images_of, run_diagnosis, simulation_hook
-from dvrk_dart.diagnosis.arm_effects import GravityTilt
+from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.joint_effects import (
+from dvrk_dart.diagnosis.effects.joint_effects import (
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
 )
-from dvrk_dart.diagnosis.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.page import PERIOD_FIGURE, diagnosis_html, repeatable_share, share_words
-from dvrk_dart.diagnosis.payload import PointPayload, equivalent_payload_links
-from dvrk_dart.diagnosis.payload_checks import validate_payload_speeds, validate_real_payload
-from dvrk_dart.diagnosis.blind_suite import validate_blind_suite
-from dvrk_dart.diagnosis.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
+from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html, repeatable_share, share_words
+from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
+from dvrk_dart.diagnosis.checks.payload_checks import validate_payload_speeds, validate_real_payload
+from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
@@ -98,7 +98,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
 
 
 def _insertion_verdicts(result: dict, spec: dict) -> list[dict]:
-    """J3's three terms (diagnosis/insertion_terms.py) fitted on the training
+    """J3's three terms (diagnosis/beyond/insertion_terms.py) fitted on the training
     runs: closer on the held-out runs than J3's own friction refitted alone."""
     study = result.get("insertion_terms")
     if not study:

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.api import run_diagnosis
-from dvrk_dart.diagnosis.design import WITHHELD_KINDS
-from dvrk_dart.diagnosis.identifiable import reference_first_moment
-from dvrk_dart.diagnosis.payload import point_mass_parameters
+from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
+from dvrk_dart.diagnosis.payload.identifiable import reference_first_moment
+from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.model import friction
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit, velocity_unit
 

@@ -27,9 +27,9 @@ import numpy as np
 
 from dvrk_dart.diagnosis.api import simulation_hook
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload import point_mass_parameters
-from dvrk_dart.diagnosis.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz

@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from dvrk_dart.diagnosis.api import run_diagnosis
-from dvrk_dart.diagnosis.page import answer_sentence, offset_joints_sentence
-from dvrk_dart.diagnosis.parameter_band import band_sentence
+from dvrk_dart.diagnosis.output.page import answer_sentence, offset_joints_sentence
+from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
 

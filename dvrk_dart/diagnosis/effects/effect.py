@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dvrk_dart.diagnosis.features import TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import Payload
 

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.batch import BatchSimulate
+from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.runs import RunProcessing, Simulate, loaded_states, simulated_efforts
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, Simulate, loaded_states, simulated_efforts
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_periodic

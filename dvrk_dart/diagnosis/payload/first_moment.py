@@ -32,10 +32,10 @@ import math
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
-from dvrk_dart.diagnosis.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
-from dvrk_dart.diagnosis.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
+from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
+from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import N_JOINTS

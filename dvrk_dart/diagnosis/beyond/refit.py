@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.batch import replayed_residuals
-from dvrk_dart.diagnosis.page import repeatable_share
-from dvrk_dart.diagnosis.result import gaps
-from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.fit.batch import replayed_residuals
+from dvrk_dart.diagnosis.output.page import repeatable_share
+from dvrk_dart.diagnosis.fit.result import gaps
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.identify import IdentificationConfig, identify
 from dvrk_dart.identification.outputs import PARAMS_FILE, write_outputs

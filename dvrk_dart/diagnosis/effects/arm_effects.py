@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.geometry import joints_moving_link
+from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
+from dvrk_dart.diagnosis.effects.geometry import joints_moving_link
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 

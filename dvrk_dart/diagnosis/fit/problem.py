@@ -12,11 +12,11 @@ from typing import Sequence
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import Design, Grams
-from dvrk_dart.diagnosis.effect import Effect
-from dvrk_dart.diagnosis.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
-from dvrk_dart.diagnosis.library import candidate_effects
-from dvrk_dart.diagnosis.runs import (
+from dvrk_dart.diagnosis.fit.design import Design, Grams
+from dvrk_dart.diagnosis.effects.effect import Effect
+from dvrk_dart.diagnosis.payload.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
+from dvrk_dart.diagnosis.effects.library import candidate_effects
+from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     DiagnosisRun,
     RunProcessing,
     RunRole,
@@ -25,7 +25,7 @@ from dvrk_dart.diagnosis.runs import (
     loaded_states,
     prepare_run,
 )
-from dvrk_dart.diagnosis.session_floor import session_offset_joints
+from dvrk_dart.diagnosis.fit.session_floor import session_offset_joints
 from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from dvrk_dart.diagnosis.design import BLOCK_DURATION_S
-from dvrk_dart.diagnosis.runs import DiagnosisRun, same_motion
+from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel

@@ -18,10 +18,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from dvrk_dart.diagnosis import insertion_terms, pitch_load
-from dvrk_dart.diagnosis.batch import replayed_residuals
-from dvrk_dart.diagnosis.result import gaps
-from dvrk_dart.diagnosis.runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.beyond import insertion_terms
+from dvrk_dart.diagnosis.beyond import pitch_load
+from dvrk_dart.diagnosis.fit.batch import replayed_residuals
+from dvrk_dart.diagnosis.fit.result import gaps
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit

@@ -1,0 +1,1 @@
+"""The validations on withheld real data and on blind synthetic runs (make validate)."""

@@ -1,0 +1,1 @@
+"""The candidate effects: their regressors, their physics in the simulation, the library."""

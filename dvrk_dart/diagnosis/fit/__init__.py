@@ -1,0 +1,1 @@
+"""The problem (runs by role, design, Gram blocks), the selection and the re-simulation."""

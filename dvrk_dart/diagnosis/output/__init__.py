@@ -1,0 +1,1 @@
+"""The answer: words, the page, the printout, where the gap is."""

@@ -1,0 +1,1 @@
+"""Payloads: the point and first-moment models, their intervals, their reports."""
