@@ -56,7 +56,7 @@ def test_synthetic_injections_generated_by_the_simulator_are_found_blind(arm, sp
     summary, verdicts = validate_synthetic(arm, spec["synthetic"], tmp_path)
     failed = [v for v in verdicts if not v["passed"]]
     assert not failed, failed
-    assert len(summary["cases"]) >= 6
+    assert {c["case"] for c in summary["cases"]} >= {"friction_q2", "gravity_tilt"}  # the others are in the blind suite
 
 
 @pytest.fixture(scope="module")

@@ -123,7 +123,10 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
         named = top.get("kind") in ("payload", "payload_at_position") and top["parameters"].get("group") == expected.split(":", 1)[1]
     else:
         named = top["family"] == expected
-    return {"top_effect": top["name"], "named": bool(named), "joint": case["joint"], "gap_after": gap,
+    size_error = None
+    if named and "size" in case and isinstance(top["parameters"].get(case["size_parameter"]), (int, float)):
+        size_error = abs(top["parameters"][case["size_parameter"]] / case["size"] - 1.0)
+    return {"top_effect": top["name"], "named": bool(named), "joint": case["joint"], "gap_after": gap, "size_error": size_error,
             "floor": float(floor[joint]), "gap_within_noise": bool(gap_ok)}
 
 
@@ -156,5 +159,13 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
                  "passed": o["named"] and o["gap_within_noise"],
                  "value": f"top = {o['top_effect']}; {o['joint']} {o['gap_after']:.4g} vs {o['floor']:.4g} with the true physics"}
                 for o in outcomes]
+    verdicts += [{"check": f"blind {o['case']} ({o['processing']}, without a baseline): its size within {spec['size_tolerance']:.0%}",
+                  "passed": o["size_error"] is not None and o["size_error"] <= spec["size_tolerance"],
+                  "value": "not named" if o["size_error"] is None else f"size error {o['size_error']:.1%}"}
+                 for o in outcomes if not o["baseline"] and o["processing"] == "upstream" and "size" in _case(spec, o["case"])]
     return {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
             "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}, verdicts
+
+
+def _case(spec: dict, name: str) -> dict:
+    return next(c for c in spec["cases"] if c["name"] == name)
