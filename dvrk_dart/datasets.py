@@ -53,14 +53,25 @@ def published_rms(arm: Arm, run: str, processing: str) -> list[float | None]:
     return per_measured_joint(rms(residual), state.measured)
 
 
-def own_identification_rms(dataset: Dataset, processing: str, out_dir: Path) -> list[float | None]:
-    """`identify --runs TRAIN --holdout HOLDOUT --processing P`: the held-out run's whole-run RMS."""
+def own_identification(dataset: Dataset, processing: str, out_dir: Path, identified: dict) -> Path:
+    """The folder of `identify --runs TRAIN --holdout HOLDOUT --processing P`:
+    one `identified` already holds ({(train, holdout, processing): folder}), else made in out_dir."""
     from dvrk_dart.identification.identify import IdentificationConfig
     from dvrk_dart.identification.outputs import identify_into_folder
 
-    config = IdentificationConfig(runs=dataset.train, holdout=(dataset.holdout,), processing=processing)
-    _, data = identify_into_folder(config, out_dir / f"identification-{processing}")
-    return data["errors"]["holdout"][dataset.holdout]["whole_run"]["rms"]
+    key = (tuple(dataset.train), (dataset.holdout,), processing)
+    if key in identified:
+        return Path(identified[key])
+    folder = out_dir / f"identification-{processing}"
+    identify_into_folder(IdentificationConfig(runs=dataset.train, holdout=(dataset.holdout,), processing=processing), folder)
+    return folder
+
+
+def own_identification_rms(dataset: Dataset, folder: Path) -> list[float | None]:
+    """The held-out run's whole-run RMS of an identification folder."""
+    from dvrk_dart.identification.outputs import SUMMARY_FILE
+
+    return json.loads((folder / SUMMARY_FILE).read_text())["errors"]["holdout"][dataset.holdout]["whole_run"]["rms"]
 
 
 def diagnosis_rms(diagnosis_dir: Path, case: str) -> dict | None:
@@ -75,27 +86,28 @@ def diagnosis_rms(diagnosis_dir: Path, case: str) -> dict | None:
             "selected_effects_alone": result["gap_after"]["holdout"]}
 
 
-def dataset_figures(arm: Arm, dataset: Dataset, out_dir: Path, diagnosis_dir: Path) -> dict:
+def dataset_figures(arm: Arm, dataset: Dataset, out_dir: Path, diagnosis_dir: Path, identified: dict) -> dict:
     folder = out_dir / dataset.name
+    own = {p: own_identification(dataset, p, folder, identified) for p in PROCESSINGS}
     figures = {
         "title": dataset.title, "train": list(dataset.train), "holdout": dataset.holdout,
         "published": {p: published_rms(arm, dataset.holdout, p) for p in PROCESSINGS},
-        "own_identification": {p: own_identification_rms(dataset, p, folder) for p in PROCESSINGS},
+        "own_identification": {p: own_identification_rms(dataset, own[p]) for p in PROCESSINGS},
         "diagnosis": diagnosis_rms(diagnosis_dir, dataset.diagnosis_case),
     }
-    figures["phantom_force"] = phantom_forces(arm, dataset, folder, diagnosis_dir)
+    figures["phantom_force"] = phantom_forces(arm, dataset, folder, diagnosis_dir, own["periodic"])
     write_json_atomic(folder / FIGURES_FILE, figures)
     return figures
 
 
-def phantom_forces(arm: Arm, dataset: Dataset, folder: Path, diagnosis_dir: Path) -> dict:
+def phantom_forces(arm: Arm, dataset: Dataset, folder: Path, diagnosis_dir: Path, own_periodic: Path) -> dict:
     """`dvrk-dart force` on the held-out run (periodic) under each model: the force it
     implies in free motion, where the true force is zero; the figure of one period."""
     from dvrk_dart.instrument_force import ForceConfig, instrument_force, one_period_forces
     from dvrk_dart.io.arm import load_arm
 
     models = {"published parameters": (arm, "identified"),
-              "own identification": (load_arm(params_file=folder / "identification-periodic" / "params.json"), "identified")}
+              "own identification": (load_arm(params_file=own_periodic / "params.json"), "identified")}
     combined = diagnosis_dir / dataset.diagnosis_case / "one_configuration.json"
     if combined.is_file():
         models["diagnosis: one configuration"] = (arm, str(combined))
@@ -130,14 +142,15 @@ def plot_phantom_force(period: dict, path: Path, run: str) -> None:
     plt.close(fig)
 
 
-def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path) -> tuple[str, str, list[Path]]:
-    """(title, html, figures) of the report: one table per dataset, the same rows."""
+def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: dict | None = None) -> tuple[str, str, list[Path]]:
+    """(title, html, figures) of the report: one table per dataset, the same rows;
+    `identified`: identification folders already made ({(train, holdout, processing): folder})."""
     parts = ["<p>Every figure is the RMS of measured minus predicted efforts on the held-out run, whole run "
              "(N·m, N for q3). The published parameters were identified on the 2019 runs; the project's own are trained on the "
              "dataset's training runs only; the diagnosis is fitted on them too (its band: the smallest cutoff of its runs).</p>"]
     files = []
     for dataset in load_datasets():
-        figures = dataset_figures(arm, dataset, out_dir, diagnosis_dir)
+        figures = dataset_figures(arm, dataset, out_dir, diagnosis_dir, identified or {})
         print(f"dataset {dataset.name}: held-out {dataset.holdout}, " + "; ".join(
             f"{label} " + " ".join("-" if v is None else f"{v:.4f}" for v in values[:3]) for label, values in _rows(figures)))
         print(f"dataset {dataset.name}: phantom force at the instrument on {dataset.holdout}, |F| RMS " + "; ".join(

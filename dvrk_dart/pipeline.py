@@ -66,7 +66,9 @@ def _datasets_section(out_dir: Path):
     from dvrk_dart.datasets import datasets_section
     from dvrk_dart.io.arm import load_arm
 
-    return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis")
+    # the identification section's (one -> two, both processings) serve the 2019 dataset's rows
+    identified = {(("one",), ("two",), processing): out_dir / folder for processing, folder in IDENTIFICATION_FOLDERS.items()}
+    return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis", identified)
 
 
 #: the contact scenario: the held-out run replayed against a tissue-like surface (runs/contact.py)
