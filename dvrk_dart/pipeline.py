@@ -4,6 +4,7 @@ diagnosis with its withheld-effect validations, in one command."""
 from __future__ import annotations
 
 import json
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pandas as pd
@@ -45,6 +46,11 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
               + (f" (published parameters {' '.join(f'{v:.4f}' for v in published)})" if published else ""))
         datas.append(data)
     return report_section(*datas)
+
+
+def _independent_sections(out_dir: Path, runs_dir: Path) -> tuple:
+    """The identification and periodic sections (they need the campaign, not the diagnosis)."""
+    return _identification_section(out_dir), _periodic_section(out_dir, runs_dir)
 
 
 def _periodic_section(out_dir: Path, runs_dir: Path):
@@ -173,9 +179,10 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
 
     # the Monte Carlo first: the held-out diagnosis calls an effect unmodelled only outside its band
     uncertainty = _uncertainty_section(out_dir, jobs, executor, ray_address)
-    section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty", jobs=jobs)
-    identification = _identification_section(out_dir)
-    periodic = _periodic_section(out_dir, runs_dir)
+    with ProcessPoolExecutor(max_workers=1) as beside:  # what needs no diagnosis, while the diagnoses run
+        independent = beside.submit(_independent_sections, out_dir, runs_dir)
+        section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty", jobs=jobs)
+        identification, periodic = independent.result()
     datasets = _datasets_section(out_dir)
     contact, contact_verdict = _contact_section(out_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)

@@ -26,6 +26,7 @@ from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, Simulate, loaded_states, simulated_efforts
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_periodic
 from dvrk_dart.metrics import rms
@@ -154,6 +155,15 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
         runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
         outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline)
                      for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
+    summary = {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
+               "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out_dir / "blind_suite.json", summary)
+    return summary, suite_verdicts(spec, outcomes)
+
+
+def suite_verdicts(spec: dict, outcomes: list[dict]) -> list[dict]:
+    """A verdict per diagnosis (the class first, the gap closed), and the size for the upstream runs without a baseline."""
     verdicts = [{"check": f"blind {o['case']} ({o['processing']}, {'with' if o['baseline'] else 'without'} a baseline): "
                           f"the injected class on {o['joint']} first, its gap within {spec['gap_tolerance']:g}x the noise",
                  "passed": o["named"] and o["gap_within_noise"],
@@ -163,8 +173,7 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
                   "passed": o["size_error"] is not None and o["size_error"] <= spec["size_tolerance"],
                   "value": "not named" if o["size_error"] is None else f"size error {o['size_error']:.1%}"}
                  for o in outcomes if not o["baseline"] and o["processing"] == "upstream" and "size" in _case(spec, o["case"])]
-    return {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
-            "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}, verdicts
+    return verdicts
 
 
 def _case(spec: dict, name: str) -> dict:
