@@ -3,8 +3,9 @@ from the same phase one period away far more than the run's steady
 period-to-period difference does.
 
 A recording often starts with the arm going from rest into the excitation
-(the 2018 runs: in their first 0.6 s J2's effort differs from the next
-period's by 1.1 N·m RMS, later periods by 0.03). The periodic layer averages
+(the 2018 runs: over test1's first 2.5 s J2's effort differs from the next
+period's by 1.1 N·m RMS, later periods by 0.03; its first window, 1.25 s, is
+left out). The periodic layer averages
 the periods: a transient would enter every harmonic and the noise level that
 sets the cutoff, so it is left out, and only it: a run without one keeps all
 its samples.
