@@ -19,7 +19,7 @@ import numpy as np
 WINDOW_PERIOD_FRACTION = 1.0 / 8.0
 #: a window is transient where its RMS period-to-period difference (each joint
 #: on its own median level) exceeds the run's median window by this factor.
-#: Chosen on the real runs: their steady windows stay under 1.5x the median,
+#: Chosen on the real runs: their steady windows stay under 1.7x the median,
 #: the first windows of the wpi/ runs reach 2.1-2.8x (kept), the 2018 runs'
 #: first windows 13x and 34x (left out).
 TRANSIENT_RATIO = 4.0
