@@ -207,6 +207,8 @@ class PsmModel:
     identification_mass_bounds_kg: dict[int, float] = field(default_factory=dict)
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
+    #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
+    controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()
     processing: UpstreamProcessing = UpstreamProcessing()
     dvrk_topics: DvrkTopics | None = None
@@ -242,6 +244,12 @@ class PsmModel:
         for key, link in self.links.items():  # parents precede children in the file
             frames[key] = frames[link.parent] @ link.transform(q)
         return frames
+
+    def controller_gain(self, name: str):
+        """A gain of the card's [controllers] (a one-line error naming the card where it has none)."""
+        if name not in self.controller_gains:
+            raise DvrkDartError(f"{self.source}: no [controllers] {name} (the paper's controllers and the counterweight PID need it)")
+        return self.controller_gains[name]
 
     def cable_efforts(self, q: np.ndarray) -> np.ndarray:
         """The known cable torques (links with a `cable_polynomial`) at positions
@@ -463,6 +471,7 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         identification_mass_bounds_kg={int(k): float(v) for k, v in checks.get("identification_mass_bounds_kg", {}).items()},
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
+        controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
         processing=UpstreamProcessing(**raw.get("processing", {})),
         dvrk_topics=_dvrk_topics(raw, path),

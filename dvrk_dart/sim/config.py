@@ -95,7 +95,7 @@ class SimConfig:
     extra: JointEffects = field(default_factory=JointEffects)
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: tuple[float, float] = (0.0, 0.0)  # base mounting tilt about base x, then y
-    counterweight_pid: tuple[float, float, float] = (2000.0, 0.0, 60.0)  # Kp N/m, Ki N/(m s), Kd N s/m
+    counterweight_pid: tuple[float, float, float] | None = None  # Kp N/m, Ki N/(m s), Kd N s/m; None: the model card's
     closure_residual_limit_m: float = 1e-4  # beyond this the simulation is declared diverged
 
     def to_dict(self) -> dict:
@@ -108,7 +108,8 @@ class SimConfig:
         raw["extra"] = JointEffects(**{k: tuple(tuple(x) if isinstance(x, list) else x for x in v) for k, v in raw.get("extra", {}).items()})
         raw["payloads"] = tuple(Payload(p["link"], p["mass_kg"], tuple(p["position_m"])) for p in raw.get("payloads", []))
         raw["gravity_tilt_rad"] = tuple(raw.get("gravity_tilt_rad", cls.gravity_tilt_rad))
-        raw["counterweight_pid"] = tuple(raw.get("counterweight_pid", cls.counterweight_pid))
+        pid = raw.get("counterweight_pid")
+        raw["counterweight_pid"] = None if pid is None else tuple(pid)
         return cls(**raw)
 
 

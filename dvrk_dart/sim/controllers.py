@@ -19,10 +19,6 @@ from scipy.spatial.transform import Rotation
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 
-#: the paper's gains
-KINEMATIC_GAIN = 15.0  # 1/s
-TORQUE_KP = 800.0  # 1/s^2
-TORQUE_KD = 60.0  # 1/s
 #: joints of the position task under torque control (J1..J3)
 ARM_JOINTS = slice(0, 3)
 
@@ -37,9 +33,11 @@ class KinematicController:
     """Eq. 5 in the dVRK joint coordinates (q1..q4, wrist pitch, wrist yaw)."""
 
     arm: Arm
-    gain: float = KINEMATIC_GAIN
+    gain: float | None = None  # 1/s; None: the arm's model card ([controllers] kinematic_gain)
 
     def __post_init__(self):
+        if self.gain is None:
+            self.gain = float(self.arm.model.controller_gain("kinematic_gain"))
         # dq_motor = T dtheta, theta = (q1..q4, wrist pitch, wrist yaw, jaw)
         # (the map as a matrix: its images of the unit vectors, as columns)
         self._dvrk_to_motor = self.arm.model.motor_map.positions_to_model(np.eye(N_JOINTS)).T
@@ -58,8 +56,12 @@ class CartesianTorqueController:
     """Eq. 6-7: feedback linearisation of the tool-tip position on J1..J3."""
 
     arm: Arm
-    kp: float = TORQUE_KP
-    kd: float = TORQUE_KD
+    kp: float | None = None  # 1/s^2; None: the arm's model card ([controllers] torque_kp)
+    kd: float | None = None  # 1/s; None: [controllers] torque_kd
+
+    def __post_init__(self):
+        self.kp = float(self.arm.model.controller_gain("torque_kp")) if self.kp is None else self.kp
+        self.kd = float(self.arm.model.controller_gain("torque_kd")) if self.kd is None else self.kd
 
     def efforts(self, q, dq, p_desired, v_desired, a_desired) -> tuple[np.ndarray, np.ndarray]:
         """(u for J1..J3, position error p_d - p)."""

@@ -236,7 +236,7 @@ class PsmSimulator(ClosedChainReadout):
         return GzT @ M @ self._Gz, GzT @ h
 
     def _counterweight_pid(self, q: np.ndarray, dq: np.ndarray, x: np.ndarray, v: np.ndarray) -> float:
-        kp, ki, kd = self.config.counterweight_pid
+        kp, ki, kd = self.config.counterweight_pid or self.model.controller_gain("counterweight_pid")
         cw = self.psm.counterweight_dof
         ratio = self.model.counterweight_ratio
         error = ratio * q[INSERTION] - x[cw]
