@@ -54,18 +54,17 @@ def case_physics(case: dict, base: SimConfig) -> SimConfig:
     return replace(base, extra=base.extra.plus(JointEffects(**fields)), payloads=base.payloads + payloads)
 
 
-def suite_motion(spec: dict) -> ProcessedRun:
-    """`periods` whole periods of the spec's real run, its positions as the
-    periodic layer's series (exactly periodic: both processings apply)."""
-    state = process_periodic(load_run(resolve_run(spec["run"])))
-    return state.head(int(round(spec["periods"] * state.periodic.period.period_s * state.rate_hz)) + 2)
+def suite_motion(spec: dict, real: ProcessedRun) -> ProcessedRun:
+    """`periods` whole periods of the spec's real run (processed periodic), its
+    positions as the periodic layer's series (exactly periodic: both processings apply)."""
+    return real.head(int(round(spec["periods"] * real.periodic.period.period_s * real.rate_hz)) + 2)
 
 
-def measured_noise(spec: dict, joints_with_session_offsets: np.ndarray) -> dict[str, np.ndarray]:
+def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: np.ndarray) -> dict[str, np.ndarray]:
     """The real runs' noise: per sample on the efforts and the positions (the
     periodic layer's, on the suite's run), and the constant efforts that moved
     between two sessions of it (`session_pair`) on the joints sessions move."""
-    summary = process_periodic(load_run(resolve_run(spec["run"]))).periodic.summary()
+    summary = real.periodic.summary()
     first, second = (load_run(resolve_run(name)).tau for name in spec["session_pair"])
     span = min(len(first), len(second))
     return {"effort": np.nan_to_num(np.array(summary["noise_per_sample_rms"], dtype=float)),
@@ -147,8 +146,9 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
     without and with a baseline (`spec["baselines"]`, default both;
     `spec["subset"]`: the case names to run only)."""
     simulate = simulate or BatchSimulate(arm, "local", 1)
-    motion = suite_motion(spec)
-    noise = measured_noise(spec, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
+    real = process_periodic(load_run(resolve_run(spec["run"])))
+    motion = suite_motion(spec, real)
+    noise = measured_noise(spec, real, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
     cases = [c for c in spec["cases"] if c["name"] in spec.get("subset", [c["name"] for c in spec["cases"]])]
     outcomes = []
     for case in cases:
