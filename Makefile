@@ -22,8 +22,9 @@ $(STAMP): pyproject.toml
 validate: $(STAMP)
 	$(BIN)/dvrk-dart validate --out $(OUT) --report $(REPORT) --jobs $(JOBS)
 
+## the tests, JOBS side by side (pytest-xdist)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(JOBS)
 
 bench: $(STAMP)
 	$(BIN)/python -m dvrk_dart.bench --out $(OUT)/bench.json

@@ -14,6 +14,7 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import central_difference
 from dvrk_dart.io.arm import load_arm
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, load_model
 
 #: (key, target, "lower" if smaller is better else "higher", unit, what the target stands for)
 TARGETS = {
@@ -51,11 +52,11 @@ def best_time(fn, repeat: int, number: int) -> float:
 
 
 def bench_model() -> dict:
-    arm = load_arm()
+    arm = load_arm(DEFAULT_MODEL_FILE)
     q = np.array([0.1, 0.2, 0.1, 0.3, 0.2, -0.1, 0.4])
     dq = np.full(7, 0.1)
     query = best_time(lambda: arm.identified.mcg(q, dq), repeat=5, number=5000)
-    run = load_run(resolve_run("two"))
+    run = load_run(resolve_run("two"), arm.model)
     q_all, dq_all = run.q, run.dq
     ddq_all = central_difference(dq_all, 1.0 / sample_rate_hz())
     batch = best_time(lambda: arm.identified.predict(q_all, dq_all, ddq_all), repeat=3, number=1)
@@ -65,7 +66,7 @@ def bench_model() -> dict:
 def bench_periodic(repeat: int = 5) -> dict:
     from dvrk_dart.io.periodic import analyse
 
-    run = load_run(resolve_run("two"))
+    run = load_run(resolve_run("two"), load_model(DEFAULT_MODEL_FILE))
     analyse(run.t, run.q, run.tau, sample_rate_hz(), "two")  # warm-up
     return {"periodic_projection_s": best_time(lambda: analyse(run.t, run.q, run.tau, sample_rate_hz(), "two"), repeat=repeat, number=1)}
 
@@ -73,8 +74,8 @@ def bench_periodic(repeat: int = 5) -> dict:
 def bench_force(repeat: int = 5) -> dict:
     from dvrk_dart.model.force import estimate_force
 
-    arm = load_arm()
-    run = load_run(resolve_run("two"))
+    arm = load_arm(DEFAULT_MODEL_FILE)
+    run = load_run(resolve_run("two"), arm.model)
     ddq = central_difference(run.dq, 1.0 / sample_rate_hz())
     gap = run.tau - arm.identified.predict(run.q, run.dq, ddq)
     return {"force_estimation_s": best_time(lambda: estimate_force(arm.model, run.q, gap), repeat=repeat, number=1)}
@@ -83,7 +84,7 @@ def bench_force(repeat: int = 5) -> dict:
 def bench_simulation() -> dict:
     from dvrk_dart.sim.realtime import measure_realtime_factor
 
-    return {"sim_realtime_factor": measure_realtime_factor()}
+    return {"sim_realtime_factor": measure_realtime_factor(load_model(DEFAULT_MODEL_FILE))}
 
 
 def bench_campaign(out_dir: Path) -> dict:
@@ -135,10 +136,11 @@ def bench_bag_import() -> dict:
 
     from dvrk_dart.io.bags import load_bag_run, arm_joint_states, write_bag
 
-    run = load_run(resolve_run("two"))
+    model = load_model(DEFAULT_MODEL_FILE)
+    run = load_run(resolve_run("two"), model)
     with tempfile.TemporaryDirectory() as folder:
-        bag = write_bag(Path(folder) / "two", arm_joint_states("PSM1", run.t, run.q, run.dq, run.tau))
-        seconds = best_time(lambda: load_bag_run(bag), repeat=3, number=1)
+        bag = write_bag(Path(folder) / "two", arm_joint_states(model, "PSM1", run.t, run.q, run.dq, run.tau))
+        seconds = best_time(lambda: load_bag_run(bag, model), repeat=3, number=1)
     return {"bag_import_s": seconds}
 
 

@@ -15,16 +15,11 @@ import numpy as np
 
 from dvrk_dart import cli_parser
 from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.command_args import arm_model_file, command_arm, reading_options
+from dvrk_dart.model.joints import JOINT_NAMES
 # commands kept beside their own kind; the parser finds every cmd_* here
 from dvrk_dart.model_commands import cmd_force, cmd_model_check, cmd_model_errors, cmd_session_floor  # noqa: F401
 from dvrk_dart.run_commands import cmd_replay, cmd_run  # noqa: F401
-
-
-def _bag_topics(args: argparse.Namespace):
-    from dvrk_dart.io.bags import BagTopics
-
-    return BagTopics(args.arm, args.topic, args.jaw_topic, args.rate)
 
 
 #: the options that name measured runs (any of them may be a bag)
@@ -103,8 +98,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     from dvrk_dart.io.bags import is_bag, load_bag_run
     from dvrk_dart.io.outputs import MARKER, check_writable_folder, enclosing_output
     from dvrk_dart.io.reference_data import sample_rate_hz
+    from dvrk_dart.model.description import load_model
 
-    topics = _bag_topics(args)
+    topics = reading_options(args)
     if topics.rate != sample_rate_hz():
         raise DvrkDartError(f"--rate: the 21-column CSV has no time column and is read at {sample_rate_hz():g} Hz; import at that rate")
     if not is_bag(args.bag):
@@ -125,7 +121,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
     check_writable_folder(out.absolute().parent)
-    run = load_bag_run(args.bag, topics)
+    run = load_bag_run(args.bag, load_model(arm_model_file(args)), topics)
     values = np.hstack([run.q, run.dq, run.tau])
     with atomic_path(out) as tmp:
         np.savetxt(tmp, values, delimiter=",", fmt="%.17g")
@@ -151,7 +147,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
     from dvrk_dart.io.bags import check_arm_namespace, export_run
     from dvrk_dart.io.outputs import check_writable_folder
-    from dvrk_dart.model.description import using_model
+    from dvrk_dart.model.description import load_model
 
     run_dir, bag = Path(args.run_dir), Path(args.bag)
     if run_dir.resolve() in bag.absolute().resolve().parents:
@@ -160,9 +156,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     if bag.suffix == ".bag" and args.storage != "ros1":
         raise DvrkDartError(f"--bag: {bag} is a ROS 1 bag's name and --storage {args.storage} writes a rosbag2 folder: "
                             "add --storage ros1, or name the folder without .bag")
-    with using_model(_model_of_run(run_dir)):  # an MTM run gets the MTM's topics and joint names
-        check_arm_namespace(args.arm)
-        out = export_run(run_dir, bag, args.arm, args.storage)
+    model = load_model(_model_of_run(run_dir))  # an MTM run gets the MTM's topics and joint names
+    check_arm_namespace(args.arm, model.dvrk_topics)
+    out = export_run(run_dir, bag, model, args.arm, args.storage)
     print(f"{args.run_dir} -> {out}")
     return 0
 
@@ -175,10 +171,11 @@ def cmd_excitation(args: argparse.Namespace) -> int:
     from dvrk_dart.runs.excitation import build_excitation, write_excitation
 
     check_output_folder(args.out, "excitation")
-    check_arm_namespace(args.arm)
-    excitation = build_excitation(args.name, args.rate if args.rate is not None else sample_rate_hz())
+    arm = command_arm(args)
+    check_arm_namespace(args.arm, arm.model.dvrk_topics)
+    excitation = build_excitation(args.name, args.rate if args.rate is not None else sample_rate_hz(), arm)
     with building_folder(args.out, "excitation") as folder:
-        summary = write_excitation(excitation, folder, args.arm)
+        summary = write_excitation(excitation, folder, arm.model, args.arm)
     print(f"excitation {args.name}: {summary['samples']} samples, {summary['duration_s']:.2f} s -> {args.out}/{summary['csv']}, {args.out}/{summary['bag']}")
     print("  start pose (move there first, e.g. with move_jp): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["start_pose"].items()))
     return 0
@@ -223,7 +220,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, "diagnosis")
     with building_folder(args.out, "diagnosis") as folder:
-        code = run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}))
+        code = run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}), command_arm(args), reading_options(args))
     print(f"written {Path(args.out) / 'diagnosis.json'}")
     return code
 
@@ -241,6 +238,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
         prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing, excitation=args.excitation,
+        model_file=str(arm_model_file(args)), topics=reading_options(args),
     )
     result, data = identify_into_folder(config, args.out)
     processing = data["processing"]
@@ -278,7 +276,8 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     if args.samples < 2:
         raise DvrkDartError(f"--samples: {args.samples}: a band needs at least 2 parameter sets")
     config = UncertaintyConfig(args.measured, args.samples, args.seed, None if args.params_cov else args.relative_std,
-                               args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing)
+                               args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing,
+                               arm_model=str(arm_model_file(args)), topics=reading_options(args))
     if config.duration_s is not None and not config.duration_s > 0.0:
         raise DvrkDartError(f"--duration: {config.duration_s} s must be positive")
     summary = run_uncertainty(config, args.out, args.ray_address)
@@ -287,7 +286,7 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     print(f"{'joint':>6} {'inside':>7} {'outside rms':>12} {'model inside':>13}")
     for j, name in enumerate(JOINT_NAMES):
         print(f"{name:>6} {summary['measured_inside_band_fraction'][j]:7.3f} {summary['rms_measured_outside_band'][j]:12.4f} "
-              f"{summary['nominal_model_inside_band_fraction'][j]:13.3f} {effort_unit(name)}")
+              f"{summary['nominal_model_inside_band_fraction'][j]:13.3f} {summary['effort_units'][j]}")
     for name, error in summary["failed_samples"].items():
         print(f"dvrk-dart: sample {name} failed: {error}", file=sys.stderr)
     return 0
@@ -364,17 +363,9 @@ def main(argv: list[str] | None = None) -> int:
             check_ray_address(args.ray_address)
         _check_outputs_apart_from_inputs(args)
         _check_arm_of_reference_runs(args)
-        from dvrk_dart.model.description import resolve_arm_model, using_model
-
-        with using_model(resolve_arm_model(getattr(args, "arm_model", None) or "psm")):
-            if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
-                from dvrk_dart.io.bags import bag_topics
-
-                _check_bag_options(args)
-                with bag_topics(_bag_topics(args)):
-                    code = args.func(args)
-            else:
-                code = args.func(args)
+        if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
+            _check_bag_options(args)
+        code = args.func(args)
         raise_if_interrupted()  # a Ctrl-C swallowed on the way: the outputs were not committed after it
         return code
     except DvrkDartError as exc:

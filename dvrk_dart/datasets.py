@@ -24,7 +24,7 @@ from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import PROCESSINGS, process
 from dvrk_dart.metrics import per_measured_joint, rms
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.paths import PIPELINES_DIR
 
 DATASETS_FILE = PIPELINES_DIR / "datasets.toml"
@@ -48,7 +48,7 @@ def load_datasets(path: Path = DATASETS_FILE) -> list[Dataset]:
 
 def published_rms(arm: Arm, run: str, processing: str) -> list[float | None]:
     """The published parameters on a whole run (model-errors' figures; None where not recorded)."""
-    state = process(load_run(resolve_run(run)), processing)
+    state = process(load_run(resolve_run(run), arm.model), processing)
     residual = state.tau - state.in_band(arm.identified.predict(state.q, state.dq, state.ddq, "all"))
     return per_measured_joint(rms(residual), state.measured)
 
@@ -107,7 +107,7 @@ def phantom_forces(arm: Arm, dataset: Dataset, folder: Path, diagnosis_dir: Path
     from dvrk_dart.io.arm import load_arm
 
     models = {"published parameters": (arm, "identified"),
-              "own identification": (load_arm(params_file=own_periodic / "params.json"), "identified")}
+              "own identification": (load_arm(arm.model.source, own_periodic / "params.json"), "identified")}
     combined = diagnosis_dir / dataset.diagnosis_case / "one_configuration.json"
     if combined.is_file():
         models["diagnosis: one configuration"] = (arm, str(combined))
@@ -158,7 +158,7 @@ def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: d
         staged = out_dir / f"{dataset.name}_{PHANTOM_FIGURE}"  # the report copies extras by file name: keep them apart
         staged.write_bytes((out_dir / dataset.name / PHANTOM_FIGURE).read_bytes())
         files.append(staged)
-        parts += [_table(dataset, figures), _force_table(dataset, figures["phantom_force"]),
+        parts += [_table(dataset, figures, arm.model), _force_table(dataset, figures["phantom_force"]),
                   f"<figure><img src='figures/extra/{staged.name}' alt='phantom force'><figcaption>The force the efforts imply at the "
                   f"instrument over one period of held-out {dataset.holdout}, before (published parameters) and after the diagnosis "
                   "(its one configuration); the true force is zero.</figcaption></figure>"]
@@ -196,9 +196,9 @@ def _ratio(a: list, b: list) -> list:
     return [None if x is None or not y else x / y for x, y in zip(a, b)]
 
 
-def _table(dataset: Dataset, figures: dict) -> str:
+def _table(dataset: Dataset, figures: dict, model) -> str:
     joints = [j for j, v in enumerate(figures["published"]["upstream"]) if v is not None][:3]
-    header = ["held-out " + dataset.holdout, *(f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})" for j in joints)]
+    header = ["held-out " + dataset.holdout, *(f"{JOINT_NAMES[j]} ({model.effort_unit(JOINT_NAMES[j])})" for j in joints)]
     rows = []
     for label, values in _rows(figures):
         cells = "".join(num_cell(values[j], dataset=dataset.name, row=label, joint=JOINT_NAMES[j]) for j in joints)

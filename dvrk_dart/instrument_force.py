@@ -20,6 +20,8 @@ from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process, process_all
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.runs.config import DYNAMICS_CHOICES, RunConfig, recorded_processing, sim_config_for
 from dvrk_dart.sim.config import SimConfig
 
@@ -30,11 +32,14 @@ class ForceConfig:
     dynamics: str = "identified"  # inertial | identified | a diagnosis.json / one_configuration.json
     processing: str | None = None  # None: the file's recorded one, else periodic where the run is periodic
     excitation: str | None = None
+    #: how the run is read where it is a bag (--arm, --topic, --jaw-topic) or a CSV (--rate)
+    topics: BagTopics = BagTopics()
 
 
-def processed_run(config: ForceConfig) -> tuple[ProcessedRun, str]:
-    """The run through the processing the options, the --dynamics file or the default choose, and why."""
-    run = load_run(resolve_run(config.measured))
+def processed_run(config: ForceConfig, model: PsmModel) -> tuple[ProcessedRun, str]:
+    """The run of `model`'s arm through the processing the options, the
+    --dynamics file or the default choose, and why."""
+    run = load_run(resolve_run(config.measured), model, config.topics)
     design = read_design(config.excitation) if config.excitation else None
     if config.processing is not None:
         return process(run, config.processing, design=design), f"--processing {config.processing}"
@@ -63,7 +68,7 @@ def model_config(dynamics: str) -> SimConfig:
 
 def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:
     """Estimate, summarise and (with `out_dir`) write the logs and force.json."""
-    state, why = processed_run(config)
+    state, why = processed_run(config, arm.model)
     missing = [f"q{j + 1}" for j in force_point_of(arm.model).joints if not state.measured[j]]
     if missing:
         raise DvrkDartError(f"--measured {config.measured}: {', '.join(missing)} not recorded: the force at the "
@@ -80,7 +85,7 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
         "definition": "F = J^-T (tau_measured - tau_model) over the point's joints, base frame; a direction whose lever "
                       "(singular value of J) is under min_lever_m is not determined (NaN in force.csv); the figures are "
                       "over the determined samples, *_all_samples_* over every sample",
-        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured))}, "versions": software_versions(),
+        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics)}, "versions": software_versions(),
     }
     if out_dir is not None:
         table = force_table(state.t, point_positions(arm.model, state.q, point.link), estimate.force, estimate.determined, estimate.lever_m)
@@ -91,7 +96,7 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
 
 def one_period_forces(arm: Arm, config: ForceConfig) -> tuple[np.ndarray, np.ndarray]:
     """(t in the period, F) over the first period of a periodic run (NaN where not determined)."""
-    state, _ = processed_run(config)
+    state, _ = processed_run(config, arm.model)
     if state.periodic is None:
         raise DvrkDartError(f"{config.measured}: one period needs the periodic processing")
     n = state.first_period_samples()

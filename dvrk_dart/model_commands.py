@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.command_args import command_arm, reading_options
+from dvrk_dart.model.joints import JOINT_NAMES
 
 
 def cmd_model_errors(args: argparse.Namespace) -> int:
@@ -21,13 +22,12 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     from dvrk_dart.io.signal import process_all
     from dvrk_dart.io.excitation_design import read_design
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
-    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.model.identified import parse_terms
 
-    arm = load_arm(params_file=args.params)
+    arm = command_arm(args)
     terms = parse_terms(args.terms)
     design = read_design(args.excitation) if getattr(args, "excitation", None) else None
-    [processed], note = process_all([load_run(resolve_run(args.measured))], args.processing, design)
+    [processed], note = process_all([load_run(resolve_run(args.measured), arm.model, reading_options(args))], args.processing, design)
     why = f"--processing {args.processing}" if args.processing else (note or "the default: the run is a periodic excitation")
     with np.errstate(over="ignore", invalid="ignore"):
         predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
@@ -65,7 +65,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
                 continue
             cutoff = f" {result['joint_cutoffs'][j]:9d}" if processed.periodic is not None else ""
             why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
-            print(f"{name:>6} {rel:9.4f} {r:10.4f} {effort_unit(name)}{cutoff}{why}")
+            print(f"{name:>6} {rel:9.4f} {r:10.4f} {arm.model.effort_unit(name)}{cutoff}{why}")
     return 0
 
 
@@ -73,12 +73,11 @@ def cmd_force(args: argparse.Namespace) -> int:
     """The force at the instrument point (the arm's model card) the measured efforts imply."""
     from dvrk_dart.instrument_force import ForceConfig, instrument_force, print_force_summary
     from dvrk_dart.io.outputs import building_folder, check_output_folder
-    from dvrk_dart.io.arm import load_arm
 
     check_output_folder(args.out, "force")
-    config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation)
+    config = ForceConfig(args.measured, args.dynamics, args.processing, args.excitation, reading_options(args))
     with building_folder(args.out, "force") as folder:
-        summary = instrument_force(load_arm(params_file=args.params), config, folder)
+        summary = instrument_force(command_arm(args), config, folder)
     print_force_summary(summary)
     print(f"written {Path(args.out) / 'force.csv'}, force.json, force.mcap, force.rrd")
     return 0
@@ -87,10 +86,9 @@ def cmd_force(args: argparse.Namespace) -> int:
 def cmd_session_floor(args: argparse.Namespace) -> int:
     """The floor of the identified model's residual: two recordings of one trajectory."""
     from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
-    from dvrk_dart.io.arm import load_arm
 
-    arm = load_arm(params_file=args.params)
-    a, b = processed_pair((args.measured, args.repeat), args.processing)
+    arm = command_arm(args)
+    a, b = processed_pair((args.measured, args.repeat), args.processing, arm.model, reading_options(args))
     try:
         check_repeat(a, b)
         table = floor_table(arm, a, b)
@@ -107,15 +105,13 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
     verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES):
         print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]:9.4f}  "
-              f"{effort_unit(name)}: {verdicts[j]}")
+              f"{arm.model.effort_unit(name)}: {verdicts[j]}")
     return 0
 
 
 def cmd_model_check(args: argparse.Namespace) -> int:
     """Print the model card facts: parameter oddities and basic model checks."""
-    from dvrk_dart.io.arm import load_arm
-
-    arm = load_arm(params_file=args.params)
+    arm = command_arm(args)
     print(f"model: {arm.model.name} ({arm.model.source})")
     print(f"parameters: {arm.params.source}")
     for note in arm.params.oddities(arm.model):

@@ -11,6 +11,7 @@ import pandas as pd
 
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.outputs import check_shared_folder, write_marker
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE
 from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.runs.campaign import load_campaign, needs_diagnosis, run_campaign
 
@@ -58,7 +59,7 @@ def _periodic_section(out_dir: Path, runs_dir: Path):
     from dvrk_dart.analysis.periodic_section import periodic_section
     from dvrk_dart.io.arm import load_arm
 
-    section = periodic_section(load_arm(), out_dir / "periodic", runs_dir)
+    section = periodic_section(load_arm(DEFAULT_MODEL_FILE), out_dir / "periodic", runs_dir)
     figures = json.loads((out_dir / "periodic" / "periodic.json").read_text())
     print("periodic: model vs measured on two (J1..J3), upstream "
           + " ".join(f"{v:.4f}" for v in figures["model_vs_measured_two"]["upstream"][:3]) + ", periodic "
@@ -74,7 +75,7 @@ def _datasets_section(out_dir: Path):
 
     # the identification section's (one -> two, both processings) serve the 2019 dataset's rows
     identified = {(("one",), ("two",), processing): out_dir / folder for processing, folder in IDENTIFICATION_FOLDERS.items()}
-    return datasets_section(load_arm(), out_dir / "datasets", out_dir / "diagnosis", identified)
+    return datasets_section(load_arm(DEFAULT_MODEL_FILE), out_dir / "datasets", out_dir / "diagnosis", identified)
 
 
 #: the contact scenario: the held-out run replayed against a tissue-like surface (runs/contact.py)
@@ -96,8 +97,8 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
     from dvrk_dart.runs.contact import contact_check, simulate_contact, surface_under
     from dvrk_dart.sim.config import SimConfig
 
-    arm = load_arm()
-    state = process(load_run(resolve_run(CONTACT["run"])), "periodic")
+    arm = load_arm(DEFAULT_MODEL_FILE)
+    state = process(load_run(resolve_run(CONTACT["run"]), arm.model), "periodic")
     surface = surface_under(arm, state, CONTACT["depth_m"], stiffness_n_per_m=CONTACT["stiffness_n_per_m"],
                             damping_n_s_per_m=CONTACT["damping_n_s_per_m"])
     run = simulate_contact(arm, state, surface, CONTACT["duration_s"])

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.command_args import arm_model_file, reading_options
+from dvrk_dart.model.joints import JOINT_NAMES
 
 
 def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: str | None = None):
@@ -30,7 +31,7 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
                                     "use --mode velocity or torque")
     dynamics = args.dynamics or spec.dynamics
     return RunConfig(scenario, mode, args.counterweight or "on", dynamics, args.dt, args.duration, args.params, measured,
-                     getattr(args, "processing", "upstream"), getattr(args, "harmonics", None))
+                     getattr(args, "processing", "upstream"), getattr(args, "harmonics", None), args.arm_model, reading_options(args))
 
 
 def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
@@ -42,7 +43,7 @@ def _check_arm_of_scenario(args: argparse.Namespace, spec) -> None:
         raise DvrkDartError(f"--arm-model {asked}: the scenario {spec.name} is the {spec.arm_model} arm's; leave --arm-model out")
 
 
-def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
+def _print_effort_table(metrics: dict, dynamics: str | None, model) -> None:
     """The replay's RMS figures as a labelled table, a row per joint with its unit."""
     terms = metrics.get("model_terms_compared")
     columns = [("rms_sim_vs_model", "sim vs model"),
@@ -58,23 +59,21 @@ def _print_effort_table(metrics: dict, dynamics: str | None) -> None:
         if name not in recorded:
             print(f"  {name:>6}  not measured (the run did not record {name}; the simulation held it)")
             continue
-        print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {effort_unit(name):<3}" for key, _ in columns))
+        print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {model.effort_unit(name):<3}" for key, _ in columns))
 
 
 def _run_and_write(config, out: Path | None) -> int:
     from dvrk_dart.io.outputs import check_output_folder
-    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
-    from dvrk_dart.runs.runner import arm_of_scenario, run
+    from dvrk_dart.runs.runner import arm_of_run, run
 
     out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
-    with arm_of_scenario(config):
-        arm = load_arm(params_file=config.params_file)
-        record = run(config, arm)
-        write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
+    arm = arm_of_run(config)
+    record = run(config, arm)
+    write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     print(f"{record.name}: {metrics.get('samples')} samples, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
-    _print_effort_table(metrics, config.dynamics)
+    _print_effort_table(metrics, config.dynamics, arm.model)
     for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
         if metrics.get(key) is not None:
             print(f"  {key}: {float(np.max(metrics[key])):.3g} {unit}")
@@ -121,8 +120,9 @@ def _replay_processing(args: argparse.Namespace) -> bool:
     if recorded is None:  # the default of every command: periodic where the run is a periodic excitation
         from dvrk_dart.io.reference_data import load_run, resolve_run
         from dvrk_dart.io.signal import process_all
+        from dvrk_dart.model.description import load_model
 
-        [processed], note = process_all([load_run(resolve_run(args.measured))], None)
+        [processed], note = process_all([load_run(resolve_run(args.measured), load_model(arm_model_file(args)), reading_options(args))], None)
         args.processing = processed.processing
         print(f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})")
         return False

@@ -6,12 +6,12 @@ import pytest
 
 from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
 from dvrk_dart.io.signal import process
-from dvrk_dart.io.arm import load_arm
+from arms import PSM, PSM_ARM  # noqa: F401
 
 
 @pytest.fixture(scope="session")
 def arm():
-    return load_arm()
+    return PSM_ARM
 
 
 @pytest.fixture(scope="session")
@@ -31,11 +31,11 @@ def identified(arm):
 
 @pytest.fixture(scope="session")
 def processed_two():
-    return process(load_run(resolve_run("two")))
+    return process(load_run(resolve_run("two"), PSM))
 
 
 @pytest.fixture(scope="session")
 def data_ranges():
     """(lower, upper) of the joint positions seen in all the measured runs."""
-    qs = np.vstack([load_run(resolve_run(name)).q for name, file in RUNS.items() if not file.startswith("mtm/")])
+    qs = np.vstack([load_run(resolve_run(name), PSM).q for name, file in RUNS.items() if not file.startswith("mtm/")])
     return qs.min(axis=0), qs.max(axis=0)

@@ -12,6 +12,7 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.mcap_log import write_mcap
 from dvrk_dart.io.record import RunRecord
 from dvrk_dart.sim.config import SimConfig
+from arms import PSM, PSM_ARM  # noqa: F401
 
 #: synthetic torque run: the x error is this constant after the transient, so
 #: its RMS after 1 s is known exactly
@@ -28,7 +29,7 @@ def write_run(record: RunRecord, runs_dir: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     write_json_atomic(folder / "config.json", {"run": record.name, **record.config, "inputs_sha256": None})
     write_json_atomic(folder / "metrics.json", record.metrics)
-    write_mcap(record, folder / "run.mcap")
+    write_mcap(record, folder / "run.mcap", PSM)
     return folder
 
 
@@ -107,11 +108,10 @@ def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
     """Short runs of the real simulator: kinematic, velocity with and without the
     counterweight, and replays of the measured run 'two' with the paper's arm
     and with every identified term simulated."""
-    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.runner import run
 
-    arm = load_arm()
+    arm = PSM_ARM
     names = []
     for scenario, mode, counterweight, dynamics in (
         ("rectilinear", "kinematic", "on", "inertial"),

@@ -9,7 +9,6 @@ import pytest
 
 from dvrk_dart.cli import main
 from dvrk_dart.io.arm import load_arm
-from dvrk_dart.model.description import using_model
 from dvrk_dart.paths import MODELS_DIR
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.simulator import PsmSimulator
@@ -24,8 +23,7 @@ PUBLISHED = {
 
 @pytest.fixture(scope="module", params=ARMS)
 def arm_of(request):
-    with using_model(MODELS_DIR / request.param / f"{request.param}.toml"):
-        yield request.param, load_arm()
+    return request.param, load_arm(MODELS_DIR / request.param / f"{request.param}.toml")
 
 
 def test_every_arm_folder_is_complete():
@@ -79,6 +77,9 @@ def test_the_mtm_replays_two_in_dart(tmp_path, capsys):
         loaded, rows, error = _load_and_measure(str(out))
         assert error is None and loaded.counterweight == "none"
         assert set(rows[rows.joint == "q3"].unit) <= {"N·m", "rad", "1"}
+        # its first period is the MTM's 2000 samples at 200 Hz (10 s), not the PSM's 1111
+        first = rows[(rows.quantity == "samples") & (rows.regime == "first_period") & (rows.joint == "q1")].value
+        assert len(first) == 1 and first.iloc[0] == np.sum(loaded.record.t < 10.0) > np.sum(loaded.record.t < 1111 / 200)
         if dynamics == "inertial":
             assert np.all(np.array(metrics["rms_sim_vs_model"][:3]) <= 0.01), metrics["rms_sim_vs_model"]
         else:
@@ -92,10 +93,11 @@ def test_an_mtm_bag_reads_like_its_csv(tmp_path, capsys):
     from dvrk_dart.io.bags import arm_joint_states, write_bag
     from dvrk_dart.io.reference_data import load_run, resolve_run
 
-    with using_model(MODELS_DIR / "mtm" / "mtm.toml"):
-        run = load_run(resolve_run("mtm-two"))
-        states = arm_joint_states(None, 1.7e9 + run.t, run.q, run.dq, run.tau)
-        bag = write_bag(tmp_path / "mtm_two", states)
+    from arms import MTM
+
+    run = load_run(resolve_run("mtm-two"), MTM)
+    states = arm_joint_states(MTM, None, 1.7e9 + run.t, run.q, run.dq, run.tau)
+    bag = write_bag(tmp_path / "mtm_two", states)
     assert [s.topic for s in states] == ["/MTML/measured_js"] and len(states[0].names) == 7
     capsys.readouterr()
     assert main(["model-errors", "--arm-model", "mtm", "--measured", str(bag), "--first-period", "--json", "--processing", "upstream"]) == 0

@@ -16,8 +16,8 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import NS, BagTopics, arm_joint_states, load_bag_run, write_bag
 from dvrk_dart.io.mcap_log import read_mcap
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.model.description import load_model
 from dvrk_dart.model.joints import MotorCoordinateMap
+from arms import PSM
 
 #: upstream's published relative errors (data README), trajectory "two", first period
 PUBLISHED_RELATIVE_ERRORS = np.array([0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642])
@@ -31,7 +31,7 @@ EPOCH_S = 1_700_000_000
 
 @pytest.fixture(scope="module")
 def run_two():
-    return load_run(resolve_run("two"))
+    return load_run(resolve_run("two"), PSM)
 
 
 def jittered_topics(run, seed=0, arm="PSM1", rows=slice(None)):
@@ -44,7 +44,7 @@ def jittered_topics(run, seed=0, arm="PSM1", rows=slice(None)):
     for which in range(2):
         t = t0 + rng.uniform(-JITTER_S, JITTER_S, len(t0))
         v = truth(t)
-        states = arm_joint_states(arm, EPOCH_S + t, v[:, :7], v[:, 7:14], v[:, 14:])[which]
+        states = arm_joint_states(PSM, arm, EPOCH_S + t, v[:, :7], v[:, 7:14], v[:, 14:])[which]
         topics.append(states)
         stamps[states.topic] = np.round(t * NS).astype(np.int64) + EPOCH_S * NS
     return topics, stamps
@@ -56,9 +56,8 @@ def model_errors(bag, capsys, *extra):
 
 
 def test_motor_coordinate_map_round_trip():
-    from dvrk_dart.model.description import load_model
 
-    motor_map = load_model().motor_map
+    motor_map = PSM.motor_map
     x = np.random.default_rng(1).normal(size=(50, 7))
     for there, back in ((motor_map.positions_to_dvrk, motor_map.positions_to_model), (motor_map.efforts_to_dvrk, motor_map.efforts_to_model)):
         np.testing.assert_allclose(back(there(x)), x, rtol=0, atol=1e-12)
@@ -84,8 +83,8 @@ def test_single_mcap_file_sqlite3_and_other_arm(tmp_path, capsys, run_two):
     sqlite = write_bag(tmp_path / "sqlite", topics, "sqlite3", stamps_ns=stamps)
     mcap_dir = write_bag(tmp_path / "mcap", topics, "mcap", stamps_ns=stamps)
     mcap_file = next(mcap_dir.glob("*.mcap"))
-    a = load_bag_run(sqlite, BagTopics(arm="PSM2"))
-    b = load_bag_run(mcap_file, BagTopics(topic="/PSM2/measured_js", jaw_topic="/PSM2/jaw/measured_js"))
+    a = load_bag_run(sqlite, PSM, BagTopics(arm="PSM2"))
+    b = load_bag_run(mcap_file, PSM, BagTopics(topic="/PSM2/measured_js", jaw_topic="/PSM2/jaw/measured_js"))
     np.testing.assert_array_equal(a.data.to_numpy(), b.data.to_numpy())
     # on the data's own grid the resampled values are the run's: the cubic through
     # jittered samples errs by much less than a sample step's motion (up to ~8e-3 rad)
@@ -102,8 +101,8 @@ def test_joints_are_matched_by_name(tmp_path, run_two):
     arm = topics[0]
     order = [3, 0, 5, 1, 4, 2]
     shuffled = type(arm)(arm.topic, tuple(arm.names[i] for i in order), arm.t, arm.position[:, order], arm.velocity[:, order], arm.effort[:, order])
-    a = load_bag_run(write_bag(tmp_path / "a", topics))
-    b = load_bag_run(write_bag(tmp_path / "b", [shuffled, topics[1]]))
+    a = load_bag_run(write_bag(tmp_path / "a", topics), PSM)
+    b = load_bag_run(write_bag(tmp_path / "b", [shuffled, topics[1]]), PSM)
     np.testing.assert_array_equal(a.data.to_numpy(), b.data.to_numpy())
 
 
@@ -114,17 +113,17 @@ def test_jaw_in_the_arm_message(tmp_path, run_two):
         arm.topic, (*arm.names, *jaw.names), arm.t,
         *(np.hstack([getattr(arm, f), getattr(jaw, f)]) for f in ("position", "velocity", "effort")),
     )
-    one = load_bag_run(write_bag(tmp_path / "one", [merged], stamps_ns=stamps), BagTopics(jaw_topic=arm.topic))
+    one = load_bag_run(write_bag(tmp_path / "one", [merged], stamps_ns=stamps), PSM, BagTopics(jaw_topic=arm.topic))
     # the same as a bag whose jaw topic has the arm's stamps
     both = load_bag_run(write_bag(tmp_path / "two", [arm, type(jaw)(jaw.topic, jaw.names, arm.t, jaw.position, jaw.velocity, jaw.effort)],
-                                  stamps_ns={arm.topic: stamps[arm.topic], jaw.topic: stamps[arm.topic]}))
+                                  stamps_ns={arm.topic: stamps[arm.topic], jaw.topic: stamps[arm.topic]}), PSM)
     np.testing.assert_array_equal(one.data.to_numpy(), both.data.to_numpy())
 
 
 def test_missing_header_stamps_fall_back_to_receive_times(tmp_path, capsys, run_two):
     topics, _ = jittered_topics(run_two, rows=slice(0, 600))
     zero = {s.topic: np.zeros(len(s.t), dtype=np.int64) for s in topics}
-    run = load_bag_run(write_bag(tmp_path / "b", topics, stamps_ns=zero))
+    run = load_bag_run(write_bag(tmp_path / "b", topics, stamps_ns=zero), PSM)
     assert len(run) >= 590
     assert "no header stamps; using the bag's receive times" in capsys.readouterr().err
 
@@ -156,7 +155,7 @@ def test_export_import_round_trip(tmp_path, simulated_run, capsys):
         }
         first = next(reader.messages())
         msg = reader.deserialize(first[2], first[0].msgtype)
-        assert tuple(msg.name) == load_model().dvrk_topics.arm_joints and len(msg.effort) == 6
+        assert tuple(msg.name) == PSM.dvrk_topics.arm_joints and len(msg.effort) == 6
         assert msg.header.stamp.sec * NS + msg.header.stamp.nanosec == round(record.t[0] * NS)
     assert any(p.suffix == ".mcap" for p in bag.iterdir())
 
@@ -222,7 +221,7 @@ def _bad_bags(tmp_path, run):
         _write_raw(tmp_path / "type", {"/PSM1/measured_js": ("std_msgs/msg/String", [(k, String(data="x")) for k in range(3)])}),
         ["/PSM1/measured_js", "std_msgs/msg/String", "expected sensor_msgs/msg/JointState"],
     )
-    names = tuple("outer_roll_x" if n == "outer_roll" else n for n in load_model().dvrk_topics.arm_joints)
+    names = tuple("outer_roll_x" if n == "outer_roll" else n for n in PSM.dvrk_topics.arm_joints)
     t, s = _modified(run, names=names)
     bags["missing joint"] = (write_bag(tmp_path / "names", t, stamps_ns=s), ["/PSM1/measured_js", "joint outer_roll missing"])
     t, s = _modified(run)
@@ -282,9 +281,9 @@ def test_the_jaw_follows_the_arm_topic_and_one_clock_is_required(tmp_path, capsy
     for states in decoys:  # PSM1's jaw far from PSM2's: reading it would show
         states.position[:] += 1.0
     bag = write_bag(tmp_path / "two_arms", topics + decoys, stamps_ns={**stamps, **decoy_stamps})
-    run = load_bag_run(bag, BagTopics(topic="/PSM2/measured_js"))
+    run = load_bag_run(bag, PSM, BagTopics(topic="/PSM2/measured_js"))
     # PSM2's jaw to the grid's sample offset (PSM1's would be 1 rad off)
     assert np.max(np.abs(run.q[:, 6] - np.interp(run.t, run_two.t - run_two.t[0], run_two.q[:, 6]))) < 0.1
     mixed = {topics[0].topic: stamps[topics[0].topic], topics[1].topic: np.zeros_like(stamps[topics[1].topic])}
     with pytest.raises(DvrkDartError, match="two clocks cannot be aligned"):
-        load_bag_run(write_bag(tmp_path / "mixed", topics, stamps_ns=mixed), BagTopics(arm="PSM2"))
+        load_bag_run(write_bag(tmp_path / "mixed", topics, stamps_ns=mixed), PSM, BagTopics(arm="PSM2"))

@@ -11,7 +11,7 @@ import pytest
 
 from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
 from dvrk_dart.diagnosis.checks.validation import WITHHELD_FILE
-from dvrk_dart.io.arm import load_arm
+from arms import PSM_ARM
 
 #: (case, processing, with a baseline): one per family of the library
 SUBSET = [("coulomb_q2", "upstream", True), ("offset_q1", "upstream", False), ("torsion_spring_q4", "periodic", False),
@@ -22,7 +22,7 @@ SUBSET = [("coulomb_q2", "upstream", True), ("offset_q1", "upstream", False), ("
 def test_the_injected_effect_is_found_blind(case, processing, baseline, tmp_path):
     spec = {**tomllib.loads(WITHHELD_FILE.read_text())["blind_suite"], "subset": [case], "processings": [processing],
             "baselines": [baseline]}
-    summary, _ = validate_blind_suite(load_arm(), spec, tmp_path)
+    summary, _ = validate_blind_suite(PSM_ARM, spec, tmp_path)
     (outcome,) = summary["cases"]
     assert outcome["named"], outcome
     assert outcome["gap_after"] <= 1.5 * outcome["floor"], outcome

@@ -16,9 +16,9 @@ sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 from test_periodic_designs import EFFORT_NOISE, design_run  # noqa: E402
 
 from dvrk_dart.cli import main  # noqa: E402
-from dvrk_dart.io.arm import load_arm  # noqa: E402
 from dvrk_dart.runs.replay import simulate_efforts  # noqa: E402
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects  # noqa: E402
+from arms import PSM_ARM
 
 MOVING = np.array([True, True, True, False, False, False, False])
 FRICTION_Q2_N_M = 0.25
@@ -33,7 +33,7 @@ def _write(path, state, efforts, seed):
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("combinations")
-    arm = load_arm()
+    arm = PSM_ARM
     state, base = design_run(arm, 3, 0.4, 5, MOVING, 200.0, 11)
     friction = replace(IDENTIFIED_PHYSICS, extra=JointEffects(coulomb=(0.0, FRICTION_Q2_N_M) + (0.0,) * 5))
     other, other_base = design_run(arm, 3, 0.35, 5, MOVING, 200.0, 12)

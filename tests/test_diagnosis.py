@@ -37,9 +37,10 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
 from dvrk_dart.diagnosis.fit.session_floor import moved_constants
 from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
-from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process, zero_phase_lowpass
+from dvrk_dart.io.signal import process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
+from arms import PSM
 
 #: the size of a blindly recovered effect must be within this relative error
 SIZE_TOLERANCE = 0.20
@@ -55,12 +56,13 @@ MIN_JOINT_FRACTION_EXPLAINED = 0.2
 #: greedy steps allowed in the synthetic tests (the injected effect must come first)
 SYNTHETIC_MAX_EFFECTS = 2
 #: synthetic segment: two base periods of the excitation
+FIRST_PERIOD_SAMPLES = PSM.processing.first_period_samples
 SEGMENT_SAMPLES = 2 * FIRST_PERIOD_SAMPLES
 
 
 @pytest.fixture(scope="module")
 def segment():
-    return process(load_run(resolve_run("one"))).head(SEGMENT_SAMPLES)
+    return process(load_run(resolve_run("one"), PSM)).head(SEGMENT_SAMPLES)
 
 
 @pytest.fixture(scope="module")
@@ -132,10 +134,10 @@ def test_envelopes_contain_the_dh_skeleton(arm):
 
 def test_effects_to_sim_config_maps_each_field(arm):
     chosen = [
-        (JointFriction("q2"), np.array([0.1, 0.2])),
-        (JointOffset("q3"), np.array([-0.3])),
-        (JointStiffness("q4"), np.array([0.002])),
-        (JointArmature("q1"), np.array([0.01])),
+        (JointFriction(arm.model, "q2"), np.array([0.1, 0.2])),
+        (JointOffset(arm.model, "q3"), np.array([-0.3])),
+        (JointStiffness(arm.model, "q4"), np.array([0.002])),
+        (JointArmature(arm.model, "q1"), np.array([0.01])),
         (GravityTilt(arm), np.array([0.01, -0.02])),
         (PointPayload(arm.model, 4), np.array([0.105, 0.2, 0.0, 0.01])),
     ]
@@ -155,19 +157,19 @@ TILT_NOISE_SCALE = 0.2
 
 SYNTHETIC_CASES = [
     # (effect factory, true parameters, index of the size parameter, noise scale)
-    ("friction_q2", lambda arm: JointFriction("q2"), [0.15, 0.20], 0, 1.0),
-    ("friction_q3_smooth0.03", lambda arm: JointFriction("q3", reversal_velocity=0.03), [0.4, 0.6], 0, 1.0),
+    ("friction_q2", lambda arm: JointFriction(arm.model, "q2"), [0.15, 0.20], 0, 1.0),
+    ("friction_q3_smooth0.03", lambda arm: JointFriction(arm.model, "q3", reversal_velocity=0.03), [0.4, 0.6], 0, 1.0),
     ("payload_on_insertion_carriage", lambda arm: PointPayload(arm.model, 8), [0.20, 0.02, -0.03, 0.30], 0, 1.0),
     # payloads elsewhere: a translating parallelogram link, the counterweight, the tool off its roll axis
     ("payload_on_pitch_front", lambda arm: PointPayload(arm.model, 4), [0.15, 0.30, 0.0, 0.02], 0, 1.0),
     ("payload_on_counterweight", lambda arm: PointPayload(arm.model, 9), [0.20, 0.02, 0.0, 0.03], 0, 1.0),
     ("payload_on_tool_roll", lambda arm: PointPayload(arm.model, 10), [0.10, 0.02, 0.0, -0.30], 0, 1.0),
-    ("offset_q3", lambda arm: JointOffset("q3"), [-0.3], 0, 1.0),
-    ("armature_q3", lambda arm: JointArmature("q3"), [0.5], 0, 1.0),
-    ("cable_elasticity_q1", lambda arm: JointStiffness("q1"), [0.3], 0, 1.0),
-    ("torsion_spring_q4", lambda arm: JointStiffness("q4"), [0.01], 0, 1.0),
-    ("offset_q1", lambda arm: JointOffset("q1"), [-0.15], 0, 1.0),
-    ("armature_q1", lambda arm: JointArmature("q1"), [0.02], 0, 1.0),
+    ("offset_q3", lambda arm: JointOffset(arm.model, "q3"), [-0.3], 0, 1.0),
+    ("armature_q3", lambda arm: JointArmature(arm.model, "q3"), [0.5], 0, 1.0),
+    ("cable_elasticity_q1", lambda arm: JointStiffness(arm.model, "q1"), [0.3], 0, 1.0),
+    ("torsion_spring_q4", lambda arm: JointStiffness(arm.model, "q4"), [0.01], 0, 1.0),
+    ("offset_q1", lambda arm: JointOffset(arm.model, "q1"), [-0.15], 0, 1.0),
+    ("armature_q1", lambda arm: JointArmature(arm.model, "q1"), [0.02], 0, 1.0),
     ("gravity_tilt", lambda arm: GravityTilt(arm), [0.030, -0.025], None, TILT_NOISE_SCALE),
 ]
 
@@ -350,13 +352,13 @@ def test_smooth_friction_goes_into_the_simulation_whole(arm, segment):
     state = segment.head(300)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
     features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
-    effect, p = JointFriction("q3", reversal_velocity=0.03), np.array([0.4, 0.6])
+    effect, p = JointFriction(arm.model, "q3", reversal_velocity=0.03), np.array([0.4, 0.6])
     cfg = effects_to_sim_config([(effect, p)])
     assert cfg.extra.coulomb[2] == 0.4 and cfg.extra.viscous[2] == 0.6 and cfg.extra.coulomb_reversal_velocity[2] == 0.03
     assert not_simulated([(effect, p)]) == []
     total = config_effort_by_formula(arm, cfg, state.q, state.dq, state.ddq)
     assert np.max(np.abs(total - ref - effect.effort(features, p))) < 1e-10
-    assert effect.family == JointFriction("q3").family
+    assert effect.family == JointFriction(arm.model, "q3").family
 
 
 # ------------------------------------------------------ where + contract
@@ -365,7 +367,7 @@ def test_regime_table_finds_friction_by_velocity_sign(arm, segment):
     coulomb = 0.2
     residual = np.zeros_like(ref)
     residual[:, 1] = coulomb * np.sign(segment.dq[:, 1])
-    table = residual_regimes(segment, residual)
+    table = residual_regimes(segment, residual, PSM)
     j2 = table[(table.joint == "q2") & (table.regime == "velocity")].set_index("bin")
     assert j2.loc["positive", "mean"] == pytest.approx(coulomb)
     assert j2.loc["negative", "mean"] == pytest.approx(-coulomb)
@@ -374,8 +376,8 @@ def test_regime_table_finds_friction_by_velocity_sign(arm, segment):
 
 def test_contract_and_outputs(arm, segment, noise_rms, tmp_path):
     """diagnose with a holdout run, a caller-supplied simulation and out_dir."""
-    train_state, holdout_state = segment.head(FIRST_PERIOD_SAMPLES), process(load_run(resolve_run("two"))).head(FIRST_PERIOD_SAMPLES)
-    offset = JointOffset("q3")
+    train_state, holdout_state = segment.head(FIRST_PERIOD_SAMPLES), process(load_run(resolve_run("two"), PSM)).head(FIRST_PERIOD_SAMPLES)
+    offset = JointOffset(arm.model, "q3")
 
     def simulate(config, state):  # stand-in for the DART replay
         return config_effort_by_formula(arm, config, state.q, state.dq, state.ddq)
@@ -420,7 +422,7 @@ SESSION_NOISE_FRACTION = 0.1
 
 def _session_noise(arm, state, noise_rms, seed):
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape))
+    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape), arm.model.processing.cutoff_parameter_hz)
     return noise / rms(noise) * SESSION_NOISE_FRACTION * np.asarray(noise_rms)
 
 
@@ -488,8 +490,8 @@ def test_session_floor_splits_the_gap(arm, segment, noise_rms):
     estimated from them bounds what the fixed effects leave."""
     drift = np.zeros_like(segment.tau)
     drift[:, 1] = 0.05 * np.sin(np.linspace(0.0, 3.0, len(segment)))
-    a = synthesize_measurement(arm, segment, [(JointFriction("q2"), np.array([0.15, 0.2]))], noise_rms, seed=21)
-    b = synthesize_measurement(arm, segment, [(JointFriction("q2"), np.array([0.15, 0.2]))], noise_rms, seed=22, extra_effort=drift)
+    a = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=21)
+    b = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=22, extra_effort=drift)
     result = diagnose(a, arm=arm, figures=False, max_effects=2, repeat=b, profile_payload_mass=False)
     floor = np.asarray(result["session_floor"])
     expected = rms(drift + 0.0)[1]
@@ -540,7 +542,7 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
     position = np.linalg.solve(T, np.r_[point_base, 1.0])[:3]
     mass = 0.2
     baseline = prepare_run(synthesize_measurement(arm, segment, [], noise_rms, seed=41), arm, name="no_weight")
-    injected = [(PointPayload(arm.model, key), np.r_[mass, position]), (JointOffset("q2"), np.array([0.1]))]
+    injected = [(PointPayload(arm.model, key), np.r_[mass, position]), (JointOffset(arm.model, "q2"), np.array([0.1]))]
     weighted = prepare_run(synthesize_measurement(arm, segment, injected, noise_rms, seed=42), arm, name="weighted")
     result = diagnose(weighted, baseline=baseline, arm=arm, figures=False)
     payload = result["payload"]
@@ -562,7 +564,7 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     result = {"gap_before": {"train": [0.3, 0.3, 0.6], "holdout": [0.33, 0.32, 0.65]},
               "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]}, "effects": [friction],
               "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05],
-              "gap_split": {"runs": "holdout", "joints": split}}
+              "gap_split": {"runs": "holdout", "joints": split}, "units": ["N·m", "N·m", "N", "N·m", "N·m", "N·m", "N·m"]}
     sentence = answer_sentence(result)
     assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
     assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence

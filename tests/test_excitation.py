@@ -11,8 +11,8 @@ from rosbags.highlevel import AnyReader
 
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.model.description import load_model
 from dvrk_dart.runs.excitation import fourier_basis
+from arms import PSM
 
 #: a 6-harmonic series reproduces the measured positions to this (rad, m) on the
 #: arm and wrist joints: the tracking error and noise of the recording, ~1e-3
@@ -38,15 +38,15 @@ def test_excitation_two(tmp_path, capsys):
     assert max(source["fit_rms_position"][:6]) < FIT_POSITION_RMS
     assert source["fit_rms_position"][6] < FIT_JAW_RMS
     csv = pd.read_csv(out / "two.csv")
-    assert list(csv.columns) == ["time", *load_model().dvrk_topics.joint_names]
+    assert list(csv.columns) == ["time", *PSM.dvrk_topics.joint_names]
     assert len(csv) == 5999 and csv.time.iloc[1] == pytest.approx(0.005)
     # the trajectory follows the measured run (in the dVRK's joints)
-    measured = load_model().motor_map.positions_to_dvrk(load_run(resolve_run("two")).q)
-    rms = np.sqrt(np.mean((csv[list(load_model().dvrk_topics.joint_names)].to_numpy() - measured) ** 2, axis=0))
+    measured = PSM.motor_map.positions_to_dvrk(load_run(resolve_run("two"), PSM).q)
+    rms = np.sqrt(np.mean((csv[list(PSM.dvrk_topics.joint_names)].to_numpy() - measured) ** 2, axis=0))
     assert rms[:6].max() < FIT_POSITION_RMS
     # within the limits it was checked against
-    limits = load_model().dvrk_velocity_limits
-    assert all(summary["max_speed"][n] <= limit for n, limit in zip(load_model().dvrk_topics.joint_names, limits))
+    limits = PSM.dvrk_velocity_limits
+    assert all(summary["max_speed"][n] <= limit for n, limit in zip(PSM.dvrk_topics.joint_names, limits))
     # the bag: servo_jp commands (positions only) with the same values
     with AnyReader([out / "two_servo_jp"]) as reader:
         assert set(reader.topics) == {"/PSM1/servo_jp", "/PSM1/jaw/servo_jp"}
@@ -54,9 +54,9 @@ def test_excitation_two(tmp_path, capsys):
         positions = []
         for connection, _, raw in reader.messages(connections=arm):
             msg = reader.deserialize(raw, connection.msgtype)
-            assert tuple(msg.name) == load_model().dvrk_topics.arm_joints and len(msg.velocity) == 0
+            assert tuple(msg.name) == PSM.dvrk_topics.arm_joints and len(msg.velocity) == 0
             positions.append(msg.position)
-    np.testing.assert_allclose(np.array(positions), csv[list(load_model().dvrk_topics.arm_joints)].to_numpy(), atol=1e-12)
+    np.testing.assert_allclose(np.array(positions), csv[list(PSM.dvrk_topics.arm_joints)].to_numpy(), atol=1e-12)
 
 
 def _scenario(tmp_path, name, start_pose, path_table, duration_s=0.2):

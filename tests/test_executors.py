@@ -8,6 +8,7 @@ import pytest
 from dvrk_dart.runs.campaign import config_name, run_campaign
 from dvrk_dart.runs.config import RunConfig
 from dvrk_dart.runs.executors import run_tasks
+from arms import PSM, PSM_ARM  # noqa: F401
 
 #: fields that measure the machine, not the run
 TIMING_FIELDS = {"wall_time_s", "realtime_factor"}
@@ -55,12 +56,11 @@ def test_the_diagnosis_replays_in_a_batch_give_the_replays_one_by_one():
     from dvrk_dart.diagnosis.fit.batch import BatchSimulate
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.replay import simulate_efforts
     from dvrk_dart.sim.config import SimConfig
 
-    arm = load_arm()
-    state = process(load_run(resolve_run("two"))).head(500)  # 2.5 s
+    arm = PSM_ARM
+    state = process(load_run(resolve_run("two"), PSM)).head(500)  # 2.5 s
     configs = [SimConfig(), SimConfig(friction=True, offsets=True)]
     batch = BatchSimulate(arm, "local", jobs=2)
     batch.prefetch([(c, state) for c in configs])
@@ -93,10 +93,9 @@ def test_replayed_residuals_come_back_in_the_tasks_order():
     from dvrk_dart.diagnosis.fit.batch import replayed_residuals
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
-    from dvrk_dart.io.arm import load_arm
     from dvrk_dart.sim.config import SimConfig
 
-    arm, state = load_arm(), process(load_run(resolve_run("two")))
+    arm, state = PSM_ARM, process(load_run(resolve_run("two"), PSM))
     lengths = [3000, 100]  # 15 s, then 0.5 s
     residuals = replayed_residuals([(arm, SimConfig(), state.head(n)) for n in lengths], "local", jobs=2)
     assert [len(r) for r in residuals] == lengths

@@ -8,7 +8,7 @@ import pytest
 from dvrk_dart.model.force import estimate_force, point_positions, positional_jacobian
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.io.arm import load_arm
+from arms import PSM, PSM_ARM  # noqa: F401
 
 #: measured independently (the issue): the published model's periodic residual on
 #: held-out "two" at the wrist centre, every sample: 1.10 N RMS, per axis 0.63 / 0.81 / 0.38 N
@@ -17,12 +17,12 @@ PUBLISHED_PHANTOM_N = 1.10
 
 @pytest.fixture(scope="module")
 def arm():
-    return load_arm()
+    return PSM_ARM
 
 
 def test_the_jacobian_moves_the_point_as_the_joints_do(arm):
     """J dq against the point's displacement over a small step, on the run's own states."""
-    run = load_run(resolve_run("two"))
+    run = load_run(resolve_run("two"), PSM)
     q, dq = run.q[::50], run.dq[::50]
     point = arm.model.force_point
     J = positional_jacobian(arm.model, q, point)
@@ -34,7 +34,7 @@ def test_the_jacobian_moves_the_point_as_the_joints_do(arm):
 
 def test_a_force_is_recovered_from_the_efforts_it_causes(arm):
     """tau = J^T F at the run's states: the estimate gives F back where the levers allow, NaN where not."""
-    run = load_run(resolve_run("two"))
+    run = load_run(resolve_run("two"), PSM)
     q = run.q[::20]
     J = positional_jacobian(arm.model, q, arm.model.force_point)
     force = np.random.default_rng(0).normal(0.0, 2.0, (len(q), 3))
@@ -77,7 +77,7 @@ def test_a_contact_in_dart_is_estimated_from_the_simulated_efforts(arm):
     from dvrk_dart.runs.contact import contact_check, simulate_contact, surface_under
     from dvrk_dart.sim.config import SimConfig
 
-    state = process(load_run(resolve_run("two")), "upstream")
+    state = process(load_run(resolve_run("two"), PSM), "upstream")
     run = simulate_contact(arm, state, surface_under(arm, state, 0.01), 8.0)
     check = contact_check(arm, run, config_effort_by_formula(arm, SimConfig(), run.q, run.dq, run.ddq))
     assert check["in_contact_fraction"] > 0.01 and np.abs(run.contact_force).max() > 1.0

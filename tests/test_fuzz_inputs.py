@@ -15,15 +15,15 @@ from hypothesis import strategies as st
 
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
-from dvrk_dart.io.arm import load_arm
 from dvrk_dart.runs.scenarios import SCENARIOS_DIR
+from arms import PSM_ARM
 
 #: few examples each: the three properties together stay well under a minute
 FUZZ = settings(max_examples=50, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 GOOD_ROWS = np.loadtxt(resolve_run("two"), delimiter=",")[:450]
-GOOD_PARAMS = json.loads(resolve(load_arm().model.default_parameters).read_text())
+GOOD_PARAMS = json.loads(resolve(PSM_ARM.model.default_parameters).read_text())
 GOOD_SCENARIO = (SCENARIOS_DIR / "spiral.toml").read_text()
 
 junk_values = st.one_of(st.sampled_from(["nan", "inf", "-inf", "", "abc", "1e999", "0x10", "--1", "1,2"]),

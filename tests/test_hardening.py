@@ -20,7 +20,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
 from dvrk_dart.io.signal import MIN_ROWS
-from dvrk_dart.io.arm import load_arm
+from arms import PSM_ARM
 
 
 def tree_digest(folder: Path) -> dict[str, str]:
@@ -206,7 +206,7 @@ def test_an_impossible_duration_is_a_one_line_error(tmp_path, capsys, duration):
 
 
 def edited_params(tmp_path: Path, edit) -> Path:
-    raw = json.loads(resolve(load_arm().model.default_parameters).read_text())
+    raw = json.loads(resolve(PSM_ARM.model.default_parameters).read_text())
     edit(raw)
     path = tmp_path / "params.json"
     path.write_text(json.dumps(raw))
@@ -310,9 +310,8 @@ def test_divergence_values_show_enough_digits(tmp_path, capsys):
 def _covariance_file(tmp_path: Path, damage: str) -> Path:
     from dvrk_dart.identification.outputs import COVARIANCE_FORMAT
     from dvrk_dart.identification.regressor import parameter_layout, standard_vector
-    from dvrk_dart.io.arm import load_arm
 
-    arm = load_arm()
+    arm = PSM_ARM
     layout = parameter_layout(arm.model)
     n = len(layout)
     covariance = np.diag(np.full(n, 1e-6))
@@ -350,9 +349,8 @@ def test_a_covariance_that_is_no_covariance_is_refused(tmp_path, capsys, damage,
 def test_a_large_relative_std_draws_real_bodies(tmp_path, capsys):
     """The help allows (0, 1): 0.99 draws bodies, projected where they must be, no traceback."""
     from dvrk_dart.identification.sampling import sample_parameters
-    from dvrk_dart.io.arm import load_arm
 
-    drawn = sample_parameters(load_arm(), 8, seed=2, relative_std=0.99)
+    drawn = sample_parameters(PSM_ARM, 8, seed=2, relative_std=0.99)
     assert len(drawn.samples) == 8 and drawn.projected_bodies >= 0
 
 

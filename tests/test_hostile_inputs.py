@@ -13,6 +13,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.io.reference_data import resolve, resolve_run
 from dvrk_dart.paths import PIPELINES_DIR
+from arms import PSM
 
 SCENARIOS = PIPELINES_DIR / "scenarios"
 
@@ -173,7 +174,7 @@ def test_a_late_baseline_is_aligned_on_the_best_shift(arm):
     from dvrk_dart.io.reference_data import load_run
     from dvrk_dart.io.signal import process
 
-    run = process(load_run(resolve_run("one-no-weight")))
+    run = process(load_run(resolve_run("one-no-weight"), PSM))
     late = run.window(499, len(run) - 499)
     assert motion_offset(run, late) == -499
 

@@ -35,6 +35,7 @@ from dvrk_dart.io.signal import process
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import load_parameters
 from dvrk_dart.model.pseudo_inertia import pseudo_inertia
+from arms import PSM, PSM_ARM  # noqa: F401
 
 #: relative errors on "two", first period, of the published parameters (data README)
 PUBLISHED = np.array([0.0929, 0.1783, 0.1907, 0.1345, 0.2394, 0.2125, 0.2642])
@@ -169,7 +170,7 @@ def test_inconsistent_runs_are_refused(tmp_path, capsys):
     # runs of different rates go together: each is processed at its own
     from dvrk_dart.identification.identify import RunData
 
-    a = process(load_run(resolve_run("two")))
+    a = process(load_run(resolve_run("two"), PSM))
     b = type(a)(a.t * 2.0, a.q, a.dq, a.ddq, a.tau)
     check_consistent_runs([RunData("a", tmp_path / "a.csv", a, None), RunData("b", tmp_path / "b.csv", b, None)])
 
@@ -252,11 +253,10 @@ def test_periodic_identification_on_the_held_out_run(periodic_result):
     1-4 % worse: its friction reverses over about 0.1 mm (the pre-sliding law,
     chosen on "one"), which a model of the instantaneous velocity cannot follow."""
     result = periodic_result
-    from dvrk_dart.io.arm import load_arm
 
     own = np.array(result.errors(result.holdout[0])["rms"][:3])
     run = result.holdout[0].processed
-    published = load_arm().identified.predict(run.q, run.dq, run.ddq)
+    published = PSM_ARM.identified.predict(run.q, run.dq, run.ddq)
     theirs = np.sqrt(np.mean((run.in_band(published) - run.tau) ** 2, axis=0))[:3]
     assert np.all(own <= theirs), (own, theirs)
     assert own[0] < 0.8 * theirs[0] and own[1] < 0.9 * theirs[1], (own, theirs)  # measured 0.55x, 0.81x
@@ -290,7 +290,7 @@ def _simulated_periodic_run(path, truth_Y_theta, positions, t, noise_std, rng):
     values = np.hstack([positions[0], positions[1], truth_Y_theta + rng.normal(size=truth_Y_theta.shape) * noise_std])
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", t)
-    return MeasuredRun(path, data)
+    return MeasuredRun(path, data, PSM)
 
 
 def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_result, tmp_path):

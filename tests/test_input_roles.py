@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import distinct_inputs, resolve_run
+from arms import PSM
 
 DIAGNOSE_ROLES = ("--measured", "--baseline", "--repeat", "--holdout", "--train")
 IDENTIFY_ROLES = ("--runs", "--holdout")
@@ -43,7 +44,7 @@ def test_one_recording_in_two_roles_is_refused_whatever_its_names(tmp_path_facto
     else:
         shutil.copy(source, second)
     with pytest.raises(DvrkDartError, match="the same recording as"):
-        distinct_inputs([(roles[0], str(first)), (roles[1], str(second))])
+        distinct_inputs([(roles[0], str(first)), (roles[1], str(second))], PSM)
 
 
 @pytest.mark.parametrize("argv", [

@@ -20,6 +20,7 @@ from dvrk_dart.io.mcap_log import read_mcap, write_mcap
 from dvrk_dart.io.rerun_log import write_rrd
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.io.record import RunRecord
+from arms import PSM
 
 N_SAMPLES = 500
 BODIES = ("yaw", "pitch_back", "pitch_front", "insertion_carriage", "counterweight", "tool_roll")
@@ -117,7 +118,7 @@ def assert_same_record(back: RunRecord, record: RunRecord) -> None:
 def test_mcap_round_trip(tmp_path: Path, make) -> None:
     record = make()
     path = tmp_path / "run.mcap"
-    write_mcap(record, path)
+    write_mcap(record, path, PSM)
     assert_same_record(read_mcap(path), record)
     assert [p.name for p in tmp_path.iterdir()] == ["run.mcap"]  # no temporary left behind
 
@@ -126,7 +127,7 @@ def test_mcap_channels_counts_and_values(tmp_path: Path) -> None:
     """Read with the plain mcap reader, as Foxglove or another tool would."""
     record = full_record()
     path = tmp_path / "run.mcap"
-    write_mcap(record, path)
+    write_mcap(record, path, PSM)
     with open(path, "rb") as stream:
         reader = make_reader(stream)
         summary = reader.get_summary()
@@ -175,7 +176,7 @@ def test_nan_is_valid_json(tmp_path: Path) -> None:
     """Foxglove parses JSON strictly: a NaN must be written as null."""
     record = full_record()
     path = tmp_path / "run.mcap"
-    write_mcap(record, path)
+    write_mcap(record, path, PSM)
     with open(path, "rb") as stream:
         for _, _, message in make_reader(stream).iter_messages(topics=[log_mcap.TOPIC_MEASURED]):
             json.loads(message.data, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
@@ -197,7 +198,7 @@ def test_interrupted_mcap_write_leaves_no_file(tmp_path: Path, monkeypatch, exis
 
     monkeypatch.setattr(mcap_bulk._File, "chunk", failing_chunk)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        write_mcap(full_record(), path)
+        write_mcap(full_record(), path, PSM)
     assert [p.name for p in tmp_path.iterdir()] == (["run.mcap"] if existing else [])
     if existing:
         assert path.read_bytes() == b"previous run"
@@ -207,7 +208,7 @@ def test_model_total_is_reserved(tmp_path: Path) -> None:
     record = minimal_record()
     record.effort_model = {"total": np.zeros_like(record.q)}
     with pytest.raises(Exception, match="total"):
-        write_mcap(record, tmp_path / "run.mcap")
+        write_mcap(record, tmp_path / "run.mcap", PSM)
     assert not list(tmp_path.iterdir())
 
 
@@ -219,7 +220,7 @@ def _rerun_cli() -> str | None:
 @pytest.mark.parametrize("make", [full_record, minimal_record], ids=["full", "minimal"])
 def test_rrd_written_and_loadable(tmp_path: Path, make) -> None:
     path = tmp_path / "run.rrd"
-    write_rrd(make(), path)
+    write_rrd(make(), path, PSM)
     assert [p.name for p in tmp_path.iterdir()] == ["run.rrd"]
     assert path.stat().st_size > 20_000
     cli = _rerun_cli()
@@ -231,10 +232,9 @@ def test_rrd_written_and_loadable(tmp_path: Path, make) -> None:
 
 def test_rrd_with_model_tree(tmp_path: Path) -> None:
     """With the PSM model, links are drawn as the model's tree (the real link names)."""
-    from dvrk_dart.model.description import load_model
 
     path = tmp_path / "run.rrd"
-    write_rrd(full_record(), path, model=load_model())
+    write_rrd(full_record(), path, PSM)
     assert path.stat().st_size > 20_000
 
 
@@ -246,5 +246,5 @@ def test_interrupted_rrd_write_leaves_no_file(tmp_path: Path, monkeypatch) -> No
 
     monkeypatch.setattr(log_rerun, "_log_joint_series", crash)
     with pytest.raises(RuntimeError, match="simulated crash"):
-        write_rrd(full_record(), tmp_path / "run.rrd")
+        write_rrd(full_record(), tmp_path / "run.rrd", PSM)
     assert not list(tmp_path.iterdir())

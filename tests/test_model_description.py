@@ -9,6 +9,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
 from dvrk_dart.model.description import load_model
 from dvrk_dart.model.parameters import load_parameters
+from arms import PSM
 
 
 def test_every_link_has_a_group_and_the_tree_is_ordered(arm):
@@ -99,7 +100,7 @@ def test_malformed_model_file(tmp_path):
 
 
 def test_sessions_name_known_joints(tmp_path):
-    model = load_model()
+    model = PSM
     assert model.session_offset_joints == ("q2", "q3", "q4")  # J1's constant does not move between sessions
     bad = tmp_path / "psm.toml"
     bad.write_text(model.source.read_text().replace('offset_joints = ["q2", "q3", "q4"]', 'offset_joints = ["q2", "yaw"]'))

@@ -12,6 +12,7 @@ from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import analyse, harmonic_design
 from dvrk_dart.io.reference_data import load_run, resolve_run
+from arms import PSM
 
 RATE_HZ = 200.0
 
@@ -24,7 +25,7 @@ def cli_json(capsys, *args) -> dict:
 
 @pytest.fixture(scope="module")
 def two():
-    return load_run(resolve_run("two"))
+    return load_run(resolve_run("two"), PSM)
 
 
 @pytest.fixture(scope="module")

@@ -15,10 +15,10 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from dvrk_dart.io.periodic import analyse, harmonic_design
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
-from dvrk_dart.io.arm import load_arm
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.runs.replay import simulate_efforts
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
+from arms import PSM_ARM
 
 #: per-sample noise of the reference runs (io/periodic.py's measured levels on "one"/"two")
 EFFORT_NOISE = np.array([0.02, 0.026, 0.19, 6e-4, 7e-4, 1e-3, 9e-4])
@@ -33,7 +33,7 @@ SWING = 0.35
 
 @pytest.fixture(scope="module")
 def arm():
-    return load_arm()
+    return PSM_ARM
 
 
 @st.composite

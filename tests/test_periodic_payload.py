@@ -25,6 +25,7 @@ from dvrk_dart.diagnosis.payload.periodic_payload import (
 )
 from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing, prepare_run, run_features
 from dvrk_dart.model.joints import N_JOINTS
+from arms import PSM
 
 #: simulated pairs per placement: the coverage's binomial standard deviation is 1.5 %
 DRAWS = 400
@@ -39,7 +40,7 @@ HAND_PLACEMENTS = {  # pipelines/withheld.toml's hand measurements (the 105 g ru
 @pytest.fixture(scope="module")
 def pairs(arm):
     """The real 105 g run and the --repeat run, each minus the no-weight baseline, on the harmonics."""
-    processing = choose_processing(["one-105g", "one-no-weight", "one"], "periodic")
+    processing = choose_processing(["one-105g", "one-no-weight", "one"], "periodic", PSM)
     baseline = prepare_run("one-no-weight", arm, processing=processing)
     runs = {name: prepare_run(name, arm, baseline=baseline, processing=processing) for name in ("one-105g", "one")}
     # the half-speed run has no baseline of its own motion: its state (its own period, the same cutoff), noise and features only

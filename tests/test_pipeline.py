@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from dvrk_dart.analysis.tables import load_checks
-from dvrk_dart.io.arm import load_arm
 from dvrk_dart.io.mcap_log import read_mcap
 from dvrk_dart.runs.config import RunConfig
 from dvrk_dart.runs.runner import run
+from arms import PSM_ARM
 
 #: the thresholds are the validation's own (pipelines/checks.toml)
 THRESHOLDS = {check["id"]: check["threshold"] for check in load_checks()}
@@ -74,7 +74,7 @@ def test_torque_mode_error_decays(runs, scenario):
     error = np.linalg.norm(record.tool_pose_ref[:, :3] - record.tool_pose[:, :3], axis=1)
     # exponential decay: after its peak the error stays under the envelope of
     # the closed loop's slow pole (s^2 + Kd s + Kp = 0) down to the tolerance
-    gains = load_arm().model.controller_gains
+    gains = PSM_ARM.model.controller_gains
     slow_pole = (gains["torque_kd"] - np.sqrt(gains["torque_kd"] ** 2 - 4 * gains["torque_kp"])) / 2  # 20 1/s
     peak = int(np.argmax(error))
     t = record.t[peak:] - record.t[peak]

@@ -13,12 +13,13 @@ from dvrk_dart.diagnosis.beyond.pitch_load import fit_pitch_loads
 from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing, loaded_states
 from dvrk_dart.identification.regressor import FrictionLaw, Regressor
 from dvrk_dart.metrics import rms
+from arms import PSM
 
 
 @pytest.fixture(scope="module")
 def states():
     names = ["one", "two", "one-no-weight"]
-    return dict(zip(names, loaded_states(names, choose_processing(names, "periodic"))))
+    return dict(zip(names, loaded_states(names, PSM, choose_processing(names, "periodic", PSM))))
 
 
 @pytest.fixture(scope="module")

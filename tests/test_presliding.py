@@ -8,6 +8,7 @@ import pytest
 
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.friction import PreslidingState, reversal
+from arms import PSM
 
 
 def test_zero_distance_is_the_sign_law():
@@ -85,7 +86,7 @@ def test_friction_along_the_range_is_simulated_as_the_regressor_says(arm):
     from dvrk_dart.io.signal import process
     from dvrk_dart.sim.config import SimConfig
 
-    state = process(load_run(resolve_run("two"))).head(800)
+    state = process(load_run(resolve_run("two"), PSM)).head(800)
     effect, p = PositionFriction(arm.model, "q2", 0.01), np.array([0.05, 0.30, 0.10, 0.20, 0.0])
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
     injected = effect.effort(TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz()), p)

@@ -11,6 +11,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import SHARED_ROOT, load_run, resolve_run
+from arms import PSM
 
 DATA_2018 = SHARED_ROOT / "wpi-2018"
 TEST1, TEST2 = DATA_2018 / "psm1_fourier_test1.csv", DATA_2018 / "psm1_fourier_test2.csv"
@@ -45,7 +46,7 @@ def test_the_start_transients_of_the_2018_runs_are_left_out():
     from dvrk_dart.io.signal import process_periodic
 
     for path, period_s in ((TEST1, 10.0), (TEST2, 1 / 0.13)):
-        analysis = process_periodic(load_run(path)).periodic
+        analysis = process_periodic(load_run(path, PSM)).periodic
         start, stop = analysis.kept
         assert 0 < start <= 0.25 * period_s * 200 and stop == 5990, (path.name, analysis.kept)
         assert analysis.effort_noise.per_sample_rms[1] < 0.05, analysis.effort_noise.per_sample_rms[:3]
@@ -78,10 +79,10 @@ def _write_header_csv(path: Path, run, columns: list[str], t: bool = True) -> Pa
 def test_a_header_names_any_subset_of_joints(tmp_path):
     """q1, q2 with their velocities and efforts, a time column at 100 Hz: the
     file's own rate, the rest not measured (zeros, no say)."""
-    two = load_run(resolve_run("two"))
-    half = type(two)(two.path, two.data.iloc[::2].reset_index(drop=True))  # every other row: 100 Hz
+    two = load_run(resolve_run("two"), PSM)
+    half = type(two)(two.path, two.data.iloc[::2].reset_index(drop=True), PSM)  # every other row: 100 Hz
     path = _write_header_csv(tmp_path / "two_q1q2.csv", half, ["q1", "q2", "dq1", "dq2", "tau1", "tau2"])
-    run = load_run(path)
+    run = load_run(path, PSM)
     assert run.measured == ("q1", "q2") and abs(run.rate_hz - 100.0) < 1e-6
     assert np.allclose(run.q[:, :2], half.q[:, :2]) and not run.q[:, 2:].any() and not run.tau[:, 2:].any()
 
@@ -90,10 +91,9 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
     """position.<joint>/velocity.<joint>/effort.<joint>: the dVRK's coordinates, mapped to the model's."""
     import pandas as pd
 
-    from dvrk_dart.model.description import load_model
 
-    one = load_run(resolve_run("one"))
-    model = load_model()
+    one = load_run(resolve_run("one"), PSM)
+    model = PSM
     names = model.dvrk_topics.joint_names
     motor = model.motor_map
     columns = {"time": one.t}
@@ -102,7 +102,7 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
         columns.update({f"{field}.{name}": values[:, j] for j, name in enumerate(names)})
     path = tmp_path / "one_dvrk.csv"
     pd.DataFrame(columns).to_csv(path, index=False)
-    run = load_run(path)
+    run = load_run(path, PSM)
     assert np.allclose(run.q, one.q, atol=1e-9) and np.allclose(run.tau, one.tau, atol=1e-9)
 
 
@@ -117,11 +117,11 @@ def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
     path = tmp_path / "bad.csv"
     path.write_text(header + "\n" + rows + "\n")
     with pytest.raises(DvrkDartError, match=words):
-        load_run(path)
+        load_run(path, PSM)
 
 
 def test_an_uneven_time_column_is_refused(tmp_path):
-    two = load_run(resolve_run("two"))
+    two = load_run(resolve_run("two"), PSM)
     path = _write_header_csv(tmp_path / "uneven.csv", two, ["q1", "dq1", "tau1"])
     text = path.read_text().splitlines()
     fields = text[300].split(",")
@@ -129,7 +129,7 @@ def test_an_uneven_time_column_is_refused(tmp_path):
     text[300] = ",".join(fields)
     path.write_text("\n".join(text) + "\n")
     with pytest.raises(DvrkDartError, match="time column, row"):
-        load_run(path)
+        load_run(path, PSM)
 
 
 @needs_2018
@@ -159,14 +159,14 @@ def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
 @needs_2018
 def test_a_three_joint_log_of_an_arm_that_couples_them_is_refused(tmp_path):
     """The MTM's q2..q4 mix in the dVRK's values: joints 1..3 alone cannot be put in its coordinates."""
-    from dvrk_dart.model.description import resolve_arm_model, using_model
+    from arms import MTM
 
-    with using_model(resolve_arm_model("mtm")), pytest.raises(DvrkDartError, match="couples q2, q3, q4"):
-        load_run(TEST1)
+    with pytest.raises(DvrkDartError, match="couples q2, q3, q4"):
+        load_run(TEST1, MTM)
 
 
 def test_rate_and_a_time_column_must_agree(tmp_path, capsys):
-    two = load_run(resolve_run("two"))
+    two = load_run(resolve_run("two"), PSM)
     path = _write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
     assert main(["model-errors", "--measured", str(path), "--rate", "100"]) == 2
     err = capsys.readouterr().err.strip()

@@ -11,10 +11,11 @@ import pytest
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io import reference_data
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run
+from arms import PSM
 
 
 def test_loader_returns_named_typed_columns():
-    run = load_run(resolve_run("two"))
+    run = load_run(resolve_run("two"), PSM)
     assert list(run.data.columns[:3]) == ["t", "q1", "q2"] and run.data.columns[-1] == "tau7"
     assert run.data.shape == (5999, 22)
     assert all(dtype == np.float64 for dtype in run.data.dtypes)

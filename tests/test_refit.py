@@ -9,15 +9,16 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, refit_check
 from dvrk_dart.identification.outputs import PARAMS_FILE
-from dvrk_dart.io.arm import load_arm
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
+from arms import PSM, PSM_ARM  # noqa: F401
 
 
 @pytest.fixture(scope="module")
 def refit(tmp_path_factory):
     out = tmp_path_factory.mktemp("refit")
     diagnosis = {"processing": {"processing": "periodic", "harmonics": None}, "session_floor": None, "holdout_runs": ["two"]}
-    return refit_check(load_arm(), ["one"], ["two"], diagnosis, out), out
+    return refit_check(PSM_ARM, ["one"], ["two"], diagnosis, out), out
 
 
 def test_the_refit_removes_most_of_j1s_held_out_gap(refit):
@@ -34,7 +35,7 @@ def test_the_refit_removes_most_of_j1s_held_out_gap(refit):
 def test_the_refit_is_written_and_readable(refit):
     result, out = refit
     path = out / REFIT_FOLDER / PARAMS_FILE
-    load_parameters(path, load_arm().model)  # a params.json every --params reader accepts
+    load_parameters(path, PSM_ARM.model)  # a params.json every --params reader accepts
     assert result["params"]["path"] == f"{REFIT_FOLDER}/{PARAMS_FILE}"
     assert json.loads((out / REFIT_FOLDER / "identification.json").read_text())["processing"]["processing"] == "periodic"
     assert "q1" in result["words"] and result["repeatable_gap_removed_share"] is None  # no --repeat: no floor
@@ -57,7 +58,8 @@ def test_the_answer_names_the_joints_whose_gap_the_refit_halves(refit):
     from dvrk_dart.diagnosis.output.page import _refit_clause
 
     result, _ = refit
-    clause = _refit_clause({"refit": result})
+    units = [PSM.effort_unit(j) for j in JOINT_NAMES]
+    clause = _refit_clause({"refit": result, "units": units})
     assert "q1" in clause and "q3" not in clause
-    flat = {"refit": {**result, "gap_holdout_refit": result["gap_holdout_arm_params"]}}
+    flat = {"refit": {**result, "gap_holdout_refit": result["gap_holdout_arm_params"]}, "units": units}
     assert "does not halve" in _refit_clause(flat)

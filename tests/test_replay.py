@@ -18,6 +18,7 @@ from dvrk_dart.model.joints import INSERTION
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.runs.replay import replay, simulate_efforts
 from dvrk_dart.sim.config import SimConfig, simulated_terms
+from arms import PSM
 
 #: the shorter variants (off, pid) replay the first seconds only
 SHORT_S = 8.0
@@ -28,12 +29,12 @@ THRESHOLDS = {check["id"]: check["threshold"] for check in load_checks()}
 @pytest.fixture(scope="module")
 def with_cw():
     """The whole processed run (27.99 s of the 30 s recording) with the ideal tendon."""
-    return replay("two", config=SimConfig(counterweight="on"))
+    return replay("two", PSM, config=SimConfig(counterweight="on"))
 
 
 @pytest.fixture(scope="module")
 def without_cw():
-    return replay("two", config=SimConfig(counterweight="off"), duration_s=SHORT_S)
+    return replay("two", PSM, config=SimConfig(counterweight="off"), duration_s=SHORT_S)
 
 
 def test_closed_chain_holds_over_the_whole_replay(with_cw):
@@ -91,7 +92,7 @@ def test_removing_the_counterweight_removes_exactly_its_own_terms(model, params,
 
 
 def test_pid_mirror_shows_the_transient_j3_discrepancy(with_cw):
-    pid = replay("two", config=SimConfig(counterweight="pid"), duration_s=SHORT_S)
+    pid = replay("two", PSM, config=SimConfig(counterweight="pid"), duration_s=SHORT_S)
     rms_pid = np.array(pid.metrics["rms_sim_vs_model"])
     rms_ideal = np.array(with_cw.metrics["rms_sim_vs_model"])
     assert rms_pid[INSERTION] > 100 * rms_ideal[INSERTION]  # the mirror's lag is visible
@@ -101,7 +102,7 @@ def test_pid_mirror_shows_the_transient_j3_discrepancy(with_cw):
 
 def test_identified_friction_spring_and_motor_inertia_as_physics(params):
     config = SimConfig(friction=True, offsets=True, spring=True, motor_inertia=True)
-    record = replay("two", config=config, duration_s=3.0, log_every=1)
+    record = replay("two", PSM, config=config, duration_s=3.0, log_every=1)
     assert record.metrics["model_terms_compared"] == ["inertia", "coriolis", "gravity", "friction", "offset", "spring", "motor_inertia"]
     error = record.effort_sim - record.model_total(simulated_terms(config))
     # Coulomb friction is set-valued at zero velocity: in the step where a joint
@@ -121,7 +122,7 @@ def test_efforts_are_read_at_their_samples(arm):
     inertial effort's lag inertia x jerk x dt/2 when the servo aims at the next
     sample's velocity) and without a start-up transient (0.14-0.25 N·m on the
     first sample when the position feedback aims a step ahead)."""
-    processed = process(load_run(resolve_run("two")), "periodic")
+    processed = process(load_run(resolve_run("two"), PSM), "periodic")
     config = SimConfig()
     simulated = simulate_efforts(arm, config, processed)
     model = arm.identified.predict(processed.q, processed.dq, processed.ddq, simulated_terms(config))
@@ -133,7 +134,7 @@ def test_efforts_are_read_at_their_samples(arm):
 
 
 def test_kinematic_replay_follows_the_measured_pose():
-    record = replay("two", mode="kinematic", duration_s=1.0)
+    record = replay("two", PSM, mode="kinematic", duration_s=1.0)
     assert record.metrics["closure_residual_max_m"] < 1e-12
     assert np.max(np.abs(record.q - record.q_measured)) < 1e-3
 

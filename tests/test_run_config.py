@@ -10,9 +10,9 @@ from dvrk_dart.analysis.tables import load_checks
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.io.arm import load_arm
 from dvrk_dart.runs.config import RunConfig, sim_config_for
 from dvrk_dart.runs.runner import run
+from arms import PSM_ARM
 
 THRESHOLDS = {check["id"]: check["threshold"] for check in load_checks()}
 SHORT_S = 3.0
@@ -20,7 +20,7 @@ SHORT_S = 3.0
 
 def heavier_pitch_link(tmp_path, factor: float = 1.5):
     """params.json with the pitch link's mass scaled (the issue's heavy.json)."""
-    arm = load_arm()
+    arm = PSM_ARM
     raw = json.loads(resolve(arm.model.default_parameters).read_text())
     key = str(arm.model.link_by_name("pitch").key)
     raw[key]["m"] *= factor

@@ -5,6 +5,7 @@ import pytest
 
 from dvrk_dart.diagnosis.output.page import answer_sentence
 from dvrk_dart.diagnosis.output.wording import explanation, words_for
+from arms import PSM
 
 JOINTS = ["q1", "q2", "q3", "q4", "q5", "q6", "q7"]
 
@@ -20,7 +21,7 @@ def _result(before, after, selected_joints):
     gap_after = {"train": after + [0.01] * 4, "holdout": None}
     entries = [{"name": "friction_q2", "kind": "friction", "joints": selected_joints, "selected": True}]
     return {"gap_before": gap_before, "gap_after": gap_after, "selection": {"selected": ["friction_q2"]}, "effects": entries,
-            "explanation": explanation(gap_before, gap_after, JOINTS, entries)}
+            "explanation": explanation(gap_before, gap_after, JOINTS, entries), "units": [PSM.effort_unit(j) for j in JOINTS]}
 
 
 def test_only_the_joints_the_effects_act_on_count():

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 
 from dvrk_dart.analysis.tables import LoadedRun, simulated_terms_of  # noqa: E402
 from dvrk_dart.model.identified import TERMS  # noqa: E402
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit  # noqa: E402
+from dvrk_dart.model.joints import JOINT_NAMES  # noqa: E402
 from dvrk_dart.runs.executors import quiet_worker  # noqa: E402
 
 COLORS = {"sim": "tab:red", "model": "tab:blue", "measured": "tab:green", "reference": "black", "command": "tab:purple"}
@@ -49,8 +49,8 @@ class FigureFile:
     runs: tuple[str, ...]
 
 
-def _joint_label(j: int) -> str:
-    return f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})"
+def _joint_label(run: LoadedRun, j: int) -> str:
+    return f"{JOINT_NAMES[j]} ({run.model.effort_unit(JOINT_NAMES[j])})"
 
 
 def _save(fig, path: Path) -> None:
@@ -145,7 +145,7 @@ def efforts_figure(runs: list[LoadedRun], path: Path, with_measured: bool) -> No
                 curves += [record.effort_measured[:, j], full[:, j]]
             ax.plot(record.t, model[:, j], color=COLORS["model"], lw=LINE_WIDTH, label="model (simulated terms)")
             ax.plot(record.t, record.effort_sim[:, j], color=COLORS["sim"], lw=LINE_WIDTH, alpha=0.8, label="simulated")
-            ax.set_ylabel(_joint_label(j))
+            ax.set_ylabel(_joint_label(run, j))
             _robust_ylim(ax, curves)
         axes[0, c].set_title(f"({'abc'[c]}) {VARIANT_LABELS.get(run.counterweight, run.counterweight)}")
         axes[-1, c].set_xlabel("time (s)")
@@ -165,7 +165,7 @@ def torque_figure(runs: list[LoadedRun], path: Path) -> None:
         for r, j in enumerate(ARM_JOINTS):
             if record.effort_command is not None:
                 axes[r, 0].plot(record.t, record.effort_command[:, j], style, color=COLORS["command"], lw=LINE_WIDTH, label=f"commanded, {label}")
-            axes[r, 0].set_ylabel(f"u{j + 1} ({effort_unit(JOINT_NAMES[j])})")
+            axes[r, 0].set_ylabel(f"u{j + 1} ({run.model.effort_unit(JOINT_NAMES[j])})")
             axes[r, 1].plot(record.t, position_error[:, r], style, color=COLORS["sim"], lw=LINE_WIDTH, label=f"error, {label}")
             axes[r, 1].set_ylabel(f"error {'xyz'[r]} (m)")
     axes[0, 0].set_title("(a) commanded efforts")
@@ -190,7 +190,7 @@ def residual_figure(run: LoadedRun, path: Path) -> None:
         ax.plot(record.t, residual_model, color=COLORS["model"], lw=LINE_WIDTH, alpha=0.8, label="measured - model (all terms)")
         _robust_ylim(ax, [residual_sim, residual_model])
         ax.axhline(0.0, color="grey", lw=0.5)
-        ax.set_ylabel(f"residual {_joint_label(j)}")
+        ax.set_ylabel(f"residual {_joint_label(run, j)}")
     axes[0].legend(loc="best", fontsize="small")
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"{run.name}: residual efforts")

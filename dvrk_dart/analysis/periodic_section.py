@@ -28,7 +28,7 @@ from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import process
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 SHOWN_JOINTS = JOINT_NAMES[:3]
 #: the runs of the section: the held-out run, and two sessions of trajectory one
@@ -39,8 +39,8 @@ REPLAY_RUNS = {"upstream": "replay-two_velocity_cw-on_identified", "periodic": "
 
 def periodic_figures(arm: Arm, out_dir: Path) -> dict:
     """The section's numbers (also written to OUT/periodic.json) and its figure."""
-    model = {p: rms(residual(arm, process(load_run(resolve_run(HELD_OUT)), p))).tolist() for p in ("upstream", "periodic")}
-    a, b = processed_pair(SESSIONS, "periodic")
+    model = {p: rms(residual(arm, process(load_run(resolve_run(HELD_OUT), arm.model), p))).tolist() for p in ("upstream", "periodic")}
+    a, b = processed_pair(SESSIONS, "periodic", arm.model)
     floor = floor_table(arm, a, b)
     per_session = np.asarray(floor["rms_difference"]) / math.sqrt(2.0)
     gap = np.asarray(model["periodic"])
@@ -76,7 +76,7 @@ def _plot_one_period(arm: Arm, a, b, per_session: np.ndarray, path: Path) -> Non
         ax.plot(t, rb[:, j], lw=0.6, color="#c0392b", label=SESSIONS[1])
         ax.plot(t, mean[:, j], lw=1.4, color="k", label="repeatable (mean of the sessions)")
         ax.axhline(0.0, color="0.5", lw=0.5)
-        ax.set_ylabel(f"{name} ({effort_unit(name)})")
+        ax.set_ylabel(f"{name} ({arm.model.effort_unit(name)})")
     axes[0].legend(ncol=2, fontsize=7, loc="upper right")
     axes[-1].set_xlabel("t within one period (s)")
     fig.suptitle("Model residual over one period of trajectory one: two sessions (periodic processing)", fontsize=10)
@@ -122,7 +122,7 @@ def periodic_section(arm: Arm, out_dir: Path, runs_dir: Path) -> tuple[str, str,
         "measured between the harmonics, and a model's prediction is projected on the same harmonics: both sides see the same "
         f"band. Held-out run <code>{HELD_OUT}</code>; the floor from <code>{SESSIONS[0]}</code> and <code>{SESSIONS[1]}</code>, "
         "two sessions of one trajectory (<code>dvrk-dart session-floor</code>).</p>",
-        table(["RMS", *[f"{j} ({effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
+        table(["RMS", *[f"{j} ({arm.model.effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
         f"<p>The sessions' difference against the noise:</p><ul>{verdicts}</ul>",
         f"<figure><img src='figures/extra/{figure.name}' alt='repeatable residual'><figcaption>The identified model's residual over "
         "one period, J1..J3: each session (thin), their mean (the repeatable residual, black) and the floor of one session (grey band)."

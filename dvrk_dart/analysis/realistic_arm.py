@@ -15,7 +15,7 @@ from dvrk_dart.analysis.tables import (
     Analysis,
 )
 from dvrk_dart.metrics import REGIME_ALL
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 SCENARIO, MODE, COUNTERWEIGHT = "replay-two", "velocity", "on"
 #: the order the arms are shown in: from the paper's to the most realistic
@@ -36,7 +36,7 @@ def realistic_arm_section(analysis: Analysis) -> str:
     )
     if len(runs) < 2:
         return ""
-    header = ["simulated arm (--dynamics)", *[f"{j} ({effort_unit(j)})" for j in SHOWN_JOINTS]]
+    header = ["simulated arm (--dynamics)", *[f"{j} ({runs[0].model.effort_unit(j)})" for j in SHOWN_JOINTS]]
 
     def cell(run: str, quantity: str, joint: str, regime: str) -> str:
         value = analysis.value(run, quantity, joint, regime)

@@ -31,7 +31,9 @@ from dvrk_dart.io.periodic import HarmonicSeries
 from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: draws of the positions' noise through the model (the spread of their RMS is ~1/sqrt(2 x draws x samples))
 PREDICTION_NOISE_DRAWS = 8
@@ -114,7 +116,7 @@ def floor_table(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> dict:
     mean, what the runs' noise predicts for it, and which it is."""
     difference = residual_difference(arm, a, b)
     result = {
-        "joints": list(JOINT_NAMES), "units": [effort_unit(j) for j in JOINT_NAMES],
+        "joints": list(JOINT_NAMES), "units": [arm.model.effort_unit(j) for j in JOINT_NAMES],
         "rms_difference": rms(difference).tolist(),
         "rms_difference_demeaned": rms(difference - difference.mean(axis=0)).tolist(),
         "noise_predicted_rms": None, "ratio_to_noise": None, "verdict": None,
@@ -154,15 +156,15 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
         raise DvrkDartError("not the same motion sample by sample")
 
 
-def processed_pair(names: tuple[str, str], processing: str) -> list[ProcessedRun]:
-    """Two recordings through one processing; periodic ones on their common
-    (smaller) harmonic cutoff. The same file twice is refused."""
+def processed_pair(names: tuple[str, str], processing: str, model: PsmModel, topics: BagTopics = BagTopics()) -> list[ProcessedRun]:
+    """Two recordings of `model`'s arm through one processing; periodic ones on
+    their common (smaller) harmonic cutoff. The same file twice is refused."""
     from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve_run
     from dvrk_dart.io.signal import process
 
-    distinct_inputs([("--measured", names[0]), ("--repeat", names[1])])  # a floor needs two sessions
+    distinct_inputs([("--measured", names[0]), ("--repeat", names[1])], model, topics)  # a floor needs two sessions
     paths = [resolve_run(name) for name in names]
-    measured = [load_run(path) for path in paths]
+    measured = [load_run(path, model, topics) for path in paths]
     runs = [process(run, processing) for run in measured]
     if processing == "periodic":
         harmonics = min(run.periodic.harmonics for run in runs)

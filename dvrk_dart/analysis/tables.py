@@ -45,11 +45,11 @@ from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysi
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path, write_json_atomic, write_text_atomic
 from dvrk_dart.io.reference_data import sha256_of
-from dvrk_dart.model.description import current_model_file, load_model, using_model
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
 from dvrk_dart.paths import MODELS_DIR
 from dvrk_dart.metrics import REGIME_ALL, TORQUE_TRANSIENT_S, relative_error, rms
 from dvrk_dart.model.identified import INERTIAL_TERMS, TERMS
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.executors import quiet_worker
 
 RUN_LOG = "run.mcap"
@@ -76,28 +76,28 @@ NEAR_ZERO_VELOCITY = {"rad": 0.01, "m": 0.001}  # rad/s, m/s by joint position u
 HIGH_ACCELERATION_PERCENTILE = 90.0
 #: fewer samples than this in a regime: no RMS is reported (not meaningful)
 MIN_REGIME_SAMPLES = 20
-#: upstream's test window: the excitation's first base period on the measured data
-#: (signal.FIRST_PERIOD_SAMPLES at the data's sample rate); replays only
 
 
 def run_model_file(config: dict) -> Path:
-    """The arm model a run was made with (its config.json `model_file`, a file of models/), else the current one."""
+    """The arm model a run was made with (its config.json `model_file`, a file
+    of models/); a folder that names none predates other arms: the PSM."""
     name = Path(str(config.get("model_file") or "")).name
     candidate = MODELS_DIR / Path(name).stem / name if name else None
-    return candidate if candidate is not None and candidate.is_file() else current_model_file()
+    return candidate if candidate is not None and candidate.is_file() else DEFAULT_MODEL_FILE
 
 
-def first_period_s() -> float:
+def first_period_s(model: PsmModel) -> float:
+    """Upstream's test window of the arm's runs (s): its first period at the reference rate."""
     from dvrk_dart.io.reference_data import sample_rate_hz
 
-    return load_model().processing.first_period_samples / sample_rate_hz()
+    return model.processing.first_period_samples / sample_rate_hz()
 
 
 REGIME_DESCRIPTIONS = {
     REGIME_ALL: "every logged sample",
     REGIME_NEAR_ZERO_VELOCITY: "samples where the joint's simulated |dq| < {rad} rad/s ({m} m/s for q3)".format(**NEAR_ZERO_VELOCITY),
     REGIME_HIGH_ACCELERATION: f"samples where the joint's simulated |ddq| is at or above its {HIGH_ACCELERATION_PERCENTILE:g}th percentile in the run",
-    REGIME_FIRST_PERIOD: "replays only: the first base period of the excitation (upstream's test window, 1111 samples at 200 Hz)",
+    REGIME_FIRST_PERIOD: "replays only: the first base period of the excitation (upstream's test window: the arm's [processing] first_period_samples, the PSM's 1111 at 200 Hz)",
 }
 
 # ---------------------------------------------------------------- quantities
@@ -143,6 +143,7 @@ class LoadedRun:
     scenario: str
     mode: str
     counterweight: str
+    model: PsmModel  # the run's arm: its units, first period, whether it has a counterweight
     dynamics: str = "inertial"  # the simulated arm (runs.config.RunConfig.dynamics label)
     #: per-sample (position m, orientation rad) tracking errors of a Cartesian task,
     #: computed once (RunRecord.tracking_errors) for the tables and the figures
@@ -198,7 +199,7 @@ def _mcap_versions(path: Path) -> dict:
     return {}
 
 
-def _identity(name: str, config: dict) -> tuple[str, str, str]:
+def _identity(name: str, config: dict, model: PsmModel) -> tuple[str, str, str]:
     """(scenario, mode, counterweight) from the config, else from the run name."""
     parts = name.rsplit("_", 2)
     scenario = config.get("scenario")
@@ -206,7 +207,7 @@ def _identity(name: str, config: dict) -> tuple[str, str, str]:
     scenario = scenario or (parts[0] if len(parts) == 3 else name)
     mode = config.get("mode") or (parts[1] if len(parts) == 3 else "")
     counterweight = config.get("counterweight") or (parts[2].removeprefix("cw-") if len(parts) == 3 else "")
-    if run_model_file(config).is_file() and load_model(run_model_file(config)).counterweight_link is None:
+    if model.counterweight_link is None:
         counterweight = "none"  # an arm without a counterweight (the MTM): no variant to name
     return str(scenario), str(mode), str(counterweight)
 
@@ -219,7 +220,8 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
     record.body_positions = {}  # the largest arrays, unused here: keep the worker's reply small
     config = _read_json(run_dir / CONFIG_FILE) or record.config
     metrics = _read_json(run_dir / METRICS_FILE) or record.metrics
-    scenario, mode, counterweight = _identity(record.name or run_dir.name, config)
+    model = load_model(run_model_file(config))
+    scenario, mode, counterweight = _identity(record.name or run_dir.name, config, model)
     tracking = None
     if record.tool_pose is not None and record.tool_pose_ref is not None:
         tracking = record.tracking_errors()
@@ -234,6 +236,7 @@ def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
         scenario=scenario,
         mode=mode,
         counterweight=counterweight,
+        model=model,
         dynamics=str(config.get("dynamics", "inertial")),
         tracking=tracking,
     )
@@ -243,8 +246,7 @@ def _load_and_measure(run_dir: str) -> tuple[LoadedRun | None, pd.DataFrame | No
     """Worker: one run folder -> (loaded run, its metric rows) or an error message."""
     try:
         loaded = load_run_folder(run_dir)
-        with using_model(run_model_file(loaded.config)):  # units, first period, counterweight: the run's own arm
-            return loaded, run_metrics(loaded), None
+        return loaded, run_metrics(loaded), None
     except Exception as exc:  # one unreadable log must not hide the others
         return None, None, f"{type(exc).__name__}: {exc}".splitlines()[0]
 
@@ -261,18 +263,18 @@ def simulated_terms_of(config: dict) -> tuple[str, ...]:
     return simulated_terms(SimConfig(**flags))
 
 
-def _regime_masks(record, joint: int, finite: np.ndarray, replay: bool) -> dict[str, np.ndarray]:
+def _regime_masks(record, joint: int, finite: np.ndarray, replay: bool, model: PsmModel) -> dict[str, np.ndarray]:
     """Sample masks of each regime for one joint (already restricted to finite rows)."""
     masks = {REGIME_ALL: finite}
     dq = np.abs(record.dq[:, joint])
     ddq = np.abs(record.ddq[:, joint])
-    limit = NEAR_ZERO_VELOCITY[position_unit(JOINT_NAMES[joint])]
+    limit = NEAR_ZERO_VELOCITY[model.position_unit(JOINT_NAMES[joint])]
     masks[REGIME_NEAR_ZERO_VELOCITY] = finite & (dq < limit)
     usable = finite & np.isfinite(ddq)
     if usable.any():
         masks[REGIME_HIGH_ACCELERATION] = usable & (ddq >= np.percentile(ddq[usable], HIGH_ACCELERATION_PERCENTILE))
     if replay:
-        masks[REGIME_FIRST_PERIOD] = finite & (record.t < first_period_s())
+        masks[REGIME_FIRST_PERIOD] = finite & (record.t < first_period_s(model))
     return masks
 
 
@@ -292,7 +294,7 @@ def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     """The long table of one run (columns METRICS_COLUMNS)."""
-    record = loaded.record
+    record, model = loaded.record, loaded.model
     rows: list[tuple] = []
 
     def add(joint: str, quantity: str, regime: str, value: float, unit: str, source: str = RUN_LOG) -> None:
@@ -307,12 +309,12 @@ def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
         actual, reference = sources[actual_key], sources[reference_key]
         for j, joint in enumerate(JOINT_NAMES):
             finite = np.isfinite(actual[:, j]) & np.isfinite(reference[:, j])
-            for regime, mask in _regime_masks(record, j, finite, replay).items():
+            for regime, mask in _regime_masks(record, j, finite, replay, loaded.model).items():
                 n = int(mask.sum())
                 if n < MIN_REGIME_SAMPLES:
                     continue
                 a, b = actual[mask, j], reference[mask, j]
-                add(joint, f"rms_{name}", regime, rms(a - b), effort_unit(joint))
+                add(joint, f"rms_{name}", regime, rms(a - b), model.effort_unit(joint))
                 if np.any(b != 0.0):  # a relative error to an all-zero reference (the massless tool) is undefined
                     add(joint, f"rel_{name}", regime, relative_error(a, b), "1")
                 if (joint, regime) not in counted:  # from the first comparison: the simulated samples
@@ -323,16 +325,16 @@ def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
         finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
         if finite.sum() >= MIN_REGIME_SAMPLES:
             for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
-                add(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, position_unit(JOINT_NAMES[j]))
+                add(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j]))
 
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
         sim_vs_measured = {row[0]: row[3] for row in rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}
         for joint, value in zip(JOINT_NAMES, at_measured):
             value = math.nan if value is None else value
-            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, effort_unit(joint), METRICS_FILE)
+            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, model.effort_unit(joint), METRICS_FILE)
             if joint in sim_vs_measured:
-                add(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, effort_unit(joint))
+                add(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, model.effort_unit(joint))
 
     if loaded.tracking is not None:
         position, orientation = loaded.tracking

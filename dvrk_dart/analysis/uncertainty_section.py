@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from dvrk_dart.io.html import _e, num_cell, table, text_cell
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 SHOWN_JOINTS = JOINT_NAMES[:3]
 
@@ -30,7 +30,7 @@ def uncertainty_section(folder: Path) -> tuple[str, str, list[Path]]:
         f"projected onto physical consistency) replayed in DART on <code>{_e(config['measured'])}</code> "
         f"({_e(config['dynamics'])} arm, first {config['duration_s']} s). The band holds {low:.0%}-{high:.0%} of the simulated efforts; "
         "the distance of the measured effort to it is the part of the gap that no parameter set within the uncertainty explains.</p>",
-        table(["", *[f"{j} ({effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
+        table(["", *[f"{j} ({summary['effort_units'][JOINT_NAMES.index(j)]})" for j in SHOWN_JOINTS]], rows),
         *[f"<figure><img src='figures/extra/{_e(p.name)}' alt='{_e(p.stem)}'><figcaption>{_e(p.stem)}: measured efforts over the "
           "parameter band</figcaption></figure>" for p in figures],
     ]

@@ -24,6 +24,7 @@ from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import process
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
 IMAGE_SUFFIXES = (".png", ".svg")
@@ -48,7 +49,7 @@ def base_sim_config(arm: Arm) -> SimConfig:
     return SimConfig()
 
 
-def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path) -> None:
+def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path, topics: BagTopics = BagTopics()) -> None:
     """MCAP and Rerun logs of the replay before (the diagnosis's base: the
     identified inertia, or the identified arm) and after (with the selected
     effects as physics)."""
@@ -56,7 +57,7 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path)
     from dvrk_dart.runs.replay import replay_processed
     from dvrk_dart.runs.runner import rcm_position
 
-    processed = process(load_run(resolve_run(measured)))
+    processed = process(load_run(resolve_run(measured), arm.model, topics))
     for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
         record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
         record.name = f"diagnosis-{run_label(measured)}_{label}"
@@ -73,7 +74,7 @@ def images_of(folder: Path) -> list[Path]:
 
 def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
                   parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
-                  processing: str | None = "upstream", refit: bool = False) -> dict:
+                  processing: str | None = "upstream", refit: bool = False, topics: BagTopics = BagTopics()) -> dict:
     """diagnose() with the DART replay, plus diagnosis.html and the replay logs
     (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
     folder of one of the runs: effects are unmodelled only outside its band;
@@ -85,25 +86,25 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
         check_refit_inputs(training, holdout, baseline)
     band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
     if band is not None:
-        _band_span(band, band_run(band, _runs_sha256([*training, baseline, *holdout, repeat])))
+        _band_span(band, band_run(band, _runs_sha256([*training, baseline, *holdout, repeat])), arm, topics)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
                       simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
-                      processing=processing, base_config=base_sim_config(arm))
+                      processing=processing, base_config=base_sim_config(arm), topics=topics)
     if band is not None:
         apply_band(result, band)
     if refit:
-        result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address)
+        result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address, topics)
     if insertion_applies(arm, result, training, holdout, baseline):
         for key, check in (("insertion_terms", insertion_check), ("one_configuration", one_configuration_check)):
             try:
-                result[key] = check(arm, training, holdout, result, executor, jobs, ray_address)
+                result[key] = check(arm, training, holdout, result, executor, jobs, ray_address, topics)
             except DvrkDartError as exc:  # its replay failed or drifted: dropped with the reason, the diagnosis stands
                 result[key] = None
                 result["dropped_effects"].append({"effect": key, "reason": str(exc)})
     result["diagnosis_base"] = arm.model.diagnosis_base
     if holdout:
-        result["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, result["processing"])
+        result["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, result["processing"], topics)
     measured = measured[0] if isinstance(measured, (list, tuple)) else measured
     result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
     result["versions"] = software_versions()
@@ -112,17 +113,17 @@ def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), ho
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], page_title(result)))
     if logs:
-        log_replays(arm, measured, sim_config_of(result), out_dir)
+        log_replays(arm, measured, sim_config_of(result), out_dir, topics)
     return result
 
 
-def identified_model_gap(arm: Arm, holdout, processing: dict) -> list[float | None]:
+def identified_model_gap(arm: Arm, holdout, processing: dict, topics: BagTopics = BagTopics()) -> list[float | None]:
     """The identified model on the held-out runs, in the diagnosis's band,
     pooled over their samples as the simulation's gaps are (result.gaps): what
     the diagnosis is measured against."""
     residuals, recorded = [], []
     for name in holdout:
-        state = process(load_run(resolve_run(name)), processing["processing"], processing.get("harmonics"))
+        state = process(load_run(resolve_run(name), arm.model, topics), processing["processing"], processing.get("harmonics"))
         residuals.append(state.tau - state.in_band(arm.identified.predict(state.q, state.dq, state.ddq, "all")))
         recorded.append(state.measured)
     return gaps(residuals, np.all(recorded, axis=0))
@@ -149,10 +150,10 @@ def _write_one_configuration(result: dict, out_dir: Path) -> None:
             "method": combined["method"], "diagnosis": "diagnosis.json (one_configuration: its inputs, versions and figures)"})
 
 
-def _band_span(band: dict, run: str) -> None:
+def _band_span(band: dict, run: str, arm: Arm, topics: BagTopics) -> None:
     """The run's own duration beside the band's (a band replayed over the first
     seconds of a run judges those seconds: said with the verdicts)."""
-    measured = load_run(resolve_run(run))
+    measured = load_run(resolve_run(run), arm.model, topics)
     band["run_duration_s"] = float(measured.t[-1] - measured.t[0])
 
 

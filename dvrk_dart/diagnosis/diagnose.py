@@ -40,8 +40,10 @@ from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import gap_split, session_floor
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.arm import Arm, load_arm
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
+from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
 #: safety bound of the greedy selection
@@ -56,7 +58,7 @@ def diagnose(
     simulate: Simulate | None = None,
     out_dir: Path | str | None = None,
     *,
-    arm: Arm | None = None,
+    arm: Arm,
     base_config: SimConfig = SimConfig(),
     effects: Sequence[Effect] | None = None,
     max_effects: int = MAX_SELECTED_EFFECTS,
@@ -68,6 +70,7 @@ def diagnose(
     nuisance_offsets: bool | None = None,
     payload_model: str | None = None,
     processing: str | None = "upstream",
+    topics: BagTopics = BagTopics(),
 ) -> dict:
     """Diagnose the gap of `measured` (a run name such as 'two', a path, a
     ProcessedRun or a DiagnosisRun carrying its simulated efforts), or of
@@ -100,15 +103,16 @@ def diagnose(
     simulate: simulate(config, run) -> efforts, the DART replay; without it the
         identified model at the measured state stands in for the simulation and
         the gap after is computed with the effects' regressors;
-    out_dir: where diagnosis.json, the regime tables and the figures go.
+    out_dir: where diagnosis.json, the regime tables and the figures go;
+    arm: the arm the runs were recorded on (its model and identified parameters);
+    topics: how runs that are bags are read (--arm, --topic, --jaw-topic) and CSVs' --rate.
     Returns the diagnosis dict (the contract of diagnosis.json)."""
-    arm = arm or load_arm()
     measured_list = list(measured) if isinstance(measured, (list, tuple)) else [measured]
     several = baseline is not None or len(measured_list) > 1
     problem = build_problem(arm, measured_list, baseline, train, holdout, repeat, simulate=simulate, base_config=base_config,
                             effects=effects, payload_model=payload_model or ("first_moment" if baseline is not None else "point"),
                             payload_at=payload_at, nuisance=several if nuisance_offsets is None else bool(nuisance_offsets),
-                            processing=processing, folds=folds)
+                            processing=processing, folds=folds, topics=topics)
     selection, dropped = select(problem, max_effects), []
     while True:  # a selected effect whose re-simulation fails or drifts is dropped with the reason; the diagnosis goes on
         try:
@@ -122,13 +126,13 @@ def diagnose(
     entries = effect_entries(problem, selection)
     floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor)
+    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor, arm.model)
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
     if out_dir is not None:
         period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
-        _write_outputs(Path(out_dir), result, problem.train_runs[0], after.train_after[0], figures, period)
+        _write_outputs(Path(out_dir), result, problem.train_runs[0], after.train_after[0], figures, period, arm.model)
     return result
 
 
@@ -221,7 +225,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
     return Diagnosis(
         joints=list(JOINT_NAMES),
-        units=[effort_unit(j) for j in JOINT_NAMES],
+        units=[problem.arm.model.effort_unit(j) for j in JOINT_NAMES],
         measured=train_runs[0].name,
         measured_runs=[r.name for r in train_runs[: problem.n_measured]],
         baseline_source={r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},
@@ -289,17 +293,17 @@ def gravity_mismatch_of(fit: dict) -> dict:
                       + "; without a baseline run this is the arm's mass distribution, not a payload."]}
 
 
-def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple) -> None:
+def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple, model: PsmModel) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    before_table = residual_regimes(run.state, run.residual).assign(stage="before")
-    after_table = residual_regimes(run.state, after).assign(stage="after")
+    before_table = residual_regimes(run.state, run.residual, model).assign(stage="before")
+    after_table = residual_regimes(run.state, after, model).assign(stage="after")
     table = pd.concat([before_table, after_table], ignore_index=True)
     write_text_atomic(out_dir / "where.csv", table.to_csv(index=False))
     result["where"] = {"table": "where.csv", "run": run.name, "figures": []}
     if figures:
-        paths = plot_residuals(run.state, run.residual, out_dir / "figures", "residual_before")
-        paths += plot_residuals(run.state, after, out_dir / "figures", "residual_after")
+        paths = plot_residuals(run.state, run.residual, out_dir / "figures", model, "residual_before")
+        paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after")
         period_run, period_after, floor = period
-        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png"))
+        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model))
         result["where"]["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     write_json_atomic(out_dir / "diagnosis.json", result)

@@ -30,7 +30,8 @@ from dvrk_dart.identification.regressor import FrictionLaw, Regressor, standard_
 from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_all
 from dvrk_dart.metrics import per_measured_joint, relative_error, rms
-from dvrk_dart.model.description import PsmModel, current_model_file, load_model
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
 
@@ -52,7 +53,9 @@ class IdentificationConfig:
     prior: str = PRIOR_NONE
     seed: int = 0
     solver: str = "CLARABEL"
-    model_file: str | None = None  # None: the current arm's (--arm-model)
+    model_file: str = str(DEFAULT_MODEL_FILE)  # the arm (--arm-model)
+    #: how the runs are read where they are bags (--arm, --topic, --jaw-topic) or CSVs (--rate)
+    topics: BagTopics = BagTopics()
     #: upstream | periodic | None: periodic where every run is periodic, else upstream (noted)
     processing: str | None = None
     #: the commanded excitation (--excitation): the periodic layer's design
@@ -156,14 +159,13 @@ def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, 
     return fitted, held, notes
 
 
-def _load_runs(names: tuple[str, ...], regressor: Regressor, processing: str | None, excitation: str | None = None
-               ) -> tuple[list[RunData], str | None]:
+def _load_runs(names: tuple[str, ...], regressor: Regressor, config: IdentificationConfig) -> tuple[list[RunData], str | None]:
     """Every run through one processing (and the note of io/signal.process_all)."""
     from dvrk_dart.io.excitation_design import read_design
 
     paths = [resolve_run(name) for name in names]
-    design = read_design(excitation) if excitation else None
-    processed, note = process_all([load_run(path) for path in paths], processing, design)
+    design = read_design(config.excitation) if config.excitation else None
+    processed, note = process_all([load_run(path, regressor.model, config.topics) for path in paths], config.processing, design)
     runs = [RunData(str(name), path, p, p.in_band(regressor(p.q, p.dq, p.ddq))) for name, path, p in zip(names, paths, processed)]
     return runs, note
 
@@ -212,13 +214,13 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     start = time.perf_counter()
     if not config.runs:
         raise DvrkDartError("--runs: at least one training run is needed")
-    distinct_inputs([("--runs", r) for r in config.runs] + [("--holdout", r) for r in config.holdout])
-    model = load_model(config.model_file or current_model_file())
+    model = load_model(config.model_file)
+    distinct_inputs([("--runs", r) for r in config.runs] + [("--holdout", r) for r in config.holdout], model, config.topics)
     joints = _joint_indices(config.joints)
     bounds = load_bounds(config.bounds_file, model)
     regressor = Regressor(model, config.friction_law)
     prior, prior_source = _prior(config, model, regressor)
-    loaded, note = _load_runs(config.runs + config.holdout, regressor, config.processing, config.excitation)
+    loaded, note = _load_runs(config.runs + config.holdout, regressor, config)
     train, holdout = loaded[: len(config.runs)], loaded[len(config.runs):]
     check_consistent_runs(train + holdout)
     timings["load_and_regressor_s"] = time.perf_counter() - start

@@ -49,7 +49,7 @@ from dvrk_dart.identification.regressor import body_of, params_json, standard_ve
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import software_versions
 from dvrk_dart.io.reference_data import input_record, resolve
-from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
 from dvrk_dart.model.pseudo_inertia import pseudo_inertia
 
@@ -100,8 +100,8 @@ def reference_theta(result: IdentificationResult) -> tuple[np.ndarray, str, floa
     return standard_vector(params, layout), str(path), worst
 
 
-def _run_entry(run: RunData) -> dict:
-    return {"name": run.name, **input_record(run.path), "samples_after_processing": len(run.processed)}
+def _run_entry(run: RunData, result: IdentificationResult) -> dict:
+    return {"name": run.name, **input_record(run.path, result.model, result.config.topics), "samples_after_processing": len(run.processed)}
 
 
 def _processing(result: IdentificationResult) -> dict:
@@ -136,6 +136,7 @@ def summary(result: IdentificationResult) -> dict:
     se = wls.standard_errors
     return {
         "joints": list(JOINT_NAMES),
+        "effort_units": [result.model.effort_unit(j) for j in JOINT_NAMES],
         "fitted_joints": [JOINT_NAMES[j] for j in wls.joints],
         "left_out": result.left_out,
         "data": result.data_extent(),
@@ -145,7 +146,7 @@ def summary(result: IdentificationResult) -> dict:
             "friction_law": result.regressor.friction_law.describe(), "bounds_file": str(result.bounds.source),
             "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": str(result.model.source),
         },
-        "runs": {"train": [_run_entry(r) for r in result.train], "holdout": [_run_entry(r) for r in result.holdout]},
+        "runs": {"train": [_run_entry(r, result) for r in result.train], "holdout": [_run_entry(r, result) for r in result.holdout]},
         "versions": software_versions(),
         "processing": _processing(result),
         "presliding": {
@@ -234,7 +235,7 @@ def _figure_png(result: IdentificationResult, run: RunData, title: str) -> str:
         ax.plot(t, run.processed.tau[:n, j], color="#c0392b", lw=1.0, label="measured")
         ax.plot(t, predicted[:, j], color="#2c6fbb", lw=1.0, label="identified")
         ax.plot(t, predicted[:, j] - run.processed.tau[:n, j], color="k", lw=0.6, ls="--", label="difference")
-        ax.set_ylabel(f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})")
+        ax.set_ylabel(f"{JOINT_NAMES[j]} ({result.model.effort_unit(JOINT_NAMES[j])})")
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=3, loc="upper right", fontsize=8)
     axes[-1].set_xlabel("t (s), first base period")
@@ -255,7 +256,7 @@ def _error_table(result: IdentificationResult, data: dict) -> str:
                 cells += [num_cell(v, run=name, quantity="relative_error", joint=j) for v, j in zip(e["relative_error"], JOINT_NAMES)]
                 cells += [num_cell(v, run=name, quantity="rms", joint=j) for v, j in zip(e["rms"], JOINT_NAMES)]
                 rows.append("<tr>" + "".join(cells) + "</tr>")
-    header = ["run"] + [f"rel {j}" for j in JOINT_NAMES] + [f"RMS {j} ({effort_unit(j)})" for j in JOINT_NAMES]
+    header = ["run"] + [f"rel {j}" for j in JOINT_NAMES] + [f"RMS {j} ({u})" for j, u in zip(JOINT_NAMES, data["effort_units"])]
     return table(header, rows)
 
 
@@ -339,11 +340,12 @@ def report_section(*datas: dict) -> tuple[str, str]:
             f"runs like <code>model-errors --first-period --processing {processing}</code>: relative error "
             "||tau_model - tau_measured|| / ||tau_measured||.</p>"
         )
-        parts += [_holdout_table(run, own, ref["errors_first_period"].get(run), processing) for run, own in data["errors"]["holdout"].items()]
+        parts += [_holdout_table(run, own, ref["errors_first_period"].get(run), processing, data["effort_units"])
+                  for run, own in data["errors"]["holdout"].items()]
     return "Own identification vs the published parameters", "".join(parts)
 
 
-def _holdout_table(run: str, own: dict, published: dict | None, processing: str) -> str:
+def _holdout_table(run: str, own: dict, published: dict | None, processing: str, units: list[str]) -> str:
     rows = []
     for j, name in enumerate(JOINT_NAMES):
         mine = own["first_period"]["relative_error"][j]
@@ -355,7 +357,7 @@ def _holdout_table(run: str, own: dict, published: dict | None, processing: str)
             "<tr>" + text_cell(name) + num_cell(theirs, identification="relative_error_published_params", **cell)
             + num_cell(mine, css=css, identification="relative_error_identified", **cell)
             + num_cell(ratio, identification="ratio_identified_to_published", **cell)
-            + num_cell(own["first_period"]["rms"][j], identification="rms_identified", **cell) + text_cell(effort_unit(name)) + "</tr>"
+            + num_cell(own["first_period"]["rms"][j], identification="rms_identified", **cell) + text_cell(units[j]) + "</tr>"
         )
     return f"<h4>Held-out run {run} (first period, {processing})</h4>" + table(
         ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows)

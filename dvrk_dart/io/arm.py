@@ -8,7 +8,7 @@ from functools import cache
 from pathlib import Path
 
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.model.description import PsmModel, current_model_file, load_model
+from dvrk_dart.model.description import PsmModel, load_model
 from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
 
@@ -20,11 +20,11 @@ class Arm:
     identified: IdentifiedModel
 
 
-def load_arm(model_file: str | Path | None = None, params_file: str | Path | None = None) -> Arm:
-    """An arm's description (default: the current arm's, `--arm-model`), its
-    identified parameters (default: the manifest's params.json of that arm,
-    resolved at run time) and the Pinocchio evaluator."""
-    return _load_arm(Path(model_file) if model_file is not None else current_model_file(), params_file)
+def load_arm(model_file: str | Path, params_file: str | Path | None = None) -> Arm:
+    """An arm's description (`model_file`), its identified parameters (default:
+    the manifest's params.json of that arm, resolved at run time) and the
+    Pinocchio evaluator."""
+    return _load_arm(Path(model_file), params_file)
 
 
 @cache

@@ -12,8 +12,6 @@ topics and message types a real PSM publishes or accepts.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import heapq
 import os
 import shutil
@@ -31,6 +29,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun, check_joint_ranges, sample_rate_hz
 from dvrk_dart.io.outputs import MARKER
 from dvrk_dart.io.signal import MIN_ROWS
+from dvrk_dart.model.description import DvrkTopics, PsmModel, load_model
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,
@@ -45,33 +44,31 @@ NS = 1_000_000_000
 
 @dataclass(frozen=True)
 class BagTopics:
-    """Where an arm's joint states are in a bag, and the grid they are put on."""
+    """Where an arm's joint states are in a bag, and the grid they are put on:
+    the command's reading options (--arm, --topic, --jaw-topic, --rate); each
+    default comes from the arm's [dvrk_topics] (`card`), passed with the arm."""
 
     arm: str | None = None  # default: the arm model's namespace (PSM1, MTML)
     topic: str | None = None  # default /<arm>/measured_js
     jaw_topic: str | None = None  # default /<arm>/jaw/measured_js
     rate_hz: float | None = None  # default: the reference data's rate (200 Hz)
 
-    @property
-    def namespace(self) -> str:
-        return self.arm or _card().namespace
+    def namespace(self, card: DvrkTopics) -> str:
+        return self.arm or card.namespace
 
-    @property
-    def joint_topic(self) -> str:
-        return self.topic or f"/{self.namespace}/measured_js"
+    def joint_topic(self, card: DvrkTopics) -> str:
+        return self.topic or f"/{self.namespace(card)}/measured_js"
 
-    @property
-    def jaw(self) -> str:
+    def jaw(self, card: DvrkTopics) -> str:
         """--jaw-topic, else the jaw of the arm's namespace (that of --topic when given)."""
         if self.jaw_topic:
             return self.jaw_topic
-        namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.namespace}"
+        namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.namespace(card)}"
         return f"{namespace}/jaw/measured_js"
 
-    def wanted(self) -> list[tuple[str, tuple[str, ...]]]:
+    def wanted(self, card: DvrkTopics) -> list[tuple[str, tuple[str, ...]]]:
         """(topic, joint names) to read, in the order of q1..q7 (before the coupling)."""
-        card = _card()
-        return [(self.joint_topic, card.arm_joints)] + ([(self.jaw, card.jaw_joints)] if card.jaw_joints else [])
+        return [(self.joint_topic(card), card.arm_joints)] + ([(self.jaw(card), card.jaw_joints)] if card.jaw_joints else [])
 
     @property
     def rate(self) -> float:
@@ -80,30 +77,9 @@ class BagTopics:
             raise DvrkDartError(f"--rate: {self.rate_hz!r} is not a positive rate (Hz)")
         return rate
 
-
-#: the topics of the command being run (the CLI sets them: --arm, --topic, ...);
-#: every measured run that is a bag is read with them
-_current_topics: contextvars.ContextVar[BagTopics] = contextvars.ContextVar("bag_topics", default=BagTopics())
-
-
-@contextlib.contextmanager
-def bag_topics(topics: BagTopics) -> Iterator[None]:
-    token = _current_topics.set(topics)
-    try:
-        yield
-    finally:
-        _current_topics.reset(token)
-
-
-def current_topics() -> BagTopics:
-    return _current_topics.get()
-
-
-def _card():
-    """The current arm's [dvrk_topics] (models/<arm>/)."""
-    from dvrk_dart.model.description import load_model
-
-    return load_model().dvrk_topics
+    def record(self, card: DvrkTopics) -> dict:
+        """What an output records of the options a bag was read with."""
+        return {"arm": self.arm, "topic": self.joint_topic(card), "jaw_topic": self.jaw(card), "rate_hz": self.rate}
 
 
 def is_bag(path: str | os.PathLike) -> bool:
@@ -132,13 +108,12 @@ class TopicSamples:
     receive_time: bool  # stamps are the bag's receive times (no header stamps)
 
 
-def _other_families() -> dict[str, str]:
-    """{namespace family: arm model} of the arm models other than the current
-    one (a family is a namespace without the arm's number or side: MTM for MTML)."""
-    from dvrk_dart.model.description import load_model
+def _other_families(card: DvrkTopics) -> dict[str, str]:
+    """{namespace family: arm model} of the arm models other than `card`'s
+    (a family is a namespace without the arm's number or side: MTM for MTML)."""
     from dvrk_dart.paths import MODELS_DIR
 
-    current = _card().namespace
+    current = card.namespace
     families = {}
     for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
         family = load_model(folder / f"{folder.name}.toml").dvrk_topics.namespace[:-1]
@@ -147,20 +122,20 @@ def _other_families() -> dict[str, str]:
     return families
 
 
-def _other_arm_hint(present) -> str | None:
+def _other_arm_hint(present, card: DvrkTopics) -> str | None:
     """'add --arm-model X' when the bag holds the joint states of another arm model."""
-    for family, model in _other_families().items():
+    for family, model in _other_families(card).items():
         if any(t.startswith(f"/{family}") and t.endswith("/measured_js") for t in present):
             return f"the bag holds another arm's joints: add --arm-model {model}"
     return None
 
 
-def check_arm_namespace(namespace: str | None) -> None:
+def check_arm_namespace(namespace: str | None, card: DvrkTopics) -> None:
     """--arm of a command that writes topics: not the namespace of another arm
     model (an MTM's servo_jp with the PSM's joints would drive the wrong arm)."""
-    for family, model in _other_families().items():
+    for family, model in _other_families(card).items():
         if namespace and namespace.startswith(family):
-            raise DvrkDartError(f"--arm {namespace}: an arm of the {model} model, and these are the {_card().namespace[:-1]}'s joints")
+            raise DvrkDartError(f"--arm {namespace}: an arm of the {model} model, and these are the {card.namespace[:-1]}'s joints")
 
 
 def _first_line(exc: BaseException) -> str:
@@ -178,7 +153,7 @@ def _is_run_recording(path: Path) -> bool:
     return path.suffix == ".mcap" and marker.is_file() and path.name in marker.read_text(errors="replace")
 
 
-def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
+def read_topics(path: Path, topics: BagTopics, card: DvrkTopics) -> tuple[TopicSamples, ...]:
     """The arm's (and a PSM jaw's) joint states, checked; one-line errors."""
     from rosbags.highlevel import AnyReader
 
@@ -186,12 +161,12 @@ def read_topics(path: Path, topics: BagTopics) -> tuple[TopicSamples, ...]:
         with AnyReader([path], default_typestore=_typestore(path)) as reader:
             present = reader.topics
             # (the two may be one topic: a recorder that puts the jaw in the arm's message)
-            wanted = topics.wanted()
+            wanted = topics.wanted(card)
             for topic in dict(wanted):
                 if topic not in present:
                     listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
                     raise DvrkDartError(f"{path}: no topic {topic} (topics in the bag: {listed}); "
-                                        f"{_other_arm_hint(present) or 'see --arm, --topic, --jaw-topic'}")
+                                        f"{_other_arm_hint(present, card) or 'see --arm, --topic, --jaw-topic'}")
                 msgtype = present[topic].msgtype
                 if msgtype != JOINT_STATE:
                     raise DvrkDartError(f"{path}: topic {topic} has messages of type {msgtype}, expected {JOINT_STATE}")
@@ -264,17 +239,14 @@ def _resample(samples: TopicSamples, start_ns: int, grid_s: np.ndarray) -> np.nd
     return CubicSpline(t, values, axis=0)(grid_s)
 
 
-def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
-    """A bag -> MeasuredRun (model coordinates, uniform grid), with one-line errors."""
-    from dvrk_dart.model.description import load_model
-
+def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = BagTopics()) -> MeasuredRun:
+    """A bag of `model`'s arm -> MeasuredRun (model coordinates, uniform grid), with one-line errors."""
     path = Path(path)
-    topics = topics or current_topics()
     rate = topics.rate
     if rate != sample_rate_hz():
         # upstream's filter, trim and first period are defined in samples at that rate
         raise DvrkDartError(f"--rate {rate:g}: measured runs are processed at {sample_rate_hz():g} Hz (the identification's processing); resample at that rate")
-    read = read_topics(path, topics)
+    read = read_topics(path, topics, model.dvrk_topics)
     if len({samples.receive_time for samples in read}) > 1:
         stamped = next(s for s in read if not s.receive_time)
         received = next(s for s in read if s.receive_time)
@@ -304,14 +276,14 @@ def load_bag_run(path: str | os.PathLike, topics: BagTopics | None = None):
         field: np.hstack([v[:, i * k : (i + 1) * k] for v, k in values])
         for i, field in enumerate(("position", "velocity", "effort"))
     }
-    motor_map = load_model().motor_map
+    motor_map = model.motor_map
     q = motor_map.positions_to_model(dvrk["position"])
     dq = motor_map.positions_to_model(dvrk["velocity"])
     tau = motor_map.efforts_to_model(dvrk["effort"])
-    check_joint_ranges(q, path)
+    check_joint_ranges(q, path, model)
     data = pd.DataFrame(np.hstack([q, dq, tau]), columns=CSV_COLUMNS)
     data.insert(0, "t", grid_s)
-    return MeasuredRun(path=path, data=data)
+    return MeasuredRun(path=path, data=data, model=model)
 
 
 # --- writing ------------------------------------------------------------------
@@ -330,12 +302,9 @@ class JointStates:
     effort: np.ndarray | None = None
 
 
-def arm_joint_states(arm: str | None, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
-    """The topics of the current arm (its joints, then a PSM's jaw on its own
+def arm_joint_states(model: PsmModel, arm: str | None, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
+    """The topics of `model`'s arm (its joints, then a PSM's jaw on its own
     topic) from model-coordinate arrays (N, 7): mapped to the dVRK's joint values."""
-    from dvrk_dart.model.description import load_model
-
-    model = load_model()
     card, motor_map = model.dvrk_topics, model.motor_map
     arm = arm or card.namespace
     position = motor_map.positions_to_dvrk(q)
@@ -424,7 +393,7 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
     return out
 
 
-def export_run(run_dir: Path, out: Path, arm: str | None = None, storage: str = "mcap") -> Path:
+def export_run(run_dir: Path, out: Path, model: PsmModel, arm: str | None = None, storage: str = "mcap") -> Path:
     """A simulated run folder -> a bag with the topics and types a real PSM
     publishes: measured_js (position, velocity, the *simulated* effort) and
     jaw/measured_js, stamped with the simulated time."""
@@ -448,4 +417,4 @@ def export_run(run_dir: Path, out: Path, arm: str | None = None, storage: str = 
             raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
     if storage == "ros1" and out.suffix != ".bag":
         raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
-    return write_bag(out, arm_joint_states(arm, record.t, record.q, record.dq, record.effort_sim), storage)
+    return write_bag(out, arm_joint_states(model, arm, record.t, record.q, record.dq, record.effort_sim), storage)

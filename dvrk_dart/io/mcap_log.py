@@ -51,7 +51,8 @@ from dvrk_dart.io.atomic import atomic_path as atomic_output
 from dvrk_dart.io.atomic import strict_json
 from dvrk_dart.io.mcap_bulk import BulkChannel, write_bulk
 from dvrk_dart.io.provenance import software_versions
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.io.record import RunRecord
 
 FORMAT = "dvrk_dart.run/1"
@@ -145,11 +146,15 @@ SCHEMAS: dict[str, dict] = {
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 _JOINT_NAMES = list(JOINT_NAMES)
-_JOINT_CHANNEL_METADATA = {
-    "joint_names": json.dumps(_JOINT_NAMES),
-    "position_units": json.dumps([position_unit(n) for n in JOINT_NAMES]),
-    "effort_units": json.dumps([effort_unit(n) for n in JOINT_NAMES]),
-}
+
+
+def _joint_channel_metadata(model: PsmModel) -> dict[str, str]:
+    """The joints' names and units of the run's arm, on every joint channel."""
+    return {
+        "joint_names": json.dumps(_JOINT_NAMES),
+        "position_units": json.dumps([model.position_unit(n) for n in JOINT_NAMES]),
+        "effort_units": json.dumps([model.effort_unit(n) for n in JOINT_NAMES]),
+    }
 
 
 # ---------------------------------------------------------------- writing
@@ -259,10 +264,10 @@ def _checked(name: str, array: np.ndarray | None, n: int, width: int | None) -> 
     return array
 
 
-def _channels(record: RunRecord, ns: np.ndarray) -> list[tuple[str, str, dict[str, str], pa.Array]]:
+def _channels(record: RunRecord, ns: np.ndarray, model: PsmModel) -> list[tuple[str, str, dict[str, str], pa.Array]]:
     """(topic, schema name, channel metadata, messages) for what the record holds."""
     n = len(record)
-    jm = _JOINT_CHANNEL_METADATA
+    jm = _joint_channel_metadata(model)
     sim = {
         "position": _checked("q", record.q, n, N_JOINTS),
         "velocity": _checked("dq", record.dq, n, N_JOINTS),
@@ -315,14 +320,14 @@ def _stamps_ns(t: np.ndarray) -> np.ndarray:
     return np.round(t * 1e9).astype(np.int64)
 
 
-def write_mcap(record: RunRecord, path: str | os.PathLike) -> None:
-    """Write `record` to `path` (atomically: a failed write leaves no file there).
+def write_mcap(record: RunRecord, path: str | os.PathLike, model: PsmModel) -> None:
+    """Write `record` of `model`'s arm to `path` (atomically: a failed write leaves no file there).
 
     Messages are interleaved in time order (sample by sample) so chunks cover
     short time ranges and Foxglove plays the file back without seeking.
     """
     ns = _stamps_ns(record.t)
-    channels = [BulkChannel(topic, schema, metadata, messages) for topic, schema, metadata, messages in _channels(record, ns)]
+    channels = [BulkChannel(topic, schema, metadata, messages) for topic, schema, metadata, messages in _channels(record, ns, model)]
     versions = software_versions()
     schemas = {name: (SchemaEncoding.JSONSchema, json.dumps(schema).encode()) for name, schema in SCHEMAS.items()}
     metadata = [

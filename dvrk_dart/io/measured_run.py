@@ -5,7 +5,6 @@ against the velocity column, glitched rows."""
 
 from __future__ import annotations
 
-import functools
 import tomllib
 from dataclasses import dataclass
 from functools import cache
@@ -15,8 +14,9 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import PsmModel, load_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
-from dvrk_dart.paths import PROJECT_DIR
+from dvrk_dart.paths import MODELS_DIR, PROJECT_DIR
 
 MANIFEST_FILE = PROJECT_DIR / "reference_data" / "manifest.toml"
 
@@ -100,6 +100,7 @@ class MeasuredRun:
 
     path: Path
     data: pd.DataFrame
+    model: PsmModel  # the arm it was recorded on: its coordinates, units and processing facts
     measured: tuple[str, ...] = JOINT_NAMES
 
     @property
@@ -136,43 +137,24 @@ class MeasuredRun:
         return len(self.data)
 
 
-def check_joint_ranges(q: np.ndarray, where: str | Path) -> None:
+def check_joint_ranges(q: np.ndarray, where: str | Path, model: PsmModel) -> None:
     """Positions within the model's joint ranges (the simulator's own limits)."""
-    lower, upper = joint_ranges()
-    outside = (q < lower) | (q > upper)
+    outside = (q < model.joint_lower) | (q > model.joint_upper)
     if outside.any():
         row, j = np.argwhere(outside)[0]
         raise DvrkDartError(
             f"{where}: row {row + 1}, column {CSV_COLUMNS[j]}: {float(q[row, j])!r} outside the joint range "
-            f"[{float(lower[j])!r}, {float(upper[j])!r}]" + _other_arm_fitting(q)
+            f"[{float(model.joint_lower[j])!r}, {float(model.joint_upper[j])!r}]" + _other_arm_fitting(q, model)
         )
 
 
-def _other_arm_fitting(q: np.ndarray) -> str:
+def _other_arm_fitting(q: np.ndarray, model: PsmModel) -> str:
     """' (... --arm-model X)' when every row lies in the joint ranges of another arm model."""
-    from dvrk_dart.model.description import current_model_file
-    from dvrk_dart.paths import MODELS_DIR
-
     for folder in sorted(p for p in MODELS_DIR.iterdir() if (p / f"{p.name}.toml").is_file()):
         model_file = folder / f"{folder.name}.toml"
-        if model_file.resolve() == current_model_file().resolve():
+        if model_file.resolve() == model.source.resolve():
             continue
-        lower, upper = _joint_ranges_of(model_file)
-        if np.all((q >= lower) & (q <= upper)):
+        other = load_model(model_file)
+        if np.all((q >= other.joint_lower) & (q <= other.joint_upper)):
             return f" (every row fits the {folder.name} arm model's ranges: --arm-model {folder.name})"
     return ""
-
-
-def joint_ranges() -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) joint ranges of the current arm's model description (rad, m)."""
-    from dvrk_dart.model.description import current_model_file
-
-    return _joint_ranges_of(current_model_file())
-
-
-@functools.cache
-def _joint_ranges_of(model_file: Path) -> tuple[np.ndarray, np.ndarray]:
-    from dvrk_dart.model.description import load_model
-
-    model = load_model(model_file)
-    return model.joint_lower, model.joint_upper

@@ -15,7 +15,7 @@ import pandas as pd
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path
 from dvrk_dart.model.joints import N_JOINTS
-from dvrk_dart.io.bags import current_topics, is_bag, load_bag_run
+from dvrk_dart.io.bags import BagTopics, is_bag, load_bag_run
 from dvrk_dart.io.csv_run import read_csv_run
 from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers' names)
     CSV_COLUMNS,
@@ -24,12 +24,12 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     check_glitches,
     check_joint_ranges,
     check_rate,
-    joint_ranges,
     manifest,
     sample_rate_hz,
 )
 from dvrk_dart.io.provenance import sha256_of  # noqa: F401  (re-exported)
 from dvrk_dart.io.signal import MIN_ROWS
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
 
 SHARED_ROOT = PROJECT_DIR.parent / "shared" / "reference_data"
@@ -56,10 +56,9 @@ def reference_run_arm(name: str) -> str:
     return folder if folder == "mtm" else "psm"
 
 
-def rate_of(path: Path, time_column_hz: float | None = None) -> tuple[float, str]:
-    """(rows per second, where it comes from) of a CSV: --rate, else its time
+def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | None = None) -> tuple[float, str]:
+    """(rows per second, where it comes from) of a CSV: --rate (`explicit`), else its time
     column's, else the manifest's entry of that file name, else the reference data's default."""
-    explicit = current_topics().rate_hz
     if explicit is not None:
         if not (np.isfinite(explicit) and explicit > 0):
             raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
@@ -74,23 +73,19 @@ def rate_of(path: Path, time_column_hz: float | None = None) -> tuple[float, str
     return sample_rate_hz(), "the default rate"
 
 
-def input_record(path: str | Path) -> dict:
-    """What an output records of a measured-run file it used: path, sha256 and
-    the options that selected its data (a bag's topics, a CSV's rate)."""
+def input_record(path: str | Path, model: PsmModel, topics: BagTopics = BagTopics()) -> dict:
+    """What an output records of a measured-run file of `model`'s arm it used:
+    path, sha256 and the options that selected its data (a bag's topics, a CSV's rate)."""
     path = Path(path)
     entry = {"path": str(path), "sha256": sha256_of(path)}
     if is_bag(path):
-        topics = current_topics()
-        entry["bag_topics"] = {"arm": topics.arm, "topic": topics.joint_topic, "jaw_topic": topics.jaw, "rate_hz": topics.rate}
+        entry["bag_topics"] = topics.record(model.dvrk_topics)
     else:
-        entry["rate_hz"], entry["rate_from"] = rate_of(path, _time_column_rate(path))
+        entry["rate_hz"], entry["rate_from"] = rate_of(path, _time_column_rate(path, model), topics.rate_hz)
     return entry
 
 
-def _time_column_rate(path: Path) -> float | None:
-    from dvrk_dart.model.description import load_model
-
-    model = load_model()
+def _time_column_rate(path: Path, model: PsmModel) -> float | None:
     return read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names).rate_hz
 
 
@@ -190,7 +185,7 @@ SAME_RECORDING_TOLERANCE = 1e-5
 SAME_RECORDING_WINDOW = 50
 
 
-def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
+def distinct_inputs(roles: list[tuple[str, str | Path]], model: PsmModel, topics: BagTopics = BagTopics()) -> dict[str, dict]:
     """(option, run) pairs -> {run: {"role", "path", "sha256"}}; the same
     recording in two roles, or twice in one, is refused in one line naming
     both: the same path or content, or the same positions however the file was
@@ -199,8 +194,8 @@ def distinct_inputs(roles: list[tuple[str, str | Path]]) -> dict[str, dict]:
     inputs = {}
     for option, spec in roles:
         path = Path(resolve_run(spec))
-        run = load_run(path)
-        record = input_record(path)
+        run = load_run(path, model, topics)
+        record = input_record(path, model, topics)
         digest = record["sha256"]
         for other_option, other, other_digest, other_q, other_rate in seen:
             if digest == other_digest or same_recording_at_rates(run.q, run.rate_hz, other_q, other_rate):
@@ -237,23 +232,20 @@ def same_recording(a: np.ndarray, b: np.ndarray) -> bool:
     return window_of(a, b) or window_of(b, a)
 
 
-def load_run(path: Path | str) -> MeasuredRun:
-    """Load a measured run (a CSV in any layout of io/csv_run.py, or a ROS bag
-    read with the command's topics: io/bags.py), with one-line errors."""
-    from dvrk_dart.model.description import load_model
-
+def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics()) -> MeasuredRun:
+    """Load a measured run of `model`'s arm (a CSV in any layout of io/csv_run.py,
+    or a ROS bag read with the command's `topics`: io/bags.py), with one-line errors."""
     path = Path(path)
     if is_bag(path):
-        return load_bag_run(path)
-    model = load_model()
+        return load_bag_run(path, model, topics)
     read = read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names)
     values = read.values
     if len(values) < MIN_ROWS:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
-    check_joint_ranges(values[:, :N_JOINTS], path)
-    rate, source = rate_of(path, read.rate_hz)
+    check_joint_ranges(values[:, :N_JOINTS], path, model)
+    rate, source = rate_of(path, read.rate_hz, topics.rate_hz)
     check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)
-    return MeasuredRun(path=path, data=data, measured=read.measured)
+    return MeasuredRun(path=path, data=data, model=model, measured=read.measured)

@@ -34,7 +34,7 @@ import rerun.blueprint as rrb
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path as atomic_output
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit, position_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.io.record import RunRecord
 
 APPLICATION_ID = "dvrk_dart"
@@ -72,10 +72,10 @@ def _series(rec: rr.RecordingStream, entity: str, times: rr.TimeColumn, values: 
     rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)), strict=True)
 
 
-def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.TimeColumn) -> None:
+def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.TimeColumn, model: PsmModel) -> None:
     model_total = record.model_total() if record.effort_model else None
     for j, joint in enumerate(JOINT_NAMES):
-        tau, pos = effort_unit(joint), position_unit(joint)
+        tau, pos = model.effort_unit(joint), model.position_unit(joint)
         sources = {"sim": record.effort_sim, "model": model_total, "measured": record.effort_measured, "command": record.effort_command}
         for source, effort in sources.items():
             if effort is not None:
@@ -92,15 +92,10 @@ def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.Time
                 _series(rec, f"errors/{kind}/{joint}", times, a[:, j] - b[:, j], f"{joint} ({unit})", COLORS["error"])
 
 
-def _arm_segments(record: RunRecord, model: PsmModel | None) -> dict[str, list[tuple[str | None, str]]]:
-    """Group -> (parent body, body) segments to draw; None stands for the base origin.
-
-    With the model, each body is joined to its parent link (the tree, counterweight
-    included); without it, consecutive bodies of record.body_positions are joined.
-    """
+def _arm_segments(record: RunRecord, model: PsmModel) -> dict[str, list[tuple[str | None, str]]]:
+    """Group -> (parent body, body) segments to draw, each body joined to its
+    parent link (the tree, counterweight included); None stands for the base origin."""
     names = list(record.body_positions)
-    if model is None:
-        return {"chain": list(zip(names[:-1], names[1:]))}
     by_key = {link.key: link for link in model.links.values()}
     groups: dict[str, list[tuple[str | None, str]]] = {}
     for name in names:
@@ -115,7 +110,7 @@ def _arm_segments(record: RunRecord, model: PsmModel | None) -> dict[str, list[t
     return groups
 
 
-def _log_arm(rec: rr.RecordingStream, record: RunRecord, model: PsmModel | None) -> None:
+def _log_arm(rec: rr.RecordingStream, record: RunRecord, model: PsmModel) -> None:
     if not record.body_positions:
         return
     t = np.asarray(record.t, dtype=float)
@@ -227,12 +222,9 @@ def blueprint(record: RunRecord) -> rrb.Blueprint:
     )
 
 
-def write_rrd(record: RunRecord, path: str | os.PathLike, model: PsmModel | None = None) -> None:
-    """Write the recording to `path` (atomically), with its default blueprint.
-
-    `model` (optional) lets the arm be drawn as its link tree; without it, the
-    bodies are joined in the order of record.body_positions.
-    """
+def write_rrd(record: RunRecord, path: str | os.PathLike, model: PsmModel) -> None:
+    """Write the recording of `model`'s arm to `path` (atomically), with its
+    default blueprint: the arm drawn as the model's link tree, its joints' units."""
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
     times = rr.TimeColumn(TIMELINE, duration=np.asarray(record.t, dtype=float))
     with atomic_output(path) as tmp:
@@ -243,7 +235,7 @@ def write_rrd(record: RunRecord, path: str | os.PathLike, model: PsmModel | None
             _log_arm(rec, record, model)
             _log_markers(rec, record)
             _log_tool(rec, record, times)
-            _log_joint_series(rec, record, times)
+            _log_joint_series(rec, record, times, model)
             if record.closure_residual_m is not None:
                 _series(rec, "closure/residual_m", times, record.closure_residual_m, "closure residual (m)", COLORS["closure"])
             rec.flush()

@@ -1,8 +1,9 @@
 """Signal processing identical to the upstream identification (Wang et al. 2019,
 `identification/data_processing.py`), so that our numbers compare with theirs.
 
-- a 6th-order Butterworth low-pass with Wn = 2 pi 5.4 / 200 (a fraction of
-  Nyquist: the effective cut-off is about 17 Hz, not 5.4 Hz),
+- a 6th-order Butterworth low-pass with Wn = 2 pi fc / 200, fc the arm's
+  ([processing] of its model card: the PSM's 5.4, a fraction of Nyquist: the
+  effective cut-off is about 17 Hz, not 5.4 Hz),
 - applied forward-backward with their odd extension of 3 * 7 = 21 samples,
 - to q, to the *measured* dq and to tau; ddq is the 5-point central difference
   of the measured dq, then filtered the same way;
@@ -26,12 +27,9 @@ from dvrk_dart.io.periodic import PeriodicAnalysis, analyse
 from dvrk_dart.io.measured_run import MeasuredRun, sample_rate_hz
 
 FILTER_ORDER = 6
-CUTOFF_PARAMETER_HZ = 5.4  # upstream's fc, used as Wn = 2 pi fc h (not a true cut-off)
 CUT_SAMPLES = 200
 #: the fewest samples the processing works on: the trimmed ends and one more
 MIN_ROWS = 2 * CUT_SAMPLES + 2
-#: the excitation's base period at 200 Hz: 1 / 0.18 Hz = 5.56 s
-FIRST_PERIOD_SAMPLES = 1111
 #: the processings a measured run can go through
 PROCESSINGS = ("upstream", "periodic")
 
@@ -45,8 +43,8 @@ class ProcessedRun:
     tau: np.ndarray
     #: the periodic layer's findings (None: upstream processing)
     periodic: PeriodicAnalysis | None = field(default=None, compare=False)
-    #: upstream's first period of this arm (samples)
-    upstream_first_period: int = field(default=FIRST_PERIOD_SAMPLES, compare=False)
+    #: upstream's first period of this arm (samples; its model card's [processing]), None where not known
+    upstream_first_period: int | None = field(default=None, compare=False)
     #: (7,) bool: the joints the run recorded (the others carry no figure, fit or cutoff)
     measured: np.ndarray | None = field(default=None, compare=False)
 
@@ -71,8 +69,10 @@ class ProcessedRun:
         return x if self.periodic is None else self.periodic.projector(x)
 
     def first_period_samples(self) -> int:
-        """Upstream: its nominal 1111 samples; periodic: the fitted period's."""
+        """Upstream: the arm's nominal first period (the PSM's 1111 samples); periodic: the fitted period's."""
         if self.periodic is None:
+            if self.upstream_first_period is None:
+                raise DvrkDartError("a run processed without its arm's [processing] has no first period")
             return self.upstream_first_period
         return int(round(self.periodic.period.period_s / (self.t[1] - self.t[0])))
 
@@ -110,7 +110,7 @@ def central_difference(x: np.ndarray, h: float) -> np.ndarray:
     return d
 
 
-def zero_phase_lowpass(x: np.ndarray, cutoff_parameter_hz: float = CUTOFF_PARAMETER_HZ) -> np.ndarray:
+def zero_phase_lowpass(x: np.ndarray, cutoff_parameter_hz: float) -> np.ndarray:
     """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0.
     Its Wn is upstream's at the reference rate whatever the run's: a run at
     another rate (the half-speed run's 100 Hz rows) keeps its cut-off at the
@@ -137,9 +137,7 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, desi
     h = 1.0 / run.rate_hz
     if len(run) < MIN_ROWS:
         raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
-    from dvrk_dart.model.description import load_model
-
-    model = load_model()
+    model = run.model
     upstream = model.processing
     fc = upstream.cutoff_parameter_hz
     q = zero_phase_lowpass(run.q, fc)
@@ -153,9 +151,7 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, desi
 
 def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> ProcessedRun:
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
-    from dvrk_dart.model.description import load_model
-
-    tau = run.tau - load_model().cable_efforts(run.q)  # what the identification removed before fitting
+    tau = run.tau - run.model.cable_efforts(run.q)  # what the identification removed before fitting
     analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design)
     kept = slice(*analysis.kept)  # without a start or end transient (io/transient.py)
     t = run.t[kept] - run.t[kept][0]

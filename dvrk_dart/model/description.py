@@ -9,12 +9,8 @@ the DART builder and the Pinocchio model are both built from `PsmModel`.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
-import functools
 import math
 import tomllib
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -29,34 +25,9 @@ from dvrk_dart.model.joints import (
 )
 from dvrk_dart.paths import MODELS_DIR
 
+#: the arm a command models when --arm-model is not given
 DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
 
-#: the arm model of the command being run (`--arm-model`): every default load reads it
-_current_model_file: contextvars.ContextVar[Path] = contextvars.ContextVar("arm_model_file", default=DEFAULT_MODEL_FILE)
-
-
-@contextlib.contextmanager
-def using_model(path: str | Path) -> Iterator[None]:
-    token = _current_model_file.set(Path(path))
-    try:
-        yield
-    finally:
-        _current_model_file.reset(token)
-
-
-def current_model_file() -> Path:
-    return _current_model_file.get()
-
-
-@functools.cache
-def prismatic_coordinates_of(model_file: Path) -> tuple[str, ...]:
-    """Coordinates that a prismatic link of the model moves."""
-    model = load_model(model_file)
-    moved = np.zeros(N_JOINTS, dtype=bool)
-    for link in model.links.values():
-        if link.joint_type == "prismatic":
-            moved |= link.variable.coeffs != 0.0
-    return tuple(name for name, m in zip(JOINT_NAMES, moved) if m)
 
 
 def resolve_arm_model(text: str) -> Path:
@@ -156,8 +127,8 @@ class Link(DHFrame):
 class UpstreamProcessing:
     """The identification's own filter and test window for this arm (io/signal.py)."""
 
-    cutoff_parameter_hz: float = 5.4
-    first_period_samples: int = 1111
+    cutoff_parameter_hz: float
+    first_period_samples: int
 
 
 @dataclass(frozen=True)
@@ -210,7 +181,7 @@ class PsmModel:
     #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
     controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()
-    processing: UpstreamProcessing = UpstreamProcessing()
+    processing: UpstreamProcessing | None = None  # [processing]: required of a model file
     dvrk_topics: DvrkTopics | None = None
     project_unphysical_bodies: bool = False  # DART gets the nearest physical body of a non-physical identified one
     #: what the diagnosis simulates before adding effects ([diagnosis] base): the identified
@@ -223,6 +194,24 @@ class PsmModel:
     def folder(self) -> Path:
         """The arm's model folder (models/<arm>/)."""
         return self.source.parent
+
+    @cached_property
+    def prismatic_coordinates(self) -> tuple[str, ...]:
+        """The coordinates a prismatic link moves (the PSM's q3; none on the MTM)."""
+        moved = np.zeros(N_JOINTS, dtype=bool)
+        for link in self.links.values():
+            if link.joint_type == "prismatic":
+                moved |= link.variable.coeffs != 0.0
+        return tuple(name for name, m in zip(JOINT_NAMES, moved) if m)
+
+    def position_unit(self, name: str) -> str:
+        return "m" if name in self.prismatic_coordinates else "rad"
+
+    def velocity_unit(self, name: str) -> str:
+        return f"{self.position_unit(name)}/s"
+
+    def effort_unit(self, name: str) -> str:
+        return "N" if name in self.prismatic_coordinates else "N·m"
 
     @property
     def body_links(self) -> list[Link]:
@@ -374,9 +363,17 @@ def _diagnosis_base(raw: dict, path: Path) -> str:
     return base
 
 
-def load_model(path: Path | str | None = None) -> PsmModel:
-    """Read and check an arm's model description file (default: the current arm's, `using_model`)."""
-    path = Path(path) if path is not None else current_model_file()
+def _upstream_processing(raw: dict, path: Path) -> UpstreamProcessing:
+    table = _require(raw, "processing", path, "file")
+    try:
+        return UpstreamProcessing(float(table["cutoff_parameter_hz"]), int(table["first_period_samples"]))
+    except (KeyError, TypeError, ValueError):
+        raise DvrkDartError(f"{path}: [processing] needs cutoff_parameter_hz (a number) and first_period_samples (an integer)") from None
+
+
+def load_model(path: Path | str) -> PsmModel:
+    """Read and check an arm's model description file."""
+    path = Path(path)
     try:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -473,7 +470,7 @@ def load_model(path: Path | str | None = None) -> PsmModel:
         session_offset_joints=_session_offset_joints(raw, path),
         controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
-        processing=UpstreamProcessing(**raw.get("processing", {})),
+        processing=_upstream_processing(raw, path),
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
         diagnosis_base=_diagnosis_base(raw, path),

@@ -9,32 +9,11 @@ import numpy as np
 
 JOINT_NAMES = ("q1", "q2", "q3", "q4", "q5", "q6", "q7")
 N_JOINTS = len(JOINT_NAMES)
-#: the PSM's prismatic coordinate (its insertion): the PSM-only code (counterweight, insertion checks) names it
-PRISMATIC_JOINTS = ("q3",)
 INSERTION = JOINT_NAMES.index("q3")
 #: the coordinate that pitches the arm (both arms' q2): the reference of a hand-measured payload position
 PITCH = JOINT_NAMES.index("q2")
 #: the coordinate that turns the arm about its first axis (both arms' q1)
 YAW = JOINT_NAMES.index("q1")
-
-
-def prismatic_coordinates() -> tuple[str, ...]:
-    """The coordinates of the current arm (`--arm-model`) that a prismatic link moves (the PSM's q3; none on the MTM)."""
-    from dvrk_dart.model.description import current_model_file, prismatic_coordinates_of
-
-    return prismatic_coordinates_of(current_model_file())
-
-
-def position_unit(name: str) -> str:
-    return "m" if name in prismatic_coordinates() else "rad"
-
-
-def velocity_unit(name: str) -> str:
-    return f"{position_unit(name)}/s"
-
-
-def effort_unit(name: str) -> str:
-    return "N" if name in prismatic_coordinates() else "N·m"
 
 
 def column_names(prefix: str) -> list[str]:

@@ -82,11 +82,12 @@ def code_fingerprint() -> str:
 
 
 def inputs_fingerprint(config: RunConfig, code: str) -> str:
-    from dvrk_dart.runs.runner import inputs_used, scenario_of
+    from dvrk_dart.model.description import load_model
+    from dvrk_dart.runs.runner import arm_model_file, inputs_used, scenario_of
 
-    scenario = scenario_of(config)
-    parts = [code, json.dumps(scenario.to_dict(), sort_keys=True), json.dumps(config.to_dict(), sort_keys=True)]
-    parts += [f"{k}={json.dumps(v, sort_keys=True)}" for k, v in sorted(inputs_used(config, scenario).items())]
+    scenario, model_file = scenario_of(config), arm_model_file(config)
+    parts = [code, sha256_of(model_file), json.dumps(scenario.to_dict(), sort_keys=True), json.dumps(config.to_dict(), sort_keys=True)]
+    parts += [f"{k}={json.dumps(v, sort_keys=True)}" for k, v in sorted(inputs_used(config, scenario, load_model(model_file)).items())]
     if config.params_file:
         parts.append(sha256_of(Path(config.params_file)))
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()
@@ -105,8 +106,8 @@ def write_run_folder(record, out_dir: Path, model, fingerprint: str | None = Non
         write_json_atomic(folder / "config.json", {"run": record.name, **record.config, "versions": software_versions(), "inputs_sha256": fingerprint})
         write_json_atomic(folder / "metrics.json", record.metrics)
         if len(record):
-            write_mcap(record, folder / "run.mcap")
-            write_rrd(record, folder / "run.rrd", model=model)
+            write_mcap(record, folder / "run.mcap", model)
+            write_rrd(record, folder / "run.rrd", model)
         if fingerprint and "error" not in record.metrics:  # a failed run is run again next time
             write_text_atomic(folder / INPUTS_FILE, fingerprint + "\n")
 
@@ -115,16 +116,14 @@ def _execute(task: tuple[RunConfig, str | None, str]):
     """Worker: run one config. With a folder (local workers share the driver's
     file system) it writes the run there and returns its metrics; without, it
     returns the record for the driver to write (Ray)."""
-    from dvrk_dart.io.arm import load_arm
-    from dvrk_dart.runs.runner import arm_of_scenario, run
+    from dvrk_dart.runs.runner import arm_of_run, run
 
     config, runs_dir, fingerprint = task
-    with arm_of_scenario(config):
-        arm = load_arm(params_file=config.params_file)
-        record = run(config, arm)
-        if runs_dir is None:
-            return record
-        write_run_folder(record, Path(runs_dir) / record.name, arm.model, fingerprint)
+    arm = arm_of_run(config)
+    record = run(config, arm)
+    if runs_dir is None:
+        return record
+    write_run_folder(record, Path(runs_dir) / record.name, arm.model, fingerprint)
     return record.metrics
 
 
@@ -132,7 +131,7 @@ def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: b
                  executor: str = "local", ray_address: str | None = None) -> dict:
     """Run every spec not already up to date, on the executor; returns a summary
     with the failures by run name (a failed run does not stop the others)."""
-    from dvrk_dart.io.arm import load_arm
+    from dvrk_dart.runs.runner import arm_of_run
 
     start = time.perf_counter()
     code = code_fingerprint()
@@ -152,7 +151,7 @@ def run_campaign(specs: list[RunConfig], runs_dir: Path, jobs: int = 2, force: b
         name = names[spec]
         if error is None and not worker_writes:  # the driver writes what the Ray worker returned
             try:
-                write_run_folder(result, runs_dir / name, load_arm(params_file=spec.params_file).model, fingerprint)
+                write_run_folder(result, runs_dir / name, arm_of_run(spec).model, fingerprint)
             except Exception as exc:
                 error = error_text(exc)
         if error is None:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.signal import PROCESSINGS
 from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES, MAX_DURATION_S  # noqa: F401  (the CLI's bound too)
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
@@ -52,6 +53,10 @@ class RunConfig:
     #: the periodic processing's harmonic cutoff (None: the run's own), as a
     #: diagnosis that compared several runs on their smallest one recorded it
     harmonics: int | None = None
+    #: the arm (an arm of models/ by name, a model folder or file); None: the scenario's, else the PSM
+    arm_model: str | None = None
+    #: how the measured run is read where it is a bag (--arm, --topic, --jaw-topic) or a CSV (--rate)
+    topics: BagTopics = BagTopics()
 
     def __post_init__(self) -> None:
         if self.processing not in PROCESSINGS:
@@ -82,7 +87,10 @@ class RunConfig:
     @classmethod
     def from_dict(cls, raw: dict) -> "RunConfig":
         names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in raw.items() if k in names})
+        kept = {k: v for k, v in raw.items() if k in names}
+        if isinstance(kept.get("topics"), dict):
+            kept["topics"] = BagTopics(**kept["topics"])
+        return cls(**kept)
 
 
 def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream") -> str:

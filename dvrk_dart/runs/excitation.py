@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.description import load_model
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, velocity_unit
+from dvrk_dart.io.arm import Arm
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: the identification's excitation (data README): nominal base frequency and harmonics
 EXCITATION_BASE_HZ = 0.18
@@ -88,13 +89,13 @@ def fitted_base_frequency(t: np.ndarray, q: np.ndarray) -> float:
     return float(refined.x)
 
 
-def fitted_excitation(name: str, rate_hz: float) -> Excitation:
-    """The Fourier series fitted to the measured run `name`, sampled at rate_hz."""
+def fitted_excitation(name: str, rate_hz: float, model: PsmModel) -> Excitation:
+    """The Fourier series fitted to the measured run `name` of `model`'s arm, sampled at rate_hz."""
     from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
     if name not in EXCITATIONS:
         raise DvrkDartError(f"unknown excitation '{name}' (known: {', '.join(EXCITATIONS)})")
-    run = load_run(resolve_run(name))
-    motor_map = load_model().motor_map
+    run = load_run(resolve_run(name), model)
+    motor_map = model.motor_map
     q_dvrk, dq_dvrk = motor_map.positions_to_dvrk(run.q), motor_map.positions_to_dvrk(run.dq)
     base_hz = fitted_base_frequency(run.t, q_dvrk)
     basis, dbasis = fourier_basis(run.t, base_hz)
@@ -109,7 +110,7 @@ def fitted_excitation(name: str, rate_hz: float) -> Excitation:
         "base_frequency_hz": base_hz,
         "nominal_base_frequency_hz": EXCITATION_BASE_HZ,
         "harmonics": EXCITATION_HARMONICS,
-        "joints": list(load_model().dvrk_topics.joint_names),
+        "joints": list(model.dvrk_topics.joint_names),
         # rows: constant, sin(l w t) for l = 1..6, cos(l w t) for l = 1..6; columns: dVRK joints
         "coefficients": coefficients.tolist(),
         "fit_rms_position": np.sqrt(np.mean((basis @ coefficients - q_dvrk) ** 2, axis=0)).tolist(),
@@ -118,9 +119,8 @@ def fitted_excitation(name: str, rate_hz: float) -> Excitation:
     return Excitation(name, t, q, dq, source)
 
 
-def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
-    """A Cartesian scenario's joint trajectory (its kinematic mode), at rate_hz."""
-    from dvrk_dart.io.arm import load_arm
+def cartesian_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
+    """A Cartesian scenario's joint trajectory (its kinematic mode on `arm`), at rate_hz."""
     from dvrk_dart.runs.cartesian import CartesianDriver
     from dvrk_dart.runs.scenarios import load_scenario
 
@@ -131,7 +131,7 @@ def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
     dt = 1.0 / (rate_hz * substeps)
     samples = int(math.floor(scenario.duration_s * rate_hz + 1e-9)) + 1
     steps = (samples - 1) * substeps + 1
-    driver = CartesianDriver(load_arm(), scenario, "kinematic", dt, steps)
+    driver = CartesianDriver(arm, scenario, "kinematic", dt, steps)
     q, dq = np.empty((samples, N_JOINTS)), np.empty((samples, N_JOINTS))
     for k in range(steps):
         if k % substeps == 0:
@@ -143,52 +143,54 @@ def cartesian_excitation(name: str, rate_hz: float) -> Excitation:
     return Excitation(scenario.name, np.arange(samples) / rate_hz, q, dq, source)
 
 
-def build_excitation(name: str, rate_hz: float) -> Excitation:
+def build_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
+    """The excitation `name` (a measured run's Fourier fit, or a Cartesian scenario) of `arm`, checked."""
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise DvrkDartError(f"--rate: {rate_hz!r} is not a positive rate (Hz)")
     if rate_hz < MIN_SERVO_RATE_HZ:
         raise DvrkDartError(f"--rate: {rate_hz:g} Hz is below {MIN_SERVO_RATE_HZ:g} Hz: servo_jp jumps to each setpoint, "
                             f"{1 / rate_hz:.3g} s apart would jerk the arm")
-    excitation = fitted_excitation(name, rate_hz) if name in EXCITATIONS else cartesian_excitation(name, rate_hz)
-    check_limits(excitation)
+    excitation = fitted_excitation(name, rate_hz, arm.model) if name in EXCITATIONS else cartesian_excitation(name, rate_hz, arm)
+    check_limits(excitation, arm.model)
     return excitation
 
 
-def check_limits(excitation: Excitation) -> None:
+def check_limits(excitation: Excitation, model: PsmModel) -> None:
     """Joint limits (the model's ranges, as for every measured run) and the dVRK's
     velocity limits ([dvrk_velocity_limits] of the model): one-line refusal."""
     from dvrk_dart.io.reference_data import check_joint_ranges
-    model = load_model()
     if not (np.isfinite(excitation.q).all() and np.isfinite(excitation.dq).all()):
         raise DvrkDartError(f"excitation {excitation.name}: the trajectory has non-finite values")
-    check_joint_ranges(excitation.q, f"excitation {excitation.name}")
+    check_joint_ranges(excitation.q, f"excitation {excitation.name}", model)
     if model.dvrk_velocity_limits is None:
         raise DvrkDartError(f"{model.source}: no [dvrk_velocity_limits]: cannot check the excitation's velocities")
     speed = np.abs(model.motor_map.positions_to_dvrk(excitation.dq))
     over = speed > model.dvrk_velocity_limits
     if over.any():
         k, j = np.argwhere(over)[0]
-        unit = velocity_unit(JOINT_NAMES[j])
+        unit = model.velocity_unit(JOINT_NAMES[j])
         raise DvrkDartError(
-            f"excitation {excitation.name}: {load_model().dvrk_topics.joint_names[j]} moves at {speed[k, j]:.3f} {unit} at t = {excitation.t[k]:.3f} s, "
+            f"excitation {excitation.name}: {model.dvrk_topics.joint_names[j]} moves at {speed[k, j]:.3f} {unit} at t = {excitation.t[k]:.3f} s, "
             f"over the velocity limit {model.dvrk_velocity_limits[j]:g} {unit} ({model.source.name}, [dvrk_velocity_limits])"
         )
 
 
-def write_excitation(excitation: Excitation, folder, arm: str | None) -> dict:
+def write_excitation(excitation: Excitation, folder, model: PsmModel, namespace: str | None) -> dict:
     """NAME.csv (time + dVRK joint names, dVRK units), NAME_servo_jp (a ROS 2 bag
-    of servo_jp commands, the jaw on jaw/servo_jp) and excitation.json, in `folder`."""
+    of servo_jp commands of `model`'s arm in `namespace`, the jaw on
+    jaw/servo_jp) and excitation.json, in `folder`."""
     from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
     from dvrk_dart.io.bags import arm_joint_states, write_bag
     if Path(excitation.name).name != excitation.name or excitation.name in ("", ".", ".."):
         raise DvrkDartError(f"excitation name '{excitation.name}' cannot name a file")
-    dvrk = load_model().motor_map.positions_to_dvrk(excitation.q)
-    header = ",".join(["time", *load_model().dvrk_topics.joint_names])
+    dvrk = model.motor_map.positions_to_dvrk(excitation.q)
+    joints = model.dvrk_topics.joint_names
+    header = ",".join(["time", *joints])
     rows = "\n".join(",".join(f"{v:.17g}" for v in row) for row in np.column_stack([excitation.t, dvrk]))
     csv = folder / f"{excitation.name}.csv"
     write_text_atomic(csv, header + "\n" + rows + "\n")
     bag = folder / f"{excitation.name}_servo_jp"
-    states = arm_joint_states(arm, excitation.t, excitation.q, suffix="servo_jp")
+    states = arm_joint_states(model, namespace, excitation.t, excitation.q, suffix="servo_jp")
     write_bag(bag, states)
     from dvrk_dart.io.provenance import software_versions
 
@@ -201,8 +203,8 @@ def write_excitation(excitation: Excitation, folder, arm: str | None) -> dict:
         "csv": csv.name,
         "bag": bag.name,
         "topics": [state.topic for state in states],
-        "start_pose": dict(zip(load_model().dvrk_topics.joint_names, dvrk[0].tolist())),
-        "max_speed": dict(zip(load_model().dvrk_topics.joint_names, np.abs(load_model().motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
+        "start_pose": dict(zip(joints, dvrk[0].tolist())),
+        "max_speed": dict(zip(joints, np.abs(model.motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
         "source": excitation.source,
     }
     write_json_atomic(folder / "excitation.json", summary)

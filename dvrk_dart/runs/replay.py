@@ -18,11 +18,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.model.description import PsmModel, load_model
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.identified import TERMS, IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
 from dvrk_dart.runs.loop import LoopLog, simulate
@@ -47,16 +48,18 @@ VELOCITY_TARGET_STAGGER_STEPS = 0.5
 
 def replay(
     measured: str | Path,
+    model: PsmModel,
     mode: str = "velocity",
     config: SimConfig = SimConfig(),
     duration_s: float | None = None,
     log_every: int = 5,
-    model: PsmModel | None = None,
     params: IdentifiedParameters | None = None,
     processing: str = "upstream",
     harmonics: int | None = None,
+    topics: BagTopics = BagTopics(),
 ) -> RunRecord:
-    """Replay a measured run ('two', a manifest name or a CSV path).
+    """Replay a measured run of `model`'s arm ('two', a manifest name or a CSV
+    path; a bag read with `topics`).
 
     On divergence, raises SimulationDiverged whose `record` attribute holds the
     RunRecord of what was logged so far (metrics["error"] = the message)."""
@@ -64,9 +67,8 @@ def replay(
         raise DvrkDartError(f"mode must be one of {', '.join(MODES)}, not '{mode}'")
     if log_every < 1:
         raise DvrkDartError("log_every must be >= 1")
-    model = model or load_model()
     params = params or load_parameters(resolve(model.default_parameters), model)
-    processed = process(load_run(resolve_run(measured)), processing, harmonics)
+    processed = process(load_run(resolve_run(measured), model, topics), processing, harmonics)
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 

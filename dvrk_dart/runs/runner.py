@@ -17,6 +17,7 @@ from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.io.reference_data import resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import TORQUE_TRANSIENT_S, rms
 from dvrk_dart.io.arm import Arm, load_arm
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, resolve_arm_model
 from dvrk_dart.model.identified import TERMS
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.runs.config import RunConfig, run_name, sim_config_for
@@ -75,19 +76,21 @@ def scenario_of(config: RunConfig) -> Scenario:
     return scenario
 
 
-def arm_of_scenario(config: RunConfig):
-    """The context of the run's arm: its scenario's (`arm_model`), else the command's."""
-    from dvrk_dart.model.description import current_model_file, resolve_arm_model, using_model
+def arm_model_file(config: RunConfig) -> Path:
+    """The run's arm: its scenario's (`arm_model`), else the config's, else the PSM."""
+    arm_model = scenario_of(config).arm_model or config.arm_model
+    return resolve_arm_model(arm_model) if arm_model else DEFAULT_MODEL_FILE
 
-    arm_model = scenario_of(config).arm_model
-    return using_model(resolve_arm_model(arm_model) if arm_model else current_model_file())
+
+def arm_of_run(config: RunConfig) -> Arm:
+    """The run's arm (`arm_model_file`) with the parameters config.params_file names."""
+    return load_arm(arm_model_file(config), config.params_file)
 
 
 def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     """Run one configuration; the record carries its resolved config and metrics.
-    `arm` (model + parameters) must be the one config.params_file names, of the
-    scenario's arm (call inside `arm_of_scenario(config)`)."""
-    arm = arm or load_arm(params_file=config.params_file)
+    `arm` (model + parameters), when given, must be `arm_of_run(config)`."""
+    arm = arm or arm_of_run(config)
     scenario = scenario_of(config)
     mode, counterweight = config.mode, config.counterweight
     if mode not in scenario.modes:
@@ -103,8 +106,8 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         from dvrk_dart.runs.replay import replay
 
         try:
-            record = replay(scenario.measured, mode=mode, config=sim_config, duration_s=duration, model=arm.model, params=arm.params,
-                            processing=config.processing, harmonics=config.harmonics)
+            record = replay(scenario.measured, arm.model, mode=mode, config=sim_config, duration_s=duration, params=arm.params,
+                            processing=config.processing, harmonics=config.harmonics, topics=config.topics)
         except SimulationDiverged as exc:  # keep what was logged up to the divergence
             record = exc.record
     else:
@@ -126,7 +129,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         "model_file": str(arm.model.source.name),
         "params_file": str(arm.params.source),
         "params_sha256": sha256_of(arm.params.source),
-        "inputs": inputs_used(config, scenario),
+        "inputs": inputs_used(config, scenario, arm.model),
     }
     record.markers.setdefault("rcm", rcm_position(arm))
     record.metrics.update(
@@ -146,7 +149,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     return record
 
 
-def inputs_used(config: RunConfig, scenario: Scenario) -> dict[str, dict]:
+def inputs_used(config: RunConfig, scenario: Scenario, model: PsmModel) -> dict[str, dict]:
     """The input files the run really used (measured run, diagnosis): path,
     sha256 and the options that selected data from them (a bag's topics, a
     CSV's rate)."""
@@ -154,7 +157,7 @@ def inputs_used(config: RunConfig, scenario: Scenario) -> dict[str, dict]:
 
     inputs = {}
     if scenario.measured:
-        inputs[str(scenario.measured)] = input_record(resolve_run(scenario.measured))
+        inputs[str(scenario.measured)] = input_record(resolve_run(scenario.measured), model, config.topics)
     if config.dynamics.endswith(".json"):
         inputs[config.dynamics] = {"path": str(Path(config.dynamics)), "sha256": sha256_of(Path(config.dynamics))}
     return inputs

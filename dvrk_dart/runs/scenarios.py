@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import joint_ranges
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, load_model, resolve_arm_model
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
@@ -163,18 +163,19 @@ def load_scenario_file(path: Path) -> Scenario:
         _fail(path, f"dynamics must be one of {', '.join(DYNAMICS_CHOICES)} or a diagnosis .json file, got {dynamics!r}")
     if dynamics.endswith(".json"):  # relative to the scenario file
         dynamics = str((path.parent / dynamics).resolve())
+    arm_model = raw.get("arm_model")
+    if arm_model is not None and not isinstance(arm_model, str):
+        _fail(path, f"arm_model must be an arm's name (psm, mtm), got {arm_model!r}")
     if kind == "replay":
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
         duration = _duration(path, raw) if "duration_s" in raw else None
-        arm_model = raw.get("arm_model")
-        if arm_model is not None and not isinstance(arm_model, str):
-            _fail(path, f"arm_model must be an arm's name (psm, mtm), got {arm_model!r}")
         return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics,
                         arm_model=arm_model)
     duration = _duration(path, raw)
     start = _vector(path, raw, "start_pose", N_JOINTS)
-    lower, upper = joint_ranges()
+    model = load_model(resolve_arm_model(arm_model) if arm_model else DEFAULT_MODEL_FILE)
+    lower, upper = model.joint_lower, model.joint_upper
     for j in np.flatnonzero((start < lower) | (start > upper)):
         _fail(path, f"start_pose: q{j + 1} = {float(start[j])!r} outside the joint range [{float(lower[j])!r}, {float(upper[j])!r}]")
     path_table = raw.get("path")
@@ -187,7 +188,8 @@ def load_scenario_file(path: Path) -> Scenario:
         _positive(path, path_table, key, "path.")
     if "direction" in path_table and not np.linalg.norm(_vector(path, path_table, "direction", 3, "path.")) > 0:
         _fail(path, "path.direction must be a non-zero 3-vector")
-    return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path, dynamics=dynamics)
+    return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path, dynamics=dynamics,
+                    arm_model=arm_model)
 
 
 def available_scenarios() -> list[str]:

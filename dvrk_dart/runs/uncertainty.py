@@ -29,7 +29,9 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.outputs import building_folder, check_output_folder
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.executors import run_tasks
 
 #: the band: these quantiles of the simulated efforts over the samples
@@ -50,51 +52,52 @@ class UncertaintyConfig:
     jobs: int = 2
     #: upstream | periodic | None: periodic where the run is periodic (`processing_of`)
     processing: str | None = None
-    #: the arm's description file (None: the command's, --arm-model); workers load it themselves
-    arm_model: str | None = None
+    #: the arm's description file (--arm-model); workers load it themselves
+    arm_model: str = str(DEFAULT_MODEL_FILE)
+    #: how the measured run is read where it is a bag (--arm, --topic, --jaw-topic) or a CSV (--rate)
+    topics: BagTopics = BagTopics()
 
 
 def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
     """(processing, why): with periodic processing the band, the measured and
     the model efforts are compared at the measured samples, each projected on
     the excitation's harmonics (a whole run only)."""
-    from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process_all
 
     if config.processing is not None:
         return config.processing, f"--processing {config.processing}"
     if config.duration_s is not None:
         return "upstream", "upstream: --duration replays a part of the run, which has no projection of its own"
-    processed, note = process_all([load_run(resolve_run(config.measured))], None)
+    processed, note = process_all([_measured_run(config)], None)
     return processed[0].processing, note or "the run is a periodic excitation"
 
 
-def _replay(task: tuple[str, str, float | None, float, str, str, str]) -> dict:
+def _measured_run(config: UncertaintyConfig):
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.model.description import load_model
+
+    return load_run(resolve_run(config.measured), load_model(config.arm_model), config.topics)
+
+
+def _replay(task: tuple[UncertaintyConfig, str, str]) -> dict:
     """Worker: the velocity replay with one parameter file -> its efforts
     (periodic: at the measured samples, in the measured efforts' band), on the
-    arm of `task`'s model file (a Ray worker has no command context)."""
-    from dvrk_dart.model.description import using_model
-
-    with using_model(task[-1]):
-        return _replay_on_arm(task[:-1])
-
-
-def _replay_on_arm(task: tuple[str, str, float | None, float, str, str]) -> dict:
-    from dvrk_dart.io.reference_data import load_run, resolve_run
+    arm of the config's model file."""
     from dvrk_dart.io.signal import process
     from dvrk_dart.runs.config import RunConfig
     from dvrk_dart.runs.replay import in_band_at_samples
     from dvrk_dart.runs.runner import run
 
-    measured, params_file, duration, dt, dynamics, processing = task
-    record = run(RunConfig("replay", "velocity", dynamics=dynamics, measured=measured, params_file=params_file, duration_s=duration, dt_s=dt,
-                           processing=processing))
+    config, params_file, processing = task
+    record = run(RunConfig("replay", "velocity", dynamics=config.dynamics, measured=config.measured, params_file=params_file,
+                           duration_s=config.duration_s, dt_s=config.dt_s, processing=processing, arm_model=config.arm_model,
+                           topics=config.topics))
     if "error" in record.metrics:
         raise DvrkDartError(record.metrics["error"])
     model = record.model_total(tuple(record.metrics["model_terms_compared"]))
     if processing == "upstream":
         return {"t": record.t, "sim": record.effort_sim, "measured": record.effort_measured, "model": model}
-    processed = process(load_run(resolve_run(measured)), processing)
+    processed = process(_measured_run(config), processing)
     return {"t": processed.t - processed.t[0], "sim": in_band_at_samples(processed, record.t, record.effort_sim),
             "measured": processed.tau, "model": in_band_at_samples(processed, record.t, model)}
 
@@ -108,25 +111,24 @@ def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndar
 def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
     from dvrk_dart.identification.sampling import sample_parameters
     from dvrk_dart.io.provenance import software_versions
-    from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, sha256_of
+    from dvrk_dart.io.reference_data import input_record, resolve_run, sha256_of
     from dvrk_dart.io.signal import process
     from dvrk_dart.io.arm import load_arm
-    from dvrk_dart.model.description import current_model_file
     from dvrk_dart.runs.replay import replay_duration
 
     out = check_output_folder(out, "uncertainty")
     processing, processing_why = processing_of(config)
     # the run, its processing and the span: every input's error before any work
-    replay_duration(process(load_run(resolve_run(config.measured)), processing), config.duration_s)
+    replay_duration(process(_measured_run(config), processing), config.duration_s)
     start = time.perf_counter()
-    drawn = sample_parameters(load_arm(), config.samples, config.seed, config.relative_std, config.params_cov)
+    arm = load_arm(config.arm_model)
+    drawn = sample_parameters(arm, config.samples, config.seed, config.relative_std, config.params_cov)
     with building_folder(out, "uncertainty") as folder:
         (folder / "params").mkdir()
         paths = [folder / "params" / "nominal.json"] + [folder / "params" / f"sample_{i:04d}.json" for i in range(config.samples)]
         for path, params in zip(paths, [drawn.nominal, *drawn.samples]):
             path.write_text(json.dumps(params, indent=1))
-        arm_model = config.arm_model or str(current_model_file())
-        tasks = [(config.measured, str(p), config.duration_s, config.dt_s, config.dynamics, processing, arm_model) for p in paths]
+        tasks = [(config, str(p), processing) for p in paths]
         results, failures = {}, {}
         for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
             if error is None:
@@ -144,11 +146,11 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         model_inside, _ = band_statistics(low, high, nominal["model"])
         summary = {
             "config": asdict(config),
-            "measured_file": {**input_record(resolve_run(config.measured)), "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
+            "measured_file": {**input_record(resolve_run(config.measured), arm.model, config.topics), "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
             "versions": software_versions(),
             "processing": {"processing": processing, "chosen_because": processing_why},
             "parameters": drawn.source,
-            "params": {"path": str(load_arm().params.source), "sha256": sha256_of(load_arm().params.source)},
+            "params": {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)},
             "params_cov_sha256": sha256_of(Path(config.params_cov)) if config.params_cov else None,
             "projected_bodies": drawn.projected_bodies,
             "clipped_friction_coefficients": drawn.clipped_friction,
@@ -156,6 +158,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "failed_samples": failures,
             "band_quantiles": list(BAND_QUANTILES),
             "joints": list(JOINT_NAMES),
+            "effort_units": [arm.model.effort_unit(j) for j in JOINT_NAMES],
             "measured_inside_band_fraction": inside.tolist(),
             "rms_measured_outside_band": gap.tolist(),
             "nominal_model_inside_band_fraction": model_inside.tolist(),
@@ -169,11 +172,11 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
                         f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
         pd.DataFrame(columns).to_csv(folder / "band.csv", index=False)
-        plot_bands(folder / "band.csv", folder / "figures")
+        plot_bands(folder / "band.csv", folder / "figures", arm.model)
     return summary
 
 
-def plot_bands(band_csv: Path, folder: Path, joints: tuple[str, ...] = JOINT_NAMES[:3]) -> list[Path]:
+def plot_bands(band_csv: Path, folder: Path, model: PsmModel, joints: tuple[str, ...] = JOINT_NAMES[:3]) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -189,7 +192,7 @@ def plot_bands(band_csv: Path, folder: Path, joints: tuple[str, ...] = JOINT_NAM
         ax.plot(band.t, band[f"{name}_measured"], color="k", lw=0.8, label="measured")
         ax.plot(band.t, band[f"{name}_nominal_model"], color="tab:blue", lw=0.8, ls="--", label="identified model (nominal)")
         ax.set_xlabel("t (s)")
-        ax.set_ylabel(f"{name} effort ({effort_unit(name)})")
+        ax.set_ylabel(f"{name} effort ({model.effort_unit(name)})")
         ax.legend(fontsize=7, loc="upper right")
         fig.tight_layout()
         path = folder / f"band_{name}.png"

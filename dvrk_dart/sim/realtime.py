@@ -6,18 +6,17 @@ import time
 
 import numpy as np
 
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.simulator import PsmSimulator
 
 
-def measure_realtime_factor(seconds: float = 5.0, config: SimConfig = SimConfig()) -> float:
+def measure_realtime_factor(model: PsmModel, seconds: float = 5.0, config: SimConfig = SimConfig()) -> float:
     """Simulated seconds per wall second of the full arm (velocity servo on a
     smooth multi-joint motion), for the benchmark."""
     from dvrk_dart.io.reference_data import resolve
-    from dvrk_dart.model.description import load_model
     from dvrk_dart.model.parameters import load_parameters
 
-    model = load_model()
     params = load_parameters(resolve(model.default_parameters), model)
     sim = PsmSimulator(model, params, config)
     centre = 0.5 * (model.joint_lower + model.joint_upper)

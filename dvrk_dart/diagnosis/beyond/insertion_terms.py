@@ -43,12 +43,12 @@ import numpy as np
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
 from dvrk_dart.diagnosis.output.page import repeatable_share, share_words
-from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.model import friction
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.description import prismatic_coordinates_of
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, JointEffects
 
@@ -162,7 +162,7 @@ def simulation_effects(arm: Arm, fitted: InsertionTerms) -> JointEffects:
 
 def has_insertion(arm: Arm) -> bool:
     """Whether the arm has the PSM's prismatic insertion (the MTM has none)."""
-    return JOINT_NAMES[INSERTION] in prismatic_coordinates_of(arm.model.source)
+    return JOINT_NAMES[INSERTION] in arm.model.prismatic_coordinates
 
 
 def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[ProcessedRun], executor: str = "local", jobs: int = 2,
@@ -200,12 +200,13 @@ def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
             and result["processing"]["processing"] == "periodic")
 
 
-def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2, ray_address: str | None = None) -> dict:
+def insertion_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
+                    topics: BagTopics = BagTopics()) -> dict:
     """`insertion_study` on the diagnosis's runs and processing, with the share
     of J3's repeatable gap (above the session floor) the simulated terms
     remove, and words."""
-    processing = RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"))
-    train, holdout = loaded_states(list(train), processing), loaded_states(list(holdout), processing)
+    processing = processing_of(result, topics)
+    train, holdout = loaded_states(list(train), arm.model, processing), loaded_states(list(holdout), arm.model, processing)
     study = insertion_study(arm, train, holdout, executor, jobs, ray_address)
     floor = result.get("session_floor")
     share = None

@@ -22,10 +22,12 @@ from dvrk_dart.diagnosis.beyond import insertion_terms
 from dvrk_dart.diagnosis.beyond import pitch_load
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
 from dvrk_dart.diagnosis.fit.result import gaps
-from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, effort_unit
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 from dvrk_dart.sim.config import SimConfig
 
 #: the one configuration, as `--dynamics` reads it:
@@ -47,20 +49,20 @@ def one_configuration(arm: Arm, effects: SimConfig, train: list[ProcessedRun], h
     held = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "one configuration: held-out replays")
     gap = gaps(held, np.all([s.measured for s in holdout], axis=0))
     return {"gap_holdout": gap, "insertion_terms": terms.named_coefficients(), "pitch_loads": loads.to_dict(),
-            "sim_config": config.to_dict(), "method": METHOD, "words": one_configuration_sentence(gap)}
+            "sim_config": config.to_dict(), "method": METHOD, "words": one_configuration_sentence(gap, arm.model)}
 
 
 def one_configuration_check(arm: Arm, train, holdout, result: dict, executor: str = "local", jobs: int = 2,
-                            ray_address: str | None = None) -> dict | None:
+                            ray_address: str | None = None, topics: BagTopics = BagTopics()) -> dict | None:
     """`one_configuration` on the diagnosis's runs and processing (None when it selected no effect)."""
     if not result.get("sim_config"):
         return None
-    processing = RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"))
-    train, holdout = loaded_states(list(train), processing), loaded_states(list(holdout), processing)
+    processing = processing_of(result, topics)
+    train, holdout = loaded_states(list(train), arm.model, processing), loaded_states(list(holdout), arm.model, processing)
     return one_configuration(arm, SimConfig.from_dict(result["sim_config"]), train, holdout, executor, jobs, ray_address)
 
 
-def one_configuration_sentence(gap: list[float]) -> str:
+def one_configuration_sentence(gap: list[float], model: PsmModel) -> str:
     return ("The selected effects with J3's terms and the loads the pitch angle sets on J1 and J2, in one DART configuration, leave "
-            + ", ".join(f"{name} {gap[j]:.3g} {effort_unit(name)}" for j, name in enumerate(JOINT_NAMES[:3]) if gap[j] is not None)
+            + ", ".join(f"{name} {gap[j]:.3g} {model.effort_unit(name)}" for j, name in enumerate(JOINT_NAMES[:3]) if gap[j] is not None)
             + " on the held-out runs.")

@@ -26,13 +26,14 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
 from dvrk_dart.diagnosis.output.page import repeatable_share
 from dvrk_dart.diagnosis.fit.result import gaps
-from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, loaded_states
+from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.identify import IdentificationConfig, identify
 from dvrk_dart.identification.outputs import PARAMS_FILE, write_outputs
 from dvrk_dart.io.provenance import sha256_of
 from dvrk_dart.io.reference_data import resolve_run
 from dvrk_dart.io.arm import Arm, load_arm
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS
 
@@ -61,18 +62,18 @@ def _held_out_gaps(arms: list[Arm], states: list, executor: str, jobs: int, ray_
 
 
 def refit_check(arm: Arm, train, holdout, result: dict, out_dir: Path, executor: str = "local", jobs: int = 2,
-                ray_address: str | None = None) -> dict:
+                ray_address: str | None = None, topics: BagTopics = BagTopics()) -> dict:
     """The refit's identification (written to OUT/refit/) and its held-out
     gaps beside the arm's; `result` is the diagnosis (its processing and floor)."""
     processing = result["processing"]
     config = IdentificationConfig(runs=tuple(str(resolve_run(s)) for s in train), processing=processing["processing"],
-                                  prior=str(arm.params.source))
+                                  prior=str(arm.params.source), model_file=str(arm.model.source), topics=topics)
     identified = identify(config)
     folder = Path(out_dir) / REFIT_FOLDER
     folder.mkdir(parents=True, exist_ok=True)
     write_outputs(identified, folder)
-    refit_arm = load_arm(params_file=folder / PARAMS_FILE)
-    states = loaded_states(list(holdout), RunProcessing(processing["processing"], processing.get("harmonics")))
+    refit_arm = load_arm(arm.model.source, folder / PARAMS_FILE)
+    states = loaded_states(list(holdout), arm.model, processing_of(result, topics))
     published, refit = _held_out_gaps([arm, refit_arm], states, executor, jobs, ray_address)
     floor = result.get("session_floor")
     share = None if floor is None else repeatable_share(published, refit, floor).tolist()

@@ -30,6 +30,7 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_periodic
 from dvrk_dart.metrics import rms
+from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import JointEffects, Payload, SimConfig
 
@@ -60,12 +61,12 @@ def suite_motion(spec: dict, real: ProcessedRun) -> ProcessedRun:
     return real.head(int(round(spec["periods"] * real.periodic.period.period_s * real.rate_hz)) + 2)
 
 
-def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: np.ndarray) -> dict[str, np.ndarray]:
+def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: np.ndarray, model: PsmModel) -> dict[str, np.ndarray]:
     """The real runs' noise: per sample on the efforts and the positions (the
     periodic layer's, on the suite's run), and the constant efforts that moved
     between two sessions of it (`session_pair`) on the joints sessions move."""
     summary = real.periodic.summary()
-    first, second = (load_run(resolve_run(name)).tau for name in spec["session_pair"])
+    first, second = (load_run(resolve_run(name), model).tau for name in spec["session_pair"])
     span = min(len(first), len(second))
     return {"effort": np.nan_to_num(np.array(summary["noise_per_sample_rms"], dtype=float)),
             "position": np.nan_to_num(np.array(summary["position_noise_per_sample_rms"], dtype=float)),
@@ -100,7 +101,7 @@ def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunPr
     simulation, each joint that sessions move demeaned as the diagnosis does):
     the noise of efforts and positions through the processing, the floor."""
     def gap(path: Path, config: SimConfig) -> np.ndarray:
-        state = loaded_states([str(path)], processing)[0]
+        state = loaded_states([str(path)], arm.model, processing)[0]
         return state.tau - simulated_efforts(arm, state, simulate, config)
 
     residual = gap(runs["measured"], runs["config"])
@@ -146,9 +147,9 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
     without and with a baseline (`spec["baselines"]`, default both;
     `spec["subset"]`: the case names to run only)."""
     simulate = simulate or BatchSimulate(arm, "local", 1)
-    real = process_periodic(load_run(resolve_run(spec["run"])))
+    real = process_periodic(load_run(resolve_run(spec["run"]), arm.model))
     motion = suite_motion(spec, real)
-    noise = measured_noise(spec, real, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
+    noise = measured_noise(spec, real, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), arm.model)
     cases = [c for c in spec["cases"] if c["name"] in spec.get("subset", [c["name"] for c in spec["cases"]])]
     outcomes = []
     for case in cases:

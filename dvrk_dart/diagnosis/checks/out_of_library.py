@@ -33,10 +33,10 @@ from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
-from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, ProcessedRun, process
+from dvrk_dart.io.signal import ProcessedRun, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: a leftover counts as present when the gap after exceeds the noise by this
 #: factor in energy (after^2 > ratio noise^2): a tenth of the noise energy
@@ -73,7 +73,8 @@ def injected_effort(arm: Arm, state: ProcessedRun, case: dict) -> np.ndarray:
 
 def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     simulate = simulation_hook(arm)
-    segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)
+    processed = process(load_run(resolve_run(spec["run"]), arm.model))
+    segment = processed.head(spec["base_periods"] * processed.first_period_samples())
     noise_rms = rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
     cases, verdicts = [], []
     for seed, case in enumerate(spec["cases"]):
@@ -84,7 +85,7 @@ def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
         before, after, noise = result["gap_before"]["train"][j], result["gap_after"]["train"][j], float(noise_rms[j])
         leftover = float(np.sqrt(max(after**2 - noise**2, 0.0)))
         selected = result["selection"]["selected"]
-        report = {"case": case["name"], "physics": case["physics"], "joint": JOINT_NAMES[j], "unit": effort_unit(JOINT_NAMES[j]),
+        report = {"case": case["name"], "physics": case["physics"], "joint": JOINT_NAMES[j], "unit": arm.model.effort_unit(JOINT_NAMES[j]),
                   "injected_rms": float(rms(extra)[j]), "noise_rms": noise, "gap_before": before, "gap_after": after,
                   "closest_library_effect": selected[0] if selected else None, "selected": selected,
                   "explained_share_of_gap": float(1.0 - after**2 / before**2) if before > 0 else 0.0, "left_over_above_noise": leftover}

@@ -44,9 +44,9 @@ def synthesize_measurement(
     if extra_effort is not None:
         tau = tau + np.asarray(extra_effort, dtype=float)
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(tau.shape))
+    noise = zero_phase_lowpass(rng.standard_normal(tau.shape), arm.model.processing.cutoff_parameter_hz)
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)
-    return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise)
+    return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise, upstream_first_period=state.upstream_first_period)
 
 
 def time_scaled(state: ProcessedRun, speed: float) -> ProcessedRun:
@@ -62,4 +62,5 @@ def time_scaled(state: ProcessedRun, speed: float) -> ProcessedRun:
     def at(x: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(source, t, x[:, j]) for j in range(x.shape[1])])
 
-    return ProcessedRun(t.copy(), at(state.q), speed * at(state.dq), speed**2 * at(state.ddq), at(state.tau))
+    return ProcessedRun(t.copy(), at(state.q), speed * at(state.dq), speed**2 * at(state.ddq), at(state.tau),
+                        upstream_first_period=state.upstream_first_period)

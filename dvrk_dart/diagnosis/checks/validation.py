@@ -37,10 +37,11 @@ from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.io.signal import FIRST_PERIOD_SAMPLES, process
+from dvrk_dart.io.signal import process
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm, load_arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, resolve_arm_model
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.paths import PIPELINES_DIR
 
 WITHHELD_FILE = PIPELINES_DIR / "withheld.toml"
@@ -53,10 +54,10 @@ REPORT_FIGURE_JOINTS = ("q1", "q2", "q3")
 def _effect(arm: Arm, case: dict):
     kind = case["effect"]
     factories = {
-        "friction": lambda: JointFriction(case["joint"]),
-        "offset": lambda: JointOffset(case["joint"]),
-        "stiffness": lambda: JointStiffness(case["joint"]),
-        "armature": lambda: JointArmature(case["joint"]),
+        "friction": lambda: JointFriction(arm.model, case["joint"]),
+        "offset": lambda: JointOffset(arm.model, case["joint"]),
+        "stiffness": lambda: JointStiffness(arm.model, case["joint"]),
+        "armature": lambda: JointArmature(arm.model, case["joint"]),
         "payload": lambda: PointPayload(arm.model, int(case["link"]), equivalent_keys=equivalent_payload_links(arm)[int(case["link"])]),
         "tilt": lambda: GravityTilt(arm),
     }
@@ -91,7 +92,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
         combined["repeatable_gap_explained_share"] = repeatable_share(bar, combined["gap_holdout"], floor).tolist()
     shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
-                 "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
+                 "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {arm.model.effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
     write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts + _refit_verdicts(result, spec) + _insertion_verdicts(result, spec)
@@ -123,7 +124,7 @@ def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
     shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
     return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects, J3's terms and the pitch-angle loads) closer than the "
                       f"identified model on {j}", "passed": bool(gap[i] <= bar[i]),
-             "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {effort_unit(j)}{shares[i]}"}
+             "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {result['units'][i]}{shares[i]}"}
             for i, j in enumerate(JOINT_NAMES[:3])]
 
 
@@ -136,16 +137,13 @@ def _refit_verdicts(result: dict, spec: dict) -> list[dict]:
     before, after = refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]
     return [{"check": f"held-out {', '.join(spec['holdout'])}: the identified parameters refitted on {', '.join(spec['train'])} at least as close "
                       f"as the published ones on {j} (both replayed with every identified term)",
-             "passed": bool(after[i] <= before[i]), "value": f"{after[i]:.4f} vs {before[i]:.4f} {effort_unit(j)}"}
+             "passed": bool(after[i] <= before[i]), "value": f"{after[i]:.4f} vs {before[i]:.4f} {result['units'][i]}"}
             for i, j in enumerate(JOINT_NAMES[:3])]
 
 
 def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
-    """validate_holdout on the arm of `spec["arm_model"]` (the check names it)."""
-    from dvrk_dart.model.description import resolve_arm_model, using_model
-
-    with using_model(resolve_arm_model(spec["arm_model"])):
-        result, verdicts = validate_holdout(load_arm(), spec, out_dir)
+    """validate_holdout on another arm (`spec["arm_model"]`, whose `arm` it is): the check names it."""
+    result, verdicts = validate_holdout(arm, spec, out_dir)
     for v in verdicts:
         v["check"] = f"{spec['arm_model'].upper()} {v['check']}"
     return result, verdicts
@@ -154,7 +152,8 @@ def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_ba
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
 
     simulate = simulation_hook(arm)
-    segment = process(load_run(resolve_run(spec["run"]))).head(spec["base_periods"] * FIRST_PERIOD_SAMPLES)
+    processed = process(load_run(resolve_run(spec["run"]), arm.model))
+    segment = processed.head(spec["base_periods"] * processed.first_period_samples())
     noise_rms = rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
     cases, verdicts = [], []
     for seed, case in enumerate(spec["cases"]):
@@ -202,7 +201,7 @@ def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], flo
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
     tables = tomllib.loads(WITHHELD_FILE.read_text())
     spec = {**tables["blind_suite"], "processings": [BLIND_SUITE_STEPS[name]]} if name in BLIND_SUITE_STEPS else tables[name]
-    _, found = step(load_arm(), spec, out_dir / name, **extra)
+    _, found = step(load_arm(resolve_arm_model(spec.get("arm_model", "psm"))), spec, out_dir / name, **extra)
     return found, time.perf_counter() - start
 
 
@@ -275,7 +274,7 @@ def benchmark_diagnosis(measured=("two",), baseline=None) -> float:
     """Wall time (s) of a diagnosis of 30 s runs (default: one), re-simulation included."""
     import tempfile
 
-    arm = load_arm()
+    arm = load_arm(DEFAULT_MODEL_FILE)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         run_diagnosis(arm, list(measured) if len(measured) > 1 else measured[0], Path(tmp), baseline=baseline, logs=False)

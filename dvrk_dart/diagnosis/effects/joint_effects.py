@@ -7,7 +7,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.model import friction
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit, position_unit, velocity_unit
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: velocity scale of the Stribeck drop of friction near zero velocity
 #: (rad/s or m/s): about the resolution of the measured velocities
@@ -41,7 +41,7 @@ def presliding_distances(model, joint: str | None = None, link=None) -> tuple[fl
     candidates = load_bounds(None, model).presliding
     if link is not None:
         return candidates.of(link)
-    return candidates.prismatic_m if position_unit(joint) == "m" else candidates.revolute_rad
+    return candidates.prismatic_m if model.position_unit(joint) == "m" else candidates.revolute_rad
 
 
 class JointFriction(Effect):
@@ -61,8 +61,9 @@ class JointFriction(Effect):
 
     kind = "friction"
 
-    def __init__(self, joint: str, stribeck: bool = False, reversal_velocity: float | None = None, presliding: float | None = None):
+    def __init__(self, model, joint: str, stribeck: bool = False, reversal_velocity: float | None = None, presliding: float | None = None):
         self.joint_index = JOINT_NAMES.index(joint)
+        self.position_unit, self.velocity_unit = model.position_unit(joint), model.velocity_unit(joint)
         self.joints = (joint,)
         self.stribeck = stribeck
         self.reversal_velocity = None if reversal_velocity is None else float(reversal_velocity)
@@ -71,8 +72,8 @@ class JointFriction(Effect):
         suffix = "" if self.reversal_velocity is None else f"_smooth{self.reversal_velocity:g}"
         suffix += "" if self.presliding is None else f"_presliding{self.presliding:g}"
         self.name = f"{base}_{joint}{suffix}"
-        eu = effort_unit(joint)
-        pars = [Parameter("coulomb", eu, 0.0), Parameter("viscous", f"{eu}/({velocity_unit(joint)})", 0.0)]
+        eu = model.effort_unit(joint)
+        pars = [Parameter("coulomb", eu, 0.0), Parameter("viscous", f"{eu}/({self.velocity_unit})", 0.0)]
         if stribeck:
             pars.append(Parameter("stribeck", eu, 0.0))
         self.parameters = tuple(pars)
@@ -120,9 +121,9 @@ class JointFriction(Effect):
     def describe(self, p):
         out = super().describe(p)
         if self.presliding is not None:
-            out["reversal"] = f"Dahl over {self.presliding:g} {position_unit(self.joints[0])}"
+            out["reversal"] = f"Dahl over {self.presliding:g} {self.position_unit}"
         else:
-            out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {velocity_unit(self.joints[0])})"
+            out["reversal"] = "sign" if self.reversal_velocity is None else f"tanh(dq/{self.reversal_velocity:g} {self.velocity_unit})"
         return out
 
 
@@ -146,9 +147,10 @@ class PositionFriction(Effect):
         self.presliding = float(presliding)
         self.knots = np.linspace(model.joint_lower[self.joint_index], model.joint_upper[self.joint_index], POSITION_FRICTION_KNOTS)
         self.name = f"position_friction_{joint}_presliding{self.presliding:g}"
-        eu = effort_unit(joint)
+        self.position_unit = model.position_unit(joint)
+        eu = model.effort_unit(joint)
         self.parameters = (*(Parameter(f"coulomb_at_{x:.3g}", eu, 0.0) for x in self.knots),
-                           Parameter("viscous", f"{eu}/({velocity_unit(joint)})", 0.0))
+                           Parameter("viscous", f"{eu}/({model.velocity_unit(joint)})", 0.0))
 
     @property
     def family(self) -> str:
@@ -170,7 +172,7 @@ class PositionFriction(Effect):
 
     def describe(self, p):
         out = super().describe(p)
-        out["reversal"] = f"Dahl over {self.presliding:g} {position_unit(self.joints[0])}, Fc piecewise linear in {self.joints[0]}"
+        out["reversal"] = f"Dahl over {self.presliding:g} {self.position_unit}, Fc piecewise linear in {self.joints[0]}"
         return out
 
 
@@ -262,11 +264,11 @@ class JointOffset(Effect):
 
     kind = "offset"
 
-    def __init__(self, joint: str):
+    def __init__(self, model, joint: str):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.name = f"offset_{joint}"
-        self.parameters = (Parameter("offset", effort_unit(joint)),)
+        self.parameters = (Parameter("offset", model.effort_unit(joint)),)
 
     def columns(self, features):
         return _unit_column(features, self.joint_index, np.ones(len(features)))
@@ -284,11 +286,11 @@ class JointStiffness(Effect):
 
     kind = "elastic"
 
-    def __init__(self, joint: str):
+    def __init__(self, model, joint: str):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.name = f"{'torsion_spring' if joint == TORSION_SPRING_JOINT else 'cable_elasticity'}_{joint}"
-        self.parameters = (Parameter("stiffness", f"{effort_unit(joint)}/{position_unit(joint)}", 0.0),)
+        self.parameters = (Parameter("stiffness", f"{model.effort_unit(joint)}/{model.position_unit(joint)}", 0.0),)
 
     def columns(self, features):
         return _unit_column(features, self.joint_index, features.q[:, self.joint_index])
@@ -304,11 +306,11 @@ class JointArmature(Effect):
 
     kind = "armature"
 
-    def __init__(self, joint: str):
+    def __init__(self, model, joint: str):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
         self.name = f"armature_{joint}"
-        self.parameters = (Parameter("armature", "kg" if position_unit(joint) == "m" else "kg·m²", 0.0),)
+        self.parameters = (Parameter("armature", "kg" if model.position_unit(joint) == "m" else "kg·m²", 0.0),)
 
     def columns(self, features):
         return _unit_column(features, self.joint_index, features.ddq[:, self.joint_index])

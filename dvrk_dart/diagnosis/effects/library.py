@@ -64,9 +64,9 @@ def candidate_effects(
     if payload_model not in PAYLOAD_MODELS:
         raise DvrkDartError(f"payload model '{payload_model}': expected one of {', '.join(PAYLOAD_MODELS)}")
     effects: list[Effect] = []
-    effects += [JointFriction(j) for j in JOINT_NAMES]
-    effects += [JointFriction(j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
-    effects += [JointFriction(j, presliding=d) for j in JOINT_NAMES for d in presliding_distances(arm.model, j)]
+    effects += [JointFriction(arm.model, j) for j in JOINT_NAMES]
+    effects += [JointFriction(arm.model, j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
+    effects += [JointFriction(arm.model, j, presliding=d) for j in JOINT_NAMES for d in presliding_distances(arm.model, j)]
     effects += [PositionFriction(arm.model, j, d) for j in POSITION_FRICTION_JOINTS for d in presliding_distances(arm.model, j)]
     effects += [LinkFriction(arm.model, key, d) for key in coupling_friction_links(arm.model)
                 for d in presliding_distances(arm.model, link=arm.model.links[key])]
@@ -75,10 +75,10 @@ def candidate_effects(
                     if link.friction and arm.params[link.key].coulomb > 0.0 and arm.params[link.key].presliding == 0.0
                     for d in presliding_distances(arm.model, link=link)]
     if stribeck:
-        effects += [JointFriction(j, stribeck=True) for j in JOINT_NAMES]
-    effects += [JointOffset(j) for j in JOINT_NAMES]
-    effects += [JointStiffness(j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
-    effects += [JointArmature(j) for j in JOINT_NAMES]
+        effects += [JointFriction(arm.model, j, stribeck=True) for j in JOINT_NAMES]
+    effects += [JointOffset(arm.model, j) for j in JOINT_NAMES]
+    effects += [JointStiffness(arm.model, j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
+    effects += [JointArmature(arm.model, j) for j in JOINT_NAMES]
     equivalents = equivalent_payload_links(arm)
     if payload_model == "point":
         effects += [PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)]

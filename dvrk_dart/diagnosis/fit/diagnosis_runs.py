@@ -18,6 +18,8 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
 from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, process, process_periodic, same_motion  # noqa: F401
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.description import PsmModel, load_model
 from dvrk_dart.sim.config import SimConfig
 
 #: two recordings of one motion may start this far apart (a share of the shorter
@@ -33,33 +35,41 @@ Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
 # ------------------------------------------------------------- the processing
 @dataclass(frozen=True)
 class RunProcessing:
-    """How every run of a diagnosis is processed: upstream, or periodic on
-    one common harmonic cutoff (runs subtracted or compared see one band)."""
+    """How every run of a diagnosis is read and processed: upstream, or
+    periodic on one common harmonic cutoff (runs subtracted or compared see
+    one band); bags read with `topics`."""
 
     name: str = "upstream"
     harmonics: int | None = None
     why: str = "--processing upstream"
+    topics: BagTopics = BagTopics()
 
     def summary(self) -> dict:
         return {"processing": self.name, "harmonics": self.harmonics, "chosen_because": self.why}
 
 
-def choose_processing(specs, processing: str | None) -> RunProcessing:
-    """`processing` None: periodic where every run (name or path) is a periodic
-    excitation, else upstream, with the reason; periodic: every run must be."""
+def choose_processing(specs, processing: str | None, model: PsmModel, topics: BagTopics = BagTopics()) -> RunProcessing:
+    """`processing` None: periodic where every run (name or path) of `model`'s
+    arm is a periodic excitation, else upstream, with the reason; periodic:
+    every run must be."""
     if processing == "upstream":
-        return RunProcessing()
+        return RunProcessing(topics=topics)
     paths = [Path(resolve_run(s)) for s in _flat(specs) if isinstance(s, (str, Path))]
     if not paths and processing is None:
-        return RunProcessing(why="no measured file among the runs")
+        return RunProcessing(why="no measured file among the runs", topics=topics)
     try:
-        cutoffs = [process_periodic(load_run(path)).periodic.harmonics for path in paths]
+        cutoffs = [process_periodic(load_run(path, model, topics)).periodic.harmonics for path in paths]
     except DvrkDartError as exc:
         if processing == "periodic":
             raise
-        return RunProcessing(why=f"upstream: {exc}")
+        return RunProcessing(why=f"upstream: {exc}", topics=topics)
     why = "--processing periodic" if processing == "periodic" else "every run is a periodic excitation"
-    return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs")
+    return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs", topics)
+
+
+def processing_of(result: dict, topics: BagTopics = BagTopics()) -> RunProcessing:
+    """The processing a diagnosis (its result dict) read and processed its runs with."""
+    return RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"), topics=topics)
 
 
 def _flat(specs) -> list:
@@ -139,30 +149,30 @@ class DiagnosisRun:
 RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 
 
-def _load_state(spec, processing: RunProcessing) -> tuple[str, ProcessedRun]:
+def _load_state(spec, model: PsmModel, processing: RunProcessing) -> tuple[str, ProcessedRun]:
     if isinstance(spec, ProcessedRun):
         return "run", spec
     path = Path(resolve_run(spec))
     stat = path.stat()
-    return run_label(spec), _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing)
+    return run_label(spec), _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing, model.source)
 
 
 @lru_cache(maxsize=8)
-def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing) -> ProcessedRun:
+def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing, model_file: Path) -> ProcessedRun:
     """One processing per file version: the batch re-simulation prefetches the
     states that prepare_run then meets again (keyed by the file's version)."""
-    return process(load_run(path), processing.name, processing.harmonics)
+    return process(load_run(path, load_model(model_file), processing.topics), processing.name, processing.harmonics)
 
 
-def loaded_states(specs, processing: RunProcessing = RunProcessing()) -> list[ProcessedRun]:
-    """The processed states of run specs not yet simulated (names, paths,
-    ProcessedRun, (run, baseline) pairs), for a batch of replays."""
+def loaded_states(specs, model: PsmModel, processing: RunProcessing = RunProcessing()) -> list[ProcessedRun]:
+    """The processed states of run specs of `model`'s arm not yet simulated
+    (names, paths, ProcessedRun, (run, baseline) pairs), for a batch of replays."""
     states = []
     for spec in specs:
         if isinstance(spec, tuple):
-            states += loaded_states(spec, processing)
+            states += loaded_states(spec, model, processing)
         elif spec is not None and not isinstance(spec, DiagnosisRun):
-            states.append(_load_state(spec, processing)[1])
+            states.append(_load_state(spec, model, processing)[1])
     return states
 
 
@@ -182,7 +192,7 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
     if isinstance(spec, DiagnosisRun):
         run = spec
     else:
-        label, state = _load_state(spec, processing)
+        label, state = _load_state(spec, arm.model, processing)
         run = DiagnosisRun(name or label, state, simulated_efforts(arm, state, simulate, base_config))
     if baseline is not None:
         base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)

@@ -29,6 +29,7 @@ from dvrk_dart.diagnosis.fit.session_floor import session_offset_joints
 from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
@@ -144,20 +145,16 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
     return effects + [PayloadAtPosition(arm.model, key, position)], len(effects)
 
 
-def _processing(specs, processing: str | None, baseline) -> RunProcessing:
-    """Every command's default (None): periodic where every run is a periodic excitation, else upstream."""
-    return choose_processing(specs, processing)
-
-
 def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
                   simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
-                  nuisance: bool, processing: str | None, folds: int) -> Problem:
+                  nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics()) -> Problem:
     """The runs prepared by role (simulated, aligned on their baseline), the
     design of the candidate effects and the Gram blocks of every run."""
     effects, at_index = _effects(arm, effects, payload_model, base_config, payload_at)
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
-    inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat))
-    run_processing = _processing(all_specs, processing, baseline)
+    inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat), arm.model, topics)
+    # every command's default (None): periodic where every run is a periodic excitation, else upstream
+    run_processing = choose_processing(all_specs, processing, arm.model, topics)
 
     def as_run(spec, baseline=None):
         if isinstance(spec, tuple):
@@ -165,7 +162,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
         return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing)
 
     if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
-        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], run_processing)])
+        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], arm.model, run_processing)])
     baseline_run = as_run(baseline) if baseline is not None else None
     train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]

@@ -30,7 +30,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: a joint's constant effort moves from session to session when two sessions'
 #: mean efforts differ by more than this many standard errors (~95 %)
@@ -71,13 +71,13 @@ def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, referenc
     return np.ones(len(JOINT_NAMES), dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"
 
 
-def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None) -> list[dict]:
+def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, model: PsmModel) -> list[dict]:
     """Per joint: the gap before, split into explained, session-to-session, left over (RMS-equivalents)."""
     rows = []
     for j, joint in enumerate(JOINT_NAMES):
         b2, a2 = float(before[j]) ** 2, float(after[j]) ** 2
         session2 = min(a2, float(floor[j]) ** 2) if floor is not None else None
-        row = {"joint": joint, "unit": effort_unit(joint), "before": float(before[j]), "after": float(after[j]),
+        row = {"joint": joint, "unit": model.effort_unit(joint), "before": float(before[j]), "after": float(after[j]),
                "explained": math.sqrt(max(b2 - a2, 0.0)), "session_to_session": None, "left_over": None}
         if session2 is not None:
             row["session_to_session"] = math.sqrt(session2)

@@ -16,7 +16,7 @@ import numpy as np
 from dvrk_dart.io.html import STYLE, fmt
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.diagnosis.output.wording import explanation
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
 ANSWER_JOINTS = 3
@@ -38,6 +38,11 @@ _KIND_WORDS = {
 
 #: an effect's role in a diagnosis with a baseline (diagnosis.json `effects[].role`)
 _ROLE_WORDS = {"finding": "finding", "common_model_error": "model error common to the runs and their baseline"}
+
+
+def _unit(result: dict, joint: str) -> str:
+    """The effort unit of `joint` on the diagnosed arm (diagnosis.json `units`)."""
+    return result["units"][JOINT_NAMES.index(joint)]
 
 
 def plain_name(entry: dict) -> str:
@@ -114,7 +119,7 @@ def beyond_identified_sentence(result: dict) -> str:
     if not bar or not after:
         return ""
     shown = [j for j in range(ANSWER_JOINTS) if bar[j] is not None and after[j] is not None]
-    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {effort_unit(JOINT_NAMES[j])}" for j in shown)
+    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
@@ -149,7 +154,7 @@ def answer_sentence(result: dict) -> str:
         lead = "no effect"
     others = selected[1:]
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
-    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in zip(joints, before, after))
+    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     words = (result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                         [e for e in result.get("effects", []) if e["name"] in selected]))["words"]
@@ -182,7 +187,7 @@ def _refit_clause(result: dict) -> str:
     if not refit:
         return ""
     pairs = list(zip(JOINT_NAMES[:ANSWER_JOINTS], refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]))
-    biased = [f"{j} {b:.3g} -> {a:.3g} {effort_unit(j)}" for j, b, a in pairs if a * a <= 0.5 * b * b]
+    biased = [f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in pairs if a * a <= 0.5 * b * b]
     if not biased:
         return " Refitting the identified parameters on the training runs does not halve any held-out gap in squares."
     return f" The published fit's bias: the identified parameters refitted on the training runs leave {'; '.join(biased)} on the held-out runs."
@@ -202,7 +207,7 @@ def _bar(share) -> str:
 
 
 def _gap_table(result: dict) -> list[str]:
-    parts = ["<table>", _row(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES)], "th")]
+    parts = ["<table>", _row(["gap (RMS measured - simulated)", *(f"{j} ({_unit(result, j)})" for j in JOINT_NAMES)], "th")]
     for key in ("gap_before", "gap_after"):
         for split in ("train", "holdout"):
             values = (result.get(key) or {}).get(split)
@@ -263,7 +268,7 @@ def _insertion_clause(result: dict) -> str:
     combined = result.get("one_configuration")
     together = "" if not combined else (
         "; with the effects above and the loads the pitch angle sets on q1 and q2, in one simulation: "
-        + ", ".join(f"{name} {gap:.3g} {effort_unit(name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
+        + ", ".join(f"{name} {gap:.3g} {_unit(result, name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
     return (f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at "
             f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N){together}.")
 
@@ -301,7 +306,7 @@ def _payload_html(result: dict) -> list[str]:
     if payload and payload.get("words"):  # the identifiable quantity first (first_moment payload)
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
         return ["<p>" + " ".join(e(w) for w in payload["words"]) + "</p>", "<table>",
-                _row(["payload at q = 0", *(f"{j} ({effort_unit(j)})" for j in JOINT_NAMES[:3])], "th"),
+                _row(["payload at q = 0", *(f"{j} ({_unit(result, j)})" for j in JOINT_NAMES[:3])], "th"),
                 _row(["gravity effort (interval)", *(_value_interval(v, i) for v, i in zip(g[:3], gi[:3]))]), "</table>"]
     if not payload:
         return []
@@ -350,7 +355,7 @@ def _band_html(result: dict) -> list[str]:
     if band is None:
         return []
     e = html.escape
-    rows = "".join(f"<tr><td>{j} ({e(effort_unit(j))})</td><td>{band['measured_inside_band_fraction'][j]:.3f}</td>"
+    rows = "".join(f"<tr><td>{j} ({e(_unit(result, j))})</td><td>{band['measured_inside_band_fraction'][j]:.3f}</td>"
                    f"<td>{band['rms_measured_outside_band'][j]:.4f}</td><td>{'outside' if j in band['joints_outside_band'] else 'inside'}</td></tr>"
                    for j in JOINT_NAMES[:3])
     return [f"<p>{e(band_sentence(result))}. Rule: {e(band['rule'])}. Parameters: {e(str(band['parameters']))}.</p>",

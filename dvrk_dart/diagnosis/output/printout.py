@@ -8,24 +8,26 @@ from pathlib import Path
 from dvrk_dart.diagnosis.api import run_diagnosis
 from dvrk_dart.diagnosis.output.page import answer_sentence, offset_joints_sentence
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
-from dvrk_dart.io.arm import load_arm
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.model.joints import JOINT_NAMES
 
 
-def run_diagnosis_cli(args: argparse.Namespace) -> int:
-    arm = load_arm(params_file=args.params)
+def run_diagnosis_cli(args: argparse.Namespace, arm: Arm, topics: BagTopics) -> int:
+    """`dvrk-dart diagnose` on the command's `arm`, its runs read with `topics`: the diagnosis, then its printout."""
     measured = args.measured[0] if len(args.measured) == 1 else args.measured
     result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
                            repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
                            parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
                            jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
-                           processing=getattr(args, "processing", None), refit=getattr(args, "refit", False))
+                           processing=getattr(args, "processing", None), refit=getattr(args, "refit", False),
+                           topics=topics)
     print(answer_sentence(result))
     print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:
-                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {effort_unit(j)}" for j, v in zip(JOINT_NAMES, values) if v is not None))
+                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {u}" for j, v, u in zip(JOINT_NAMES, values, result["units"]) if v is not None))
     selected = [e["name"] for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
     if result.get("refit"):
@@ -52,7 +54,7 @@ def run_diagnosis_cli(args: argparse.Namespace) -> int:
     if result.get("nuisance_offsets"):
         for run, offsets in result["nuisance_offsets"].items():
             joints = (result.get("nuisance_offset_joints") or {}).get("joints") or list(offsets)
-            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {effort_unit(j)}" for j in joints if j in offsets))
+            print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {result['units'][JOINT_NAMES.index(j)]}" for j in joints if j in offsets))
     for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "

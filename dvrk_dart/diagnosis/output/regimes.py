@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.io.signal import ProcessedRun
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: |dq| below this fraction of the run's largest |dq| counts as "near zero"
 NEAR_ZERO_VELOCITY_FRACTION = 0.05
@@ -20,7 +21,7 @@ REGIME_QUANTILES = (1 / 3, 2 / 3)
 MAX_PLOTTED_SAMPLES = 3000
 
 
-def residual_regimes(state: ProcessedRun, residual: np.ndarray) -> pd.DataFrame:
+def residual_regimes(state: ProcessedRun, residual: np.ndarray, model: PsmModel) -> pd.DataFrame:
     """Residual statistics per joint and motion regime (tidy: one row per
     joint, regime and bin): velocity sign / near zero, acceleration level,
     insertion depth q3 and pitch angle q2."""
@@ -55,7 +56,7 @@ def residual_regimes(state: ProcessedRun, residual: np.ndarray) -> pd.DataFrame:
                 rows.append(
                     {
                         "joint": joint,
-                        "unit": effort_unit(joint),
+                        "unit": model.effort_unit(joint),
                         "regime": regime,
                         "bin": label,
                         "bin_lower": float(lo),
@@ -69,7 +70,7 @@ def residual_regimes(state: ProcessedRun, residual: np.ndarray) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str, label: str = "residual") -> list[Path]:
+def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str, model: PsmModel, label: str = "residual") -> list[Path]:
     """One figure per joint: the residual against q, dq and ddq of that joint."""
     import matplotlib
 
@@ -84,12 +85,12 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
     paths = []
     for j, joint in enumerate(JOINT_NAMES):
         fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
-        pu = "m" if effort_unit(joint) == "N" else "rad"
+        pu = model.position_unit(joint)
         for ax, x, xlabel in zip(axes, (state.q, state.dq, state.ddq), (f"{joint} ({pu})", f"d{joint} ({pu}/s)", f"dd{joint} ({pu}/s²)")):
             ax.scatter(x[keep, j], residual[keep, j], s=2, alpha=0.4, c=state.dq[keep, j] > 0, cmap="coolwarm")
             ax.axhline(0.0, color="k", lw=0.5)
             ax.set_xlabel(xlabel)
-        axes[0].set_ylabel(f"{label} ({effort_unit(joint)})")
+        axes[0].set_ylabel(f"{label} ({model.effort_unit(joint)})")
         fig.suptitle(f"{label} of {joint} (colour: velocity sign)")
         fig.tight_layout()
         target = folder / f"{label}_{joint}.png"
@@ -104,7 +105,7 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
 PERIOD_FIGURE_JOINTS = 3
 
 
-def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path) -> Path:
+def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path, model: PsmModel) -> Path:
     """The residual before and after the effects over the run's first period,
     one panel per main joint, ± the session floor as a band (when measured)."""
     import matplotlib
@@ -122,7 +123,7 @@ def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floo
             ax.axhspan(-floor[j], floor[j], color="0.85", label="± session floor")
         ax.plot(t, before[:n, j], color="tab:red", lw=0.8, alpha=0.6, label="before")
         ax.plot(t, after[:n, j], color="tab:blue", lw=1.0, label="after")
-        ax.set_ylabel(f"{JOINT_NAMES[j]} ({effort_unit(JOINT_NAMES[j])})")
+        ax.set_ylabel(f"{JOINT_NAMES[j]} ({model.effort_unit(JOINT_NAMES[j])})")
     axes[0].legend(loc="upper right", ncol=3, fontsize=8)
     axes[-1].set_xlabel("time in the period (s)")
     fig.suptitle("residual (measured - simulated) over one period")

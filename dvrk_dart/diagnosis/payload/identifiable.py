@@ -37,7 +37,7 @@ from dvrk_dart.diagnosis.fit.selection import (
 )
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: step of the central difference of J1's gravity effort in q1 (rad)
 YAW_SLOPE_STEP_RAD = 1e-4
@@ -180,7 +180,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     report["mass_identified"] = mass_identified
     report["position_m"] = (np.asarray(p[1:4]) / p[0]).tolist() if mass_identified else None
     report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(report["first_moment_base_at_q0_kg_m"]))
-    units = [effort_unit(j) for j in JOINT_NAMES]
+    units = [arm.model.effort_unit(j) for j in JOINT_NAMES]
     moment = np.asarray(report["first_moment_base_at_q0_kg_m"])
     words = [
         ("The best-fitting payload's first moment" if ties else "The efforts determine the payload's first moment") + f" m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "

@@ -27,7 +27,7 @@ from dvrk_dart.diagnosis.payload.periodic_payload import (
 )
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.joints import JOINT_NAMES, effort_unit
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the payload is found when its gravity signature stands out of the session
 #: scatter at this level (Wald test, HC2 covariance)
@@ -217,7 +217,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
         # what the --repeat pair alone reads as this payload: a session change of its shape, counted in every interval
         report["session_change_as_payload"] = {key: session[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0",
                                                                              "mass_kg_at_position") if key in session}
-    report["words"] = _words(report)
+    report["words"] = _words(report, arm.model)
     return report
 
 
@@ -227,7 +227,7 @@ def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
     return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f})"
 
 
-def _words(report: dict) -> list[str]:
+def _words(report: dict, model) -> list[str]:
     words = []
     if not report["found"]:
         words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}): what the runs "
@@ -244,7 +244,7 @@ def _words(report: dict) -> list[str]:
     words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
                  + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
     words.append("Gravity efforts at q = 0: " + ", ".join(
-        f"{j} {_interval_text(v, i, effort_unit(j))}" for j, v, i in
+        f"{j} {_interval_text(v, i, model.effort_unit(j))}" for j, v, i in
         zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".")
     slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad")
     words.append(f"J1's effort changes with q1 at {slope} at q = 0 (J1's own path: how the real yaw axis lies relative to gravity).")
