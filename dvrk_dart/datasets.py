@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.io.html import num_cell, table, text_cell
+from dvrk_dart.io.html import num_cell, render, table, text_cell
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import PROCESSINGS, process
@@ -145,10 +145,7 @@ def plot_phantom_force(period: dict, path: Path, run: str) -> None:
 def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: dict | None = None) -> tuple[str, str, list[Path]]:
     """(title, html, figures) of the report: one table per dataset, the same rows;
     `identified`: identification folders already made ({(train, holdout, processing): folder})."""
-    parts = ["<p>Every figure is the RMS of measured minus predicted efforts on the held-out run, whole run "
-             "(N·m, N for q3). The published parameters were identified on the 2019 runs; the project's own are trained on the "
-             "dataset's training runs only; the diagnosis is fitted on them too (its band: the smallest cutoff of its runs).</p>"]
-    files = []
+    shown, files = [], []
     for dataset in load_datasets():
         figures = dataset_figures(arm, dataset, out_dir, diagnosis_dir, identified or {})
         print(f"dataset {dataset.name}: held-out {dataset.holdout}, " + "; ".join(
@@ -158,11 +155,12 @@ def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: d
         staged = out_dir / f"{dataset.name}_{PHANTOM_FIGURE}"  # the report copies extras by file name: keep them apart
         staged.write_bytes((out_dir / dataset.name / PHANTOM_FIGURE).read_bytes())
         files.append(staged)
-        parts += [_table(dataset, figures, arm.model), _force_table(dataset, figures["phantom_force"]),
-                  f"<figure><img src='figures/extra/{staged.name}' alt='phantom force'><figcaption>The force the efforts imply at the "
-                  f"instrument over one period of held-out {dataset.holdout}, before (published parameters) and after the diagnosis "
-                  "(its one configuration); the true force is zero.</figcaption></figure>"]
-    return "Every real dataset: held-out figures side by side", "".join(parts), files
+        first = next(iter(figures["phantom_force"].values()))
+        shown.append({"title": dataset.title, "name": dataset.name, "train": dataset.train, "holdout": dataset.holdout,
+                      "rms_table": _table(dataset, figures, arm.model), "force_table": _force_table(dataset, figures["phantom_force"]),
+                      "point": first["point"], "min_lever_m": first["min_lever_m"], "figure": staged.name})
+    body = render("report/datasets.html", datasets=shown, figures_file=FIGURES_FILE)
+    return "Every real dataset: held-out figures side by side", body, files
 
 
 def _force_table(dataset: Dataset, forces: dict) -> str:
@@ -170,12 +168,8 @@ def _force_table(dataset: Dataset, forces: dict) -> str:
     rows = []
     for label, f in forces.items():
         cells = [f["rms_n"], f["p95_n"], *(f["rms_per_axis_n"] or [None] * 3), f["determined_fraction"], f["rms_all_samples_n"]]
-        rows.append(f"<tr>{text_cell(label)}" + "".join(num_cell(v, dataset=dataset.name, row=f"phantom force: {label}") for v in cells) + "</tr>")
-    first = next(iter(forces.values()))
-    intro = (f"<p>The phantom force at the {first['point']} (<code>dvrk-dart force</code>, periodic): F = J^-T (measured - model) "
-             f"over q1..q3, in free motion where the true force is zero. Samples whose lever arm is under {first['min_lever_m']} m "
-             "(the instrument near the remote centre of motion) are not determined and left out; the last column keeps them.</p>")
-    return intro + table(["model", "|F| RMS (N)", "95th percentile (N)", "x RMS (N)", "y RMS (N)", "z RMS (N)",
+        rows.append([text_cell(label), *(num_cell(v, dataset=dataset.name, row=f"phantom force: {label}") for v in cells)])
+    return table(["model", "|F| RMS (N)", "95th percentile (N)", "x RMS (N)", "y RMS (N)", "z RMS (N)",
                           "determined samples", "|F| RMS, every sample (N)"], rows)
 
 
@@ -201,9 +195,6 @@ def _table(dataset: Dataset, figures: dict, model) -> str:
     header = ["held-out " + dataset.holdout, *(f"{JOINT_NAMES[j]} ({model.effort_unit(JOINT_NAMES[j])})" for j in joints)]
     rows = []
     for label, values in _rows(figures):
-        cells = "".join(num_cell(values[j], dataset=dataset.name, row=label, joint=JOINT_NAMES[j]) for j in joints)
-        rows.append(f"<tr>{text_cell(label)}{cells}</tr>")
-    intro = (f"<h3>{dataset.title}</h3><p>Trained on {', '.join(dataset.train)}, held out: {dataset.holdout}. "
-             f"Figures in <code>{dataset.name}/{FIGURES_FILE}</code>.</p>")
-    return intro + table(header, rows)
+        rows.append([text_cell(label), *(num_cell(values[j], dataset=dataset.name, row=label, joint=JOINT_NAMES[j]) for j in joints)])
+    return table(header, rows)
 

@@ -88,7 +88,7 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
     """DART's contact force against the estimate from the simulated efforts, and with each model's real residual added."""
     import numpy as np
 
-    from dvrk_dart.io.html import num_cell, table, text_cell
+    from dvrk_dart.io.html import num_cell, render, table, text_cell
     from dvrk_dart.diagnosis.effects.library import config_effort_by_formula
     from dvrk_dart.instrument_force import ForceConfig, model_efforts
     from dvrk_dart.io.reference_data import load_run, resolve_run
@@ -121,14 +121,10 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
                         "DART's applied contact force (sim-to-sim)", "passed": first["sim_to_sim_error_rms_n"] <= CONTACT_SIM_TO_SIM_BAR_N,
                "value": f"{first['sim_to_sim_error_rms_n']:.2e} N RMS (contact force {first['contact_force_rms_n']:.3f} N RMS, in contact "
                         f"{first['in_contact_fraction']:.0%} of the time)"}
-    rows = [f"<tr>{text_cell(label)}{num_cell(r['sim_to_sim_error_rms_n'])}{num_cell(r['with_real_residual_error_rms_n'])}"
-            + "".join(num_cell(v) for v in r["with_real_residual_error_per_axis_n"]) + "</tr>" for label, r in results.items()]
-    html = (f"<p>The arm replays '{CONTACT['run']}' in DART against a horizontal surface {CONTACT['depth_m'] * 1000:g} mm above the "
-            f"lowest point of the wrist centre's path (stiffness {CONTACT['stiffness_n_per_m']:g} N/m, damping "
-            f"{CONTACT['damping_n_s_per_m']:g} N s/m); DART's applied force is the truth. The estimate from the simulated efforts "
-            "(the model the simulation was built from) is the sim-to-sim error; with the real residual of each model on the run added "
-            "to the efforts, the error a user should expect on the real arm.</p>"
-            + table(["model", "sim-to-sim error (N RMS)", "with the real residual (N RMS)", "x (N)", "y (N)", "z (N)"], rows))
+    rows = [[text_cell(label), num_cell(r["sim_to_sim_error_rms_n"]), num_cell(r["with_real_residual_error_rms_n"]),
+             *(num_cell(v) for v in r["with_real_residual_error_per_axis_n"])] for label, r in results.items()]
+    html = render("report/contact.html", contact=CONTACT,
+                  errors_table=table(["model", "sim-to-sim error (N RMS)", "with the real residual (N RMS)", "x (N)", "y (N)", "z (N)"], rows))
     print(f"contact: {verdict['value']}; with the real residual: " + "; ".join(
         f"{label} {r['with_real_residual_error_rms_n']:.3f} N" for label, r in results.items()))
     return ("Force at the instrument: a contact in DART", html), verdict

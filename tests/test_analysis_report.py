@@ -322,6 +322,6 @@ def test_no_ratio_in_the_report_compares_with_round_off(report):
 
 def test_report_shows_the_realistic_arm_per_joint(report):
     text = report.read_text()
-    assert "id='realistic-arm'" in text
+    assert 'id="realistic-arm"' in text
     cells = [c for c in parse(report).cells if c["attrs"].get("data-quantity") == "rms_sim_vs_measured"]
     assert {"replay-two_velocity_cw-on", "replay-two_velocity_cw-on_identified"} <= {c["attrs"]["data-run"] for c in cells}

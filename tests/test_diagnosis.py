@@ -556,7 +556,7 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
 
 
 def test_the_answer_sentence_says_what_how_far_and_what_is_left():
-    from dvrk_dart.diagnosis.output.page import answer_sentence
+    from dvrk_dart.diagnosis.output.answer import answer_sentence
 
     friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
                 "units": {"coulomb": "N"}, "size": 0.5}
@@ -576,7 +576,8 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
 
 
 def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
-    from dvrk_dart.diagnosis.output.page import repeatable_share, share_words
+    from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+    from dvrk_dart.diagnosis.output.wording import share_words
 
     shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
     assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")

@@ -103,7 +103,7 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     from pathlib import Path
 
     from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
-    from dvrk_dart.diagnosis.output.page import _insertion_clause
+    from dvrk_dart.diagnosis.output.answer import _insertion_clause
     from dvrk_dart.io.arm import load_arm
 
     periodic = {"processing": {"processing": "periodic", "harmonics": 30}, "session_floor": [0.011, 0.05, 0.028]}

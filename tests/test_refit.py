@@ -55,7 +55,7 @@ def test_refit_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
 
 def test_the_answer_names_the_joints_whose_gap_the_refit_halves(refit):
     """The sentence at the top names a joint only where the refit at least halves its held-out gap in squares."""
-    from dvrk_dart.diagnosis.output.page import _refit_clause
+    from dvrk_dart.diagnosis.output.answer import _refit_clause
 
     result, _ = refit
     units = [PSM.effort_unit(j) for j in JOINT_NAMES]

@@ -3,7 +3,7 @@ answer sentence, the page and diagnosis.json."""
 
 import pytest
 
-from dvrk_dart.diagnosis.output.page import answer_sentence
+from dvrk_dart.diagnosis.output.answer import answer_sentence
 from dvrk_dart.diagnosis.output.wording import explanation, words_for
 from arms import PSM
 
@@ -37,3 +37,15 @@ def test_the_answer_says_what_the_json_says():
         result = _result([0.3, 0.25, 0.6], after, ["q2"])
         assert result["explanation"]["words"] == words
         assert answer_sentence(result).startswith(f"The gap is {words} by")
+
+
+def test_the_page_escapes_what_it_did_not_write():
+    """Every value on diagnosis.html goes through the templates' autoescape: a run or effect name is text, not HTML."""
+    from dvrk_dart.diagnosis.output.page import diagnosis_page
+
+    result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.1], ["q2"])
+    result["effects"][0]["name"] = "friction_q2<script>alert(1)</script>"
+    result["selection"]["selected"] = [result["effects"][0]["name"]]
+    page = diagnosis_page(result, ["figures/a<b.png"], "diagnosis of <run>")
+    assert "<script>" not in page and "&lt;script&gt;" in page and "diagnosis of &lt;run&gt;" in page
+    assert page.count("<table") == 3  # the gaps, the ranked effects, their parameters: tables from the template

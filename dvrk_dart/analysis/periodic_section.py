@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.io.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import num_cell, render, table, text_cell
 from dvrk_dart.analysis.residual_floor import aligned_residuals, floor_table, processed_pair, residual
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run
@@ -98,9 +98,9 @@ def periodic_section(arm: Arm, out_dir: Path, runs_dir: Path) -> tuple[str, str,
     replay = _replay_gaps(runs_dir)
     floor = figures["session_floor"]
 
-    def row(label: str, values, key: str, **attrs) -> str:
-        cells = [num_cell(None if values is None else values[JOINT_NAMES.index(j)], periodic=key, joint=j, **attrs) for j in SHOWN_JOINTS]
-        return "<tr>" + text_cell(label) + "".join(cells) + "</tr>"
+    def row(label: str, values, key: str, **attrs) -> list:
+        return [text_cell(label), *(num_cell(None if values is None else values[JOINT_NAMES.index(j)], periodic=key, joint=j, **attrs)
+                                    for j in SHOWN_JOINTS)]
 
     rows = [
         row("identified model vs measured, upstream processing", figures["model_vs_measured_two"]["upstream"], "model_vs_measured", processing="upstream"),
@@ -113,19 +113,8 @@ def periodic_section(arm: Arm, out_dir: Path, runs_dir: Path) -> tuple[str, str,
         row("floor of one session (RMS difference / sqrt 2)", figures["session_floor_per_session"], "floor_per_session"),
         row("model's gap on two (periodic) = floor + repeatable, in squares: repeatable part", figures["repeatable_two_periodic"], "repeatable"),
     ]
-    verdicts = "".join(f"<li>{j}: {_e(floor['verdict'][JOINT_NAMES.index(j)])}</li>" for j in SHOWN_JOINTS)
     figure = out_dir / "repeatable_residual_one_period.png"
-    body = [
-        f"<p>The excitations repeat a Fourier series (period {figures['period_s']:.4f} s, fitted from the positions). On the "
-        f"periodic processing, positions and efforts are projected on its first {figures['harmonics']} harmonics (the cutoff where "
-        "the efforts sink into their noise), velocities and accelerations are the series' analytic derivatives, the noise is "
-        "measured between the harmonics, and a model's prediction is projected on the same harmonics: both sides see the same "
-        f"band. Held-out run <code>{HELD_OUT}</code>; the floor from <code>{SESSIONS[0]}</code> and <code>{SESSIONS[1]}</code>, "
-        "two sessions of one trajectory (<code>dvrk-dart session-floor</code>).</p>",
-        table(["RMS", *[f"{j} ({arm.model.effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
-        f"<p>The sessions' difference against the noise:</p><ul>{verdicts}</ul>",
-        f"<figure><img src='figures/extra/{figure.name}' alt='repeatable residual'><figcaption>The identified model's residual over "
-        "one period, J1..J3: each session (thin), their mean (the repeatable residual, black) and the floor of one session (grey band)."
-        "</figcaption></figure>",
-    ]
-    return "Periodic excitation: both processings, the session floor, the repeatable gap", "\n".join(body), [figure]
+    body = render("report/periodic.html", period_s=figures["period_s"], harmonics=figures["harmonics"], held_out=HELD_OUT, sessions=SESSIONS,
+                  rms_table=table(["RMS", *[f"{j} ({arm.model.effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
+                  verdicts=[(j, floor["verdict"][JOINT_NAMES.index(j)]) for j in SHOWN_JOINTS], figure=figure.name)
+    return "Periodic excitation: both processings, the session floor, the repeatable gap", body, [figure]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from dvrk_dart.io.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import num_cell, render, table, text_cell
 from dvrk_dart.analysis.tables import (
     REGIME_DESCRIPTIONS,
     REGIME_HIGH_ACCELERATION,
@@ -44,29 +44,14 @@ def realistic_arm_section(analysis: Analysis) -> str:
             return text_cell("—")
         return num_cell(value, run=run, quantity=quantity, joint=joint, regime=regime)
 
-    def row(label: str, run: str, quantity: str, regime: str = REGIME_ALL) -> str:
-        return "<tr>" + text_cell(label) + "".join(cell(run, quantity, j, regime) for j in SHOWN_JOINTS) + "</tr>"
+    def row(label: str, run: str, quantity: str, regime: str = REGIME_ALL) -> list:
+        return [text_cell(label), *(cell(run, quantity, j, regime) for j in SHOWN_JOINTS)]
 
     measured = [row(f"{r.dynamics}: RMS(simulated - measured)", r.name, "rms_sim_vs_measured") for r in runs]
     measured.append(row("the full identified model: RMS(model - measured) at the measured states", runs[0].name,
                         "rms_model_full_vs_measured_at_measured_state"))
-    parts = [
-        "<h2 id='realistic-arm'>The realistic arm: replay of the held-out trajectory two</h2>",
-        "<p class='note'>The same velocity replay of the measured run \"two\" with three simulated arms: <em>inertial</em> "
-        "(the identified rigid-body parameters only, as in the CoppeliaSim paper), <em>identified</em> (every identified term as "
-        "DART physics: friction, offsets, the J4 spring, motor inertias) and <em>diagnosed</em> (the effects the diagnosis fitted "
-        "on trajectory \"one\", simulated as physics). Trajectory \"two\" was not used to fit anything.</p>",
-        table(header, measured),
-    ]
     identified = next((r for r in runs if r.dynamics == "identified"), None)
-    if identified is not None:
-        regimes = [row(f"{regime}: {REGIME_DESCRIPTIONS.get(regime, regime)}", identified.name, "rms_sim_vs_model", regime)
-                   for regime in REGIMES_SHOWN]
-        parts += [
-            "<h3>Identified arm: where the simulation departs from the model</h3>",
-            f"<p class='note'>RMS(simulated - model with the same terms) of <code>{_e(identified.name)}</code> by motion regime. "
-            "DART's Coulomb friction is set-valued (the joint sticks while the static force stays below Fc), the model's is "
-            "Fc sign(dq): the two differ only where the velocity crosses zero, which is where the insertion joint's difference sits.</p>",
-            table(["regime", *header[1:]], regimes),
-        ]
-    return "\n".join(parts)
+    regimes = [] if identified is None else [
+        row(f"{regime}: {REGIME_DESCRIPTIONS.get(regime, regime)}", identified.name, "rms_sim_vs_model", regime) for regime in REGIMES_SHOWN]
+    return render("report/realistic_arm.html", measured_table=table(header, measured), identified=identified.name if identified else None,
+                  regimes_table=table(["regime", *header[1:]], regimes))

@@ -34,17 +34,18 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import pandas as pd
+from markupsafe import Markup
 
 from dvrk_dart.io.html import (
     DIMENSIONLESS,
     INTEGER,
     RATIO_DIGITS,
     SHOWN_DIGITS,
-    STYLE,
-    _e,
     code_cell,
     fmt,
     num_cell,
+    render,
+    row,
     table,
     text_cell,
     unit_text,
@@ -77,6 +78,8 @@ REPORT_FILE = "index.html"
 ANALYSIS_DIR = "analysis"
 EXTRA_DIR = "figures/extra"
 IMAGE_SUFFIXES = (".png", ".svg", ".jpg", ".jpeg")
+#: the report's tables as data (analysis/), linked from its header
+REPORT_DATA_FILES = ("metrics.csv", "metrics.parquet", "checks.csv", "comparison.csv", "summary.json")
 
 #: per-run tables, whole run: quantity -> its columns
 WHOLE_RUN_TABLES = (
@@ -99,17 +102,11 @@ REGIME_TABLES = ("rms_sim_vs_model", "rms_sim_vs_measured", "rms_model_full_vs_m
 # ---------------------------------------------------------------- sections
 
 
-def _verdict_row(row, label: str) -> str:
-    condition = f"{row.operator} {fmt(row.threshold)} {row.unit}"
-    return (
-        f'<tr class="{row.status}">'
-        + text_cell(label)
-        + text_cell(row.run)
-        + text_cell(row.component)
-        + num_cell(row.value, check=row.check, run=row.run, field="value")
-        + text_cell(condition)
-        + f'<td class="status">{_e(row.status.upper())}</td></tr>'
-    )
+def _verdict_row(check, label: str):
+    condition = f"{check.operator} {fmt(check.threshold)} {check.unit}"
+    return row(text_cell(label), text_cell(check.run), text_cell(check.component),
+               num_cell(check.value, check=check.check, run=check.run, field="value"), text_cell(condition),
+               text_cell(check.status.upper(), "status"), css=check.status)
 
 
 def verdict_section(analysis: Analysis) -> str:
@@ -126,26 +123,12 @@ def verdict_section(analysis: Analysis) -> str:
         label = f"{worst.title} ({int((rows.status == STATUS_PASS).sum())} of {len(rows)} runs pass)"
         summary_rows.append(_verdict_row(worst, label))
     detail_rows = [_verdict_row(row, row.title) for row in checks.itertuples(index=False)]
-    failing = checks[checks.status != STATUS_PASS]
-    lines = [
-        "<h2 id='verdicts'>Verdicts</h2>",
-        f"<p class='summary {'ok' if ok else 'ko'}'><strong>{passed} of {total}</strong> check runs passed"
-        + (f" ({int((failing.status == STATUS_FAIL).sum())} failed, {int((failing.status == STATUS_MISSING).sum())} missing)" if not ok else "")
-        + "</p>",
-        "<p class='note'>Thresholds: <code>pipelines/checks.toml</code>. The value is the worst listed component of the run; "
-        "each line below shows the check's worst run. A missing run (not in the runs folder, or without that quantity) counts as not passed.</p>",
-        table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
-        "<details><summary>Every run of every check</summary>"
-        + table(["check", "run", "worst component", "value", "condition", "status"], detail_rows)
-        + "</details>",
-    ]
-    if analysis.failures:
-        lines.append("<p><strong>Unreadable run folders:</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in analysis.failures.items()) + "</ul>")
-    errors = {name: r.metrics.get("error") for name, r in analysis.runs.items()}
-    errors = {k: v for k, v in errors.items() if v}
-    if errors:
-        lines.append("<p><strong>Runs that stopped early (diverged):</strong></p><ul>" + "".join(f"<li>{_e(k)}: {_e(v)}</li>" for k, v in errors.items()) + "</ul>")
-    return "\n".join(lines)
+    stopped = {name: r.metrics["error"] for name, r in analysis.runs.items() if r.metrics.get("error")}
+    return render("report/verdicts.html", ok=ok, passed=passed, total=total, failed=int((checks.status == STATUS_FAIL).sum()),
+                  missing=int((checks.status == STATUS_MISSING).sum()),
+                  summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
+                  detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
+                  unreadable=analysis.failures, stopped=stopped)
 
 
 def _closeness(row) -> float:
@@ -162,84 +145,58 @@ def _component_header(entry: dict) -> list[str]:
 
 
 def comparison_section(analysis: Analysis, published: dict) -> str:
-    comparison = analysis.comparison
-    sources = "".join(
-        f"<li><strong>{_e(key)}</strong>: {_e(s['title'])}"
-        + (f" ({_e(s['document'])})" if "document" in s else "")
-        + (f" ({_e(s['repository'])} @ {_e(s['commit'][:10])})" if "repository" in s else "")
-        + (f". {_e(s['note'])}" if "note" in s else "")
-        + "</li>"
-        for key, s in published.get("sources", {}).items()
-    )
-    parts = [
-        "<h2 id='comparison'>Comparison with the published numbers</h2>",
-        "<p class='note'>Ratio = published / ours for errors: <strong>&gt; 1 means our simulator is better</strong> (green), &lt; 1 worse (red); "
-        f"a ratio above {MAX_MEANINGFUL_RATIO:.0e} would compare a physical error with round-off and is shown as 'at round-off'; "
-        "where the goal is to reproduce a published number, the difference is shown instead. "
-        "for the runs without counterweight (nCW) the error is the counterweight's physical effect, so the ratio only compares sizes. "
-        "The paper's kinematic control with the dynamic engine on is our velocity mode; its nCW is our cw-off, its wCW (a PID mirror of q3) our cw-pid, "
-        "and our default cw-on is the ideal tendon. Published values: <code>pipelines/published.toml</code>; a dash means the run is not in the folder.</p>",
-        f"<ul class='note'>{sources}</ul>",
-    ]
-    for entry in published.get("published", []):
-        rows_of_entry = comparison[comparison.published == entry["id"]]
-        if rows_of_entry.empty:
-            continue
-        first = rows_of_entry.drop_duplicates("component").set_index("component")
-        rows = [
-            "<tr>" + text_cell(f"published ({entry['source']})")
-            + "".join(num_cell(first.loc[c, "published_value"], published=entry["id"], component=c, field="published_value") for c in entry["components"])
-            + "</tr>"
-        ]
-        is_error = entry.get("kind", KIND_ERROR) == KIND_ERROR
-        better = total = 0
-        for (run, quantity, regime, goal), group in rows_of_entry.groupby(["run", "quantity", "regime", "goal"], sort=False):
-            group = group.set_index("component")
-            note = next((n for n in group.note if isinstance(n, str) and n and n != "at round-off"), "")
-            label = (f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
-                     + (f" ({note})" if note else ""))
-            ours, second = [], []
-            for c in entry["components"]:
-                row = group.loc[c]
-                key = {"published": entry["id"], "run": run, "component": c, "quantity": quantity, "regime": regime}
-                ours.append(num_cell(row.our_value, **key, joint=c, field="our_value"))
-                if goal == "equal":
-                    second.append(num_cell(row.reproduced_to, **key, field="reproduced_to"))
-                elif row.note == "at round-off":
-                    second.append(text_cell("at round-off", "better"))
-                    better += 1
-                else:
-                    ratio = row.ratio_published_over_ours
-                    css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
-                    second.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
-                    better += int(ratio > 1)
-                if goal == "smaller":
-                    total += int(math.isfinite(row.our_value))
-            rows.append("<tr>" + text_cell(label) + "".join(ours) + "</tr>")
+    entries = [_comparison_entry(analysis.comparison, entry) for entry in published.get("published", [])]
+    return render("report/comparison.html", max_ratio=MAX_MEANINGFUL_RATIO, sources=published.get("sources", {}),
+                  entries=[e for e in entries if e is not None])
+
+
+def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
+    """One published figure: its table of ours against it, and the verdict (None: no run of it in the folder)."""
+    rows_of_entry = comparison[comparison.published == entry["id"]]
+    if rows_of_entry.empty:
+        return None
+    first = rows_of_entry.drop_duplicates("component").set_index("component")
+    rows = [[text_cell(f"published ({entry['source']})"),
+             *(num_cell(first.loc[c, "published_value"], published=entry["id"], component=c, field="published_value") for c in entry["components"])]]
+    is_error = entry.get("kind", KIND_ERROR) == KIND_ERROR
+    better = total = 0
+    for (run, quantity, regime, goal), group in rows_of_entry.groupby(["run", "quantity", "regime", "goal"], sort=False):
+        group = group.set_index("component")
+        note = next((n for n in group.note if isinstance(n, str) and n and n != "at round-off"), "")
+        label = (f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
+                 + (f" ({note})" if note else ""))
+        ours, second = [], []
+        for c in entry["components"]:
+            compared = group.loc[c]
+            key = {"published": entry["id"], "run": run, "component": c, "quantity": quantity, "regime": regime}
+            ours.append(num_cell(compared.our_value, **key, joint=c, field="our_value"))
             if goal == "equal":
-                rows.append("<tr>" + text_cell("reproduced to |ours - published|") + "".join(second) + "</tr>")
-            elif goal == "smaller":
-                rows.append("<tr>" + text_cell("published / ours") + "".join(second) + "</tr>")
-        verdict = (
-            f"ours better on {better} of {total} compared values" if is_error
-            else "an effect that must show, not an error: the ratio compares its size, neither side is better"
-        )
-        parts.append(
-            f"<h4>{_e(entry['where'])}</h4><p class='note'>{_e(entry['quantity'])}; {verdict}.</p>"
-            + table(["", *_component_header(entry)], rows)
-        )
-    return "\n".join(parts)
+                second.append(num_cell(compared.reproduced_to, **key, field="reproduced_to"))
+            elif compared.note == "at round-off":
+                second.append(text_cell("at round-off", "better"))
+                better += 1
+            else:
+                ratio = compared.ratio_published_over_ours
+                css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
+                second.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
+                better += int(ratio > 1)
+            if goal == "smaller":
+                total += int(math.isfinite(compared.our_value))
+        rows.append([text_cell(label), *ours])
+        if goal == "equal":
+            rows.append([text_cell("reproduced to |ours - published|"), *second])
+        elif goal == "smaller":
+            rows.append([text_cell("published / ours"), *second])
+    verdict = (
+        f"ours better on {better} of {total} compared values" if is_error
+        else "an effect that must show, not an error: the ratio compares its size, neither side is better"
+    )
+    return {"where": entry["where"], "quantity": entry["quantity"], "verdict": verdict,
+            "table": table(["", *_component_header(entry)], rows)}
 
 
 def figures_section(figures) -> str:
-    if not figures:
-        return "<h2 id='figures'>Figures</h2><p>No run of the folder matches a figure.</p>"
-    items = [
-        f"<figure><img src='{_e(f.file)}' alt='{_e(f.title)}'><figcaption><strong>{_e(f.title)}.</strong> {_e(f.caption)} "
-        f"Runs: {_e(', '.join(f.runs))}.</figcaption></figure>"
-        for f in figures
-    ]
-    return "<h2 id='figures'>Figures</h2>\n" + "\n".join(items)
+    return render("report/figures.html", figures=figures)
 
 
 def _units_of(metrics: pd.DataFrame, quantity: str, components: Sequence[str]) -> str:
@@ -253,9 +210,7 @@ def _units_of(metrics: pd.DataFrame, quantity: str, components: Sequence[str]) -
 
 def per_run_section(analysis: Analysis) -> str:
     metrics = analysis.metrics
-    parts = ["<h2 id='results'>Results per run</h2>",
-             "<p class='note'>Every number below is a row of <code>analysis/metrics.csv</code> (and .parquet). "
-             "Efforts of the identified model are at the simulated state unless the quantity says otherwise.</p>"]
+    whole_run, by_regime = [], []
     for quantity, components in WHOLE_RUN_TABLES:
         selected = metrics[(metrics.quantity == quantity) & (metrics.regime == REGIME_ALL)]
         if selected.empty:
@@ -264,13 +219,12 @@ def per_run_section(analysis: Analysis) -> str:
         rows = []
         for run in sorted(selected.run.unique()):
             cells = [
-                num_cell(values[(run, c)], run=run, quantity=quantity, joint=c, regime=REGIME_ALL) if (run, c) in values.index else "<td>—</td>"
+                num_cell(values[(run, c)], run=run, quantity=quantity, joint=c, regime=REGIME_ALL) if (run, c) in values.index else text_cell("—")
                 for c in components
             ]
-            rows.append("<tr>" + text_cell(run) + "".join(cells) + "</tr>")
-        parts.append(f"<h3>{_e(quantity)} ({_e(_units_of(metrics, quantity, components))})</h3><p class='note'>{_e(QUANTITY_DESCRIPTIONS.get(quantity, ''))}</p>")
-        parts.append(table(["run", *components], rows))
-    parts.append("<h3>By motion regime</h3><p class='note'>" + "; ".join(f"<em>{_e(k)}</em>: {_e(v)}" for k, v in REGIME_DESCRIPTIONS.items()) + ". Regimes with too few samples are left out.</p>")
+            rows.append([text_cell(run), *cells])
+        whole_run.append({"quantity": quantity, "units": _units_of(metrics, quantity, components),
+                          "description": QUANTITY_DESCRIPTIONS.get(quantity, ""), "table": table(["run", *components], rows)})
     for quantity in REGIME_TABLES:
         selected = metrics[(metrics.quantity == quantity) & (metrics.regime != REGIME_ALL)]
         if selected.empty:
@@ -280,13 +234,13 @@ def per_run_section(analysis: Analysis) -> str:
         for run, regime in sorted(set(zip(selected.run, selected.regime))):
             digits = INTEGER if quantity == "samples" else SHOWN_DIGITS
             cells = [
-                num_cell(values[(run, regime, j)], digits, run=run, quantity=quantity, joint=j, regime=regime) if (run, regime, j) in values.index else "<td>—</td>"
+                num_cell(values[(run, regime, j)], digits, run=run, quantity=quantity, joint=j, regime=regime) if (run, regime, j) in values.index else text_cell("—")
                 for j in JOINT_NAMES
             ]
-            rows.append("<tr>" + text_cell(run) + text_cell(regime) + "".join(cells) + "</tr>")
-        parts.append(f"<h4>{_e(quantity)} by regime ({_e(_units_of(metrics, quantity, JOINT_NAMES))})</h4>")
-        parts.append(table(["run", "regime", *JOINT_NAMES], rows))
-    return "\n".join(parts)
+            rows.append([text_cell(run), text_cell(regime), *cells])
+        by_regime.append({"quantity": quantity, "units": _units_of(metrics, quantity, JOINT_NAMES),
+                          "table": table(["run", "regime", *JOINT_NAMES], rows)})
+    return render("report/per_run.html", whole_run=whole_run, by_regime=by_regime, regimes=REGIME_DESCRIPTIONS)
 
 
 def _effects(sim: dict) -> str:
@@ -308,47 +262,33 @@ def provenance_section(analysis: Analysis) -> str:
         revision = str(run.versions.get("git_revision", run.config.get("versions", {}).get("git_revision", "unknown")))
         dirty = run.versions.get("git_dirty", "unknown")
         mcap_sha = run.checksums.get("run.mcap", "")
-        rows.append(
-            "<tr>"
-            + text_cell(name)
-            + num_cell(len(run.record), INTEGER, run=name, field="samples")
-            + num_cell(float(run.config.get("duration_s", math.nan) or math.nan), run=name, field="duration_s")
-            + num_cell(float(sim.get("dt_s", math.nan)), run=name, field="dt_s")
-            + text_cell(_effects(sim))
-            + code_cell(revision[:10] + (" (dirty)" if dirty == "true" else ""), revision)
-            + code_cell(mcap_sha[:16], mcap_sha)
-            + code_cell((run.config.get("inputs_sha256") or "—")[:16], run.config.get("inputs_sha256") or "")
-            + "</tr>"
-        )
-        checksums = "\n".join(f"sha256 {v}  {k}" for k, v in run.checksums.items())
-        configs.append(
-            f"<details><summary>{_e(name)}: {CONFIG_FILE}, checksums, versions</summary>"
-            f"<pre>{_e(checksums)}</pre><pre>{_e(json.dumps(run.config, indent=1))}</pre>"
-            f"<pre>{_e(json.dumps(run.versions, indent=1))}</pre></details>"
-        )
+        rows.append([
+            text_cell(name),
+            num_cell(len(run.record), INTEGER, run=name, field="samples"),
+            num_cell(float(run.config.get("duration_s", math.nan) or math.nan), run=name, field="duration_s"),
+            num_cell(float(sim.get("dt_s", math.nan)), run=name, field="dt_s"),
+            text_cell(_effects(sim)),
+            code_cell(revision[:10] + (" (dirty)" if dirty == "true" else ""), revision),
+            code_cell(mcap_sha[:16], mcap_sha),
+            code_cell((run.config.get("inputs_sha256") or "—")[:16], run.config.get("inputs_sha256") or ""),
+        ])
+        configs.append({"name": name, "checksums": "\n".join(f"sha256 {v}  {k}" for k, v in run.checksums.items()),
+                        "config": json.dumps(run.config, indent=1), "versions": json.dumps(run.versions, indent=1)})
     versions: dict[str, set] = {}
     for run in analysis.runs.values():
         for key, value in run.versions.items():
             versions.setdefault(key, set()).add(str(value))
-    version_rows = ["<tr>" + text_cell(k) + code_cell(", ".join(sorted(v))) + "</tr>" for k, v in sorted(versions.items())]
-    return "\n".join([
-        "<h2 id='provenance'>Provenance</h2>",
-        "<p class='note'>Versions are those recorded in each run's MCAP metadata; checksums are sha256 of the run folder's files as read for this report.</p>",
-        table(["software", "version(s) across the runs"], version_rows),
-        table(["run", "samples", "duration (s)", "step (s)", "simulated effects", "git revision", "run.mcap sha256", "inputs sha256"], rows),
-        *configs,
-    ])
+    version_rows = [[text_cell(k), code_cell(", ".join(sorted(v)))] for k, v in sorted(versions.items())]
+    return render("report/provenance.html", config_file=CONFIG_FILE, runs=configs,
+                  versions_table=table(["software", "version(s) across the runs"], version_rows),
+                  runs_table=table(["run", "samples", "duration (s)", "step (s)", "simulated effects", "git revision", "run.mcap sha256",
+                                    "inputs sha256"], rows))
 
 
 def glossary_section() -> str:
-    rows = ["<tr>" + text_cell(k) + text_cell(v) + "</tr>" for k, v in QUANTITY_DESCRIPTIONS.items()]
-    regimes = ["<tr>" + text_cell(k) + text_cell(v) + "</tr>" for k, v in REGIME_DESCRIPTIONS.items()]
-    return "\n".join([
-        "<h2 id='glossary'>Definitions</h2>",
-        "<p class='note'>RMS and relative error: <code>dvrk_dart/metrics.py</code>. Units: SI; efforts in N·m, N for the insertion joint q3.</p>",
-        table(["quantity", "definition"], rows, css="glossary"),
-        table(["regime", "samples"], regimes, css="glossary"),
-    ])
+    return render("report/glossary.html",
+                  quantities=table(["quantity", "definition"], [[text_cell(k), text_cell(v)] for k, v in QUANTITY_DESCRIPTIONS.items()], css="glossary"),
+                  regimes=table(["regime", "samples"], [[text_cell(k), text_cell(v)] for k, v in REGIME_DESCRIPTIONS.items()], css="glossary"))
 
 
 def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
@@ -370,7 +310,7 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
             elif path.suffix.lower() in IMAGE_SUFFIXES:
                 extra_dir.mkdir(parents=True, exist_ok=True)
                 shutil.copy2(path, extra_dir / path.name)
-                items.append((path.stem.replace("_", " "), f"<figure><img src='{EXTRA_DIR}/{_e(path.name)}' alt='{_e(path.stem)}'></figure>"))
+                items.append((path.stem.replace("_", " "), render("figure.html", src=f"{EXTRA_DIR}/{path.name}", alt=path.stem, caption="")))
         return items
     for entry in extra_sections:
         title, body, *files = entry
@@ -378,15 +318,8 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
             extra_dir.mkdir(parents=True, exist_ok=True)
             shutil.copy2(file, extra_dir / Path(file).name)
         items.append((str(title), str(body)))
-    return items
-
-
-def _page(sections: list[str], title: str) -> str:
-    return (
-        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
-        f"<meta name='viewport' content='width=device-width, initial-scale=1'><title>{_e(title)}</title>"
-        f"<style>{STYLE}</style></head><body>\n" + "\n".join(sections) + "\n</body></html>\n"
-    )
+    # a section's html is the tool's own (a diagnosis page's fragment, a figure), not text to escape
+    return [(title, Markup(body)) for title, body in items]
 
 
 # ---------------------------------------------------------------- build
@@ -422,31 +355,14 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         write_analysis(analysis, building / ANALYSIS_DIR)
         figures = build_figures(analysis.runs, building, jobs=jobs)
         extras = _extra_items(extra_sections, building)
-        generated = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         navigation = ["verdicts", "comparison", "realistic-arm", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
-        header = (
-            "<h1>dvrk_dart validation report</h1>"
-            f"<p class='note'>DART simulator of the dVRK PSM vs the identified model (Wang et al. 2019) and the real robot. "
-            f"Generated {generated} from <code>{_e(runs_dir)}</code>: {len(analysis.runs)} run(s). "
-            f"Tables as data: <a href='{ANALYSIS_DIR}/metrics.csv'>metrics.csv</a>, <a href='{ANALYSIS_DIR}/metrics.parquet'>metrics.parquet</a>, "
-            f"<a href='{ANALYSIS_DIR}/checks.csv'>checks.csv</a>, <a href='{ANALYSIS_DIR}/comparison.csv'>comparison.csv</a>, "
-            f"<a href='{ANALYSIS_DIR}/summary.json'>summary.json</a>. "
-            f"<a id='documentation' href='{_e(docs_link(out_dir))}'>Documentation</a> (what every figure means; <code>make docs</code> builds it).</p>"
-            "<p class='note'>" + " · ".join(f"<a href='#{n}'>{n}</a>" for n in navigation) + "</p>"
-        )
-        sections = [
-            header,
-            verdict_section(analysis),
-            comparison_section(analysis, published),
-            realistic_arm_section(analysis),
-            figures_section(figures),
-            per_run_section(analysis),
-            *[f"<h2 id='extra-{i}'>{_e(title)}</h2>\n{body}" for i, (title, body) in enumerate(extras)],
-            glossary_section(),
-            provenance_section(analysis),
-            f"<p class='note'>Built in {time.perf_counter() - start:.1f} s.</p>",
-        ]
-        (building / REPORT_FILE).write_text(_page(sections, "dvrk_dart validation report"))
+        sections = [verdict_section(analysis), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
+                    figures_section(figures), per_run_section(analysis)]
+        page = render("report/index.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+                      runs_dir=str(runs_dir), n_runs=len(analysis.runs), analysis_dir=ANALYSIS_DIR, data_files=REPORT_DATA_FILES,
+                      docs_link=docs_link(out_dir), navigation=navigation, sections=sections, extras=extras,
+                      closing=[glossary_section(), provenance_section(analysis)], seconds=time.perf_counter() - start)
+        (building / REPORT_FILE).write_text(page)
     return out_dir / REPORT_FILE
 
 

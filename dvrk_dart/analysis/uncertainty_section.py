@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dvrk_dart.io.html import _e, num_cell, table, text_cell
+from dvrk_dart.io.html import num_cell, render, table, text_cell
 from dvrk_dart.model.joints import JOINT_NAMES
 
 SHOWN_JOINTS = JOINT_NAMES[:3]
@@ -21,17 +21,7 @@ def uncertainty_section(folder: Path) -> tuple[str, str, list[Path]]:
                        ("rms_measured_outside_band", "RMS distance of the measured effort to the band"),
                        ("band_width_rms", "RMS width of the band"),
                        ("nominal_model_inside_band_fraction", "nominal identified model inside the band (fraction)")):
-        rows.append("<tr>" + text_cell(label) + "".join(
-            num_cell(summary[key][JOINT_NAMES.index(j)], uncertainty=key, joint=j) for j in SHOWN_JOINTS) + "</tr>")
-    config = summary["config"]
-    body = [
-        f"<p>Is the measured effort already inside what the identified parameters' uncertainty allows? "
-        f"{summary['samples_replayed']} parameter sets ({_e(summary['parameters'])}; {summary['projected_bodies']} body samples "
-        f"projected onto physical consistency) replayed in DART on <code>{_e(config['measured'])}</code> "
-        f"({_e(config['dynamics'])} arm, first {config['duration_s']} s). The band holds {low:.0%}-{high:.0%} of the simulated efforts; "
-        "the distance of the measured effort to it is the part of the gap that no parameter set within the uncertainty explains.</p>",
-        table(["", *[f"{j} ({summary['effort_units'][JOINT_NAMES.index(j)]})" for j in SHOWN_JOINTS]], rows),
-        *[f"<figure><img src='figures/extra/{_e(p.name)}' alt='{_e(p.stem)}'><figcaption>{_e(p.stem)}: measured efforts over the "
-          "parameter band</figcaption></figure>" for p in figures],
-    ]
-    return ("Parameter uncertainty: the held-out replay of two", "\n".join(body), figures)
+        rows.append([text_cell(label), *(num_cell(summary[key][JOINT_NAMES.index(j)], uncertainty=key, joint=j) for j in SHOWN_JOINTS)])
+    band_table = table(["", *[f"{j} ({summary['effort_units'][JOINT_NAMES.index(j)]})" for j in SHOWN_JOINTS]], rows)
+    body = render("report/uncertainty.html", summary=summary, low=low, high=high, band_table=band_table, figures=figures)
+    return ("Parameter uncertainty: the held-out replay of two", body, figures)

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.io.html import STYLE, fmt, num_cell, table, text_cell
+from dvrk_dart.io.html import fmt, num_cell, render, table, text_cell
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.fit import MAX_CONDITION_NUMBER, PSD_MARGIN_KG_M2
 from dvrk_dart.identification.identify import (
@@ -255,44 +255,25 @@ def _error_table(result: IdentificationResult, data: dict) -> str:
                 cells = [text_cell(f"{name} ({kind}, {span.replace('_', ' ')})")]
                 cells += [num_cell(v, run=name, quantity="relative_error", joint=j) for v, j in zip(e["relative_error"], JOINT_NAMES)]
                 cells += [num_cell(v, run=name, quantity="rms", joint=j) for v, j in zip(e["rms"], JOINT_NAMES)]
-                rows.append("<tr>" + "".join(cells) + "</tr>")
+                rows.append(cells)
     header = ["run"] + [f"rel {j}" for j in JOINT_NAMES] + [f"RMS {j} ({u})" for j, u in zip(JOINT_NAMES, data["effort_units"])]
     return table(header, rows)
 
 
 def html_page(result: IdentificationResult, data: dict) -> str:
-    parts = [f"<h1>Identification: {', '.join(data['config']['runs'])}</h1>"]
-    parts.append(
-        f"<p class='note'>Base regressor condition number {fmt(data['condition_number'])} (limit {fmt(MAX_CONDITION_NUMBER)}); "
-        f"{data['n_base']} base of {data['n_standard']} standard parameters; friction law {data['config']['friction_law']}; "
-        f"prior {data['config']['prior']}; solver {data['convex_program']['solver']} ({data['convex_program']['status']}).</p>"
-    )
-    parts.append("<h2>Errors per joint</h2>" + _error_table(result, data))
-    for label, runs in (("training", result.train), ("held-out", result.holdout)):
-        for run in runs:
-            png = _figure_png(result, run, f"{run.name} ({label}): measured vs identified efforts")
-            parts.append(f"<figure><img src='data:image/png;base64,{png}' alt='{run.name}'><figcaption>{run.name} ({label}), first base period</figcaption></figure>")
-    rows = []
-    for key, m in data["masses_kg"].items():
-        eig = data["pseudo_inertia_eigenvalues_kg_m2"][key]
-        rows.append("<tr>" + text_cell(f"link {key} ({result.model.links[int(key)].name})") + num_cell(m["value"]) + num_cell(m["lower"]) + num_cell(m["upper"]) + num_cell(eig[0]) + "</tr>")
-    parts.append("<h2>Bodies</h2>" + table(["link", "mass (kg)", "lower", "upper", "smallest pseudo-inertia eigenvalue (kg m^2)"], rows))
-    rows = [
-        "<tr>" + text_cell(p["name"]) + num_cell(p["value"]) + text_cell(p["unit"]) + text_cell("yes" if p["identifiable"] else "constraints and prior") + num_cell(p["prior"]) + "</tr>"
-        for p in data["standard_parameters"]
-    ]
-    parts.append("<h2>Standard parameters</h2>" + table(["parameter", "value", "unit", "identifiable alone", "prior"], rows))
-    rows = [
-        "<tr>" + text_cell(b["name"]) + num_cell(b["wls"]) + num_cell(b["standard_error"]) + num_cell(b["consistent"]) + "</tr>"
-        for b in data["base_parameters"]
-    ]
-    parts.append("<h2>Base parameters</h2>" + table(["combination", "weighted LS", "standard error", "consistent fit"], rows))
-    if data["active_constraints"]:
-        parts.append("<h2>Active constraints</h2><ul>" + "".join(f"<li>{c}</li>" for c in data["active_constraints"]) + "</ul>")
-    return (
-        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>dvrk-dart identification</title>"
-        f"<style>{STYLE}</style></head><body>{''.join(parts)}</body></html>\n"
-    )
+    """identification.html (templates/identification.html): the errors, a figure per run, the bodies and parameters."""
+    figures = [{"run": run.name, "label": label, "png": _figure_png(result, run, f"{run.name} ({label}): measured vs identified efforts")}
+               for label, runs in (("training", result.train), ("held-out", result.holdout)) for run in runs]
+    bodies = [[text_cell(f"link {key} ({result.model.links[int(key)].name})"), num_cell(m["value"]), num_cell(m["lower"]), num_cell(m["upper"]),
+               num_cell(data["pseudo_inertia_eigenvalues_kg_m2"][key][0])] for key, m in data["masses_kg"].items()]
+    standard = [[text_cell(p["name"]), num_cell(p["value"]), text_cell(p["unit"]), text_cell("yes" if p["identifiable"] else "constraints and prior"),
+                 num_cell(p["prior"])] for p in data["standard_parameters"]]
+    base = [[text_cell(b["name"]), num_cell(b["wls"]), num_cell(b["standard_error"]), num_cell(b["consistent"])] for b in data["base_parameters"]]
+    return render("identification.html", title="dvrk-dart identification", data=data, fmt=fmt, max_condition_number=MAX_CONDITION_NUMBER,
+                  error_table=_error_table(result, data), figures=figures,
+                  bodies_table=table(["link", "mass (kg)", "lower", "upper", "smallest pseudo-inertia eigenvalue (kg m^2)"], bodies),
+                  standard_table=table(["parameter", "value", "unit", "identifiable alone", "prior"], standard),
+                  base_table=table(["combination", "weighted LS", "standard error", "consistent fit"], base))
 
 
 def write_outputs(result: IdentificationResult, folder: Path) -> dict:
@@ -329,20 +310,12 @@ def report_section(*datas: dict) -> tuple[str, str]:
     (not data-quantity: these are not analysis/metrics.csv rows) and data-processing."""
     parts = []
     for data in datas:
-        processing = data["processing"]["processing"]
-        ref = data["reference"]
-        parts.append(
-            f"<h3>{processing.capitalize()} processing</h3>"
-            f"<p>Parameters identified by <code>dvrk-dart identify --processing {processing}</code> on {', '.join(data['config']['runs'])} "
-            f"({data['n_base']} base parameters, condition number {fmt(data['condition_number'])}, physically consistent: "
-            f"smallest pseudo-inertia eigenvalue {fmt(worst_eigenvalue(data))} kg m^2, against "
-            f"{fmt(ref['pseudo_inertia_smallest_eigenvalue_kg_m2'])} kg m^2 in the published file), scored on the held-out "
-            f"runs like <code>model-errors --first-period --processing {processing}</code>: relative error "
-            "||tau_model - tau_measured|| / ||tau_measured||.</p>"
-        )
-        parts += [_holdout_table(run, own, ref["errors_first_period"].get(run), processing, data["effort_units"])
-                  for run, own in data["errors"]["holdout"].items()]
-    return "Own identification vs the published parameters", "".join(parts)
+        processing, ref = data["processing"]["processing"], data["reference"]
+        parts.append({"processing": processing, "runs": data["config"]["runs"], "n_base": data["n_base"], "condition_number": fmt(data["condition_number"]),
+                      "worst": fmt(worst_eigenvalue(data)), "published_worst": fmt(ref["pseudo_inertia_smallest_eigenvalue_kg_m2"]),
+                      "tables": [(run, _holdout_table(run, own, ref["errors_first_period"].get(run), processing, data["effort_units"]))
+                                 for run, own in data["errors"]["holdout"].items()]})
+    return "Own identification vs the published parameters", render("report/identification.html", parts=parts)
 
 
 def _holdout_table(run: str, own: dict, published: dict | None, processing: str, units: list[str]) -> str:
@@ -353,14 +326,11 @@ def _holdout_table(run: str, own: dict, published: dict | None, processing: str,
         ratio = mine / theirs if theirs else None
         css = "" if ratio is None else ("better" if ratio <= 1.0 else "worse")
         cell = {"run": run, "joint": name, "processing": processing}
-        rows.append(
-            "<tr>" + text_cell(name) + num_cell(theirs, identification="relative_error_published_params", **cell)
-            + num_cell(mine, css=css, identification="relative_error_identified", **cell)
-            + num_cell(ratio, identification="ratio_identified_to_published", **cell)
-            + num_cell(own["first_period"]["rms"][j], identification="rms_identified", **cell) + text_cell(units[j]) + "</tr>"
-        )
-    return f"<h4>Held-out run {run} (first period, {processing})</h4>" + table(
-        ["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows)
+        rows.append([text_cell(name), num_cell(theirs, identification="relative_error_published_params", **cell),
+                     num_cell(mine, css=css, identification="relative_error_identified", **cell),
+                     num_cell(ratio, identification="ratio_identified_to_published", **cell),
+                     num_cell(own["first_period"]["rms"][j], identification="rms_identified", **cell), text_cell(units[j])])
+    return table(["joint", "published params", "own identification", "ratio", "RMS own", "unit"], rows)
 
 
 def worst_eigenvalue(data: dict) -> float:

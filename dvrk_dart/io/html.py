@@ -1,11 +1,21 @@
-"""Small HTML helpers of the report: the page style, number formatting, and
-table cells that carry their exact value and identity in data-* attributes."""
+"""The project's HTML, below every page that uses it (the report, the
+diagnosis page, the identification page): the Jinja2 templates of
+dvrk_dart/templates/ (autoescaped: every value is escaped unless it is
+already `Markup`), the page style, number formatting, and table cells that
+carry their exact value and identity in data-* attributes."""
 
 from __future__ import annotations
 
-import html
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import jinja2
+from markupsafe import Markup
+
+#: the templates of every page and table (autoescaped; a missing variable is an error, not an empty string)
+TEMPLATES = jinja2.Environment(loader=jinja2.PackageLoader("dvrk_dart", "templates"), autoescape=True,
+                               undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
 
 #: significant digits shown in the tables (the exact value is in data-value)
 SHOWN_DIGITS = 4
@@ -53,29 +63,47 @@ def unit_text(unit: str) -> str:
     return "dimensionless" if unit == DIMENSIONLESS else unit
 
 
-def _e(text: object) -> str:
-    return html.escape(str(text), quote=True)
+def render(template: str, **context) -> Markup:
+    """A template of dvrk_dart/templates/ rendered with `context` (the page style included)."""
+    return Markup(TEMPLATES.get_template(template).render(style=Markup(STYLE), **context))
 
 
-def _attrs(attrs: dict) -> str:
-    return "".join(f' data-{k}="{_e(v)}"' for k, v in attrs.items())
+@dataclass(frozen=True)
+class Cell:
+    """A table cell: its text (escaped unless `Markup`), CSS class, data-*
+    attributes (name, value), and whether it is code (with a hover title)."""
+
+    text: object
+    css: str = ""
+    data: tuple[tuple[str, str], ...] = ()
+    code: bool = False
+    title: str = ""
 
 
-def num_cell(value: float, digits: int = SHOWN_DIGITS, css: str = "", **attrs) -> str:
+@dataclass(frozen=True)
+class Row:
+    cells: tuple[Cell, ...]
+    css: str = ""
+
+
+def num_cell(value: float, digits: int = SHOWN_DIGITS, css: str = "", **attrs) -> Cell:
+    """A number as shown, with its exact value in data-value and what it is in the other data-* attributes."""
     exact = repr(float(value)) if value is not None else "nan"
-    classes = f"num {css}".strip()
-    return f'<td class="{classes}"{_attrs(attrs)} data-value="{exact}">{fmt(value, digits)}</td>'
+    return Cell(fmt(value, digits), f"num {css}".strip(), (*((k, str(v)) for k, v in attrs.items()), ("value", exact)))
 
 
-def text_cell(text: object, css: str = "") -> str:
-    return f'<td class="{css}">{_e(text)}</td>' if css else f"<td>{_e(text)}</td>"
+def text_cell(text: object, css: str = "") -> Cell:
+    return Cell(text, css)
 
 
-def code_cell(text: object, title: str = "") -> str:
-    title_attr = f' title="{_e(title)}"' if title else ""
-    return f"<td><code{title_attr}>{_e(text)}</code></td>"
+def code_cell(text: object, title: str = "") -> Cell:
+    return Cell(text, code=True, title=title)
 
 
-def table(header: Sequence[str], rows: Iterable[str], css: str = "data") -> str:
-    head = "".join(f"<th>{_e(h)}</th>" for h in header)
-    return f'<table class="{css}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+def row(*cells: Cell, css: str = "") -> Row:
+    return Row(tuple(cells), css)
+
+
+def table(header: Sequence[str], rows: Iterable[Row | Sequence[Cell]], css: str = "data") -> Markup:
+    """A table of `rows` (a Row, or a sequence of cells) under `header` (templates/table.html)."""
+    return render("table.html", header=header, rows=[r if isinstance(r, Row) else Row(tuple(r)) for r in rows], css=css)

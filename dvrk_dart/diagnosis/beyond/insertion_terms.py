@@ -42,7 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
-from dvrk_dart.diagnosis.output.page import repeatable_share, share_words
+from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
-from dvrk_dart.diagnosis.output.page import repeatable_share
+from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
 from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.errors import DvrkDartError

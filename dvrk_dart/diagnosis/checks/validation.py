@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import html
 import json
 import shutil
 import time
@@ -29,7 +28,10 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     JointStiffness,
 )
 from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html, repeatable_share, share_words
+from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
+from dvrk_dart.io.html import render, table, text_cell
+from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.checks.payload_checks import validate_payload_speeds, validate_real_payload
 from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
@@ -228,16 +230,12 @@ def validate_withheld(out_dir: Path, parameter_band: Path | None = None, jobs: i
 
 def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[Path]]:
     """The report's diagnosis section: verdicts, both real-data diagnoses, figures."""
-    e = html.escape
     files: list[Path] = []
     staging = out_dir / "report_figures"
     staging.mkdir(parents=True, exist_ok=True)  # what else is there stays: the staged files are named, and overwritten, one by one
-    body = ["<p>The simulation carries the identified inertia only; the diagnosis finds which unmodelled effect explains "
-            "the gap to the measured efforts, puts it into the DART simulation as physics and re-runs the replay.</p>", "<table>",
-            "<tr><th>check</th><th>result</th><th>value</th></tr>"]
-    for v in verdicts:
-        body.append(f"<tr><td>{e(v['check'])}</td><td>{'PASS' if v['passed'] else 'FAIL'}</td><td>{e(str(v['value']))}</td></tr>")
-    body.append("</table>")
+    verdicts_table = table(["check", "result", "value"], [[text_cell(v["check"]), text_cell("PASS" if v["passed"] else "FAIL"), text_cell(v["value"])]
+                                                          for v in verdicts], css="")
+    diagnoses = []
     for name, title in (("payload", "withheld 105 g payload on the parallelogram, full and half speed together (baseline: the session's run without it)"),
                         ("insertion", "105 g on the insertion stage's base (baseline: the session's run without it)"),
                         ("holdout", "effects fitted on 'one', scored on held-out 'two'"),
@@ -252,16 +250,20 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
             shutil.copy2(image, staged)
             files.append(staged)
             sources.append(f"figures/extra/{staged.name}")
-        body.append(diagnosis_html(json.loads((folder / "diagnosis.json").read_text()), sources, title))
-    ool = out_dir / "out_of_library" / "out_of_library.json"
-    if ool.is_file():
-        body.append("<h3>physics outside the effect library, injected blind</h3><table><tr><th>case</th><th>joint</th><th>closest library effect</th>"
-                    "<th>share of the gap explained</th><th>gap after</th><th>noise</th><th>left over above the noise</th></tr>")
-        for c in json.loads(ool.read_text())["cases"]:
-            body.append(f"<tr><td>{e(c['case'])}</td><td>{c['joint']}</td><td>{e(str(c['closest_library_effect']))}</td><td>{c['explained_share_of_gap']:.0%}</td>"
-                        f"<td>{c['gap_after']:.4f}</td><td>{c['noise_rms']:.4f}</td><td>{c['left_over_above_noise']:.4f} {e(c['unit'])}</td></tr>")
-        body.append("</table>")
-    return ("Sim-to-real gap diagnosis", "\n".join(body), files)
+        diagnoses.append(diagnosis_html(json.loads((folder / "diagnosis.json").read_text()), sources, title))
+    body = render("diagnosis/validation.html", verdicts_table=verdicts_table, diagnoses=diagnoses,
+                  out_of_library_table=_out_of_library_table(out_dir / "out_of_library" / "out_of_library.json"))
+    return ("Sim-to-real gap diagnosis", body, files)
+
+
+def _out_of_library_table(path: Path):
+    """The blind out-of-library injections: what the closest library effect explains, what is left above the noise."""
+    if not path.is_file():
+        return None
+    rows = [[text_cell(c["case"]), text_cell(c["joint"]), text_cell(c["closest_library_effect"]), text_cell(f"{c['explained_share_of_gap']:.0%}"),
+             text_cell(f"{c['gap_after']:.4f}"), text_cell(f"{c['noise_rms']:.4f}"), text_cell(f"{c['left_over_above_noise']:.4f} {c['unit']}")]
+            for c in json.loads(path.read_text())["cases"]]
+    return table(["case", "joint", "closest library effect", "share of the gap explained", "gap after", "noise", "left over above the noise"], rows, css="")
 
 
 def validation_section(out_dir: Path, parameter_band: Path | None = None, jobs: int = 2) -> tuple[str, str, list[Path]]:

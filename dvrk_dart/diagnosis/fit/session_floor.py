@@ -85,3 +85,13 @@ def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, m
             row["session_floor"] = float(floor[j])
         rows.append(row)
     return rows
+
+
+def repeatable_share(before, after, floor):
+    """The share of a gap's repeatable part (above the session floor, in
+    squares) that is gone after: 1 - (after^2 - floor^2) / (before^2 - floor^2),
+    per joint; NaN where nothing repeatable was there."""
+    before, after, floor = (np.asarray(x, dtype=float) for x in (before, after, floor))
+    repeatable = np.square(before) - np.square(floor)
+    left = np.maximum(np.square(after) - np.square(floor), 0.0)
+    return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)

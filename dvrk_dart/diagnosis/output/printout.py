@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from dvrk_dart.diagnosis.api import run_diagnosis
-from dvrk_dart.diagnosis.output.page import answer_sentence, offset_joints_sentence
+from dvrk_dart.diagnosis.output.answer import answer_sentence, offset_joints_sentence
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics

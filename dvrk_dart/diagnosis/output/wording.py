@@ -12,6 +12,8 @@ when there are, else on the training runs: the figures the answer prints."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 MOSTLY_SHARE = 0.5
@@ -35,3 +37,8 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
               if name in acted and j < len(before) and before[j] is not None and after[j] is not None and before[j] > 0]
     share = float(np.mean([1.0 - after[j] / before[j] for j in joints])) if joints else None
     return {"words": words_for(share), "removed_share": share, "joints": [joint_names[j] for j in joints], "runs": split, "rule": RULE}
+
+
+def share_words(share: float | None) -> str:
+    """A repeatable_share in words: a percentage, or why there is none."""
+    return "not determined (no repeatable gap above the session floor)" if share is None or math.isnan(share) else f"{share:.0%}"

@@ -1,0 +1,186 @@
+"""The diagnosis in words: the answer in one sentence (the main effect, how far
+the gap shrinks, what is left against the session floor), effects by their
+plain names, and the clauses of the refit and of J3's terms. Everything reads
+a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+from dvrk_dart.diagnosis.output.wording import explanation
+from dvrk_dart.model.joints import JOINT_NAMES
+
+#: the joints the answer sentence speaks of (the arm's main joints)
+ANSWER_JOINTS = 3
+
+
+#: what is left counts as at the floor below this multiple of the session floor
+AT_FLOOR_RATIO = 1.5
+
+
+_KIND_WORDS = {
+    "offset": "a constant effort offset on {joints}",
+    "armature": "extra reflected motor inertia on {joints}",
+    "gravity_tilt": "gravity tilted against the model (base not level)",
+    "time_shift": "efforts recorded late against the positions",
+    "counterweight_transmission": "an error in the counterweight cable's transmission to {joints}",
+}
+
+
+def _unit(result: dict, joint: str) -> str:
+    """The effort unit of `joint` on the diagnosed arm (diagnosis.json `units`)."""
+    return result["units"][JOINT_NAMES.index(joint)]
+
+
+def plain_name(entry: dict) -> str:
+    """An effect of diagnosis.json's `effects` in words (its `name` is the
+    library's identifier, e.g. friction_q3_presliding0.0001)."""
+    name, kind, joints = entry["name"], entry.get("kind", ""), ", ".join(entry.get("joints", ()))
+    reversal = (entry.get("parameters") or {}).get("reversal")
+    how = "" if reversal in (None, "sign") else f", reversing over {reversal.removeprefix('Dahl over ').split(',')[0]}" + (
+        " (pre-sliding)" if reversal.startswith("Dahl") else "")
+    if kind == "friction":
+        if name.startswith("position_friction"):
+            return f"friction of {joints} that changes along its range{how}"
+        if name.startswith("presliding_of_"):
+            return f"the identified friction of {joints} reversing gradually{how}"
+        if len(entry.get("joints", ())) > 1:
+            return f"friction of the coupled joints {joints}{how}"
+        return f"{'Stribeck ' if name.startswith('stribeck') else ''}friction of {joints}{how}"
+    if kind == "elastic":
+        return f"{'a torsion spring' if name.startswith('torsion') else 'cable elasticity'} on {joints}"
+    if kind in ("payload", "payload_at_position"):
+        link = name.split("_on_")[-1].split("_at_")[-1]
+        return f"a payload on the {link} link"
+    return _KIND_WORDS.get(kind, name).format(joints=joints)
+
+
+def _size_words(entry: dict) -> str:
+    size, units = entry.get("size"), entry.get("units") or {}
+    unit = next(iter(units.values()), "")
+    return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
+
+
+def _payload_size_words(payload: dict) -> str:
+    """The payload's mass where the efforts determine it, at the hand position
+    when one was given, else its gravity effort on J2 at q = 0."""
+    at = payload.get("payload_at") or {}
+    if at.get("mass_kg") is not None:
+        return f", {at['mass_kg']:.3g} kg at the hand position"
+    if payload.get("mass_identified") and payload.get("mass_kg") is not None:
+        return f", {payload['mass_kg']:.3g} kg"
+    efforts = payload.get("gravity_efforts_at_q0")
+    return "" if not efforts or efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+
+
+def _row_share(split_row: dict) -> float | None:
+    """repeatable_share of a row of diagnosis.json's gap_split (None without a floor)."""
+    if split_row.get("session_floor") is None:
+        return None
+    share = float(repeatable_share(split_row["before"], split_row["after"], split_row["session_floor"]))
+    return None if math.isnan(share) else share
+
+
+def beyond_identified_sentence(result: dict) -> str:
+    """What the data show beyond the identified model, first: its gap on the
+    held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
+    bar = result.get("identified_model_gap_holdout")
+    combined = result.get("one_configuration")
+    after, what = ((combined["gap_holdout"], "one DART configuration: the selected effects, J3's terms and the pitch-angle loads")
+                   if combined else ((result.get("gap_after") or {}).get("holdout"), "the selected effects simulated in DART"))
+    if not bar or not after:
+        return ""
+    shown = [j for j in range(ANSWER_JOINTS) if bar[j] is not None and after[j] is not None]
+    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
+    processing = result.get("processing") or {}
+    band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
+    return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
+
+
+def answer_sentence(result: dict) -> str:
+    """The diagnosis in one sentence: the main effect (what, where, how big),
+    how far the gap shrinks on the main joints (held-out runs when there are),
+    the share of the repeatable gap removed, and what is left against the
+    session floor when a --repeat measured it."""
+    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
+    shown = [j for j in range(ANSWER_JOINTS) if result["gap_before"][split][j] is not None]  # the joints the runs recorded
+    before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
+    joints = [JOINT_NAMES[j] for j in shown]
+    selected = list(result["selection"]["selected"])
+    entries = {e["name"]: e for e in result.get("effects", [])}
+    payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
+    if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
+        selected = [n for n in selected if not n.startswith("payload")] or selected
+    # the effect selected first (the largest gain) leads, a payload as any other
+    payload_first = bool(selected) and selected[0].startswith("payload")
+    if payload_first and payload:
+        lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload)})"
+    elif payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
+        efforts = mismatch.get("gravity_efforts_at_q0") or [None, None]
+        size = "" if efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+        lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
+    elif selected:
+        first = entries.get(selected[0], {"name": selected[0]})
+        lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
+    else:
+        lead = "no effect"
+    others = selected[1:]
+    more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
+    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
+    where = "on the held-out runs" if split == "holdout" else "on the training runs"
+    words = (result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
+                                                        [e for e in result.get("effects", []) if e["name"] in selected]))["words"]
+    if result.get("payload_not_distinguished"):
+        where = "no payload is distinguished from none (every interval contains zero); " + where
+    beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
+    if beyond and result.get("diagnosis_base", "inertial") == "inertial":
+        where += ", against the simulation of the identified inertia alone"
+    if lead == "no effect":
+        sentence = beyond + f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
+    elif words == "not explained":
+        sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
+    else:
+        sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
+    by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
+    shares = [by_joint.get(j) for j in joints] if by_joint else []
+    if shares and any(s is not None for s in shares):
+        sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
+    floor = result.get("session_floor")
+    if floor is None:
+        return sentence + "." + _refit_clause(result) + _insertion_clause(result)
+    above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
+    return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
+                       if above else ". What is left is at the session floor: no fixed effect can remove more.") + _refit_clause(result) + _insertion_clause(result)
+
+
+def _refit_clause(result: dict) -> str:
+    """With --refit: the joints whose held-out gap the refit at least halves (the published fit's bias)."""
+    refit = result.get("refit")
+    if not refit:
+        return ""
+    pairs = list(zip(JOINT_NAMES[:ANSWER_JOINTS], refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]))
+    biased = [f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in pairs if a * a <= 0.5 * b * b]
+    if not biased:
+        return " Refitting the identified parameters on the training runs does not halve any held-out gap in squares."
+    return f" The published fit's bias: the identified parameters refitted on the training runs leave {'; '.join(biased)} on the held-out runs."
+
+
+def _insertion_clause(result: dict) -> str:
+    """On a PSM's periodic held-out runs: what J3's repeatable gap is made of, simulated."""
+    study = result.get("insertion_terms")
+    if not study:
+        return ""
+    combined = result.get("one_configuration")
+    together = "" if not combined else (
+        "; with the effects above and the loads the pitch angle sets on q1 and q2, in one simulation: "
+        + ", ".join(f"{name} {gap:.3g} {_unit(result, name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
+    return (f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at "
+            f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N){together}.")
+
+
+def offset_joints_sentence(offset_joints: dict) -> str:
+    joints = ", ".join(offset_joints["joints"]) or "none"
+    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run minus its baseline "
+            "has a nuisance offset on these only; a run of another motion has one on every joint.")
