@@ -16,7 +16,7 @@ CAMPAIGN = [
     RunConfig("rectilinear", "kinematic", duration_s=0.2),
     RunConfig("rectilinear", "velocity", duration_s=0.2),
     RunConfig("spiral", "torque", duration_s=0.2),
-    RunConfig("replay-two", "velocity", "off", duration_s=0.5),
+    RunConfig("replay", "velocity", "off", measured="two", duration_s=0.5),
 ]
 
 
@@ -44,7 +44,7 @@ def test_a_failed_task_is_reported_and_the_others_land(executor):
 
 
 def test_a_failed_campaign_run_is_named_and_the_others_land_on_ray(tmp_path):
-    good, bad = CAMPAIGN[0], RunConfig("replay-two", "velocity", duration_s=100.0)  # longer than the measured run
+    good, bad = CAMPAIGN[0], RunConfig("replay", "velocity", measured="two", duration_s=100.0)  # longer than the measured run
     summary = run_campaign([good, bad], tmp_path, jobs=2, executor="ray")
     assert summary["ran"] == [config_name(good)] and list(summary["failures"]) == [config_name(bad)]
     assert "--duration: 100 s outside" in summary["failures"][config_name(bad)]

@@ -34,7 +34,8 @@ def cli(capsys, *argv) -> tuple[int, list[str], str]:
     (["excitation", "two", "--rate", "1e9"], "--rate"),
     (["replay", "--measured", "two", "--dt", "nan"], "--dt"),
     (["validate", "--ray-address", "127.0.0.1:1"], "--ray-address"),
-    (["run", "replay-mtm-two", "--arm-model", "psm"], "--arm-model psm"),
+    (["replay", "--measured", "mtm-two"], "--measured: mtm-two is a recording of the MTM: add --arm-model mtm"),
+    (["replay", "--measured", "mtm-two", "--arm-model", "mtm", "--counterweight", "off", "--duration", "0.5"], "--counterweight off: the mtm arm has no counterweight"),
 ])
 def test_an_option_that_would_be_ignored_or_meaningless_is_refused(tmp_path, capsys, argv, fragment):
     out = tmp_path / "out"

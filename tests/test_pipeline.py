@@ -119,11 +119,13 @@ def test_cli_runs_a_short_scenario_end_to_end(tmp_path):
 
 
 def test_cli_unknown_mode_is_a_clear_error(tmp_path):
+    scenario = tmp_path / "velocity-only.toml"
+    scenario.write_text('name = "velocity-only"\nkind = "replay"\nmeasured = "two"\nmodes = ["velocity"]\n')
     done = subprocess.run(
-        [sys.executable, "-m", "dvrk_dart.cli", "run", "replay-mtm-two", "--mode", "torque", "--out", str(tmp_path / "x")],
+        [sys.executable, "-m", "dvrk_dart.cli", "run", str(scenario), "--mode", "torque", "--out", str(tmp_path / "x")],
         capture_output=True, text=True,
     )
-    assert done.returncode == 2 and "--mode: scenario 'replay-mtm-two' runs in velocity, not 'torque'" in done.stderr
+    assert done.returncode == 2 and "--mode: scenario 'velocity-only' runs in velocity, not 'torque'" in done.stderr
     assert not (tmp_path / "x").exists()
 
 
@@ -131,7 +133,7 @@ def test_campaign_skips_unchanged_runs_and_lists_failures(tmp_path):
     from dvrk_dart.runs.campaign import config_name, run_campaign
 
     good = RunConfig("rectilinear", "kinematic", "on", duration_s=0.2)
-    bad = RunConfig("replay-two", "velocity", "on", duration_s=100.0)  # longer than the measured run
+    bad = RunConfig("replay", "velocity", "on", measured="two", duration_s=100.0)  # longer than the measured run
     first = run_campaign([good, bad], tmp_path, jobs=1)
     assert first["ran"] == [config_name(good)] and list(first["failures"]) == [config_name(bad)]
     assert "--duration: 100 s outside" in first["failures"][config_name(bad)]

@@ -31,8 +31,8 @@ def heavier_pitch_link(tmp_path, factor: float = 1.5):
 
 def test_a_changed_parameter_file_changes_the_simulated_efforts(tmp_path):
     heavy = heavier_pitch_link(tmp_path)
-    nominal = run(RunConfig("replay-two", "velocity", duration_s=SHORT_S))
-    changed = run(RunConfig("replay-two", "velocity", duration_s=SHORT_S, params_file=str(heavy)))
+    nominal = run(RunConfig("replay", "velocity", measured="two", duration_s=SHORT_S))
+    changed = run(RunConfig("replay", "velocity", measured="two", duration_s=SHORT_S, params_file=str(heavy)))
     # 50 % more pitch-link mass moves the J2 gravity effort by far more than the replay's noise
     assert np.sqrt(np.mean((changed.effort_sim[:, 1] - nominal.effort_sim[:, 1]) ** 2)) > 0.05
     # and the simulation still matches the model of the parameters it was given
@@ -53,14 +53,14 @@ def test_cli_replay_records_and_uses_the_parameter_file(tmp_path):
 
 
 def test_dynamics_choices_resolve_to_the_simulated_terms(tmp_path):
-    inertial = sim_config_for(RunConfig("replay-two", "velocity"))
-    identified = sim_config_for(RunConfig("replay-two", "velocity", dynamics="identified"))
+    inertial = sim_config_for(RunConfig("replay", "velocity", measured="two"))
+    identified = sim_config_for(RunConfig("replay", "velocity", measured="two", dynamics="identified"))
     assert not (inertial.friction or inertial.offsets or inertial.spring or inertial.motor_inertia)
     assert identified.friction and identified.offsets and identified.spring and identified.motor_inertia
     diagnosis = tmp_path / "case" / "diagnosis.json"
     diagnosis.parent.mkdir()
     diagnosis.write_text(json.dumps({"sim_config": {**identified.to_dict(), "gravity_tilt_rad": [0.01, 0.0]}}))
-    config = RunConfig("replay-two", "velocity", counterweight="off", dynamics=str(diagnosis))
+    config = RunConfig("replay", "velocity", measured="two", counterweight="off", dynamics=str(diagnosis))
     assert config.dynamics_label == "diagnosed-case"
     resolved = sim_config_for(config)
     assert resolved.gravity_tilt_rad == (0.01, 0.0) and resolved.counterweight == "off" and resolved.friction
@@ -72,13 +72,13 @@ def test_dynamics_choices_resolve_to_the_simulated_terms(tmp_path):
 ])
 def test_bad_dynamics_is_a_one_line_error(dynamics, message):
     with pytest.raises(DvrkDartError, match=message):
-        sim_config_for(RunConfig("replay-two", "velocity", dynamics=dynamics))
+        sim_config_for(RunConfig("replay", "velocity", measured="two", dynamics=dynamics))
 
 
 @pytest.mark.slow
 def test_identified_arm_replay_of_two_matches_model_and_measured():
     """The issue's acceptance: the whole run "two" with every identified term simulated."""
-    record = run(RunConfig("replay-two", "velocity", dynamics="identified"))
+    record = run(RunConfig("replay", "velocity", measured="two", dynamics="identified"))
     m = record.metrics
     assert max(m["rms_sim_vs_model"][:2]) <= THRESHOLDS["identified-sim-vs-model"]
     assert m["rms_sim_vs_model"][2] <= THRESHOLDS["identified-sim-vs-model-insertion"]

@@ -45,7 +45,7 @@ def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None,
         raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
     configs = []
     for entry in raw.get("runs", []):
-        unknown = set(entry) - {"scenario", "mode", "counterweights", "duration_s", "dynamics", "processing"}
+        unknown = set(entry) - {"scenario", "measured", "arm_model", "mode", "counterweights", "duration_s", "dynamics", "processing"}
         if unknown:
             raise DvrkDartError(f"{path}: unknown key(s) {', '.join(sorted(unknown))} in a [[runs]] entry")
         scenario = load_scenario(entry["scenario"])
@@ -55,8 +55,8 @@ def load_campaign(path: Path = CAMPAIGN_FILE, diagnosis_dir: Path | None = None,
                     continue
                 dynamics = str(diagnosis_dir / dynamics[len(DIAGNOSIS_PREFIX):] / "diagnosis.json")
             for cw in entry.get("counterweights", ["on"]):
-                configs.append(RunConfig(scenario.name, entry["mode"], cw, dynamics, duration_s=entry.get("duration_s"),
-                                         processing=entry.get("processing", "upstream")))
+                configs.append(RunConfig(scenario.name, entry["mode"], cw, dynamics, duration_s=entry.get("duration_s"), measured=entry.get("measured"),
+                                         processing=entry.get("processing", "upstream"), arm_model=entry.get("arm_model")))
     return configs
 
 

@@ -99,6 +99,8 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         raise DvrkDartError(
             f"--counterweight: scenario '{scenario.name}' runs with {', '.join(scenario.counterweights)}, not '{counterweight}'"
         )
+    if arm.model.counterweight_link is None and counterweight != "on":
+        raise DvrkDartError(f"--counterweight {counterweight}: the {arm.model.folder.name} arm has no counterweight (only 'on': the arm as it is)")
     sim_config = sim_config_for(config)
     duration = config.duration_s or scenario.duration_s
     start = time.perf_counter()
