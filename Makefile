@@ -22,9 +22,9 @@ $(STAMP): pyproject.toml
 validate: $(STAMP)
 	$(BIN)/dvrk-dart validate --out $(OUT) --report $(REPORT) --jobs $(JOBS)
 
-## the tests, JOBS side by side (pytest-xdist)
+## the tests, JOBS side by side (pytest-xdist; a module's tests on one worker, so its fixtures are made once)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS)
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist loadscope
 
 bench: $(STAMP)
 	$(BIN)/python -m dvrk_dart.bench --out $(OUT)/bench.json

@@ -117,10 +117,11 @@ def real_short_runs(runs_dir: Path, duration_s: float = 1.0) -> list[str]:
         ("rectilinear", "kinematic", "on", "inertial"),
         ("rectilinear", "velocity", "on", "inertial"),
         ("rectilinear", "velocity", "off", "inertial"),
-        ("replay-two", "velocity", "on", "inertial"),
-        ("replay-two", "velocity", "on", "identified"),
+        ("replay", "velocity", "on", "inertial"),
+        ("replay", "velocity", "on", "identified"),
     ):
-        record = run(RunConfig(scenario, mode, counterweight, dynamics, duration_s=duration_s), arm)
+        measured = "two" if scenario == "replay" else None
+        record = run(RunConfig(scenario, mode, counterweight, dynamics, duration_s=duration_s, measured=measured), arm)
         write_run(record, runs_dir)
         names.append(record.name)
     return names

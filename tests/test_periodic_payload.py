@@ -138,36 +138,6 @@ def test_the_mass_at_the_hand_position_on_the_real_105g_runs(arm, pairs):
     assert abs(value[0] / 0.105 - 1.0) < 0.20 and interval[0, 0] <= 0.105 <= interval[1, 0], (value, interval)
 
 
-@pytest.mark.parametrize("run, placement", [(["one-105g", "one-105g-half"], "parallelogram"), ("one-105g-insertion", "insertion_base")])
-def test_a_periodic_diagnosis_with_a_baseline_reads_the_real_weight(arm, run, placement):
-    """`diagnose --processing periodic --baseline one-no-weight --repeat one
-    --payload-at <hand>` on the real 105 g runs: the parallelogram group, the
-    payload found against the session scatter, the mass at the hand position
-    within 20 % with the scale's 105 g inside its interval; every quantity
-    reported with an interval or as not determined with its reason. The
-    half-speed run (no baseline of its motion) is named as left out."""
-    from dvrk_dart.diagnosis.diagnose import diagnose
-
-    key, position = hand_position_on_link(arm, HAND_PLACEMENTS[placement])
-    payload = diagnose(run, baseline="one-no-weight", repeat="one", processing="periodic", payload_at=(key, position), arm=arm,
-                       figures=False)["payload"]
-    assert payload["group"] == "parallelogram" and payload["found"], payload["words"]
-    assert payload["left_out"] == (["one-105g-half"] if isinstance(run, list) else [])
-    if placement == "insertion_base":
-        # the no-weight baseline's own session change reads as first moment y
-        # (the --repeat pair alone: about 0.026 kg·m, against the hand's 0.105 kg
-        # x 2.4 cm): without it counted, the interval missed the hand's value
-        session, hand_y = payload["session_change_as_payload"], 0.105 * 0.024
-        low, high = payload["first_moment_base_at_q0_kg_m_interval"][1]
-        assert session["first_moment_base_at_q0_kg_m"][1] > 0.01 and low <= hand_y <= high, (low, high, session)
-    at = payload["payload_at"]
-    assert abs(at["mass_kg"] / 0.105 - 1.0) <= 0.20 and at["mass_kg_interval"][0] <= 0.105 <= at["mass_kg_interval"][1], at
-    for key in ("gravity_efforts_at_q0", "first_moment_base_at_q0_kg_m"):
-        for value, interval in zip(payload[key], payload[f"{key}_interval"]):
-            assert (value is None) == (interval is None) and (value is not None or key in payload["not_determined"])
-            assert value is None or interval[0] <= value <= interval[1]
-
-
 #: the withheld weight against the supplied one (about twice: data README), and the tolerance of their ratio
 HEAVY_KG, WEIGHT_RATIO_TOLERANCE = 0.205, 0.15
 #: simulated pairs per weight: the mean of an estimate over them is what scales with the weight

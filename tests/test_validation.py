@@ -127,6 +127,28 @@ def test_parallelogram_weight(parallelogram):
         assert _verdict(verdicts, f"first moment {axis}")["passed"], verdicts
 
 
+@pytest.mark.parametrize("case", ["parallelogram", "insertion"])
+def test_every_payload_quantity_has_an_interval_or_a_reason(case, parallelogram, insertion):
+    """The real 105 g diagnoses (periodic, baseline, --repeat, --payload-at):
+    the payload found against the session scatter; every quantity reported
+    with an interval holding it, or as not determined with its reason; the
+    half-speed run (no baseline of its motion) named as left out. At the
+    insertion base, the no-weight baseline's own session change reads as
+    first moment y (the --repeat pair alone: about 0.026 kg·m, against the
+    hand's 0.105 kg x 2.4 cm): the interval counts it and holds the hand's value."""
+    result = (parallelogram if case == "parallelogram" else insertion)[0]
+    payload = result["payload"]
+    assert payload["found"] and payload["left_out"] == (["one-105g-half"] if case == "parallelogram" else [])
+    for key in ("gravity_efforts_at_q0", "first_moment_base_at_q0_kg_m"):
+        for value, interval in zip(payload[key], payload[f"{key}_interval"]):
+            assert (value is None) == (interval is None) and (value is not None or key in payload["not_determined"])
+            assert value is None or interval[0] <= value <= interval[1]
+    if case == "insertion":
+        session, hand_y = payload["session_change_as_payload"], 0.105 * 0.024
+        low, high = payload["first_moment_base_at_q0_kg_m_interval"][1]
+        assert session["first_moment_base_at_q0_kg_m"][1] > 0.01 and low <= hand_y <= high, (low, high, session)
+
+
 def test_the_same_weight_gives_the_same_efforts_in_one_run_or_two(arm, tmp_path):
     """Upstream processing: the full-speed 105 g run alone against the
     no-weight run, and fitted with the half-speed run: the payload's gravity
