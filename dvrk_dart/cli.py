@@ -215,14 +215,17 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """The diagnosis folder is built beside --out and replaces it whole at the end."""
-    from dvrk_dart.diagnosis.output.printout import run_diagnosis_cli
+    from dvrk_dart.diagnosis.api import DiagnosisConfig, run_diagnosis
+    from dvrk_dart.diagnosis.output.printout import print_diagnosis
     from dvrk_dart.io.outputs import building_folder, check_output_folder
 
+    config = DiagnosisConfig(args.measured, args.baseline, args.train, args.holdout, args.repeat, args.payload_at, args.parameter_band,
+                             args.refit, args.processing, args.executor, args.jobs, args.ray_address, topics=reading_options(args))
     check_output_folder(args.out, "diagnosis")
     with building_folder(args.out, "diagnosis") as folder:
-        code = run_diagnosis_cli(argparse.Namespace(**{**vars(args), "out": str(folder)}), command_arm(args), reading_options(args))
+        print_diagnosis(run_diagnosis(command_arm(args), config, folder))
     print(f"written {Path(args.out) / 'diagnosis.json'}")
-    return code
+    return 0
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
@@ -330,15 +333,20 @@ def _repeated_option(argv: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    repeated = _repeated_option(sys.argv[1:] if argv is None else [str(a) for a in argv])
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    repeated = _repeated_option(argv)
     if repeated:
         print(f"dvrk-dart: {repeated}: given twice (an option takes its values once: {repeated} A B where it takes several)",
               file=sys.stderr)
         return 2
+    parser = build_parser()
     try:
-        args = build_parser().parse_args(argv)
+        args = parser.parse_args(cli_parser.expand_config(argv, parser))
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
+    except DvrkDartError as exc:  # --config FILE.toml
+        print(f"dvrk-dart: {exc}", file=sys.stderr)
+        return 2
     if getattr(args, "ray_address", None) and getattr(args, "executor", None) != "ray":
         print("dvrk-dart: --ray-address: only with --executor ray", file=sys.stderr)
         return 2

@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 import sys
 
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, reference_run_arm
 from dvrk_dart.io.signal import PROCESSINGS
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -233,6 +234,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_processing_option(p, None, excitation=True)
     _add_bag_options(p)
     _add_arm_model_option(p)
+    _add_config_option(p)
     p.set_defaults(func=commands.cmd_identify)
 
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
@@ -287,6 +289,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
                                     "excitation, else upstream (said in the output)")
     sim_options(p)
+    _add_config_option(p)
     p.set_defaults(func=commands.cmd_replay)
 
     p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
@@ -313,6 +316,7 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_processing_option(p, None)
     _add_bag_options(p)
     _add_arm_model_option(p)
+    _add_config_option(p)
     p.set_defaults(func=commands.cmd_uncertainty)
 
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
@@ -341,5 +345,56 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder: diagnosis.json, diagnosis.html, figures, the replays before and after")
     _add_arm_options(p)
     _add_bag_options(p)
+    _add_config_option(p)
     p.set_defaults(func=commands.cmd_diagnose)
     return parser
+
+
+#: the commands that take many options, and so `--config FILE.toml` (option = value, e.g. baseline = "one-no-weight")
+CONFIG_COMMANDS = ("diagnose", "identify", "uncertainty", "replay")
+
+
+def _add_config_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="FILE.toml", help="the options as a TOML table (option = value; the command line's own "
+                                                         "options win); a relative path in it is relative to the file")
+
+
+def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
+    """argv with `--config FILE.toml` replaced by the options it holds (those
+    not on the command line), so that every value goes through the option's
+    own checks; one-line errors name the file."""
+    import tomllib
+
+    if "--config" not in argv or not argv or argv[0] not in CONFIG_COMMANDS:
+        return argv
+    at = argv.index("--config")
+    if at + 1 >= len(argv):
+        raise DvrkDartError("--config: a TOML file is needed")
+    path = Path(argv[at + 1])
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise DvrkDartError(f"--config {path}: not a readable TOML file ({str(exc).splitlines()[0]})") from None
+    rest = argv[:at] + argv[at + 2:]
+    known = _option_strings(parser, argv[0])
+    tokens = []
+    for key, value in table.items():
+        option = "--" + key.replace("_", "-")
+        if option not in known or option == "--config":
+            raise DvrkDartError(f"--config {path}: {key} is not an option of {argv[0]}")
+        if option not in rest:
+            tokens += _tokens(option, value, path.parent)
+    return [argv[0], *tokens, *rest[1:]]
+
+
+def _option_strings(parser: argparse.ArgumentParser, command: str) -> set[str]:
+    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return set(subparsers.choices[command]._option_string_actions)
+
+
+def _tokens(option: str, value, folder: Path) -> list[str]:
+    """An option's command-line tokens from a TOML value (a flag from a boolean; a path relative to the config file)."""
+    if isinstance(value, bool):
+        return [option] if value else []
+    values = value if isinstance(value, list) else [value]
+    return [option, *(str(folder / v) if isinstance(v, str) and (folder / v).exists() else str(v) for v in values)]

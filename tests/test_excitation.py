@@ -112,7 +112,7 @@ def test_excitation_over_the_limits_is_refused(tmp_path, capsys, case, pose, pat
 
 
 def test_unknown_excitation_and_replay_scenario(tmp_path, capsys):
-    assert main(["excitation", "replay-two", "--out", str(tmp_path / "o")]) == 2
+    assert main(["excitation", "replay", "--out", str(tmp_path / "o")]) == 2
     assert "replay scenario" in capsys.readouterr().err
     assert main(["excitation", "nonexistent", "--out", str(tmp_path / "o")]) == 2
     capsys.readouterr()

@@ -6,10 +6,12 @@ The checks (`validation`, `payload_checks`, `out_of_library`), the page
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
 from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
@@ -28,6 +30,51 @@ from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
 IMAGE_SUFFIXES = (".png", ".svg")
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """One diagnosis with the DART replay (`dvrk-dart diagnose`, every
+    withheld-data check): the runs by role (each a reference run's name or a
+    file), what else to study, where it runs and how the runs are read.
+
+    measured: the run(s) whose gap is diagnosed (several: one set of effects
+        for all, each against the baseline); baseline: the same trajectory
+        without the effect under study; train: further training runs;
+        holdout: runs only scored; repeat: the same motion in another session
+        (the session floor); payload_at: 'LINK:x,y,z' or (link key, position),
+        a hand-measured payload position; parameter_band: a `dvrk-dart
+        uncertainty` folder; refit: refit the identified parameters on the
+        training runs and judge them on the held-out ones; processing:
+        upstream, periodic, or None (periodic where every run is periodic);
+        logs: the replays before and after as MCAP and Rerun logs."""
+
+    measured: tuple[str, ...]
+    baseline: str | None = None
+    train: tuple[str, ...] = ()
+    holdout: tuple[str, ...] = ()
+    repeat: str | None = None
+    payload_at: object = None
+    parameter_band: str | None = None
+    refit: bool = False
+    processing: str | None = "upstream"
+    executor: str = "local"
+    jobs: int = 2
+    ray_address: str | None = None
+    logs: bool = True
+    topics: BagTopics = BagTopics()
+
+    def __post_init__(self) -> None:
+        for name in ("measured", "train", "holdout"):  # a single run given as its name
+            value = getattr(self, name)
+            object.__setattr__(self, name, (str(value),) if isinstance(value, (str, Path)) else tuple(str(v) for v in value))
+        if not self.measured:
+            raise DvrkDartError("--measured: at least one run to diagnose")
+
+    @property
+    def measured_spec(self):
+        """What diagnose() takes: one run, or the list of them."""
+        return self.measured[0] if len(self.measured) == 1 else list(self.measured)
 
 
 def simulation_hook(arm: Arm, executor: str = "local", jobs: int = 2, ray_address: str | None = None):
@@ -72,49 +119,75 @@ def images_of(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
 
 
-def run_diagnosis(arm: Arm, measured, out_dir: Path, baseline=None, train=(), holdout=(), logs: bool = True, repeat=None, payload_at=None,
-                  parameter_band=None, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
-                  processing: str | None = "upstream", refit: bool = False, topics: BagTopics = BagTopics()) -> dict:
-    """diagnose() with the DART replay, plus diagnosis.html and the replay logs
-    (of the first measured run). parameter_band: a `dvrk-dart uncertainty`
-    folder of one of the runs: effects are unmodelled only outside its band;
-    refit: the identified parameters refitted on the training runs and judged
-    on the held-out ones (`refit`)."""
+def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
+    """diagnose() on `arm` with the DART replay, what is studied on top of its
+    effects (`config`), diagnosis.json and diagnosis.html (written once), and
+    the replay logs of the first measured run."""
     start = time.perf_counter()
-    training = [*(measured if isinstance(measured, (list, tuple)) else [measured]), *train]
-    if refit:
-        check_refit_inputs(training, holdout, baseline)
-    band = load_band(parameter_band) if parameter_band is not None else None  # a bad folder fails before any work
+    c = config
+    training, holdout = [*c.measured, *c.train], list(c.holdout)
+    if c.refit:
+        check_refit_inputs(training, holdout, c.baseline)
+    band = load_band(c.parameter_band) if c.parameter_band is not None else None  # a bad folder fails before any work
     if band is not None:
-        _band_span(band, band_run(band, _runs_sha256([*training, baseline, *holdout, repeat])), arm, topics)
+        _band_span(band, band_run(band, _runs_sha256([*training, c.baseline, *holdout, c.repeat])), arm, c.topics)
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = diagnose(measured, baseline=baseline, train=list(train) or None, holdout=list(holdout) or None,
-                      simulate=simulation_hook(arm, executor, jobs, ray_address), out_dir=out_dir, arm=arm, repeat=repeat, payload_at=payload_at,
-                      processing=processing, base_config=base_sim_config(arm), topics=topics)
+    found = diagnose(c.measured_spec, baseline=c.baseline, train=list(c.train) or None, holdout=holdout or None,
+                     simulate=simulation_hook(arm, c.executor, c.jobs, c.ray_address), out_dir=out_dir, arm=arm, repeat=c.repeat,
+                     payload_at=c.payload_at, processing=c.processing, base_config=base_sim_config(arm), topics=c.topics, write_json=False)
     if band is not None:
-        apply_band(result, band)
-    if refit:
-        result["refit"] = refit_check(arm, training, holdout, result, out_dir, executor, jobs, ray_address, topics)
-    if insertion_applies(arm, result, training, holdout, baseline):
-        for key, check in (("insertion_terms", insertion_check), ("one_configuration", one_configuration_check)):
-            try:
-                result[key] = check(arm, training, holdout, result, executor, jobs, ray_address, topics)
-            except DvrkDartError as exc:  # its replay failed or drifted: dropped with the reason, the diagnosis stands
-                result[key] = None
-                result["dropped_effects"].append({"effect": key, "reason": str(exc)})
-    result["diagnosis_base"] = arm.model.diagnosis_base
+        found = apply_band(found, band)
+    studies = (arm, training, holdout, found, c.executor, c.jobs, c.ray_address, c.topics)
+    beyond = _beyond_the_effects(studies, c.refit, insertion_applies(arm, found, training, holdout, c.baseline), out_dir)
     if holdout:
-        result["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, result["processing"], topics)
-    measured = measured[0] if isinstance(measured, (list, tuple)) else measured
-    result["params"] = {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}
-    result["versions"] = software_versions()
+        beyond["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, found["processing"], c.topics)
+    # the diagnosis and what was studied on top of it: built once here, written once
+    result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base,
+              "params": {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}, "versions": software_versions()}
+    result = {**result, **(_repeatable_shares(result) if holdout else {}), "wall_time_s": time.perf_counter() - start}
     _write_one_configuration(result, out_dir)
-    result["wall_time_s"] = time.perf_counter() - start
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], page_title(result)))
-    if logs:
-        log_replays(arm, measured, sim_config_of(result), out_dir, topics)
+    if c.logs:
+        log_replays(arm, c.measured[0], sim_config_of(result), out_dir, c.topics)
     return result
+
+
+def _beyond_the_effects(studies: tuple, refit: bool, insertion: bool, out_dir: Path) -> dict:
+    """What is studied on top of the selected effects (`studies`: arm, training
+    and held-out runs, the diagnosis, executor, jobs, Ray address, topics): the
+    refit (when asked), J3's terms and the one configuration (where they
+    apply); a study whose replay fails or drifts is dropped with the reason."""
+    arm, training, holdout, found, executor, jobs, ray_address, topics = studies
+    beyond, dropped = {}, list(found["dropped_effects"])
+    if refit:
+        beyond["refit"] = refit_check(arm, training, holdout, found, out_dir, executor, jobs, ray_address, topics)
+    if insertion:
+        for key, check in (("insertion_terms", insertion_check), ("one_configuration", one_configuration_check)):
+            try:
+                beyond[key] = check(*studies)
+            except DvrkDartError as exc:  # the diagnosis stands
+                beyond[key] = None
+                dropped.append({"effect": key, "reason": str(exc)})
+    return {**beyond, "dropped_effects": dropped}
+
+
+def _repeatable_shares(result: dict) -> dict:
+    """With held-out runs and a session floor: per joint, the share of the
+    identified model's repeatable gap (above the floor) the selected effects
+    explain, and the one configuration's likewise (None on a joint the runs did not record)."""
+    floor, after, combined = result.get("session_floor"), result["gap_after"]["holdout"], result.get("one_configuration")
+    if floor is None or after is None:
+        return {}
+
+    def share(gap) -> list[float | None]:
+        values = repeatable_share(*(np.asarray(x, dtype=float) for x in (result["identified_model_gap_holdout"], gap, floor)))
+        return [None if np.isnan(v) else float(v) for v in values]
+
+    shares = {"repeatable_gap_explained_share": share(after)}
+    if combined:
+        shares["one_configuration"] = {**combined, "repeatable_gap_explained_share": share(combined["gap_holdout"])}
+    return shares
 
 
 def identified_model_gap(arm: Arm, holdout, processing: dict, topics: BagTopics = BagTopics()) -> list[float | None]:

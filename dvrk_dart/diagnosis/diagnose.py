@@ -71,6 +71,7 @@ def diagnose(
     payload_model: str | None = None,
     processing: str | None = "upstream",
     topics: BagTopics = BagTopics(),
+    write_json: bool = True,
 ) -> dict:
     """Diagnose the gap of `measured` (a run name such as 'two', a path, a
     ProcessedRun or a DiagnosisRun carrying its simulated efforts), or of
@@ -103,7 +104,8 @@ def diagnose(
     simulate: simulate(config, run) -> efforts, the DART replay; without it the
         identified model at the measured state stands in for the simulation and
         the gap after is computed with the effects' regressors;
-    out_dir: where diagnosis.json, the regime tables and the figures go;
+    out_dir: where diagnosis.json, the regime tables and the figures go
+        (write_json False: not diagnosis.json, which the caller writes with what it adds: api.run_diagnosis);
     arm: the arm the runs were recorded on (its model and identified parameters);
     topics: how runs that are bags are read (--arm, --topic, --jaw-topic) and CSVs' --rate.
     Returns the diagnosis dict (the contract of diagnosis.json)."""
@@ -130,9 +132,12 @@ def diagnose(
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
-    if out_dir is not None:
-        period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
-        _write_outputs(Path(out_dir), result, problem.train_runs[0], after.train_after[0], figures, period, arm.model)
+    if out_dir is None:
+        return result
+    period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
+    result = {**result, "where": _write_outputs(Path(out_dir), problem.train_runs[0], after.train_after[0], figures, period, arm.model)}
+    if write_json:
+        write_json_atomic(Path(out_dir) / "diagnosis.json", result)
     return result
 
 
@@ -293,17 +298,18 @@ def gravity_mismatch_of(fit: dict) -> dict:
                       + "; without a baseline run this is the arm's mass distribution, not a payload."]}
 
 
-def _write_outputs(out_dir: Path, result: dict, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple, model: PsmModel) -> None:
+def _write_outputs(out_dir: Path, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple, model: PsmModel) -> dict:
+    """where.csv and the figures of the residual; returns diagnosis.json's `where`."""
     out_dir.mkdir(parents=True, exist_ok=True)
     before_table = residual_regimes(run.state, run.residual, model).assign(stage="before")
     after_table = residual_regimes(run.state, after, model).assign(stage="after")
     table = pd.concat([before_table, after_table], ignore_index=True)
     write_text_atomic(out_dir / "where.csv", table.to_csv(index=False))
-    result["where"] = {"table": "where.csv", "run": run.name, "figures": []}
+    where = {"table": "where.csv", "run": run.name, "figures": []}
     if figures:
         paths = plot_residuals(run.state, run.residual, out_dir / "figures", model, "residual_before")
         paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after")
         period_run, period_after, floor = period
         paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model))
-        result["where"]["figures"] = [str(p.relative_to(out_dir)) for p in paths]
-    write_json_atomic(out_dir / "diagnosis.json", result)
+        where["figures"] = [str(p.relative_to(out_dir)) for p in paths]
+    return where

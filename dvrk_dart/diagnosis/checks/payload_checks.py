@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.api import run_diagnosis
+from dvrk_dart.diagnosis.api import DiagnosisConfig, run_diagnosis
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.payload.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
@@ -28,6 +28,8 @@ from dvrk_dart.model.joints import N_JOINTS
 
 #: hand-measurement reference points
 REFERENCES = ("pitch_shaft", "rcm")
+#: the hand measurement a payload estimate is checked against, beside its diagnosis.json
+HAND_CHECK_FILE = "hand_check.json"
 
 
 def hand_point_base(arm: Arm, spec: dict) -> np.ndarray:
@@ -71,8 +73,8 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
     position given as --payload-at, and check group, first moment, masses."""
     key, position = hand_position_on_link(arm, spec)
     # no replay logs here: the held-out case writes them, and `make validate` has a time budget
-    result = run_diagnosis(arm, spec["measured"], out_dir, baseline=spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
-                           processing=spec.get("processing", "upstream"))
+    result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
+                                                processing=spec.get("processing", "upstream")), out_dir)
     payload = result.get("payload")
     m_true, tol = spec["expected_mass_kg"], spec["mass_tolerance"]
     verdicts = [{"check": f"{title}: payload found on a {spec['expected_group']} link",
@@ -82,8 +84,9 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
     if payload and payload.get("first_moment_reference_link"):  # as a body on the link the first moment is reported on
         reference = arm.model.link_by_name(payload["first_moment_reference_link"]).key
         hand_moment = reference_first_moment(arm, key, reference, point_mass_parameters(m_true, position))
-    result["hand_check"] = {"hand_point_base_at_q0_m": hand_point_base(arm, spec).tolist(), "hand_position_link_m": position.tolist(),
-                            "hand_link": spec["hand_link"], "hand_first_moment_base_at_q0_kg_m": hand_moment.tolist()}
+    # what the estimate is checked against, beside the diagnosis (which is written once, by run_diagnosis)
+    write_json_atomic(out_dir / HAND_CHECK_FILE, {"hand_point_base_at_q0_m": hand_point_base(arm, spec).tolist(), "hand_position_link_m": position.tolist(),
+                                                  "hand_link": spec["hand_link"], "hand_first_moment_base_at_q0_kg_m": hand_moment.tolist()})
     if payload and "first_moment_base_at_q0_kg_m_interval" in payload:
         intervals = payload["first_moment_base_at_q0_kg_m_interval"]
         # the components gravity sees on a link turning about the pitch shaft: y (towards the RCM) and z (up)
@@ -109,7 +112,6 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
     before, after = result["gap_before"]["train"], result["gap_after"]["train"]
     verdicts.append({"check": f"{title}: the diagnosis closes the J2 gap", "passed": after[1] < before[1],
                      "value": f"J2 {before[1]:.3f} -> {after[1]:.3f} N·m"})
-    write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts
 
 
@@ -120,8 +122,8 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
     key, position = hand_position_on_link(arm, spec)
     estimates = {}
     for run in spec["measured"]:
-        result = run_diagnosis(arm, run, out_dir / run, baseline=spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position),
-                               logs=False, processing=spec.get("processing", "upstream"))
+        result = run_diagnosis(arm, DiagnosisConfig(run, spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
+                                                    processing=spec.get("processing", "upstream")), out_dir / run)
         at = (result.get("payload") or {}).get("payload_at") or {}
         estimates[run] = {"mass_kg": at.get("mass_kg"), "interval": at.get("mass_kg_interval")}
     known = [e for e in estimates.values() if e["mass_kg"] is not None and e["interval"] is not None]

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.api import images_of, run_diagnosis, simulation_hook
+from dvrk_dart.diagnosis.api import DiagnosisConfig, images_of, run_diagnosis, simulation_hook
 from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.joint_effects import (
@@ -28,7 +28,6 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     JointStiffness,
 )
 from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
 from dvrk_dart.io.html import render, table, text_cell
 from dvrk_dart.diagnosis.output.wording import share_words
@@ -80,23 +79,17 @@ def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 
 def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
     train, *others = spec["train"]
-    processing = spec.get("processing", "upstream")
-    result = run_diagnosis(arm, train, out_dir, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
-                           processing=processing, refit=bool(spec.get("refit", False)))
+    config = DiagnosisConfig(train, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
+                             processing=spec.get("processing", "upstream"), refit=bool(spec.get("refit", False)))
+    result = run_diagnosis(arm, config, out_dir)
     # the bar: the full identified model on the held-out runs, in the same band (api.identified_model_gap)
     bar = np.asarray(result["identified_model_gap_holdout"], dtype=float)
     after = np.asarray(result["gap_after"]["holdout"], dtype=float)
-    floor = result.get("session_floor")
-    share = None if floor is None else repeatable_share(bar, after, floor)  # of the identified model's repeatable gap
-    result["repeatable_gap_explained_share"] = None if share is None else share.tolist()
-    combined = result.get("one_configuration")
-    if combined and floor is not None:  # the one configuration's share, likewise
-        combined["repeatable_gap_explained_share"] = repeatable_share(bar, combined["gap_holdout"], floor).tolist()
+    share = result.get("repeatable_gap_explained_share")  # of the identified model's repeatable gap (api.run_diagnosis)
     shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
                  "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {arm.model.effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
-    write_json_atomic(out_dir / "diagnosis.json", result)
     return result, verdicts + _refit_verdicts(result, spec) + _insertion_verdicts(result, spec)
 
 
@@ -279,6 +272,6 @@ def benchmark_diagnosis(measured=("two",), baseline=None) -> float:
     arm = load_arm(DEFAULT_MODEL_FILE)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        run_diagnosis(arm, list(measured) if len(measured) > 1 else measured[0], Path(tmp), baseline=baseline, logs=False)
+        run_diagnosis(arm, DiagnosisConfig(measured, baseline, logs=False), Path(tmp))
         return time.perf_counter() - start
 

@@ -2,26 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
-
-from dvrk_dart.diagnosis.api import run_diagnosis
 from dvrk_dart.diagnosis.output.answer import answer_sentence, offset_joints_sentence
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
-from dvrk_dart.io.arm import Arm
-from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
-def run_diagnosis_cli(args: argparse.Namespace, arm: Arm, topics: BagTopics) -> int:
-    """`dvrk-dart diagnose` on the command's `arm`, its runs read with `topics`: the diagnosis, then its printout."""
-    measured = args.measured[0] if len(args.measured) == 1 else args.measured
-    result = run_diagnosis(arm, measured, Path(args.out), baseline=args.baseline, train=args.train, holdout=args.holdout,
-                           repeat=getattr(args, "repeat", None), payload_at=getattr(args, "payload_at", None),
-                           parameter_band=getattr(args, "parameter_band", None), executor=getattr(args, "executor", "local"),
-                           jobs=getattr(args, "jobs", 2), ray_address=getattr(args, "ray_address", None),
-                           processing=getattr(args, "processing", None), refit=getattr(args, "refit", False),
-                           topics=topics)
+def print_diagnosis(result: dict) -> None:
+    """What `dvrk-dart diagnose` prints of its result: the answer, the gaps, the effects, the payload."""
     print(answer_sentence(result))
     print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
     for key in ("gap_before", "gap_after"):
@@ -59,7 +46,3 @@ def run_diagnosis_cli(args: argparse.Namespace, arm: Arm, topics: BagTopics) -> 
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
                   f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
-    return 0
-
-
-# ------------------------------------------------------------ validation

@@ -57,17 +57,16 @@ def band_run(band: dict, runs_sha256: dict[str, str]) -> str:
 
 
 def apply_band(result: dict, band: dict) -> dict:
-    """Mark each effect of a diagnosis result as beyond the parameters'
-    uncertainty or within it, and add the per-joint band summary."""
-    band["run"] = band_run(band, {name: entry["sha256"] for name, entry in result.get("inputs", {}).items()})
+    """A diagnosis result with each effect marked as beyond the parameters'
+    uncertainty or within it, and the per-joint band summary (a new dict)."""
+    run = band_run(band, {name: entry["sha256"] for name, entry in result.get("inputs", {}).items()})
     inside = band["measured_inside_band_fraction"]
     outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction < BAND_COVERAGE}
-    for effect in result["effects"]:
-        effect["beyond_parameter_uncertainty"] = bool(outside.intersection(effect["joints"]))
-    selected = [e for e in result["effects"] if e["selected"]]
-    result["parameter_band"] = {
+    effects = [{**effect, "beyond_parameter_uncertainty": bool(outside.intersection(effect["joints"]))} for effect in result["effects"]]
+    selected = [e for e in effects if e["selected"]]
+    return {**result, "effects": effects, "parameter_band": {
         "folder": band["folder"],
-        "run": band["run"],
+        "run": run,
         "sha256": band["sha256"],
         "replayed_s": band["replayed_s"],
         "run_duration_s": band.get("run_duration_s"),
@@ -79,8 +78,7 @@ def apply_band(result: dict, band: dict) -> dict:
         "joints_outside_band": [j for j in JOINT_NAMES if j in outside],
         "unmodelled_effects": [e["name"] for e in selected if e["beyond_parameter_uncertainty"]],
         "within_parameter_uncertainty": [e["name"] for e in selected if not e["beyond_parameter_uncertainty"]],
-    }
-    return result
+    }}
 
 
 def band_sentence(result: dict) -> str | None:

@@ -1,0 +1,26 @@
+"""`--config FILE.toml`: a command's options as a table, each value through the option's own checks; the command line wins."""
+
+import json
+
+from dvrk_dart.cli import main
+
+
+def test_a_config_file_gives_the_options_and_the_command_line_wins(tmp_path, capsys):
+    config = tmp_path / "replay.toml"
+    config.write_text('measured = "two"\nprocessing = "upstream"\nduration = 5.0\nmode = "velocity"\n')
+    out = tmp_path / "run"
+    assert main(["replay", "--config", str(config), "--duration", "0.3", "--out", str(out)]) == 0
+    run_config = json.loads((out / "config.json").read_text())["run_config"]
+    assert run_config["measured"] == "two" and run_config["processing"] == "upstream" and run_config["duration_s"] == 0.3
+
+
+def test_a_bad_config_file_is_one_line_naming_it(tmp_path, capsys):
+    for text, words in (('bogus = 1\n', "bogus is not an option of replay"), ('measured = \n', "not a readable TOML file"),
+                        ('measured = "no-such-run"\n', "no-such-run")):
+        config = tmp_path / "bad.toml"
+        config.write_text(text)
+        capsys.readouterr()
+        assert main(["replay", "--config", str(config), "--out", str(tmp_path / "never")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
+        assert not (tmp_path / "never").exists()
