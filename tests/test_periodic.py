@@ -10,7 +10,8 @@ import pytest
 
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.periodic import analyse, harmonic_design
+from dvrk_dart.io.period import harmonic_design
+from dvrk_dart.io.periodic import analyse
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from arms import PSM
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from dvrk_dart.io.periodic import analyse, harmonic_design
+from dvrk_dart.io.period import harmonic_design
+from dvrk_dart.io.periodic import analyse
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import N_JOINTS

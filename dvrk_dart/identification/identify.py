@@ -145,7 +145,7 @@ def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, 
     per joint left out): a joint is fitted where every training run recorded
     it and some run moves it; a joint no run moves is held in the base
     parameters' test (its own parameters are not determined)."""
-    from dvrk_dart.io.periodic import moving_joints
+    from dvrk_dart.io.period import moving_joints
 
     recorded = np.all([run.processed.measured for run in runs], axis=0)
     moving = np.any([moving_joints(run.processed.q, run.processed.measured) for run in runs], axis=0)

@@ -22,7 +22,7 @@ import pandas as pd
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.csv_run import is_number
 from dvrk_dart.io.measured_run import sample_rate_hz
-from dvrk_dart.io.periodic import design_harmonics, fit_period, moving_joints
+from dvrk_dart.io.period import design_harmonics, fit_period, moving_joints
 
 #: a commanded log's rows: positions, velocities, accelerations of each joint
 QUANTITIES_PER_JOINT = 3

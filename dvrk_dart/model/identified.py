@@ -21,7 +21,8 @@ import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
-from dvrk_dart.model.description import DHFrame, Link, PsmModel, dh_transform
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.dh import DHFrame, Link, dh_transform
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 #: the rigid-body terms of the identified model (what the inertial arm simulates)

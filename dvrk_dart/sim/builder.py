@@ -48,7 +48,8 @@ import dartpy as dart
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.description import Link, PsmModel
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.dh import Link
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters, inertia_violation
 from dvrk_dart.sim.config import SimConfig

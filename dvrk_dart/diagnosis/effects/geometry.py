@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dvrk_dart.model.description import PsmModel, dh_transform
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.dh import dh_transform
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: margin around a link's DH skeleton (joint origins, closure points) inside
