@@ -39,3 +39,4 @@ def data_ranges():
     """(lower, upper) of the joint positions seen in all the measured runs."""
     qs = np.vstack([load_run(resolve_run(name), PSM).q for name, file in RUNS.items() if not file.startswith("mtm/")])
     return qs.min(axis=0), qs.max(axis=0)
+
