@@ -25,6 +25,17 @@ def _metrics(folder, config):
     return {k: v for k, v in metrics.items() if k not in TIMING_FIELDS}
 
 
+@pytest.fixture(scope="module", autouse=True)
+def ray_cluster():
+    """One local Ray cluster for the module's tests (the executor starts its own only where none runs, and
+    then stops it: its start is what a Ray test would otherwise spend most of its time on)."""
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
 def test_a_campaign_on_ray_gives_the_local_executors_metrics(tmp_path):
     local = run_campaign(CAMPAIGN, tmp_path / "local", jobs=2, executor="local")
     ray = run_campaign(CAMPAIGN, tmp_path / "ray", jobs=2, executor="ray")
