@@ -12,10 +12,10 @@ JOBS   ?= 2
 
 setup: $(STAMP)
 
+# --no-compile: Python compiles what it imports; byte-compiling every installed package doubled the setup
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	# (no byte-compiling of every installed package: Python compiles what it imports, and the setup takes half the time)
 	$(BIN)/python -m pip install -q --no-compile -e ".[test]"
 	touch $(STAMP)
 
