@@ -123,7 +123,7 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
                         f"{first['in_contact_fraction']:.0%} of the time)"}
     rows = [[text_cell(label), num_cell(r["sim_to_sim_error_rms_n"]), num_cell(r["with_real_residual_error_rms_n"]),
              *(num_cell(v) for v in r["with_real_residual_error_per_axis_n"])] for label, r in results.items()]
-    html = render("report/contact.html", contact=CONTACT,
+    html = render("sections/contact.html", contact=CONTACT,
                   errors_table=table(["model", "sim-to-sim error (N RMS)", "with the real residual (N RMS)", "x (N)", "y (N)", "z (N)"], rows))
     print(f"contact: {verdict['value']}; with the real residual: " + "; ".join(
         f"{label} {r['with_real_residual_error_rms_n']:.3f} N" for label, r in results.items()))

@@ -114,7 +114,7 @@ def periodic_section(arm: Arm, out_dir: Path, runs_dir: Path) -> tuple[str, str,
         row("model's gap on two (periodic) = floor + repeatable, in squares: repeatable part", figures["repeatable_two_periodic"], "repeatable"),
     ]
     figure = out_dir / "repeatable_residual_one_period.png"
-    body = render("report/periodic.html", period_s=figures["period_s"], harmonics=figures["harmonics"], held_out=HELD_OUT, sessions=SESSIONS,
+    body = render("sections/periodic.html", period_s=figures["period_s"], harmonics=figures["harmonics"], held_out=HELD_OUT, sessions=SESSIONS,
                   rms_table=table(["RMS", *[f"{j} ({arm.model.effort_unit(j)})" for j in SHOWN_JOINTS]], rows),
                   verdicts=[(j, floor["verdict"][JOINT_NAMES.index(j)]) for j in SHOWN_JOINTS], figure=figure.name)
     return "Periodic excitation: both processings, the session floor, the repeatable gap", body, [figure]

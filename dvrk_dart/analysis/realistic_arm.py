@@ -53,5 +53,5 @@ def realistic_arm_section(analysis: Analysis) -> str:
     identified = next((r for r in runs if r.dynamics == "identified"), None)
     regimes = [] if identified is None else [
         row(f"{regime}: {REGIME_DESCRIPTIONS.get(regime, regime)}", identified.name, "rms_sim_vs_model", regime) for regime in REGIMES_SHOWN]
-    return render("report/realistic_arm.html", measured_table=table(header, measured), identified=identified.name if identified else None,
+    return render("sections/realistic_arm.html", measured_table=table(header, measured), identified=identified.name if identified else None,
                   regimes_table=table(["regime", *header[1:]], regimes))

@@ -124,7 +124,7 @@ def verdict_section(analysis: Analysis) -> str:
         summary_rows.append(_verdict_row(worst, label))
     detail_rows = [_verdict_row(row, row.title) for row in checks.itertuples(index=False)]
     stopped = {name: r.metrics["error"] for name, r in analysis.runs.items() if r.metrics.get("error")}
-    return render("report/verdicts.html", ok=ok, passed=passed, total=total, failed=int((checks.status == STATUS_FAIL).sum()),
+    return render("sections/verdicts.html", ok=ok, passed=passed, total=total, failed=int((checks.status == STATUS_FAIL).sum()),
                   missing=int((checks.status == STATUS_MISSING).sum()),
                   summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
                   detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
@@ -146,7 +146,7 @@ def _component_header(entry: dict) -> list[str]:
 
 def comparison_section(analysis: Analysis, published: dict) -> str:
     entries = [_comparison_entry(analysis.comparison, entry) for entry in published.get("published", [])]
-    return render("report/comparison.html", max_ratio=MAX_MEANINGFUL_RATIO, sources=published.get("sources", {}),
+    return render("sections/comparison.html", max_ratio=MAX_MEANINGFUL_RATIO, sources=published.get("sources", {}),
                   entries=[e for e in entries if e is not None])
 
 
@@ -196,7 +196,7 @@ def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
 
 
 def figures_section(figures) -> str:
-    return render("report/figures.html", figures=figures)
+    return render("sections/figures.html", figures=figures)
 
 
 def _units_of(metrics: pd.DataFrame, quantity: str, components: Sequence[str]) -> str:
@@ -240,7 +240,7 @@ def per_run_section(analysis: Analysis) -> str:
             rows.append([text_cell(run), text_cell(regime), *cells])
         by_regime.append({"quantity": quantity, "units": _units_of(metrics, quantity, JOINT_NAMES),
                           "table": table(["run", "regime", *JOINT_NAMES], rows)})
-    return render("report/per_run.html", whole_run=whole_run, by_regime=by_regime, regimes=REGIME_DESCRIPTIONS)
+    return render("sections/per_run.html", whole_run=whole_run, by_regime=by_regime, regimes=REGIME_DESCRIPTIONS)
 
 
 def _effects(sim: dict) -> str:
@@ -279,14 +279,14 @@ def provenance_section(analysis: Analysis) -> str:
         for key, value in run.versions.items():
             versions.setdefault(key, set()).add(str(value))
     version_rows = [[text_cell(k), code_cell(", ".join(sorted(v)))] for k, v in sorted(versions.items())]
-    return render("report/provenance.html", config_file=CONFIG_FILE, runs=configs,
+    return render("sections/provenance.html", config_file=CONFIG_FILE, runs=configs,
                   versions_table=table(["software", "version(s) across the runs"], version_rows),
                   runs_table=table(["run", "samples", "duration (s)", "step (s)", "simulated effects", "git revision", "run.mcap sha256",
                                     "inputs sha256"], rows))
 
 
 def glossary_section() -> str:
-    return render("report/glossary.html",
+    return render("sections/glossary.html",
                   quantities=table(["quantity", "definition"], [[text_cell(k), text_cell(v)] for k, v in QUANTITY_DESCRIPTIONS.items()], css="glossary"),
                   regimes=table(["regime", "samples"], [[text_cell(k), text_cell(v)] for k, v in REGIME_DESCRIPTIONS.items()], css="glossary"))
 
@@ -358,7 +358,7 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         navigation = ["verdicts", "comparison", "realistic-arm", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
         sections = [verdict_section(analysis), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
                     figures_section(figures), per_run_section(analysis)]
-        page = render("report/index.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        page = render("validation_report.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                       runs_dir=str(runs_dir), n_runs=len(analysis.runs), analysis_dir=ANALYSIS_DIR, data_files=REPORT_DATA_FILES,
                       docs_link=docs_link(out_dir), navigation=navigation, sections=sections, extras=extras,
                       closing=[glossary_section(), provenance_section(analysis)], seconds=time.perf_counter() - start)

@@ -23,5 +23,5 @@ def uncertainty_section(folder: Path) -> tuple[str, str, list[Path]]:
                        ("nominal_model_inside_band_fraction", "nominal identified model inside the band (fraction)")):
         rows.append([text_cell(label), *(num_cell(summary[key][JOINT_NAMES.index(j)], uncertainty=key, joint=j) for j in SHOWN_JOINTS)])
     band_table = table(["", *[f"{j} ({summary['effort_units'][JOINT_NAMES.index(j)]})" for j in SHOWN_JOINTS]], rows)
-    body = render("report/uncertainty.html", summary=summary, low=low, high=high, band_table=band_table, figures=figures)
+    body = render("sections/uncertainty.html", summary=summary, low=low, high=high, band_table=band_table, figures=figures)
     return ("Parameter uncertainty: the held-out replay of two", body, figures)

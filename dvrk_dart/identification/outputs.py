@@ -315,7 +315,7 @@ def report_section(*datas: dict) -> tuple[str, str]:
                       "worst": fmt(worst_eigenvalue(data)), "published_worst": fmt(ref["pseudo_inertia_smallest_eigenvalue_kg_m2"]),
                       "tables": [(run, _holdout_table(run, own, ref["errors_first_period"].get(run), processing, data["effort_units"]))
                                  for run, own in data["errors"]["holdout"].items()]})
-    return "Own identification vs the published parameters", render("report/identification.html", parts=parts)
+    return "Own identification vs the published parameters", render("sections/identification.html", parts=parts)
 
 
 def _holdout_table(run: str, own: dict, published: dict | None, processing: str, units: list[str]) -> str:
