@@ -29,11 +29,11 @@ from dvrk_dart.diagnosis.api import simulation_hook
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
-from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
-from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
-from dvrk_dart.io.signal import ProcessedRun, process
+from dvrk_dart.io.reference_data import sample_rate_hz
+from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
@@ -73,9 +73,7 @@ def injected_effort(arm: Arm, state: ProcessedRun, case: dict) -> np.ndarray:
 
 def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
     simulate = simulation_hook(arm)
-    processed = process(load_run(resolve_run(spec["run"]), arm.model))
-    segment = processed.head(spec["base_periods"] * processed.first_period_samples())
-    noise_rms = rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
+    segment, noise_rms = real_segment(arm, spec["run"], spec["base_periods"])
     cases, verdicts = [], []
     for seed, case in enumerate(spec["cases"]):
         extra = injected_effort(arm, segment, case)

@@ -14,7 +14,8 @@ from dvrk_dart.diagnosis.effects.library import (
     unsimulated_effort,
 )
 from dvrk_dart.diagnosis.fit.diagnosis_runs import Simulate, simulated_efforts
-from dvrk_dart.io.signal import ProcessedRun, zero_phase_lowpass
+from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.signal import ProcessedRun, process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.sim.config import SimConfig
@@ -64,3 +65,12 @@ def time_scaled(state: ProcessedRun, speed: float) -> ProcessedRun:
 
     return ProcessedRun(t.copy(), at(state.q), speed * at(state.dq), speed**2 * at(state.ddq), at(state.tau),
                         upstream_first_period=state.upstream_first_period)
+
+
+def real_segment(arm: Arm, run: str, base_periods: int) -> tuple[ProcessedRun, np.ndarray]:
+    """The first `base_periods` periods of a real run of `arm` (upstream processing),
+    and the identified model's residual RMS on them per joint: the motion and the
+    noise level of the synthetic checks' runs."""
+    processed = process(load_run(resolve_run(run), arm.model))
+    segment = processed.head(base_periods * processed.first_period_samples())
+    return segment, rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))

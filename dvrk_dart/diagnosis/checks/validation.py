@@ -34,12 +34,9 @@ from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.checks.payload_checks import validate_payload_speeds, validate_real_payload
 from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
-from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
-from dvrk_dart.io.reference_data import load_run, resolve_run
-from dvrk_dart.io.signal import process
-from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.model.description import DEFAULT_MODEL_FILE, resolve_arm_model
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -147,9 +144,7 @@ def validate_other_arm_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_ba
 def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
 
     simulate = simulation_hook(arm)
-    processed = process(load_run(resolve_run(spec["run"]), arm.model))
-    segment = processed.head(spec["base_periods"] * processed.first_period_samples())
-    noise_rms = rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
+    segment, noise_rms = real_segment(arm, spec["run"], spec["base_periods"])
     cases, verdicts = [], []
     for seed, case in enumerate(spec["cases"]):
         effect = _effect(arm, case)
