@@ -258,9 +258,10 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     target.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_building(target)
     building = target.with_name(f".{target.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    building.mkdir()
-    (building / BUILDING_SENTINEL).touch()
     try:
+        with signals_held():  # a Ctrl-C right after mkdir would leave the folder outside the try
+            building.mkdir()
+            (building / BUILDING_SENTINEL).touch()
         yield building
         (building / BUILDING_SENTINEL).unlink()
         write_marker(building, kind)
@@ -273,8 +274,9 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
                 _carry_user_files(target, building)
             swap_in(building, target)
     finally:
-        if building.exists():
-            shutil.rmtree(building, ignore_errors=True)
+        with signals_held():  # a Ctrl-C during the removal would leave half of it
+            if building.exists():
+                shutil.rmtree(building, ignore_errors=True)
 
 
 @contextlib.contextmanager
