@@ -134,7 +134,8 @@ def bench_bag_import() -> dict:
     """A 30 s, 200 Hz bag of the two PSM topics (made from run "two"), read back."""
     import tempfile
 
-    from dvrk_dart.io.bags import load_bag_run, arm_joint_states, write_bag
+    from dvrk_dart.io.bag_writer import arm_joint_states, write_bag
+    from dvrk_dart.io.bags import load_bag_run
 
     model = load_model(DEFAULT_MODEL_FILE)
     run = load_run(resolve_run("two"), model)

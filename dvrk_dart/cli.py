@@ -4,14 +4,12 @@ and exit code 2 (no traceback)."""
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import sys
 import threading
 from pathlib import Path
 
-import numpy as np
 
 from dvrk_dart import cli_parser
 from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
@@ -20,6 +18,7 @@ from dvrk_dart.model.joints import JOINT_NAMES
 # commands kept beside their own kind; the parser finds every cmd_* here
 from dvrk_dart.model_commands import cmd_force, cmd_model_check, cmd_model_errors, cmd_session_floor  # noqa: F401
 from dvrk_dart.run_commands import cmd_replay, cmd_run  # noqa: F401
+from dvrk_dart.bag_commands import cmd_excitation, cmd_export, cmd_import  # noqa: F401
 
 
 #: the options that name measured runs (any of them may be a bag)
@@ -92,95 +91,6 @@ def _check_bag_options(args: argparse.Namespace) -> None:
         raise DvrkDartError(f"{given[0]}: selects the topics of a ROS bag, and no input of this command is one")
 
 
-def cmd_import(args: argparse.Namespace) -> int:
-    """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
-    from dvrk_dart.io.atomic import atomic_path
-    from dvrk_dart.io.bags import is_bag, load_bag_run
-    from dvrk_dart.io.outputs import MARKER, check_writable_folder, enclosing_output
-    from dvrk_dart.io.reference_data import sample_rate_hz
-    from dvrk_dart.model.description import load_model
-
-    topics = reading_options(args)
-    if topics.rate != sample_rate_hz():
-        raise DvrkDartError(f"--rate: the 21-column CSV has no time column and is read at {sample_rate_hz():g} Hz; import at that rate")
-    if not is_bag(args.bag):
-        raise DvrkDartError(f"{args.bag}: not a ROS bag (a rosbag2 folder with metadata.yaml, an .mcap/.db3 file or a ROS 1 .bag)")
-    out, bag = Path(args.out), Path(args.bag)
-    if out.resolve() == bag.resolve() or bag.resolve() in out.resolve().parents:
-        raise DvrkDartError(f"--out: {out} is the input bag {bag} or inside it: refusing to write over the input, even with --force")
-    if out.is_symlink():
-        raise DvrkDartError(f"--out: {out} is a symbolic link: give the file itself, or a new name")
-    owner = enclosing_output(out) or next((p for p in out.absolute().resolve().parents if (p / MARKER).is_file()), None)
-    if owner is not None:
-        raise DvrkDartError(f"--out: {out} is inside {owner}, a folder dvrk-dart wrote, which holds only what its command wrote: "
-                            "write the CSV elsewhere")
-    if out.is_dir():
-        raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
-    if out.exists() and not out.is_file():
-        raise DvrkDartError(f"--out: {out} is not a regular file (a device, a pipe): refusing to replace it")
-    if out.exists() and not args.force:
-        raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
-    check_writable_folder(out.absolute().parent)
-    run = load_bag_run(args.bag, load_model(arm_model_file(args)), topics)
-    values = np.hstack([run.q, run.dq, run.tau])
-    with atomic_path(out) as tmp:
-        np.savetxt(tmp, values, delimiter=",", fmt="%.17g")
-    print(f"{args.bag}: {len(run)} samples ({run.t[-1]:.2f} s at {topics.rate:g} Hz) -> {out}")
-    return 0
-
-
-def _model_of_run(run_dir: Path) -> Path:
-    """The arm model a run folder was simulated with (its config.json's model_file), else the PSM's."""
-    from dvrk_dart.model.description import resolve_arm_model
-
-    try:
-        name = Path(json.loads((run_dir / "config.json").read_text())["model_file"]).stem
-    except (OSError, ValueError, KeyError, TypeError):
-        return resolve_arm_model("psm")
-    try:
-        return resolve_arm_model(name)
-    except DvrkDartError:
-        raise DvrkDartError(f"{run_dir}: simulated with the arm model {name}, which is not in models/") from None
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    """A simulated run -> a ROS 2 bag with the topics and types a real PSM publishes."""
-    from dvrk_dart.io.bags import check_arm_namespace, export_run
-    from dvrk_dart.io.outputs import check_writable_folder
-    from dvrk_dart.model.description import load_model
-
-    run_dir, bag = Path(args.run_dir), Path(args.bag)
-    if run_dir.resolve() in bag.absolute().resolve().parents:
-        raise DvrkDartError(f"--bag: {bag} is inside the run folder {run_dir}: a run folder holds only what the run wrote")
-    check_writable_folder(bag.absolute().parent, "--bag")
-    if bag.suffix == ".bag" and args.storage != "ros1":
-        raise DvrkDartError(f"--bag: {bag} is a ROS 1 bag's name and --storage {args.storage} writes a rosbag2 folder: "
-                            "add --storage ros1, or name the folder without .bag")
-    model = load_model(_model_of_run(run_dir))  # an MTM run gets the MTM's topics and joint names
-    check_arm_namespace(args.arm, model.dvrk_topics)
-    out = export_run(run_dir, bag, model, args.arm, args.storage)
-    print(f"{args.run_dir} -> {out}")
-    return 0
-
-
-def cmd_excitation(args: argparse.Namespace) -> int:
-    """An excitation to play on a real dVRK: CSV + ROS 2 bag of servo_jp commands."""
-    from dvrk_dart.io.bags import check_arm_namespace
-    from dvrk_dart.io.outputs import building_folder, check_output_folder
-    from dvrk_dart.io.reference_data import sample_rate_hz
-    from dvrk_dart.runs.excitation import build_excitation, write_excitation
-
-    check_output_folder(args.out, "excitation")
-    arm = command_arm(args)
-    check_arm_namespace(args.arm, arm.model.dvrk_topics)
-    excitation = build_excitation(args.name, args.rate if args.rate is not None else sample_rate_hz(), arm)
-    with building_folder(args.out, "excitation") as folder:
-        summary = write_excitation(excitation, folder, arm.model, args.arm)
-    print(f"excitation {args.name}: {summary['samples']} samples, {summary['duration_s']:.2f} s -> {args.out}/{summary['csv']}, {args.out}/{summary['bag']}")
-    print("  start pose (move there first, e.g. with move_jp): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["start_pose"].items()))
-    return 0
-
-
 def cmd_validate(args: argparse.Namespace) -> int:
     """The main job: the campaign, its report and the sim-to-real diagnosis."""
     from dvrk_dart.io.outputs import (
@@ -235,8 +145,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from dvrk_dart.identification.regressor import FrictionLaw
     from dvrk_dart.io.reference_data import run_label
 
-    if args.reversal_velocity is not None and args.friction_law != "tanh":
-        raise DvrkDartError(f"--reversal-velocity: only with --friction-law tanh (not {args.friction_law})")
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
@@ -274,15 +182,9 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     """Monte Carlo over the parameters' uncertainty: the effort band and the measured run in it."""
     from dvrk_dart.runs.uncertainty import UncertaintyConfig, run_uncertainty
 
-    if args.params_cov is None and args.relative_std is None:
-        args.relative_std = 0.05
-    if args.samples < 2:
-        raise DvrkDartError(f"--samples: {args.samples}: a band needs at least 2 parameter sets")
     config = UncertaintyConfig(args.measured, args.samples, args.seed, None if args.params_cov else args.relative_std,
                                args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing,
                                arm_model=str(arm_model_file(args)), topics=reading_options(args))
-    if config.duration_s is not None and not config.duration_s > 0.0:
-        raise DvrkDartError(f"--duration: {config.duration_s} s must be positive")
     summary = run_uncertainty(config, args.out, args.ray_address)
     print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays, {summary['wall_time_s']:.0f} s -> {args.out}")
     print(f"processing: {summary['processing']['processing']} ({summary['processing']['chosen_because']})")
@@ -302,9 +204,6 @@ class Terminated(BaseException):
 def _terminate(signum, frame) -> None:
     raise Terminated()
 
-
-#: local worker processes per core: more only wait on each other (and each holds a simulator)
-MAX_JOBS_PER_CORE = 4
 
 
 def _interrupt(signum, frame) -> None:
@@ -347,18 +246,6 @@ def main(argv: list[str] | None = None) -> int:
     except DvrkDartError as exc:  # --config FILE.toml
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return 2
-    if getattr(args, "ray_address", None) and getattr(args, "executor", None) != "ray":
-        print("dvrk-dart: --ray-address: only with --executor ray", file=sys.stderr)
-        return 2
-    local_jobs = getattr(args, "jobs", None) if getattr(args, "executor", "local") != "ray" else None
-    if local_jobs is not None and local_jobs > MAX_JOBS_PER_CORE * (os.cpu_count() or 1):
-        print(f"dvrk-dart: --jobs: {local_jobs} workers on {os.cpu_count()} cores would only wait on each other "
-              f"(at most {MAX_JOBS_PER_CORE * (os.cpu_count() or 1)}; a Ray cluster: --executor ray)", file=sys.stderr)
-        return 2
-    if getattr(args, "payload_at", None) is not None and getattr(args, "baseline", None) is None:
-        print("dvrk-dart: --payload-at: only with --baseline (the payload is what the runs have and their baseline has not)",
-              file=sys.stderr)
-        return 2
     interrupted.clear()  # (main may run several times in one process: the tests)
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
@@ -369,6 +256,7 @@ def main(argv: list[str] | None = None) -> int:
             from dvrk_dart.runs.executors import check_ray_address
 
             check_ray_address(args.ray_address)
+        cli_parser.check_combinations(args)
         _check_outputs_apart_from_inputs(args)
         _check_arm_of_reference_runs(args)
         if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags

@@ -4,121 +4,31 @@ of option values, and the one-line usage errors (the commands are in cli.py)."""
 from __future__ import annotations
 
 import argparse
-import math
 import os
-import re
 from pathlib import Path
 import sys
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.option_types import (
+    MAX_SAMPLES,
+    RATE_HZ,
+    SECONDS,
+    arm_namespace,
+    int_in,
+    measured_run,
+    non_empty,
+    number_in,
+    positive_int,
+    seed,
+)
 from dvrk_dart.io.reference_data import RUNS, reference_run_arm
 from dvrk_dart.io.signal import PROCESSINGS
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.runs.config import MAX_DURATION_S, MAX_STEP_S, MIN_STEP_S
+from dvrk_dart.runs.config import MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 #: the PSM's reference runs by their short names, as the help lists them
 PSM_RUN_NAMES = "|".join(name for name in RUNS if reference_run_arm(name) == "psm")
-
-
-def non_empty(text: str) -> str:
-    """An argparse type: any text but an empty one (an empty name would fall back to the default silently)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("an empty value (leave the option out for its default)")
-    return text
-
-
-def arm_namespace(text: str) -> str:
-    """A ROS namespace of one name (PSM1, MTML): letters, digits, underscores, a letter first."""
-    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", text):
-        raise argparse.ArgumentTypeError(f"'{text}' is not an arm's namespace (a ROS name such as PSM1: letters, digits, _)")
-    return text
-
-
-def int_at_least(low: int):
-    """An argparse type: a whole number >= low."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{value}: at least {low}")
-        return value
-
-    return parse
-
-
-positive_int = int_at_least(1)
-
-
-def int_in(low: int, high: int, why: str):
-    """An argparse type: a whole number in [low, high], `why` saying where the top comes from."""
-    at_least = int_at_least(low)
-
-    def parse(text: str) -> int:
-        value = at_least(text)
-        if value > high:
-            raise argparse.ArgumentTypeError(f"{value}: at most {high} ({why})")
-        return value
-
-    return parse
-
-
-#: parameter sets of an uncertainty band: its 5-95 % quantiles settle within a
-#: few hundred draws, and each draw is a whole replay
-MAX_SAMPLES = 10000
-
-
-def measured_run(text: str) -> str:
-    """A measured run's name or path, checked for what the name alone tells
-    (the file's content is checked when it is read)."""
-    from dvrk_dart.io.reference_data import RUNS, manifest
-
-    if not text.strip():
-        raise argparse.ArgumentTypeError("an empty name (one, two, ... or a path)")
-    if text in RUNS or text in manifest()["files"]:
-        return text
-    path = Path(text)
-    if path.is_symlink() and not path.exists():
-        raise argparse.ArgumentTypeError(f"{text}: a broken symbolic link (to {os.readlink(path)})")
-    if not path.exists():
-        raise argparse.ArgumentTypeError(f"{text}: file not found, and not a reference run ({', '.join(RUNS)})")
-    if not (path.is_file() or path.is_dir()):
-        raise argparse.ArgumentTypeError(f"{text}: not a regular file (a CSV or a ROS bag)")
-    return text
-
-
-def number_in(low: float, high: float, unit: str = "", open_low: bool = False, open_high: bool = False):
-    """An argparse type: a finite number in [low, high] (an end excluded when open)."""
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
-        above = value > low if open_low else value >= low
-        below = value < high if open_high else value <= high
-        if not (math.isfinite(value) and above and below):
-            interval = f"{'(' if open_low else '['}{low:g}, {high:g}{')' if open_high else ']'}"
-            raise argparse.ArgumentTypeError(f"{text}: must be in {interval} {unit}".rstrip())
-        return value
-
-    return parse
-
-
-def seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
-    if not 0 <= value < 2**32:
-        raise argparse.ArgumentTypeError(f"{value}: a seed is a whole number in [0, 2^32)")
-    return value
-
-
-#: rates a dVRK recording or command stream can have (its controllers run at most at a few kHz)
-RATE_HZ = number_in(1.0, 1e4, "Hz")
-SECONDS = number_in(0.0, MAX_DURATION_S, "s", open_low=True)
 
 
 def _add_arm_model_option(p: argparse.ArgumentParser) -> None:
@@ -308,7 +218,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument("--params-cov", help="params_covariance.json written by dvrk-dart identify")
-    source.add_argument("--relative-std", type=number_in(0.0, 1.0, open_low=True, open_high=True), help="fallback: relative std of every parameter (default 0.05)")
+    source.add_argument("--relative-std", type=number_in(0.0, 1.0, open_low=True, open_high=True), default=0.05,
+                        help="fallback: relative std of every parameter (default 0.05)")
     p.add_argument("--duration", type=SECONDS, default=None, help="replay only the first seconds")
     p.add_argument("--seed", type=seed, default=0, help="seed of the parameter draws")
     p.add_argument("--jobs", type=positive_int, default=2, help="parallel workers")
@@ -352,6 +263,29 @@ def build_parser(commands) -> argparse.ArgumentParser:
 
 #: the commands that take many options, and so `--config FILE.toml` (option = value, e.g. baseline = "one-no-weight")
 CONFIG_COMMANDS = ("diagnose", "identify", "uncertainty", "replay")
+
+
+#: local worker processes per core: more only wait on each other (and each holds a simulator)
+MAX_JOBS_PER_CORE = 4
+MAX_LOCAL_JOBS = MAX_JOBS_PER_CORE * (os.cpu_count() or 1)
+
+#: options that mean something only beside another (each value on its own is
+#: checked by its argparse type): (option's dest, whether it may be given, why not)
+COMBINATION_RULES = (
+    ("ray_address", lambda a: a.executor == "ray", "--ray-address: only with --executor ray"),
+    ("jobs", lambda a: getattr(a, "executor", "local") == "ray" or a.jobs <= MAX_LOCAL_JOBS,
+     f"--jobs: more than {MAX_LOCAL_JOBS} workers on {os.cpu_count()} cores would only wait on each other (a Ray cluster: --executor ray)"),
+    ("payload_at", lambda a: a.baseline is not None,
+     "--payload-at: only with --baseline (the payload is what the runs have and their baseline has not)"),
+    ("reversal_velocity", lambda a: a.friction_law == "tanh", "--reversal-velocity: only with --friction-law tanh"),
+)
+
+
+def check_combinations(args: argparse.Namespace) -> None:
+    """The first option given where another makes it meaningless: one line."""
+    for dest, allowed, why in COMBINATION_RULES:
+        if getattr(args, dest, None) is not None and not allowed(args):
+            raise DvrkDartError(why)
 
 
 def _add_config_option(p: argparse.ArgumentParser) -> None:

@@ -6,64 +6,88 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.command_args import command_arm, reading_options
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.joints import JOINT_NAMES
+
+
+@dataclass(frozen=True)
+class ModelErrorsConfig:
+    """`model-errors`: the identified model against one measured run."""
+
+    measured: str
+    processing: str | None = None
+    excitation: str | None = None
+    terms: str = "all"
+    first_period: bool = False
+    topics: BagTopics = BagTopics()
+
+
+def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
+    """Per-joint relative and RMS error of the identified model on the run (`null` where a joint is not recorded)."""
+    from dvrk_dart.io.excitation_design import read_design
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process_all
+    from dvrk_dart.metrics import per_measured_joint, relative_error, rms
+    from dvrk_dart.model.identified import parse_terms
+
+    terms = parse_terms(config.terms)
+    design = read_design(config.excitation) if config.excitation else None
+    [processed], note = process_all([load_run(resolve_run(config.measured), arm.model, config.topics)], config.processing, design)
+    why = f"--processing {config.processing}" if config.processing else (note or "the default: the run is a periodic excitation")
+    with np.errstate(over="ignore", invalid="ignore"):
+        predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
+        sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
+    if not sane:
+        raise DvrkDartError(f"--params {arm.params.source}: the model's efforts on {config.measured} are not finite "
+                            "(a parameter far out of any physical range)")
+    measured = processed.tau
+    if config.first_period:
+        n = processed.first_period_samples()
+        if len(measured) < n:
+            raise DvrkDartError(f"--first-period: {config.measured} has {len(measured)} processed samples, fewer than one period ({n})")
+        predicted, measured = predicted[:n], measured[:n]
+    return {
+        "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
+        "rms": per_measured_joint(rms(predicted - measured), processed.measured),
+        "samples": len(measured),
+        "terms": config.terms,
+        **processed.summary(),
+        "chosen_because": why,
+    }
 
 
 def cmd_model_errors(args: argparse.Namespace) -> int:
     """Per-joint relative and RMS error of the identified model on a measured run."""
     from dvrk_dart.io.atomic import json_text
-    from dvrk_dart.io.reference_data import load_run, resolve_run
-    from dvrk_dart.io.signal import process_all
-    from dvrk_dart.io.excitation_design import read_design
-    from dvrk_dart.metrics import per_measured_joint, relative_error, rms
-    from dvrk_dart.model.identified import parse_terms
 
     arm = command_arm(args)
-    terms = parse_terms(args.terms)
-    design = read_design(args.excitation) if getattr(args, "excitation", None) else None
-    [processed], note = process_all([load_run(resolve_run(args.measured), arm.model, reading_options(args))], args.processing, design)
-    why = f"--processing {args.processing}" if args.processing else (note or "the default: the run is a periodic excitation")
-    with np.errstate(over="ignore", invalid="ignore"):
-        predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
-        sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
-    if not sane:
-        raise DvrkDartError(f"--params {args.params or arm.params.source}: the model's efforts on {args.measured} are not finite "
-                            "(a parameter far out of any physical range)")
-    measured = processed.tau
-    if args.first_period:
-        n = processed.first_period_samples()
-        if len(measured) < n:
-            raise DvrkDartError(f"--first-period: {args.measured} has {len(measured)} processed samples, fewer than one period ({n})")
-        predicted, measured = predicted[:n], measured[:n]
-    result = {
-        "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
-        "rms": per_measured_joint(rms(predicted - measured), processed.measured),
-        "samples": len(measured),
-        "terms": args.terms,
-        **processed.summary(),
-        "chosen_because": why,
-    }
+    config = ModelErrorsConfig(args.measured, args.processing, args.excitation, args.terms, args.first_period, reading_options(args))
+    result = model_errors(arm, config)
+    why = result["chosen_because"]
     if args.json:
         print(json_text(result), end="")
     else:
-        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {processed.processing} processing ({why})")
-        if processed.periodic is not None:
+        periodic = result["processing"] == "periodic"
+        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {result['processing']} processing ({why})")
+        if periodic:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['whole_periods']} whole periods, "
                   f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
                   f"from {result['design_from']})")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
-        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if processed.periodic is not None else ""))
+        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if periodic else ""))
         for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
             if r is None:
                 print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record {name})")
                 continue
-            cutoff = f" {result['joint_cutoffs'][j]:9d}" if processed.periodic is not None else ""
+            cutoff = f" {result['joint_cutoffs'][j]:9d}" if periodic else ""
             why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
             print(f"{name:>6} {rel:9.4f} {r:10.4f} {arm.model.effort_unit(name)}{cutoff}{why}")
     return 0

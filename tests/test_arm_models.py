@@ -90,7 +90,7 @@ def test_the_mtm_replays_two_in_dart(tmp_path, capsys):
 def test_an_mtm_bag_reads_like_its_csv(tmp_path, capsys):
     """/MTML/measured_js (seven joints by the dVRK's names, no jaw topic) -> the
     run's model coordinates: the published errors of "two" come back from the bag."""
-    from dvrk_dart.io.bags import arm_joint_states, write_bag
+    from dvrk_dart.io.bag_writer import arm_joint_states, write_bag
     from dvrk_dart.io.reference_data import load_run, resolve_run
 
     from arms import MTM

@@ -13,8 +13,9 @@ from scipy.interpolate import CubicSpline
 
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.bags import NS, BagTopics, arm_joint_states, load_bag_run, write_bag
-from dvrk_dart.io.mcap_log import read_mcap
+from dvrk_dart.io.bag_writer import arm_joint_states, write_bag
+from dvrk_dart.io.bags import NS, BagTopics, load_bag_run
+from dvrk_dart.io.mcap_read import read_mcap
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.model.joints import MotorCoordinateMap
 from arms import PSM

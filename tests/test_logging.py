@@ -16,7 +16,8 @@ from mcap.reader import make_reader
 
 from dvrk_dart.io import mcap_bulk
 from dvrk_dart.io import mcap_log as log_mcap
-from dvrk_dart.io.mcap_log import read_mcap, write_mcap
+from dvrk_dart.io.mcap_log import write_mcap
+from dvrk_dart.io.mcap_read import read_mcap
 from dvrk_dart.io.rerun_log import write_rrd
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.io.record import RunRecord

@@ -22,7 +22,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from dvrk_dart.analysis.tables import LoadedRun, simulated_terms_of  # noqa: E402
+from dvrk_dart.analysis.run_folders import LoadedRun  # noqa: E402
+from dvrk_dart.analysis.tables import simulated_terms_of  # noqa: E402
 from dvrk_dart.model.identified import TERMS  # noqa: E402
 from dvrk_dart.model.joints import JOINT_NAMES  # noqa: E402
 from dvrk_dart.runs.executors import quiet_worker  # noqa: E402

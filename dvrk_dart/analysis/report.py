@@ -50,11 +50,11 @@ from dvrk_dart.io.html import (
     text_cell,
     unit_text,
 )
+from dvrk_dart.analysis.run_folders import CONFIG_FILE
 from dvrk_dart.analysis.tables import (
     ALL_COMPONENTS,
     CARTESIAN_ORIENTATION_AXES,
     CARTESIAN_POSITION_AXES,
-    CONFIG_FILE,
     KIND_ERROR,
     MAX_MEANINGFUL_RATIO,
     QUANTITY_DESCRIPTIONS,

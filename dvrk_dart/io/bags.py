@@ -1,4 +1,4 @@
-"""ROS bags in and out (rosbags: ROS 2 bags in MCAP or sqlite3 storage, ROS 1
+"""Reading ROS bags (rosbags: ROS 2 bags in MCAP or sqlite3 storage, ROS 1
 bags; no ROS installation needed).
 
 In: a bag of a dVRK arm is a measured run. The arm's `measured_js` and (a PSM)
@@ -6,18 +6,13 @@ the jaw's `jaw/measured_js` (sensor_msgs/JointState, dVRK joint names and units,
 as the arm's model card lists them in [dvrk_topics]) are read
 by joint name, put on a uniform time grid by cubic interpolation of their header
 stamps, and mapped to the identification model's coordinates (joints.py owns
-the map). Out: joint trajectories (a simulated run, an excitation) as the same
-topics and message types a real PSM publishes or accepts.
+the map). Writing them: `bag_writer.py`.
 """
 
 from __future__ import annotations
 
-import heapq
 import os
-import shutil
 import sys
-import uuid
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,7 +133,7 @@ def check_arm_namespace(namespace: str | None, card: DvrkTopics) -> None:
             raise DvrkDartError(f"--arm {namespace}: an arm of the {model} model, and these are the {card.namespace[:-1]}'s joints")
 
 
-def _first_line(exc: BaseException) -> str:
+def first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     if type(exc).__name__ == "AnyReaderError" and text:  # rosbags' wrapper of every reader's error: its name says nothing
         return text[0]
@@ -179,7 +174,7 @@ def read_topics(path: Path, topics: BagTopics, card: DvrkTopics) -> tuple[TopicS
         if _is_run_recording(path):
             raise DvrkDartError(f"{path}: a dvrk-dart run recording, not a ROS bag (`dvrk-dart export {path.parent} --bag BAG` "
                                 "writes its joint states as one)") from None
-        raise DvrkDartError(f"{path}: not a readable bag ({_first_line(exc)})") from None
+        raise DvrkDartError(f"{path}: not a readable bag ({first_line(exc)})") from None
 
 
 def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> TopicSamples:
@@ -284,137 +279,3 @@ def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = B
     data = pd.DataFrame(np.hstack([q, dq, tau]), columns=CSV_COLUMNS)
     data.insert(0, "t", grid_s)
     return MeasuredRun(path=path, data=data, model=model)
-
-
-# --- writing ------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class JointStates:
-    """One topic of joint states to write: names, times (s) and values (dVRK units);
-    velocity and effort may be None (commands carry positions only)."""
-
-    topic: str
-    names: tuple[str, ...]
-    t: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray | None = None
-    effort: np.ndarray | None = None
-
-
-def arm_joint_states(model: PsmModel, arm: str | None, t, q, dq=None, tau=None, suffix: str = "measured_js") -> list[JointStates]:
-    """The topics of `model`'s arm (its joints, then a PSM's jaw on its own
-    topic) from model-coordinate arrays (N, 7): mapped to the dVRK's joint values."""
-    card, motor_map = model.dvrk_topics, model.motor_map
-    arm = arm or card.namespace
-    position = motor_map.positions_to_dvrk(q)
-    velocity = None if dq is None else motor_map.positions_to_dvrk(dq)
-    effort = None if tau is None else motor_map.efforts_to_dvrk(tau)
-    k = len(card.arm_joints)
-
-    def part(cols):
-        return [None if a is None else a[:, cols] for a in (position, velocity, effort)]
-
-    t = np.asarray(t, dtype=float)
-    states = [JointStates(f"/{arm}/{suffix}", card.arm_joints, t, *part(slice(0, k)))]
-    if card.jaw_joints:
-        states.append(JointStates(f"/{arm}/jaw/{suffix}", card.jaw_joints, t, *part(slice(k, k + len(card.jaw_joints)))))
-    return states
-
-
-def _messages(typestore, states: JointStates, stamps_ns: np.ndarray, ros1: bool):
-    types = typestore.types
-    Time, Header, JointState = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"], types[JOINT_STATE]
-    empty = np.zeros(0)
-    for i, stamp in enumerate(stamps_ns):
-        stamp = int(stamp)
-        time = Time(sec=stamp // NS, nanosec=stamp % NS)
-        header = Header(seq=i, stamp=time, frame_id="") if ros1 else Header(stamp=time, frame_id="")
-        yield stamp, JointState(
-            header=header,
-            name=list(states.names),
-            position=np.ascontiguousarray(states.position[i], dtype=np.float64),
-            velocity=empty if states.velocity is None else np.ascontiguousarray(states.velocity[i], dtype=np.float64),
-            effort=empty if states.effort is None else np.ascontiguousarray(states.effort[i], dtype=np.float64),
-        )
-
-
-def _stream(order: int, connection, receive_ns: np.ndarray, messages) -> Iterator[tuple]:
-    for received, (_, msg) in zip(receive_ns, messages):
-        yield int(received), order, connection, msg
-
-
-def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = "mcap", stamps_ns: dict[str, np.ndarray] | None = None) -> Path:
-    """Write joint-state topics as a bag: a ROS 2 folder (mcap or sqlite3
-    storage) or a ROS 1 .bag file. Built beside `out` and moved there whole;
-    `out` must not exist (a bag is never replaced). `stamps_ns` overrides the
-    header stamps per topic (receive times stay t)."""
-    from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin
-    from rosbags.rosbag2 import Writer as Writer2
-    from rosbags.typesys import Stores, get_typestore
-
-    out = Path(out)
-    if storage not in STORAGES:
-        raise DvrkDartError(f"bag storage must be one of {', '.join(STORAGES)}, not '{storage}'")
-    if out.exists() or out.is_symlink():
-        raise DvrkDartError(f"{out}: exists; a bag is never overwritten (choose a new name or remove it)")
-    ros1 = storage == "ros1"
-    typestore = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    building = out.parent / f".{out.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    building.mkdir()
-    try:
-        target = building / out.name
-        if ros1:
-            writer = Writer1(target)
-        else:
-            plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-            writer = Writer2(target, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
-        serialize = typestore.serialize_ros1 if ros1 else typestore.serialize_cdr
-        with writer:
-            streams = []
-            for order, states in enumerate(topics):
-                connection = writer.add_connection(states.topic, JOINT_STATE, typestore=typestore)
-                receive_ns = np.round(np.asarray(states.t) * NS).astype(np.int64)
-                header_ns = receive_ns if stamps_ns is None or states.topic not in stamps_ns else stamps_ns[states.topic]
-                streams.append(_stream(order, connection, receive_ns, _messages(typestore, states, header_ns, ros1)))
-            # in time order across topics, as a recorder writes them (players replay in file order)
-            for received, _, connection, msg in heapq.merge(*streams, key=lambda item: (item[0], item[1])):
-                writer.write(connection, received, serialize(msg, JOINT_STATE))
-        if out.exists() or out.is_symlink():
-            raise DvrkDartError(f"{out}: written by another process meanwhile; a bag is never overwritten")
-        try:
-            os.replace(target, out)
-        except OSError:  # created between the check and the move
-            raise DvrkDartError(f"{out}: written by another process meanwhile; a bag is never overwritten") from None
-    finally:
-        shutil.rmtree(building, ignore_errors=True)
-    return out
-
-
-def export_run(run_dir: Path, out: Path, model: PsmModel, arm: str | None = None, storage: str = "mcap") -> Path:
-    """A simulated run folder -> a bag with the topics and types a real PSM
-    publishes: measured_js (position, velocity, the *simulated* effort) and
-    jaw/measured_js, stamped with the simulated time."""
-    from dvrk_dart.io.mcap_log import read_mcap
-
-    log = Path(run_dir) / "run.mcap"
-    if not log.is_file():
-        raise DvrkDartError(f"{run_dir}: no run.mcap (not a run folder)")
-    try:
-        record = read_mcap(log)
-    except DvrkDartError:
-        raise
-    except Exception as exc:
-        raise DvrkDartError(f"{log}: not a readable run log ({_first_line(exc)})") from None
-    if not len(record):
-        raise DvrkDartError(f"{log}: the run has no samples")
-    for label, values in (("q", record.q), ("dq", record.dq), ("effort_sim", record.effort_sim)):
-        bad = ~np.isfinite(values)
-        if bad.any():
-            k, j = np.argwhere(bad)[0]
-            raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
-    if storage == "ros1" and out.suffix != ".bag":
-        raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
-    return write_bag(out, arm_joint_states(model, arm, record.t, record.q, record.dq, record.effort_sim), storage)

@@ -4,7 +4,7 @@ analysis stage needs (it runs elsewhere, from the logs alone).
 `write_mcap` stores every array of a `RunRecord` as JSON messages, one message per
 sample and channel, stamped with the sample's simulation time (ns); config,
 metrics, markers and software versions go into MCAP metadata records.
-`read_mcap` rebuilds the RunRecord. JSON floats are written in their shortest
+`mcap_read.read_mcap` rebuilds the RunRecord. JSON floats are written in their shortest
 round-trip form (Arrow's, like `repr`; -0.0 keeps its sign), so the arrays come
 back bit-identical; non-finite values are written as `null` (valid JSON for
 Foxglove) and read back as NaN. Messages are built column-wise with Arrow and
@@ -38,12 +38,10 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 
 from dvrk_dart.errors import DvrkDartError
@@ -339,88 +337,3 @@ def write_mcap(record: RunRecord, path: str | os.PathLike, model: PsmModel) -> N
     ]
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:
         write_bulk(stream, schemas, channels, MessageEncoding.JSON, ns, metadata, library=f"dvrk_dart {versions['dvrk_dart']}")
-
-
-# ---------------------------------------------------------------- reading
-
-
-def _json_values(strings: dict[str, str]) -> dict:
-    return {k: json.loads(v) for k, v in strings.items()}
-
-
-def _pose_row(message: dict) -> list:
-    p, o = message["pose"]["position"], message["pose"]["orientation"]
-    return [p["x"], p["y"], p["z"], o["x"], o["y"], o["z"], o["w"]]
-
-
-def _array(values: list) -> np.ndarray:
-    """JSON lists back to float64; null (a non-finite value) becomes NaN."""
-    return np.array(values, dtype=float)
-
-
-def read_mcap(path: str | os.PathLike) -> RunRecord:
-    """Rebuild the RunRecord that `write_mcap` wrote (config/metrics come back as JSON types)."""
-    path = Path(path)
-    messages: dict[str, list[dict]] = {}
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        # file order, not log-time order: keeps equal stamps in the order they were written
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            messages.setdefault(channel.topic, []).append(json.loads(message.data))
-
-    run = metadata.get(METADATA_RUN)
-    if run is None or run.get("format") != FORMAT or TOPIC_SIM not in messages:
-        raise DvrkDartError(f"{path}: not a dvrk_dart run log (no '{METADATA_RUN}' metadata or no {TOPIC_SIM})")
-    if json.loads(run["joint_names"]) != _JOINT_NAMES:
-        raise DvrkDartError(f"{path}: joint names {run['joint_names']} differ from {_JOINT_NAMES}")
-    n = len(messages[TOPIC_SIM])
-    for topic, items in messages.items():
-        if len(items) != n:
-            raise DvrkDartError(f"{path}: {topic} has {len(items)} messages, {TOPIC_SIM} has {n}")
-
-    def joint_field(topic: str, key: str) -> np.ndarray | None:
-        items = messages.get(topic)
-        if not items or key not in items[0]["joints"][0]:
-            return None
-        return _array([[joint[key] for joint in m["joints"]] for m in items])
-
-    def efforts(topic: str) -> np.ndarray | None:
-        items = messages.get(topic)
-        return None if items is None else _array([m["effort"] for m in items])
-
-    def poses(topic: str) -> np.ndarray | None:
-        items = messages.get(topic)
-        if items is None:
-            return None
-        return _array([_pose_row(m) for m in items])
-
-    body_positions: dict[str, np.ndarray] = {}
-    if TOPIC_BODIES in messages:
-        items = messages[TOPIC_BODIES]
-        names = [b["name"] for b in items[0]["bodies"]]
-        xyz = _array([[[b["position"]["x"], b["position"]["y"], b["position"]["z"]] for b in m["bodies"]] for m in items])
-        body_positions = {name: xyz[:, k, :].copy() for k, name in enumerate(names)}
-
-    terms = [topic[len(TOPIC_MODEL_PREFIX):] for topic in messages if topic.startswith(TOPIC_MODEL_PREFIX)]
-    residual = messages.get(TOPIC_CLOSURE_RESIDUAL)
-    return RunRecord(
-        name=run["name"],
-        config=_json_values(metadata.get(METADATA_CONFIG, {})),
-        t=_array([m["t_s"] for m in messages[TOPIC_SIM]]),
-        q=joint_field(TOPIC_SIM, "position"),
-        dq=joint_field(TOPIC_SIM, "velocity"),
-        ddq=joint_field(TOPIC_SIM, "acceleration"),
-        effort_sim=joint_field(TOPIC_SIM, "effort"),
-        effort_model={term: efforts(TOPIC_MODEL_PREFIX + term) for term in terms if term != MODEL_TOTAL},
-        q_measured=joint_field(TOPIC_MEASURED, "position"),
-        dq_measured=joint_field(TOPIC_MEASURED, "velocity"),
-        effort_measured=joint_field(TOPIC_MEASURED, "effort"),
-        effort_command=efforts(TOPIC_COMMAND),
-        tool_pose=poses(TOPIC_TOOL_POSE),
-        tool_pose_ref=poses(TOPIC_TOOL_POSE_REF),
-        closure_residual_m=None if residual is None else _array([m["residual_m"] for m in residual]),
-        body_positions=body_positions,
-        markers={k: np.asarray(v, dtype=float) for k, v in _json_values(metadata.get(METADATA_MARKERS, {})).items()},
-        metrics=_json_values(metadata.get(METADATA_METRICS, {})),
-    )

@@ -180,7 +180,7 @@ def write_excitation(excitation: Excitation, folder, model: PsmModel, namespace:
     of servo_jp commands of `model`'s arm in `namespace`, the jaw on
     jaw/servo_jp) and excitation.json, in `folder`."""
     from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-    from dvrk_dart.io.bags import arm_joint_states, write_bag
+    from dvrk_dart.io.bag_writer import arm_joint_states, write_bag
     if Path(excitation.name).name != excitation.name or excitation.name in ("", ".", ".."):
         raise DvrkDartError(f"excitation name '{excitation.name}' cannot name a file")
     dvrk = model.motor_map.positions_to_dvrk(excitation.q)
