@@ -107,21 +107,36 @@ def cmd_force(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_session_floor(args: argparse.Namespace) -> int:
-    """The floor of the identified model's residual: two recordings of one trajectory."""
+@dataclass(frozen=True)
+class SessionFloorConfig:
+    """`session-floor`: two recordings of one trajectory in two sessions."""
+
+    measured: str
+    repeat: str
+    processing: str = "periodic"
+    topics: BagTopics = BagTopics()
+
+
+def session_floor(arm: Arm, config: SessionFloorConfig) -> dict:
+    """The floor of the identified model's residual: what changes between the two sessions, per joint."""
     from dvrk_dart.analysis.residual_floor import check_repeat, floor_table, processed_pair
 
-    arm = command_arm(args)
-    a, b = processed_pair((args.measured, args.repeat), args.processing, arm.model, reading_options(args))
+    a, b = processed_pair((config.measured, config.repeat), config.processing, arm.model, config.topics)
     try:
         check_repeat(a, b)
         table = floor_table(arm, a, b)
     except DvrkDartError as exc:
-        raise DvrkDartError(f"--repeat {args.repeat}: {exc}") from None
-    result = {"measured": args.measured, "repeat": args.repeat, **table,
-              "runs": {args.measured: a.summary(), args.repeat: b.summary()}}
+        raise DvrkDartError(f"--repeat {config.repeat}: {exc}") from None
+    return {"measured": config.measured, "repeat": config.repeat, **table,
+            "runs": {config.measured: a.summary(), config.repeat: b.summary()}}
+
+
+def cmd_session_floor(args: argparse.Namespace) -> int:
+    """The floor of the identified model's residual: two recordings of one trajectory."""
+    arm = command_arm(args)
+    table = session_floor(arm, SessionFloorConfig(args.measured, args.repeat, args.processing, reading_options(args)))
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(table))
         return 0
     print(f"identified model's residual, {args.measured} vs {args.repeat} ({args.processing} processing)")
     print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
