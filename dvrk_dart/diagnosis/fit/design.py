@@ -98,6 +98,8 @@ class Grams:
     s: np.ndarray  # (n_blocks, 7) squared residual before
     n: np.ndarray  # (n_blocks,) samples
     fold: np.ndarray  # (n_blocks,) fold index
+    #: (n_blocks, 7) periodic processing: the residual's noise energy one fitted direction absorbs (None: upstream)
+    noise: np.ndarray | None = None
 
     @staticmethod
     def of_run(design: Design, features: TrajectoryFeatures, residual: np.ndarray, folds: int, demean: np.ndarray | None = None,
@@ -130,11 +132,13 @@ class Grams:
     def scaled(self, weight: np.ndarray) -> "Grams":
         """The normal equations with joint j's rows weighted by weight[j] (squared residual units)."""
         w = np.asarray(weight, dtype=float)
-        return Grams(self.A * w[None, :, None, None], self.g * w[None, :, None], self.s * w[None, :], self.n, self.fold)
+        return Grams(self.A * w[None, :, None, None], self.g * w[None, :, None], self.s * w[None, :], self.n, self.fold,
+                     None if self.noise is None else self.noise * w[None, :])
 
     @staticmethod
     def concat(parts: list["Grams"]) -> "Grams":
-        return Grams(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("A", "g", "s", "n", "fold")))
+        noise = None if any(p.noise is None for p in parts) else np.concatenate([p.noise for p in parts])
+        return Grams(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("A", "g", "s", "n", "fold")), noise)
 
 
 @dataclass

@@ -6,7 +6,7 @@ and the runs' Gram blocks the selection works on."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -105,7 +105,25 @@ class Problem:
         return self.offset_joints if run.role is RunRole.DIFFERENCE else np.ones(N_JOINTS, dtype=bool)
 
     def grams_of(self, run: DiagnosisRun, columns: np.ndarray, folds: int) -> Grams:
-        return Grams.of_run(self.design, self.features_of(run), run.residual, folds, self.demean_of(run), columns)
+        grams = Grams.of_run(self.design, self.features_of(run), run.residual, folds, self.demean_of(run), columns)
+        noise = direction_noise(run)
+        return grams if noise is None else replace(grams, noise=np.tile(noise, (len(grams.s), 1)))
+
+
+def direction_noise(run: DiagnosisRun) -> np.ndarray | None:
+    """(7,) periodic processing: the noise energy of the run's residual along one
+    direction of its band (N sigma_proj^2 / (2H+1) per joint, the baseline's
+    added for a run minus its baseline); None upstream."""
+    def of(state):
+        p = state.periodic
+        if p is None:
+            return None
+        return (p.kept[1] - p.kept[0]) * np.nan_to_num(p.effort_noise.projected_rms) ** 2 / (2 * p.harmonics + 1)
+
+    own = of(run.state)
+    if own is None:
+        return None
+    return own + of(run.baseline.state) if run.role is RunRole.DIFFERENCE else own
 
 
 def _joint_weights(residual: np.ndarray) -> np.ndarray:
