@@ -134,7 +134,7 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
 def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, processing: str, with_baseline: bool) -> dict:
     """One diagnosis of the suite, judged."""
     result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
-                      max_effects=spec["max_effects"], figures=False, profile_payload_mass=False, processing=processing)
+                      figures=False, profile_payload_mass=False, processing=processing)
     used = RunProcessing(processing, result["processing"].get("harmonics"))
     floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
     verdict = judge_case(case, result, floor, spec["gap_tolerance"])
