@@ -7,6 +7,11 @@ OUT    ?= out
 RUNS   ?= $(OUT)/runs
 REPORT ?= report
 JOBS   ?= 2
+# Python writes its bytecode caches (.venv, dvrk_dart/__pycache__) the first time
+# it imports a module: with PYTHONDONTWRITEBYTECODE set (some shells and CI
+# images do) and pip's --no-compile, every process (test workers, the CLI
+# subprocesses, validate's workers) compiled every imported module again: ~2.5 s each
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: validate test bench report check-report view clean setup docs
 

@@ -94,19 +94,26 @@ def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, no
 
 
 def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunProcessing, with_baseline: bool,
-                     session_joints: np.ndarray) -> np.ndarray:
+                     session_joints: np.ndarray, known: dict | None = None) -> np.ndarray:
     """(7,) what the diagnosis's residual keeps when the injected effect is
     known exactly: the processed run against its simulation with the case's
     physics (minus, with a baseline, the baseline against the effect-free
     simulation, each joint that sessions move demeaned as the diagnosis does):
-    the noise of efforts and positions through the processing, the floor."""
-    def gap(path: Path, config: SimConfig) -> np.ndarray:
-        state = loaded_states([str(path)], arm.model, processing)[0]
-        return state.tau - simulated_efforts(arm, state, simulate, config)
+    the noise of efforts and positions through the processing, the floor.
+    `known`: the residuals already simulated, by run and band (a run's is the
+    same with and without a baseline when the band is)."""
+    known = {} if known is None else known
 
-    residual = gap(runs["measured"], runs["config"])
+    def gap(role: str, config: SimConfig) -> np.ndarray:
+        key = (str(runs[role]), processing.name, processing.harmonics)
+        if key not in known:
+            state = loaded_states([str(runs[role])], arm.model, processing)[0]
+            known[key] = state.tau - simulated_efforts(arm, state, simulate, config)
+        return known[key]
+
+    residual = gap("measured", runs["config"])
     if with_baseline:
-        difference = residual - gap(runs["baseline"], SimConfig())
+        difference = residual - gap("baseline", SimConfig())
         residual = difference - session_joints * difference.mean(axis=0)
     return rms(residual)
 
@@ -131,12 +138,13 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
             "floor": float(floor[joint]), "gap_within_noise": bool(gap_ok)}
 
 
-def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, processing: str, with_baseline: bool) -> dict:
-    """One diagnosis of the suite, judged."""
+def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, processing: str, with_baseline: bool,
+             known: dict | None = None) -> dict:
+    """One diagnosis of the suite, judged (`known`: `true_physics_gap`'s)."""
     result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
                       figures=False, profile_payload_mass=False, processing=processing)
     used = RunProcessing(processing, result["processing"].get("harmonics"))
-    floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()))
+    floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), known)
     verdict = judge_case(case, result, floor, spec["gap_tolerance"])
     return {"case": case["name"], "processing": processing, "baseline": with_baseline, **verdict,
             "words": (result.get("explanation") or {}).get("words")}
@@ -154,7 +162,8 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
     outcomes = []
     for case in cases:
         runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
-        outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline)
+        known: dict = {}
+        outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline, known)
                      for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
     summary = {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
                "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}
