@@ -10,7 +10,6 @@ import sys
 import threading
 from pathlib import Path
 
-
 from dvrk_dart import cli_parser
 from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
 from dvrk_dart.command_args import arm_model_file, command_arm, reading_options

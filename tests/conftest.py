@@ -9,6 +9,18 @@ from dvrk_dart.io.signal import process
 from arms import PSM, PSM_ARM  # noqa: F401
 
 
+#: the modules that keep a worker longest (a minute or more each): collected
+#: first, so that `make test`'s workers (xdist, a module each) start them
+#: first and do not end waiting on one of them
+LONGEST_FIRST = ("test_validation.py", "test_periodic_payload.py", "test_validation_payload.py", "test_diagnosis.py",
+                 "test_executors.py", "test_pipeline.py")
+
+
+def pytest_collection_modifyitems(items):
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest in their order
+
+
 @pytest.fixture(scope="session")
 def arm():
     return PSM_ARM
