@@ -13,7 +13,7 @@ from arms import PSM, PSM_ARM  # noqa: F401
 #: first, so that `make test`'s workers (xdist, a module each) start them
 #: first and do not end waiting on one of them
 LONGEST_FIRST = ("test_validation.py", "test_periodic_payload.py", "test_validation_payload.py", "test_diagnosis.py",
-                 "test_executors.py", "test_pipeline.py")
+                 "test_executors.py", "test_pipeline.py", "test_diagnose_combinations.py", "test_identification.py")
 
 
 def pytest_collection_modifyitems(items):
