@@ -30,7 +30,7 @@ def spec():
 
 
 def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
-    result, _ = validate_holdout(arm, {**spec["holdout"], "logs": False}, tmp_path)  # (no replay logs: nothing here reads them)
+    result, _ = validate_holdout(arm, {**spec["holdout"], "logs": False, "figures": False}, tmp_path)  # (nothing here reads logs or figures)
     assert result["gap_after_source"] == "simulation"  # every selected effect is simulator physics
     after, bar = np.array(result["gap_after"]["holdout"][:3]), np.array(result["identified_model_gap_holdout"][:3])
     before = np.array(result["gap_before"]["holdout"][:3])

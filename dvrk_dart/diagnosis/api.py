@@ -47,7 +47,8 @@ class DiagnosisConfig:
         uncertainty` folder; refit: refit the identified parameters on the
         training runs and judge them on the held-out ones; processing:
         upstream, periodic, or None (periodic where every run is periodic);
-        logs: the replays before and after as MCAP and Rerun logs."""
+        logs: the replays before and after as MCAP and Rerun logs; figures:
+        the residual's figures (diagnosis.html's, the report's)."""
 
     measured: tuple[str, ...]
     baseline: str | None = None
@@ -62,6 +63,7 @@ class DiagnosisConfig:
     jobs: int = 2
     ray_address: str | None = None
     logs: bool = True
+    figures: bool = True
     topics: BagTopics = BagTopics()
 
     def __post_init__(self) -> None:
@@ -134,7 +136,8 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     found = diagnose(c.measured_spec, baseline=c.baseline, train=list(c.train) or None, holdout=holdout or None,
                      simulate=simulation_hook(arm, c.executor, c.jobs, c.ray_address), out_dir=out_dir, arm=arm, repeat=c.repeat,
-                     payload_at=c.payload_at, processing=c.processing, base_config=base_sim_config(arm), topics=c.topics, write_json=False)
+                     payload_at=c.payload_at, processing=c.processing, base_config=base_sim_config(arm), topics=c.topics, write_json=False,
+                     figures=c.figures)
     if band is not None:
         found = apply_band(found, band)
     studies = (arm, training, holdout, found, c.executor, c.jobs, c.ray_address, c.topics)

@@ -74,7 +74,7 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
     key, position = hand_position_on_link(arm, spec)
     # no replay logs here: the held-out case writes them, and `make validate` has a time budget
     result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
-                                                processing=spec.get("processing", "upstream")), out_dir)
+                                                processing=spec.get("processing", "upstream"), figures=spec.get("figures", True)), out_dir)
     payload = result.get("payload")
     m_true, tol = spec["expected_mass_kg"], spec["mass_tolerance"]
     verdicts = [{"check": f"{title}: payload found on a {spec['expected_group']} link",
@@ -122,8 +122,9 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
     key, position = hand_position_on_link(arm, spec)
     estimates = {}
     for run in spec["measured"]:
+        # no figures: these diagnoses are read for their estimates only (the report shows the runs together)
         result = run_diagnosis(arm, DiagnosisConfig(run, spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
-                                                    processing=spec.get("processing", "upstream")), out_dir / run)
+                                                    processing=spec.get("processing", "upstream"), figures=False), out_dir / run)
         at = (result.get("payload") or {}).get("payload_at") or {}
         estimates[run] = {"mass_kg": at.get("mass_kg"), "interval": at.get("mass_kg_interval")}
     known = [e for e in estimates.values() if e["mass_kg"] is not None and e["interval"] is not None]

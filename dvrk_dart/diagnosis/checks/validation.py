@@ -77,7 +77,8 @@ def validate_insertion(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path | None = None) -> tuple[dict, list[dict]]:
     train, *others = spec["train"]
     config = DiagnosisConfig(train, train=others, holdout=spec["holdout"], repeat=spec.get("repeat"), parameter_band=parameter_band,
-                             processing=spec.get("processing", "upstream"), refit=bool(spec.get("refit", False)), logs=spec.get("logs", True))
+                             processing=spec.get("processing", "upstream"), refit=bool(spec.get("refit", False)), logs=spec.get("logs", True),
+                             figures=spec.get("figures", True))
     result = run_diagnosis(arm, config, out_dir)
     # the bar: the full identified model on the held-out runs, in the same band (api.identified_model_gap)
     bar = np.asarray(result["identified_model_gap_holdout"], dtype=float)

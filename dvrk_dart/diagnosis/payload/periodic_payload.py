@@ -180,7 +180,7 @@ class PayloadFit:
         se = np.sqrt(np.sum(a**2 * np.nan_to_num(self.scaled_residual) ** 2, axis=1))
         weights = a**2 / self.one_minus_leverage
         dof = np.sum(weights * self.one_minus_leverage, axis=1) ** 2 / np.maximum(
-            np.einsum("ki,ij,kj->k", weights, self.annihilator_squared, weights), 1e-300)
+            np.sum((weights @ self.annihilator_squared) * weights, axis=1), 1e-300)
         return value, se, np.maximum(dof, 1.0)
 
     def interval(self, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -261,7 +261,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
         residual = y - X @ (inverse @ (X.T @ (w * y)))
         # each residual over sqrt(1 - its leverage): the fit took that share of
         # it, most where the payload's own harmonics are (HC2, MacKinnon and White 1985)
-        leverage = np.minimum(np.einsum("ij,jk,ik->i", X, inverse, X) * w, 1.0 - 1e-9)
+        leverage = np.minimum(np.sum((X @ inverse) * X, axis=1) * w, 1.0 - 1e-9)
         squared = residual**2 / (1.0 - leverage)
         # the session term's spectrum, one for all pairs (every pair is a change of session); the noise of each pair its own
         session = np.maximum(np.mean([beyond_noise(squared[b:e].reshape(p.y.shape), p.noise)
