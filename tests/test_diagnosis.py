@@ -15,6 +15,7 @@ from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_di
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.joint_effects import (
+    AngleLoad,
     JointArmature,
     JointFriction,
     JointOffset,
@@ -40,6 +41,7 @@ from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.sim.config import JointEffects, SimConfig
 from arms import PSM
 
 #: the size of a blindly recovered effect must be within this relative error
@@ -146,6 +148,22 @@ def test_effects_to_sim_config_maps_each_field(arm):
     assert cfg.extra.offset[2] == -0.3 and cfg.extra.stiffness[3] == 0.002 and cfg.extra.armature[0] == 0.01
     assert cfg.gravity_tilt_rad == (0.01, -0.02)
     assert cfg.payloads[0].link == 4 and cfg.payloads[0].mass_kg == 0.105
+
+
+def test_the_pitch_angle_load_is_simulated_as_its_regressor_says(arm, segment):
+    """A load on J3 set by q2 (the library's angle_load_q3_by_q2) maps to the
+    simulator's explicit effort, on top of what the base already carries."""
+    state = segment.head(200)
+    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
+    load, p = AngleLoad(arm.model, "q3", "q2"), np.array([0.1, 0.2])
+    base = SimConfig(extra=JointEffects(directional_armature=(0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0)))
+    config = effects_to_sim_config([(load, p)], base)
+    assert config.extra.directional_armature == base.extra.directional_armature
+    added = config_effort_by_formula(arm, config, state.q, state.dq, state.ddq) - config_effort_by_formula(arm, base, state.q, state.dq, state.ddq)
+    assert np.max(np.abs(added - load.effort(features, p))) < 1e-12
+    assert np.max(np.abs(added[:, 2] - (0.1 * np.sin(state.q[:, 1]) + 0.2 * np.cos(state.q[:, 1])))) < 1e-12
+    assert load.name in {e.name for e in candidate_effects(arm)}
 
 
 # ------------------------------------------------------ blind recoveries

@@ -55,6 +55,7 @@ class SimContribution:
     coulomb_presliding: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
     link_friction: tuple[tuple[float, ...], ...] = ()
     position_friction: tuple[tuple[float, ...], ...] = ()
+    angle_load: tuple[tuple[float, ...], ...] = ()
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
 

@@ -319,3 +319,38 @@ class JointArmature(Effect):
         c = SimContribution()
         c.armature[self.joint_index] = p[0]
         return c
+
+
+class AngleLoad(Effect):
+    """An effort on one coordinate set by another's angle, c_sin sin(q_s) +
+    c_cos cos(q_s), whatever the motion's direction: a cable or harness between
+    the base and a link, a belt of the parallelogram (the pitch-angle loads of
+    diagnosis/beyond/). Not gravity, which also turns with the other joints.
+    Simulation: the simulator's explicit effort (SimConfig.extra.angle_load)."""
+
+    kind = "load"
+
+    def __init__(self, model, joint: str, source: str):
+        self.joint_index, self.source_index = JOINT_NAMES.index(joint), JOINT_NAMES.index(source)
+        self.joints = (joint,)
+        self.name = f"angle_load_{joint}_by_{source}"
+        eu = model.effort_unit(joint)
+        self.parameters = (Parameter(f"sin_{source}", eu), Parameter(f"cos_{source}", eu))
+
+    @property
+    def family(self) -> str:
+        return f"angle_load_{self.joints[0]}"
+
+    def columns(self, features):
+        angle = features.q[:, self.source_index]
+        out = np.zeros((len(features), N_JOINTS, 2))
+        out[:, self.joint_index, :] = np.column_stack([np.sin(angle), np.cos(angle)])
+        return out
+
+    def sim_contribution(self, p):
+        c = SimContribution()
+        c.angle_load = ((float(self.joint_index), float(self.source_index), float(p[0]), float(p[1])),)
+        return c
+
+    def size(self, p) -> float:
+        return float(np.hypot(p[0], p[1]))

@@ -18,6 +18,7 @@ from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.effects.geometry import ENVELOPE_MARGIN_M, link_envelope
 from dvrk_dart.diagnosis.effects.joint_effects import (
     CABLE_ELASTICITY_JOINTS,
+    AngleLoad,
     REVERSAL_VELOCITIES,
     TORSION_SPRING_JOINT,
     JointArmature,
@@ -41,8 +42,8 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
-from dvrk_dart.sim.config import JointEffects, Payload, SimConfig, position_load_effort, position_load_table, simulated_terms
+from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
+from dvrk_dart.sim.config import Payload, SimConfig, position_load_effort, position_load_table, simulated_terms
 
 #: the joints whose friction may change along their range (the arm joints: a
 #: guide or a capstan; the wrist's cables run over pulleys at fixed radius)
@@ -79,6 +80,8 @@ def candidate_effects(
     effects += [JointOffset(arm.model, j) for j in JOINT_NAMES]
     effects += [JointStiffness(arm.model, j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
     effects += [JointArmature(arm.model, j) for j in JOINT_NAMES]
+    if JOINT_NAMES[INSERTION] in arm.model.prismatic_coordinates:  # a load on the insertion set by the pitch (the PSM's; the MTM has no insertion)
+        effects.append(AngleLoad(arm.model, JOINT_NAMES[INSERTION], JOINT_NAMES[PITCH]))
     equivalents = equivalent_payload_links(arm)
     if payload_model == "point":
         effects += [PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)]
@@ -103,7 +106,7 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
     }
     payloads = list(base.payloads)
-    link_friction, position_friction = list(extra.link_friction), list(extra.position_friction)
+    link_friction, position_friction, angle_load = list(extra.link_friction), list(extra.position_friction), list(extra.angle_load)
     tilt = np.array(base.gravity_tilt_rad, dtype=float)
     for effect, p in selected:
         contribution = effect.sim_contribution(np.asarray(p, dtype=float))
@@ -114,9 +117,10 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         payloads += list(contribution.payloads)
         link_friction += list(contribution.link_friction)
         position_friction += list(contribution.position_friction)
+        angle_load += list(contribution.angle_load)
         tilt += contribution.gravity_tilt_rad
-    new_extra = JointEffects(**{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction),
-                           position_friction=tuple(position_friction))
+    new_extra = replace(extra, **{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction),
+                        position_friction=tuple(position_friction), angle_load=tuple(angle_load))
     return replace(base, extra=new_extra, payloads=tuple(payloads), gravity_tilt_rad=(float(tilt[0]), float(tilt[1])))
 
 
