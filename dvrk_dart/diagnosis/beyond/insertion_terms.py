@@ -224,10 +224,12 @@ def insertion_sentence(study: dict) -> str:
     share = study["repeatable_gap_removed_share"]
     removed = "" if share is None else f" ({share_words(share)} of its repeatable gap removed)"
     less, more = ("less", "more") if c["acceleration_along_motion_kg"] < 0.0 else ("more", "less")
+    carried = "" if study["gap_holdout_simulated"] < study["gap_holdout_identified"] else (
+        ": they do not carry to the held-out runs, and what J3's gap is made of is not determined by these runs")
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
             f"({c['acceleration_along_motion_kg']:+.3f} kg: {less} effort than the model while speeding up, {more} while slowing down) and "
             f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2 {c['pitch_load_cos_q2']:+.3f} N cos q2), fitted on the training runs "
             "and simulated in DART, leave J3 at "
             f"{study['gap_holdout_simulated']:.3f} N on the held-out runs{removed}; the identified model leaves "
-            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N.")
+            f"{study['gap_holdout_identified']:.3f} N, J3's own friction refitted alone {study['gap_holdout_own_friction']:.3f} N{carried}.")
 

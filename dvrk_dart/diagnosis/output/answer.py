@@ -94,6 +94,9 @@ def beyond_identified_sentence(result: dict) -> str:
         return ""
     shown = [j for j in range(ANSWER_JOINTS) if bar[j] is not None and after[j] is not None]
     gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
+    worse = [JOINT_NAMES[j] for j in shown if after[j] > bar[j]]
+    if worse:
+        gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
@@ -176,8 +179,11 @@ def _insertion_clause(result: dict) -> str:
     together = "" if not combined else (
         "; with the effects above and the loads the pitch angle sets on q1 and q2, in one simulation: "
         + ", ".join(f"{name} {gap:.3g} {_unit(result, name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
-    return (f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at "
-            f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N){together}.")
+    left = f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N)"
+    if study["gap_holdout_simulated"] >= study["gap_holdout_identified"]:  # fitted, but not what the held-out runs show
+        return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) do not carry "
+                f"to the held-out runs: simulated, they leave J3 at {left}; what J3's gap is made of is not determined by these runs{together}.")
+    return f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at {left}{together}."
 
 
 def offset_joints_sentence(offset_joints: dict) -> str:
