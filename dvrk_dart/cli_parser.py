@@ -94,10 +94,27 @@ def build_parser(commands) -> argparse.ArgumentParser:
     """The parser of every command; `commands` holds the cmd_* functions (dvrk_dart.cli)."""
     parser = OneLineParser(prog="dvrk-dart", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True)
+    for add_command in COMMANDS:
+        add_command(sub, commands)
+    return parser
 
+
+def _add_sim_options(p: argparse.ArgumentParser) -> None:
+    """The simulation's options of `run` and `replay`."""
+    p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
+                   help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
+    p.add_argument("--dt", type=number_in(MIN_STEP_S, MAX_STEP_S, "s"), default=1e-3, help="simulation step (s)")
+    p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
+    p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
+                   help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
+                        "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
+    _add_arm_options(p)
+
+
+def _model_errors_command(sub, commands) -> None:
     p = sub.add_parser("model-errors", help="errors of the identified model on a measured run")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
-    p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: 1111 samples, as upstream; periodic: the fitted period)")
+    p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: the arm model card's, as the identification used it; periodic: the fitted period)")
     _add_processing_option(p, None, excitation=True)
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -105,6 +122,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_model_errors)
 
+
+def _force_command(sub, commands) -> None:
     p = sub.add_parser("force", help="the force at the instrument the measured efforts imply (in free motion: the model's phantom force)")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--dynamics", default="identified", metavar="inertial|identified|DIAGNOSIS.json",
@@ -117,6 +136,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_force)
 
+
+def _session_floor_command(sub, commands) -> None:
     p = sub.add_parser("session-floor", help="the floor of the identified model's residual from two recordings of one trajectory")
     p.add_argument("--measured", type=measured_run, required=True, help=f"a measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--repeat", type=measured_run, required=True, help="the same trajectory recorded in another session")
@@ -126,6 +147,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_session_floor)
 
+
+def _identify_command(sub, commands) -> None:
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
     p.add_argument("--runs", type=measured_run, nargs="+", required=True, help=f"training runs: paths, or {PSM_RUN_NAMES}")
     p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs, scored only")
@@ -147,6 +170,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_config_option(p)
     p.set_defaults(func=commands.cmd_identify)
 
+
+def _import_command(sub, commands) -> None:
     p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
     p.add_argument("bag", help="rosbag2 folder, .mcap or .db3 file, or ROS 1 .bag")
     p.add_argument("--out", required=True, help="the CSV to write (21 columns, model coordinates, 200 Hz)")
@@ -154,6 +179,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_import)
 
+
+def _export_command(sub, commands) -> None:
     p = sub.add_parser("export", help="a simulated run -> a ROS 2 bag (MCAP) like a real PSM's recording")
     p.add_argument("run_dir", help="a run folder (run.mcap)")
     p.add_argument("--bag", required=True, help="the bag to write (a rosbag2 folder; a .bag file with --storage ros1)")
@@ -161,6 +188,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--storage", default="mcap", choices=("mcap", "sqlite3", "ros1"), help="rosbag2 storage, or a ROS 1 bag")
     p.set_defaults(func=commands.cmd_export)
 
+
+def _excitation_command(sub, commands) -> None:
     p = sub.add_parser("excitation", help="a trajectory to play on a dVRK: CSV + ROS 2 bag of servo_jp")
     p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
     p.add_argument("--out", required=True, help="output folder")
@@ -168,27 +197,23 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--rate", type=RATE_HZ, default=None, help="command rate (Hz, default 200)")
     p.set_defaults(func=commands.cmd_excitation)
 
+
+def _model_check_command(sub, commands) -> None:
     p = sub.add_parser("model-check", help="parameter oddities and model facts")
     _add_arm_options(p)
     p.set_defaults(func=commands.cmd_model_check)
 
-    def sim_options(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
-                       help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
-        p.add_argument("--dt", type=number_in(MIN_STEP_S, MAX_STEP_S, "s"), default=1e-3, help="simulation step (s)")
-        p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
-        p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
-                       help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
-                            "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
-        _add_arm_options(p)
 
+def _run_command(sub, commands) -> None:
     p = sub.add_parser("run", help="run one scenario variant")
     p.add_argument("scenario", help="scenario name (pipelines/scenarios/) or .toml file")
     p.add_argument("--mode", choices=MODES, help="default: the scenario's first mode")
     p.add_argument("--out", required=True, help="output folder of the run")
-    sim_options(p)
+    _add_sim_options(p)
     p.set_defaults(func=commands.cmd_run)
 
+
+def _replay_command(sub, commands) -> None:
     p = sub.add_parser("replay", help="replay a measured run in the simulator")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     _add_bag_options(p)
@@ -198,10 +223,12 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (default out/runs/<run name>)")
     _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
                                     "excitation, else upstream (said in the output)")
-    sim_options(p)
+    _add_sim_options(p)
     _add_config_option(p)
     p.set_defaults(func=commands.cmd_replay)
 
+
+def _validate_command(sub, commands) -> None:
     p = sub.add_parser("validate", help="the whole validation campaign, report and diagnosis")
     p.add_argument("--out", default="out", help="output folder (runs in OUT/runs)")
     p.add_argument("--report", default="report", help="report folder")
@@ -212,6 +239,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _executor_options(p)
     p.set_defaults(func=commands.cmd_validate)
 
+
+def _uncertainty_command(sub, commands) -> None:
     p = sub.add_parser("uncertainty", help="Monte Carlo over parameter uncertainty: effort bands of a replay")
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--samples", type=int_in(2, MAX_SAMPLES, "each is a replay; a band settles within hundreds"), default=64, help="parameter sets drawn (at least 2: a band)")
@@ -230,6 +259,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_config_option(p)
     p.set_defaults(func=commands.cmd_uncertainty)
 
+
+def _report_command(sub, commands) -> None:
     p = sub.add_parser("report", help="build the validation report from a folder of runs")
     p.add_argument("--runs", required=True, help="folder of run folders (<run>/run.mcap)")
     p.add_argument("--out", required=True, help="report folder")
@@ -238,6 +269,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
     p.add_argument("--allow-unreadable", action="store_true", help="report without the run folders that cannot be read (listed in the report); without it they refuse the report")
     p.set_defaults(func=commands.cmd_report)
 
+
+def _diagnose_command(sub, commands) -> None:
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
     p.add_argument("--measured", type=measured_run, required=True, nargs="+",
                    help=f"measured run(s): path, or {PSM_RUN_NAMES}; several: one set of effects for all")
@@ -258,7 +291,25 @@ def build_parser(commands) -> argparse.ArgumentParser:
     _add_bag_options(p)
     _add_config_option(p)
     p.set_defaults(func=commands.cmd_diagnose)
-    return parser
+
+
+#: every command's parser, in the order `--help` lists them
+COMMANDS = (
+    _model_errors_command,
+    _force_command,
+    _session_floor_command,
+    _identify_command,
+    _import_command,
+    _export_command,
+    _excitation_command,
+    _model_check_command,
+    _run_command,
+    _replay_command,
+    _validate_command,
+    _uncertainty_command,
+    _report_command,
+    _diagnose_command,
+)
 
 
 #: the commands that take many options, and so `--config FILE.toml` (option = value, e.g. baseline = "one-no-weight")
