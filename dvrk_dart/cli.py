@@ -4,6 +4,7 @@ and exit code 2 (no traceback)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -232,6 +233,16 @@ def _repeated_option(argv: list[str]) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    args = _parse(argv)
+    if isinstance(args, int):  # --help, or a usage error already said in one line
+        return args
+    interrupted.clear()  # (main may run several times in one process: the tests)
+    with _signals_handled():
+        return _run(args)
+
+
+def _parse(argv: list[str]) -> argparse.Namespace | int:
+    """The command's options (a --config file's among them), or the exit code of a usage error."""
     repeated = _repeated_option(argv)
     if repeated:
         print(f"dvrk-dart: {repeated}: given twice (an option takes its values once: {repeated} A B where it takes several)",
@@ -239,27 +250,47 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     parser = build_parser()
     try:
-        args = parser.parse_args(cli_parser.expand_config(argv, parser))
+        return parser.parse_args(cli_parser.expand_config(argv, parser))
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
     except DvrkDartError as exc:  # --config FILE.toml
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return 2
-    interrupted.clear()  # (main may run several times in one process: the tests)
+
+
+@contextlib.contextmanager
+def _signals_handled():
+    """SIGTERM and SIGINT end the command with its partial outputs removed (in the main thread)."""
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
     # (an ignored SIGINT, as under nohup, stays ignored)
     previous_interrupt = signal.signal(signal.SIGINT, _interrupt) if main_thread and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN else None
     try:
-        if getattr(args, "executor", None) == "ray":
-            from dvrk_dart.runs.executors import check_ray_address
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        if previous_interrupt is not None:
+            signal.signal(signal.SIGINT, previous_interrupt)
 
-            check_ray_address(args.ray_address)
-        cli_parser.check_combinations(args)
-        _check_outputs_apart_from_inputs(args)
-        _check_arm_of_reference_runs(args)
-        if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
-            _check_bag_options(args)
+
+def _check(args: argparse.Namespace) -> None:
+    """What argparse cannot check alone: the Ray address, combinations, outputs apart from inputs, the runs' arm, bag options."""
+    if getattr(args, "executor", None) == "ray":
+        from dvrk_dart.runs.executors import check_ray_address
+
+        check_ray_address(args.ray_address)
+    cli_parser.check_combinations(args)
+    _check_outputs_apart_from_inputs(args)
+    _check_arm_of_reference_runs(args)
+    if hasattr(args, "jaw_topic"):  # a command that reads measured runs, which may be bags
+        _check_bag_options(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command, its failures as one line and an exit code."""
+    try:
+        _check(args)
         code = args.func(args)
         raise_if_interrupted()  # a Ctrl-C swallowed on the way: the outputs were not committed after it
         return code
@@ -289,11 +320,6 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
         return 130
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-        if previous_interrupt is not None:
-            signal.signal(signal.SIGINT, previous_interrupt)
 
 
 if __name__ == "__main__":
