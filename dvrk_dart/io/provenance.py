@@ -39,7 +39,9 @@ def _git_state() -> tuple[str, str]:
 
     def git(*args: str) -> str | None:
         try:
-            done = subprocess.run(["git", *args], cwd=here, capture_output=True, text=True, timeout=10)
+            # --no-optional-locks: `status` would refresh the index under .git/index.lock, which a
+            # process ended mid-way (Ctrl-C, a timeout) left behind in the user's repository
+            done = subprocess.run(["git", "--no-optional-locks", *args], cwd=here, capture_output=True, text=True, timeout=10)
         except (OSError, subprocess.SubprocessError):
             return None
         return done.stdout.strip() if done.returncode == 0 else None
