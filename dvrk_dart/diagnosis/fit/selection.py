@@ -27,7 +27,8 @@ Selection (`diagnose`):
   pure Cp score let richer effects in that did not carry to the held-out
   trajectory, "two" J3 0.080 -> 0.113 N);
 - greedy forward selection adds the effect with the best held-out score (or a
-  simpler one, fewer parameters, not significantly worse) while the gain is at
+  simpler one, fewer parameters, not significantly worse and with 90 % of its
+  gain) while the gain is at
   least MIN_HELDOUT_GAIN and positive with bootstrap confidence, refusing a
   candidate that makes a selected effect unstable across folds (collinear);
   at most one effect of a family is selected (a joint's friction with a sharp
@@ -71,6 +72,11 @@ INTERVAL_QUANTILES = (0.05, 0.95)
 MIN_HELDOUT_GAIN = 0.005
 #: ... and its gain is positive in all but this fraction of bootstrap resamples
 GAIN_FAILURE_QUANTILE = 0.05
+#: a simpler rival must also bring at least this share of the best candidate's
+#: gain: "not significantly worse" alone let rivals in at a third of the best's
+#: gain where the bootstrap over a few blocks is wide (an armature for a
+#: payload, a payload for J3's stroke friction)
+PARSIMONY_GAIN_SHARE = 0.9
 #: an effect is not separable from the others when its fitted effort varies
 #: from fold to fold by more than this fraction of its size (weighted norm);
 #: a candidate that makes an already selected effect that unstable is refused
@@ -180,8 +186,8 @@ class Selector:
 
     def _parsimonious(self, trials: dict[int, CvResult], current: CvResult) -> int:
         """The best-scoring candidate, unless one with fewer parameters is not
-        significantly worse (bootstrap) and itself worth adding (gain at least
-        MIN_HELDOUT_GAIN): then the simplest of those (an offset before a
+        significantly worse (bootstrap), brings PARSIMONY_GAIN_SHARE of its gain
+        and is itself worth adding (gain at least MIN_HELDOUT_GAIN): then the simplest of those (an offset before a
         payload that mimics it over a small range of motion). A simpler rival
         below the bar must not stop the selection before a better candidate
         that clears it (a payload behind a 1-parameter effect that adds less)."""
@@ -189,8 +195,10 @@ class Selector:
         best_boot = self.bootstrap_fractions(trials[best].after)
         n_par = lambda i: self.design.effects[i].n_seen_parameters
         rivals = []
+        best_gain = trials[best].fraction - current.fraction
         for i, t in trials.items():
-            if n_par(i) < n_par(best) and t.fraction - current.fraction >= MIN_HELDOUT_GAIN:
+            gain = t.fraction - current.fraction
+            if n_par(i) < n_par(best) and gain >= MIN_HELDOUT_GAIN and gain >= PARSIMONY_GAIN_SHARE * best_gain:
                 worse = best_boot - self.bootstrap_fractions(t.after)
                 if np.mean(worse <= 0.0) > GAIN_FAILURE_QUANTILE:
                     rivals.append(i)
