@@ -71,3 +71,9 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
     assert "worse than the identified model on q3:" in beyond_identified_sentence(result)
     result["one_configuration"]["gap_holdout"][2] = 0.15
     assert "worse" not in beyond_identified_sentence(result)
+
+
+def test_the_pitch_angle_load_in_words():
+    from dvrk_dart.diagnosis.output.answer import plain_name
+
+    assert plain_name({"name": "angle_load_q3_by_q2", "kind": "load", "joints": ["q3"]}).startswith("a load on q3 set by q2's angle")

@@ -51,6 +51,8 @@ def plain_name(entry: dict) -> str:
         return f"{'Stribeck ' if name.startswith('stribeck') else ''}friction of {joints}{how}"
     if kind == "elastic":
         return f"{'a torsion spring' if name.startswith('torsion') else 'cable elasticity'} on {joints}"
+    if kind == "load":  # AngleLoad: angle_load_<joint>_by_<source>
+        return f"a load on {joints} set by {name.split('_by_')[-1]}'s angle, whatever the motion's direction (a cable, a harness)"
     if kind in ("payload", "payload_at_position"):
         link = name.split("_on_")[-1].split("_at_")[-1]
         return f"a payload on the {link} link"
