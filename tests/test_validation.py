@@ -52,9 +52,9 @@ def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
 
 
 def test_synthetic_injections_generated_by_the_simulator_are_found_blind(arm, spec, tmp_path):
-    summary, verdicts = validate_synthetic(arm, spec["synthetic"], tmp_path)
-    failed = [v for v in verdicts if not v["passed"]]
-    assert not failed, failed
+    summary, _ = validate_synthetic(arm, spec["synthetic"], tmp_path)
+    for case in summary["cases"]:  # the injected effect first, its size within the 20 %
+        assert case["ranked_first"] and case["size_error"] <= 0.20, case
     assert {c["case"] for c in summary["cases"]} >= {"friction_q2", "gravity_tilt"}  # the others are in the blind suite
 
 
