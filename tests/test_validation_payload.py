@@ -8,6 +8,7 @@ import tomllib
 import pytest
 
 from dvrk_dart.diagnosis.checks.payload_checks import HAND_CHECK_FILE
+from dvrk_dart.diagnosis.output.answer import answer_sentence
 from dvrk_dart.diagnosis.checks.validation import WITHHELD_FILE, validate_insertion, validate_payload
 
 #: the scale's weight (kg) and the issue's tolerance on a mass
@@ -137,3 +138,18 @@ def test_the_same_weight_gives_the_same_efforts_in_one_run_or_two(arm, tmp_path)
     for key, index in (("gravity_efforts_at_q0", 0), ("gravity_efforts_at_q0", 1), ("q1_gravity_slope_at_q0_nm_per_rad", None)):
         a, b = (p[key] if index is None else p[key][index] for p in (one, two))
         assert a * b > 0.0 and abs(a / b - 1.0) <= 0.3, (key, index, a, b)
+
+
+def test_the_null_pair_reports_no_payload(arm, spec, tmp_path):
+    """Two sessions without any weight (one-no-weight against one, the hand
+    position of the pitch link given): no payload, and J1's and J2's gravity
+    efforts at q = 0 of the payload-shaped fit hold zero in their intervals."""
+    from dvrk_dart.diagnosis.checks.payload_checks import validate_null_pair
+
+    result, _ = validate_null_pair(arm, spec["null_pair"], tmp_path)
+    assert result["payload"] is None
+    fit = result["payload_not_distinguished"]
+    for part in (fit, fit["payload_at"]):
+        for low, high in part["gravity_efforts_at_q0_interval"][:2]:
+            assert low <= 0.0 <= high, part["gravity_efforts_at_q0_interval"][:2]
+    assert "a payload on" not in answer_sentence(result).split(":")[0]  # the answer's lead names none

@@ -20,6 +20,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.api import DiagnosisConfig, run_diagnosis
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
+from dvrk_dart.diagnosis.output.answer import answer_sentence
 from dvrk_dart.diagnosis.payload.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
@@ -134,3 +135,26 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
     return estimates, [{"check": f"the same {spec['expected_mass_kg'] * 1000:g} g at two speeds ({', '.join(spec['measured'])}), each "
                                  "diagnosed alone: masses at the hand position agree within their intervals",
                         "passed": bool(agree), "value": value}]
+
+
+def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
+    """Two sessions of one motion, no weight in either (the issue's null pair):
+    no payload reported, the answer's first sentence names none, and every
+    J1/J2 gravity effort at q = 0 that the payload-shaped fit gives (its own
+    and at the hand position) has an interval holding zero, or none with the reason."""
+    key, position = hand_position_on_link(arm, spec)
+    result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], payload_at=(key, position), logs=False, figures=False,
+                                                processing=spec.get("processing")), out_dir)
+    first = answer_sentence(result).split(":")[0]
+    fit = result.get("payload") or result.get("payload_not_distinguished") or {}
+    rows = [("the payload-shaped fit", fit), ("at the hand position", fit.get("payload_at") or {})]
+    intervals = [(f"{where}, q{j + 1}", (part.get("gravity_efforts_at_q0_interval") or [None, None])[j]) for where, part in rows for j in (0, 1)]
+    open_intervals = [f"{name} [{i[0]:+.3f}, {i[1]:+.3f}]" if i else f"{name}: none" for name, i in intervals]
+    reasons = fit.get("not_determined", {})
+    holds = all((i is not None and i[0] <= 0.0 <= i[1]) or (i is None and bool(reasons)) for _, i in intervals)
+    verdicts = [{"check": "null pair (one-no-weight against one, no weight in either): no payload reported", "passed": result.get("payload") is None,
+                 "value": "none" if result.get("payload") is None else f"a payload on {result['payload']['link']}"},
+                {"check": "null pair: the answer's first sentence names no payload", "passed": "a payload on" not in first, "value": first},
+                {"check": "null pair: every J1/J2 gravity effort at q = 0 holds zero in its interval, or is null with the reason", "passed": holds,
+                 "value": "; ".join(open_intervals) or "no payload-shaped fit"}]
+    return result, verdicts

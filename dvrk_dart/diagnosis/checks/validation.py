@@ -32,7 +32,7 @@ from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
 from dvrk_dart.io.html import render, table, text_cell
 from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
-from dvrk_dart.diagnosis.checks.payload_checks import validate_payload_speeds, validate_real_payload
+from dvrk_dart.diagnosis.checks.payload_checks import validate_null_pair, validate_payload_speeds, validate_real_payload
 from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
 from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
@@ -177,7 +177,7 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 #: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
 #: they run side by side, each in its own process
 WITHHELD_STEPS = ("blind_suite_periodic", "blind_suite_upstream", "payload", "mtm_holdout", "holdout", "holdout_2018", "synthetic",
-                  "payload_speeds", "insertion", "out_of_library")
+                  "payload_speeds", "insertion", "null_pair", "out_of_library")
 #: the blind effect suite runs as one step per processing (side by side)
 BLIND_SUITE_STEPS = {"blind_suite_upstream": "upstream", "blind_suite_periodic": "periodic"}
 
@@ -187,7 +187,7 @@ def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], flo
     name, out_dir, parameter_band = task
     step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout, "holdout_2018": validate_holdout,
             "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library,
-            "payload_speeds": validate_payload_speeds, **dict.fromkeys(BLIND_SUITE_STEPS, validate_blind_suite)}[name]
+            "payload_speeds": validate_payload_speeds, "null_pair": validate_null_pair, **dict.fromkeys(BLIND_SUITE_STEPS, validate_blind_suite)}[name]
     start = time.perf_counter()
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
     tables = tomllib.loads(WITHHELD_FILE.read_text())
