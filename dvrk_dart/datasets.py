@@ -67,6 +67,16 @@ def own_identification(dataset: Dataset, processing: str, out_dir: Path, identif
     return folder
 
 
+def identify_datasets(out_dir: Path, identified: dict) -> dict:
+    """Every dataset's own identifications (each processing) not in `identified`, made in
+    out_dir/<dataset>/: they need no diagnosis, so `make validate` makes them beside the diagnoses."""
+    made = dict(identified)
+    for dataset in load_datasets():
+        for p in PROCESSINGS:
+            made[(tuple(dataset.train), (dataset.holdout,), p)] = own_identification(dataset, p, out_dir / dataset.name, identified)
+    return made
+
+
 def own_identification_rms(dataset: Dataset, folder: Path) -> list[float | None]:
     """The held-out run's whole-run RMS of an identification folder."""
     from dvrk_dart.identification.outputs import SUMMARY_FILE

@@ -50,8 +50,17 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
 
 
 def _independent_sections(out_dir: Path, runs_dir: Path) -> tuple:
-    """The identification and periodic sections (they need the campaign, not the diagnosis)."""
-    return _identification_section(out_dir), _periodic_section(out_dir, runs_dir)
+    """The identification and periodic sections and every dataset's own identifications
+    (they need the campaign, not the diagnosis)."""
+    from dvrk_dart.datasets import identify_datasets
+
+    identified = identify_datasets(out_dir / "datasets", _identified_2019(out_dir))
+    return _identification_section(out_dir), _periodic_section(out_dir, runs_dir), identified
+
+
+def _identified_2019(out_dir: Path) -> dict:
+    """The identification section's folders (one -> two, both processings): the 2019 dataset's rows."""
+    return {(("one",), ("two",), processing): out_dir / folder for processing, folder in IDENTIFICATION_FOLDERS.items()}
 
 
 def _periodic_section(out_dir: Path, runs_dir: Path):
@@ -68,13 +77,11 @@ def _periodic_section(out_dir: Path, runs_dir: Path):
     return section
 
 
-def _datasets_section(out_dir: Path):
-    """Every real PSM dataset's held-out figures side by side (dvrk_dart/datasets.py)."""
+def _datasets_section(out_dir: Path, identified: dict):
+    """Every real PSM dataset's held-out figures side by side (dvrk_dart/datasets.py); `identified`: `identify_datasets`'."""
     from dvrk_dart.datasets import datasets_section
     from dvrk_dart.io.arm import load_arm
 
-    # the identification section's (one -> two, both processings) serve the 2019 dataset's rows
-    identified = {(("one",), ("two",), processing): out_dir / folder for processing, folder in IDENTIFICATION_FOLDERS.items()}
     return datasets_section(load_arm(DEFAULT_MODEL_FILE), out_dir / "datasets", out_dir / "diagnosis", identified)
 
 
@@ -179,8 +186,8 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     with ProcessPoolExecutor(max_workers=1) as beside:  # what needs no diagnosis, while the diagnoses run
         independent = beside.submit(_independent_sections, out_dir, runs_dir)
         section = validation_section(diagnosis_dir, parameter_band=out_dir / "uncertainty", jobs=jobs)
-        identification, periodic = independent.result()
-    datasets = _datasets_section(out_dir)
+        identification, periodic, identified = independent.result()
+    datasets = _datasets_section(out_dir, identified)
     contact, contact_verdict = _contact_section(out_dir)
     after = _campaign([c for c in configs if needs_diagnosis(c)], runs_dir, jobs, force, "diagnosed runs", executor, ray_address)
     summary["ran"] += after["ran"]
