@@ -1,4 +1,4 @@
-"""The gap diagnosis: effect regressors, blind recovery of injected effects,
+"""The gap diagnosis: blind recovery of injected effects,
 the withheld 105 g payload, the regime tables and the diagnosis.json contract.
 
 Synthetic runs: the identified inertial model at a real measured state (two
@@ -11,18 +11,16 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_directions
+from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.joint_effects import (
-    AngleLoad,
     JointArmature,
     JointFriction,
     JointOffset,
     JointStiffness,
 )
 from dvrk_dart.diagnosis.effects.library import (
-    candidate_effects,
     config_effort_by_formula,
     effects_to_sim_config,
 )
@@ -41,7 +39,6 @@ from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
-from dvrk_dart.sim.config import JointEffects, SimConfig
 from arms import PSM
 
 #: the size of a blindly recovered effect must be within this relative error
@@ -90,80 +87,6 @@ def _recover(arm, segment, noise_rms, effect, p_true, seed):
     measured = synthesize_measurement(arm, segment, [(effect, np.asarray(p_true))], noise_rms, seed=seed)
     result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False, profile_payload_mass=False)
     return result, result["effects"][0]
-
-
-# ----------------------------------------------------------- regressors
-def test_payload_regressor_matches_pinocchio_body(arm, segment):
-    """A point mass through the regressor equals the same mass as a Pinocchio body
-    (config_effort_by_formula builds it independently from SimConfig)."""
-    state = segment.head(200)
-    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
-    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
-    payload = PointPayload(arm.model, 8)
-    p = np.array([0.3, 0.02, -0.03, 0.25])
-    by_regressor = ref + payload.effort(features, p)
-    by_formula = config_effort_by_formula(arm, effects_to_sim_config([(payload, p)]), state.q, state.dq, state.ddq)
-    assert np.max(np.abs(by_regressor - by_formula)) < 1e-10
-    # and the body regressor reproduces the identified inertial efforts
-    im = arm.identified
-    pi = np.concatenate([im.pin_model.inertias[j].toDynamicParameters() for j in range(1, im.pin_model.njoints)])
-    assert np.max(np.abs(features.body_regressor @ pi - ref)) < 1e-9
-
-
-def test_tilt_regressor_is_the_derivative_of_the_simulators_gravity(arm, segment):
-    """The linearised tilt regressor agrees with the exact tilted gravity of the
-    simulator's convention to second order (error shrinks 100x for 10x smaller tilt)."""
-    state = segment.head(100)
-    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
-    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
-    tilt = GravityTilt(arm)
-    errors = []
-    for scale in (1.0, 0.1):
-        angles = scale * np.array([0.02, -0.015])
-        exact = config_effort_by_formula(arm, effects_to_sim_config([(tilt, angles)]), state.q, state.dq, state.ddq)
-        errors.append(np.max(np.abs(exact - ref - tilt.effort(features, angles))))
-    assert errors[1] < errors[0] / 50
-    assert np.allclose(gravity_tilt_directions(np.array([0, 0, -9.81]))[:, 0], [0, -9.81, 0])
-
-
-def test_envelopes_contain_the_dh_skeleton(arm):
-    for effect in candidate_effects(arm):
-        if isinstance(effect, PointPayload):
-            env = effect.envelope
-            assert all(env.contains(p) for p in env.skeleton_points)
-            assert np.all(env.upper - env.lower > 0.05), effect.name
-
-
-def test_effects_to_sim_config_maps_each_field(arm):
-    chosen = [
-        (JointFriction(arm.model, "q2"), np.array([0.1, 0.2])),
-        (JointOffset(arm.model, "q3"), np.array([-0.3])),
-        (JointStiffness(arm.model, "q4"), np.array([0.002])),
-        (JointArmature(arm.model, "q1"), np.array([0.01])),
-        (GravityTilt(arm), np.array([0.01, -0.02])),
-        (PointPayload(arm.model, 4), np.array([0.105, 0.2, 0.0, 0.01])),
-    ]
-    cfg = effects_to_sim_config(chosen)
-    assert cfg.extra.coulomb[1] == 0.1 and cfg.extra.viscous[1] == 0.2
-    assert cfg.extra.offset[2] == -0.3 and cfg.extra.stiffness[3] == 0.002 and cfg.extra.armature[0] == 0.01
-    assert cfg.gravity_tilt_rad == (0.01, -0.02)
-    assert cfg.payloads[0].link == 4 and cfg.payloads[0].mass_kg == 0.105
-
-
-def test_the_pitch_angle_load_is_simulated_as_its_regressor_says(arm, segment):
-    """A load on J3 set by q2 (the library's angle_load_q3_by_q2) maps to the
-    simulator's explicit effort, on top of what the base already carries."""
-    state = segment.head(200)
-    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
-    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
-    load, p = AngleLoad(arm.model, "q3", "q2"), np.array([0.1, 0.2])
-    base = SimConfig(extra=JointEffects(directional_armature=(0.0, 0.0, 0.05, 0.0, 0.0, 0.0, 0.0)))
-    config = effects_to_sim_config([(load, p)], base)
-    assert config.extra.directional_armature == base.extra.directional_armature
-    added = config_effort_by_formula(arm, config, state.q, state.dq, state.ddq) - config_effort_by_formula(arm, base, state.q, state.dq, state.ddq)
-    assert np.max(np.abs(added - load.effort(features, p))) < 1e-12
-    assert np.max(np.abs(added[:, 2] - (0.1 * np.sin(state.q[:, 1]) + 0.2 * np.cos(state.q[:, 1])))) < 1e-12
-    assert load.name in {e.name for e in candidate_effects(arm)}
 
 
 # ------------------------------------------------------ blind recoveries
