@@ -13,7 +13,6 @@ import scipy.optimize
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
-from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.model.joints import N_JOINTS
 
 #: block length for the folds and the bootstrap (s): much longer than the
@@ -177,7 +176,7 @@ class Fitter:
         if all(e.linear for e in effects):
             lb = np.concatenate([e.lower for e in effects]) * d
             ub = np.concatenate([e.upper for e in effects]) * d
-            # Occam prior of a linear payload (first moment): energy * prior * (beta / scale)^2
+            # the Occam prior of a payload: energy * prior * (beta / scale)^2 (linear: beta = p)
             scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_columns, np.inf)) for e in effects])
             if np.any(np.isfinite(scales)):
                 rows = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / scales / d
@@ -204,11 +203,11 @@ class Fitter:
         def beta_of(p):
             return np.concatenate([e.coefficients(p[ps]) for e, ps in zip(effects, p_slices)])
 
-        # mass prior rows: sqrt(prior * energy) * m for every payload
-        mass_index = [ps.start for e, ps in zip(effects, p_slices) if isinstance(e, PointPayload)]
-        prior = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0))
-        P = np.zeros((len(mass_index), len(lower)))
-        P[np.arange(len(mass_index)), mass_index] = prior
+        # the Occam prior's rows: sqrt(prior * energy) * p / scale, per parameter (`prior_scales`)
+        scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_parameters, np.inf)) for e in effects])
+        keep = np.flatnonzero(np.isfinite(scales))
+        P = np.zeros((len(keep), len(lower)))
+        P[np.arange(len(keep)), keep] = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / scales[keep]
 
         def residual(p):
             return np.concatenate([M @ (d * beta_of(p)) - y, P @ p])

@@ -119,15 +119,28 @@ class Selector:
             share = np.einsum("bjp,bj,j->pbj", diag, train.noise, w2)  # in train.s units
             self.noise_share = np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
 
-    def optimism(self, chosen: list[int]) -> np.ndarray:
-        """(n_blocks, 7) twice the noise energy the chosen effects' fitted parameters absorb (their seen parameters, each the mean of its columns')."""
+    def optimism(self, chosen: list[int], params: dict[int, np.ndarray]) -> np.ndarray:
+        """(n_blocks, 7) twice the noise energy the chosen effects' fitted
+        parameters absorb: their seen parameters, each the mean of its
+        columns' share; a nonlinear effect's columns are the efforts per unit
+        of each parameter at `params` (a tied second moment moves with the
+        mass and first moment: its columns alone would dilute their share)."""
         total = np.zeros_like(self.train.s)
         for i in chosen:
             sl, e = self.design.slices[i], self.design.effects[i]
-            live = [c for c in range(sl.start, sl.stop) if self.noise_share[c].any()]
+            shares = self.noise_share[sl] if e.linear else self._parameter_shares(sl, e.coefficients_jacobian(params[i]))
+            live = [k for k in range(len(shares)) if shares[k].any()]
             if live:
-                total += 2.0 * e.n_seen_parameters * self.noise_share[live].mean(0)
+                total += 2.0 * e.n_seen_parameters * shares[live].mean(0)
         return total
+
+    def _parameter_shares(self, sl: slice, jacobian: np.ndarray) -> np.ndarray:
+        """(n_parameters, n_blocks, 7) the noise share of each parameter's effort direction (columns @ jacobian)."""
+        A = self.train.A[:, :, sl, sl]
+        energy = np.einsum("pk,bjpq,qk->kbj", jacobian, A, jacobian)  # x^T A x per block, joint, parameter
+        den = np.einsum("kbj,j->k", energy, self.w2)
+        share = energy * self.train.noise[None] * self.w2[None, None, :]
+        return np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
 
     def fit_all(self, chosen, warm=None) -> Fit:
         return self.fitter.fit(chosen, self.A_total, self.g_total, warm, self.energy_total)
@@ -150,7 +163,7 @@ class Selector:
             after[held] = sse(fit.beta, self.train.A, self.train.g, self.train.s)[held]
             fold_params.append(fit.params)
         if self.penalised:  # the folds' copies in the other folds: the noise fitted is not held out, its optimism added
-            after = after + self.optimism(chosen)
+            after = after + self.optimism(chosen, fold_params[0])
         return CvResult(after, weighted_fraction(after, self.train.s, self.w2), fold_params)
 
     def bootstrap_fractions(self, after: np.ndarray) -> np.ndarray:
@@ -233,9 +246,13 @@ class Selector:
             rival = self._offset_rival(selected, best, families, current)
             if rival is not None:
                 added, trial, instead_of = rival[0], rival[1], self.design.effects[best].name
-            gain = trial.fraction - current.fraction
-            gains = self.bootstrap_fractions(trial.after) - self.bootstrap_fractions(current.after)
-            failure = float(np.mean(gains <= 0.0))
+            gain, gains, failure = self._gain(trial, current)
+            if gain < MIN_HELDOUT_GAIN or failure > GAIN_FAILURE_QUANTILE:
+                runner_up = self._significant_runner_up(admissible, current, set(added) | {best})
+                if runner_up is not None:
+                    instead_of = self.design.effects[best].name
+                    added, trial = [runner_up], trials[runner_up]
+                    gain, gains, failure = self._gain(trial, current)
             step = {
                 "effect": " + ".join(self.design.effects[i].name for i in added),
                 "effects": [self.design.effects[i].name for i in added],
@@ -255,6 +272,27 @@ class Selector:
             selected.extend(added)
             current = trial
         return selected, steps, individual, current
+
+    def _gain(self, trial: CvResult, current: CvResult) -> tuple[float, np.ndarray, float]:
+        """A step's gain, its bootstrap resamples and the share of them not positive."""
+        gains = self.bootstrap_fractions(trial.after) - self.bootstrap_fractions(current.after)
+        return trial.fraction - current.fraction, gains, float(np.mean(gains <= 0.0))
+
+    def _significant_runner_up(self, trials: dict[int, CvResult], current: CvResult, tried: set[int]) -> int | None:
+        """The best-scoring candidate whose gain clears the bar, when the best
+        scorer's does not: a candidate that fits more (a payload's eight
+        parameters on a joint's noise) but not significantly must not stop
+        the selection before one that explains a joint for certain (a
+        one-joint load under a baseline's doubled noise)."""
+        for i in sorted(trials, key=lambda i: -trials[i].fraction):
+            if i in tried:
+                continue
+            gain, _, failure = self._gain(trials[i], current)
+            if gain < MIN_HELDOUT_GAIN:
+                return None
+            if failure <= GAIN_FAILURE_QUANTILE:
+                return i
+        return None
 
     def _offset_rival(self, selected: list[int], best: int, families: set, current: CvResult) -> tuple[list[int], CvResult] | None:
         """Occam's rule for a payload: its static part is an offset on every

@@ -1,10 +1,14 @@
 """A payload as what the efforts determine: its first moment (and its mass where seen).
 
-A point mass m at c on a link gives efforts linear in (m, m c) up to its small
-second moment m (|c|^2 I - c c^T) (inertia about the link origin: for 0.1 kg at
-0.2 m, 4e-3 kg·m², a few mN·m at the runs' accelerations, below the noise).
-`FirstMomentPayload` fits (m, m c) linearly, with no envelope on c: on a link
-turning about a fixed axis gravity sees m c only. It is reported as the first
+A point mass m at c on a link gives efforts linear in (m, m c) and its
+second moment m (|c|^2 I - c c^T), the inertia about the link's origin.
+`FirstMomentPayload` fits (m, m c), with no envelope on c (on a link turning
+about a fixed axis gravity sees m c only), and ties the second moment to them
+as a point mass's: (|m c|^2 I - (m c)(m c)^T) / m, a nonlinear fit. Left out
+(as it was), it is small only where the link's origin lies near the payload;
+the insertion carriage's origin lies 0.3 m from a weight on the carriage (0.2
+kg there: 0.018 kg·m² about it), and a payload on the tool roll link, whose
+origin is nearer, was named instead (blind suite, with a baseline). It is reported as the first
 moment *the efforts* determine, in the base frame at q = 0 as a body on the
 reference link of its family of equivalent links, with the gravity efforts it
 causes per joint; the mass only where gravity sees it apart from m c (a link
@@ -33,9 +37,9 @@ import math
 import numpy as np
 
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
-from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters
+from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters, point_mass_parameters_jacobian
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import N_JOINTS
@@ -48,6 +52,9 @@ YAW_PATH_JOINT = 0
 #: do not see (e.g. along the yaw axis of a link that only translates in the
 #: parallelogram), which would otherwise run to their bounds
 FIRST_MOMENT_PRIOR_LENGTH_M = 0.1
+#: the tied second moment (|m c|^2 I - (m c)(m c)^T) / m divides by at least
+#: this mass (kg): a first moment with no mass is a point at infinity
+TIED_MASS_FLOOR_KG = 1e-3
 
 
 def _yaw_path_parameters(max_mass_kg: float, reach: np.ndarray) -> tuple[Parameter, ...]:
@@ -75,6 +82,7 @@ class FirstMomentPayload(Effect):
     """A payload on a link as its mass and first moment (m, m c), c in the link frame."""
 
     kind = "payload"
+    linear = False  # the second moment tied to (m, m c) (module docstring)
 
     def __init__(self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,
                  equivalent_keys: tuple[int, ...] = (), mass_seen: bool = True):
@@ -92,6 +100,8 @@ class FirstMomentPayload(Effect):
         # the largest first moment a plausible payload has: the heaviest mass at
         # the far end of the link's envelope, along each axis
         reach = np.maximum(np.abs(self.envelope.lower), np.abs(self.envelope.upper))
+        #: the farthest point of the envelope from the link's origin (m)
+        self.reach_m = float(np.linalg.norm(reach))
         self.parameters = (Parameter("mass_kg", "kg", 0.0, max_mass_kg),) + tuple(
             Parameter(f"first_moment_{a}_kg_m", "kg·m", -max_mass_kg * r, max_mass_kg * r) for a, r in zip("xyz", reach)
         ) + _yaw_path_parameters(max_mass_kg, reach)
@@ -117,8 +127,49 @@ class FirstMomentPayload(Effect):
         """The weight under study is one body (its yaw path with it): one payload is selected."""
         return self.kind
 
+    @property
+    def n_columns(self) -> int:
+        return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS
+
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
+        """The body's ten columns and J1's path."""
+        return _with_yaw_path(features, self.link_key, features.body_regressor[:, :, features.body_columns(self.link_key)])
+
+    def first_moment_columns(self, features: TrajectoryFeatures) -> np.ndarray:
+        """(N, 7, 8) the efforts linear in the parameters, the second moment left out."""
         return _with_yaw_path(features, self.link_key, features.first_moment_columns(self.link_key))
+
+    def _tied_mass(self, p) -> tuple[float, np.ndarray]:
+        """The mass the tied second moment divides by, and its gradient in (m, m c):
+        at least |m c| / reach (no part of a payload lies beyond the link's
+        envelope, so a small mass far out, all inertia, is not a payload) and
+        TIED_MASS_FLOOR_KG."""
+        h = np.asarray(p[1:4], dtype=float)
+        norm = float(np.linalg.norm(h))
+        candidates = (float(p[0]), norm / self.reach_m, TIED_MASS_FLOOR_KG)
+        gradients = (np.eye(4)[0], np.r_[0.0, h / max(norm * self.reach_m, 1e-300)], np.zeros(4))
+        k = int(np.argmax(candidates))
+        return candidates[k], gradients[k]
+
+    def coefficients(self, p):
+        m, _ = self._tied_mass(p)
+        return np.concatenate([p[:4], point_mass_parameters(1.0 / m, np.asarray(p[1:4], dtype=float))[4:], p[4:]])
+
+    def coefficients_jacobian(self, p):
+        m, dm = self._tied_mass(p)
+        h = np.asarray(p[1:4], dtype=float)
+        J = np.zeros((self.n_columns, self.n_parameters))
+        J[:4, :4] = np.eye(4)
+        J[4:BODY_PARAMETERS, 1:4] = point_mass_parameters_jacobian(1.0 / m, h)[4:, 1:4]
+        J[4:BODY_PARAMETERS, :4] -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[4:], dm)
+        J[BODY_PARAMETERS:, 4:] = np.eye(FIRST_MOMENT_COLUMNS)
+        return J
+
+    def initial_guesses(self, linear_solution):
+        """The unconstrained solution's (m, m c) and J1's path, and the same with
+        the mass raised to put the payload within FIRST_MOMENT_PRIOR_LENGTH_M."""
+        start = np.clip(np.r_[linear_solution[:4], linear_solution[BODY_PARAMETERS:]], self.lower, self.upper)
+        return [start, np.r_[max(start[0], np.linalg.norm(start[1:4]) / FIRST_MOMENT_PRIOR_LENGTH_M), start[1:]].clip(self.lower, self.upper)]
 
     def sim_contribution(self, p):
         return None  # a first moment without a position is not a body: added by regressor

@@ -56,6 +56,8 @@ class PointPayload(Effect):
 
     kind = "payload"
     linear = False
+    #: the Occam prior on the mass (`design.PAYLOAD_MASS_PRIOR_PER_KG2`), none on the position
+    prior_scales = np.array([1.0, np.inf, np.inf, np.inf])
 
     def __init__(
         self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,

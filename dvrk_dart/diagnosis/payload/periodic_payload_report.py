@@ -69,7 +69,7 @@ def link_costs(candidates: list, pair_runs, differences, features_of, offset_joi
     """BIC of each candidate's first moment (and J1's path, `FirstMomentPayload`)
     under one variance model: the weighted residual plus log(rows) per
     parameter the efforts determine."""
-    pairs = [_pairs(pair_runs, differences, lambda r, e=e: e.columns(features_of(r))) for e in candidates]
+    pairs = [_pairs(pair_runs, differences, lambda r, e=e: e.first_moment_columns(features_of(r))) for e in candidates]
     common = _common_variance(pairs[0], len(differences), offset_joints)
     costs = []
     for candidate_pairs in pairs:
