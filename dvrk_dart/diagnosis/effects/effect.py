@@ -68,6 +68,9 @@ class Effect(ABC):
     joints: tuple[str, ...]
     parameters: tuple[Parameter, ...]
     linear = True  # effort linear in the parameters (beta = p)
+    #: beta(p) = d beta/dp (p) @ p (degree one): fitted with the Jacobian frozen
+    #: at a warm start, the fit is exact along the warm start's direction
+    homogeneous = False
 
     @property
     def n_parameters(self) -> int:

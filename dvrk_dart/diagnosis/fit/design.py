@@ -152,9 +152,14 @@ class Fitter:
     def __init__(self, design: Design):
         self.design = design
 
-    def fit(self, chosen: Sequence[int], A: np.ndarray, g: np.ndarray, warm: dict[int, np.ndarray] | None = None, energy: float = 0.0) -> Fit:
+    def fit(self, chosen: Sequence[int], A: np.ndarray, g: np.ndarray, warm: dict[int, np.ndarray] | None = None, energy: float = 0.0,
+            linearize: bool = False) -> Fit:
         """Minimise beta^T A beta - 2 beta^T g (+ the payload mass prior, scaled by
-        `energy`, the weighted residual energy before) within the bounds."""
+        `energy`, the weighted residual energy before) within the bounds.
+
+        linearize: a homogeneous effect (`Effect.homogeneous`) with a warm start
+        is fitted linearly, its coefficients' Jacobian frozen there (a
+        selection's trial adding one effect to a fitted payload barely turns it)."""
         design = self.design
         beta_full = np.zeros(design.n_columns)
         if not chosen:
@@ -186,11 +191,33 @@ class Fitter:
             sol = scipy.optimize.lsq_linear(M, y, bounds=(lb, ub), method="bvls" if len(idx) <= 60 else "trf")
             beta = sol.x / d
             params = {i: beta[sl].copy() for i, sl in zip(chosen, local)}
+        elif linearize and all(e.linear or (e.homogeneous and i in (warm or {})) for i, e in zip(chosen, effects)):
+            params = self._fit_frozen(chosen, effects, M, y, d, warm, energy)
+            beta = np.concatenate([e.coefficients(params[i]) for i, e in zip(chosen, effects)])
         else:
             params = self._fit_nonlinear(chosen, effects, local, M, y, d, warm or {}, energy)
             beta = np.concatenate([e.coefficients(params[i]) for i, e in zip(chosen, effects)])
         beta_full[idx] = beta
         return Fit(params, beta_full)
+
+    def _fit_frozen(self, chosen, effects, M, y, d, warm, energy) -> dict[int, np.ndarray]:
+        """Bounded linear least squares in the parameters, beta = T p with T the
+        coefficients' Jacobian at the warm start (the identity for a linear effect)."""
+        T = scipy.linalg.block_diag(*[np.eye(e.n_columns) if e.linear else e.coefficients_jacobian(warm[i]) for i, e in zip(chosen, effects)])
+        K = M @ (d[:, None] * T)
+        scale = np.linalg.norm(K, axis=0)
+        scale[scale == 0.0] = 1.0
+        lower, upper = (np.concatenate([getattr(e, side) for e in effects]) * scale for side in ("lower", "upper"))
+        scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_parameters, np.inf)) for e in effects])
+        keep = np.isfinite(scales)
+        prior = np.diag(math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / np.where(keep, scales, 1.0) / scale)[keep]
+        sol = scipy.optimize.lsq_linear(np.vstack([K / scale, prior]), np.concatenate([y, np.zeros(int(keep.sum()))]),
+                                        bounds=(lower, upper), method="bvls" if len(scale) <= 60 else "trf")
+        p, start, params = sol.x / scale, 0, {}
+        for i, e in zip(chosen, effects):
+            params[i] = p[start:start + e.n_parameters].copy()
+            start += e.n_parameters
+        return params
 
     def _fit_nonlinear(self, chosen, effects, local, M, y, d, warm, energy) -> dict[int, np.ndarray]:
         lower = np.concatenate([e.lower for e in effects])

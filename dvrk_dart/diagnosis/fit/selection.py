@@ -154,9 +154,8 @@ class Selector:
                 after = sse(fit.beta, self.train.A, self.train.g, self.train.s)
                 fold_params.append(fit.params)
                 break
-            fit = self.fitter.fit(
-                chosen, self.A_total - self.A_fold[f], self.g_total - self.g_fold[f], warm[k] if warm else None, self.energy_total - self.energy_fold[f]
-            )
+            fit = self.fitter.fit(chosen, self.A_total - self.A_fold[f], self.g_total - self.g_fold[f], warm[k] if warm else None,
+                                  self.energy_total - self.energy_fold[f], linearize=warm is not None)
             held = self.train.fold == f
             # on every block, then the fold's: sse reads only the fitted columns of A, where
             # A[held] would copy every block's whole Gram matrix first (most of the selection's time)

@@ -83,6 +83,7 @@ class FirstMomentPayload(Effect):
 
     kind = "payload"
     linear = False  # the second moment tied to (m, m c) (module docstring)
+    homogeneous = True  # (|m c|^2 I - (m c)(m c)^T) / m: of degree one in (m, m c)
 
     def __init__(self, model: PsmModel, key: int, envelope: LinkEnvelope | None = None, max_mass_kg: float = PAYLOAD_MAX_MASS_KG,
                  equivalent_keys: tuple[int, ...] = (), mass_seen: bool = True):
