@@ -20,7 +20,10 @@ SUBSET = [("coulomb_q2", "upstream", True), ("offset_q1", "upstream", False), ("
           # parameters fit (selection.py, Mallows' Cp)
           ("offset_q1", "periodic", True),
           # the pitch-angle load on J3: claimed by an offset of q3 before the library held it
-          ("pitch_load_q3", "periodic", False)]
+          ("pitch_load_q3", "periodic", False),
+          # a carriage payload 0.3 m from the carriage's origin: read on the tool roll link while a payload's
+          # second moment was left out (first_moment.py: now tied to its mass and first moment)
+          ("payload_insertion", "periodic", True)]
 
 
 @pytest.mark.parametrize("case, processing, baseline", SUBSET, ids=[f"{c}-{p}-{'baseline' if b else 'alone'}" for c, p, b in SUBSET])

@@ -191,8 +191,8 @@ class Fitter:
             sol = scipy.optimize.lsq_linear(M, y, bounds=(lb, ub), method="bvls" if len(idx) <= 60 else "trf")
             beta = sol.x / d
             params = {i: beta[sl].copy() for i, sl in zip(chosen, local)}
-        elif linearize and all(e.linear or (e.homogeneous and i in (warm or {})) for i, e in zip(chosen, effects)):
-            params = self._fit_frozen(chosen, effects, M, y, d, warm, energy)
+        elif linearize and all(e.linear or e.homogeneous for e in effects):
+            params = self._fit_frozen(chosen, effects, local, M, y, d, warm or {}, energy)
             beta = np.concatenate([e.coefficients(params[i]) for i, e in zip(chosen, effects)])
         else:
             params = self._fit_nonlinear(chosen, effects, local, M, y, d, warm or {}, energy)
@@ -200,10 +200,13 @@ class Fitter:
         beta_full[idx] = beta
         return Fit(params, beta_full)
 
-    def _fit_frozen(self, chosen, effects, M, y, d, warm, energy) -> dict[int, np.ndarray]:
+    def _fit_frozen(self, chosen, effects, local, M, y, d, warm, energy) -> dict[int, np.ndarray]:
         """Bounded linear least squares in the parameters, beta = T p with T the
-        coefficients' Jacobian at the warm start (the identity for a linear effect)."""
-        T = scipy.linalg.block_diag(*[np.eye(e.n_columns) if e.linear else e.coefficients_jacobian(warm[i]) for i, e in zip(chosen, effects)])
+        coefficients' Jacobian at the warm start, else at the unconstrained
+        linear solution's first guess (the identity for a linear effect)."""
+        linear = None if all(i in warm or e.linear for i, e in zip(chosen, effects)) else np.linalg.lstsq(M, y, rcond=None)[0] / d
+        at = {i: warm[i] if i in warm else e.initial_guesses(linear[sl])[0] for i, e, sl in zip(chosen, effects, local) if not e.linear}
+        T = scipy.linalg.block_diag(*[np.eye(e.n_columns) if e.linear else e.coefficients_jacobian(at[i]) for i, e in zip(chosen, effects)])
         K = M @ (d[:, None] * T)
         scale = np.linalg.norm(K, axis=0)
         scale[scale == 0.0] = 1.0
