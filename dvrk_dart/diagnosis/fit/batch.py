@@ -5,6 +5,8 @@ independent, so `prefetch` runs each group at once and the diagnosis's
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
@@ -33,16 +35,29 @@ def replayed_residuals(tasks: list, executor: str = "local", jobs: int = 2, ray_
     return residuals
 
 
+def motion_key(state: ProcessedRun) -> str:
+    """What a velocity replay reads of a run (its times, positions and
+    velocities), as a digest: two loads of one file replay alike."""
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (state.t, state.q, state.dq):
+        digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
+    return digest.hexdigest()
+
+
 class BatchSimulate:
     """simulate(config, state) -> efforts: the DART velocity replay, served
-    from the batches `prefetch` ran, else run here."""
+    from the replays already run (`prefetch`'s batches, earlier calls) of the
+    same motion and config, else run here. One instance serves several
+    diagnoses of the same runs (the blind suite's, with and without a
+    baseline) without replaying a run twice."""
 
     def __init__(self, arm: Arm, executor: str = "local", jobs: int = 2, ray_address: str | None = None):
         self.arm, self.executor, self.jobs, self.ray_address = arm, executor, jobs, ray_address
-        self._done: dict[tuple[SimConfig, int], tuple[ProcessedRun, object]] = {}  # the state is kept: its id stays its own
+        self._done: dict[tuple[SimConfig, str], np.ndarray] = {}
 
     def prefetch(self, pairs: list[tuple[SimConfig, ProcessedRun]]) -> None:
-        todo = {(config, id(state)): state for config, state in pairs if (config, id(state)) not in self._done}
+        todo = {(config, motion_key(state)): state for config, state in pairs}
+        todo = {key: state for key, state in todo.items() if key not in self._done}
         if len(todo) < 2:  # nothing to run side by side
             return
         tasks = [(self.arm, config, state) for (config, _), state in todo.items()]
@@ -50,10 +65,19 @@ class BatchSimulate:
                                                               desc="diagnosis replays", unit="replay"):
             if error is not None:
                 raise DvrkDartError(f"diagnosis: a re-simulation failed ({error})")
-            self._done[(config, id(state))] = (state, efforts)
+            self._done[(config, motion_key(state))] = _read_only(efforts)
 
     def __call__(self, config: SimConfig, state: ProcessedRun):
         from dvrk_dart.runs.replay import simulate_efforts
 
-        done = self._done.get((config, id(state)))
-        return done[1] if done is not None else simulate_efforts(self.arm, config, state)
+        key = (config, motion_key(state))
+        if key not in self._done:
+            self._done[key] = _read_only(simulate_efforts(self.arm, config, state))
+        return self._done[key]
+
+
+def _read_only(efforts) -> np.ndarray:
+    """A replay's efforts as served to every caller: not to be changed in place."""
+    array = np.array(efforts, dtype=float)
+    array.flags.writeable = False
+    return array
