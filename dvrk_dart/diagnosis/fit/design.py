@@ -157,9 +157,10 @@ class Fitter:
         """Minimise beta^T A beta - 2 beta^T g (+ the payload mass prior, scaled by
         `energy`, the weighted residual energy before) within the bounds.
 
-        linearize: a homogeneous effect (`Effect.homogeneous`) with a warm start
-        is fitted linearly, its coefficients' Jacobian frozen there (a
-        selection's trial adding one effect to a fitted payload barely turns it)."""
+        linearize: homogeneous effects (`Effect.homogeneous`) are fitted
+        linearly, their coefficients' Jacobian frozen at the warm start or the
+        unconstrained solution's first guess (a selection's trial: adding one
+        effect to a fitted payload barely turns it)."""
         design = self.design
         beta_full = np.zeros(design.n_columns)
         if not chosen:

@@ -8,11 +8,12 @@ as a point mass's: (|m c|^2 I - (m c)(m c)^T) / m, a nonlinear fit. Left out
 (as it was), it is small only where the link's origin lies near the payload;
 the insertion carriage's origin lies 0.3 m from a weight on the carriage (0.2
 kg there: 0.018 kg·m² about it), and a payload on the tool roll link, whose
-origin is nearer, was named instead (blind suite, with a baseline). It is reported as the first
-moment *the efforts* determine, in the base frame at q = 0 as a body on the
-reference link of its family of equivalent links, with the gravity efforts it
-causes per joint; the mass only where gravity sees it apart from m c (a link
-translating along q3), else an interval.
+origin is nearer, was named instead (blind suite, with a baseline).
+
+It is reported as the first moment *the efforts* determine, in the base frame
+at q = 0 as a body on the reference link of its family of equivalent links,
+with the gravity efforts it causes per joint; the mass only where gravity sees
+it apart from m c (a link translating along q3), else an interval.
 
 `PayloadAtPosition` is a point mass at a given (hand-measured) position: its
 efforts are linear in m, so a first moment becomes a mass with an interval.
