@@ -225,6 +225,8 @@ def test_the_payload_is_the_finding_of_a_run_minus_baseline_diagnosis(arm):
     assert top["kind"] in ("payload", "payload_at_position") and top["selected"] and top["role"] == "finding"
     common = [e for e in others if e["selected"] and e["role"] == "common_model_error"]
     assert common and all(e["kind"] not in ("payload", "payload_at_position") for e in common)
+    # no --repeat: the payload's report says its intervals do not count a session change
+    assert result["payloads"] and all(any(w.startswith("Without --repeat") for w in report["words"]) for report in result["payloads"])
 
 
 @pytest.mark.xfail(strict=True, reason="the mass alone is not identifiable from this pair of runs (see the docstring's numbers)")

@@ -28,6 +28,7 @@ from dvrk_dart.diagnosis.payload.payload import (
 )
 from dvrk_dart.diagnosis.payload.payload_report import (
     MASS_IDENTIFIED_RATIO,
+    WITHOUT_REPEAT,
     pitch_shaft_offsets,
 )
 from dvrk_dart.diagnosis.fit.selection import (
@@ -223,5 +224,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
         report["position_m"] = at.position.tolist()
         words.append(f"At the given position ({at.link_name}, {np.round(at.position, 3).tolist()} m in its frame) the mass is {m:.3f} kg "
                      f"(interval {m_lo:.3f}-{m_hi:.3f} kg).")
+    if session_fit is None:
+        words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "
+                     "which share their sessions: " + WITHOUT_REPEAT)
     report["words"] = words
     return report

@@ -17,6 +17,9 @@ from dvrk_dart.model.joints import N_JOINTS, PITCH
 #: a payload's mass counts as identified when its interval's ends are within
 #: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
 MASS_IDENTIFIED_RATIO = 1.7
+#: what a payload report without --repeat (the baseline's motion in another session) says of its intervals
+WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) reads as a "
+                  "payload, and the intervals do not count it.")
 #: masses tried when profiling a selected payload's mass (kg, geometric grid)
 PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
 

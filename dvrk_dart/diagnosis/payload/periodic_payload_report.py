@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
-from dvrk_dart.diagnosis.payload.payload_report import pitch_shaft_offsets
+from dvrk_dart.diagnosis.payload.payload_report import WITHOUT_REPEAT, pitch_shaft_offsets
 from dvrk_dart.diagnosis.payload.periodic_payload import (
     INTERVAL_PROBABILITY,
     Pair,
@@ -267,7 +267,6 @@ def _words(report: dict, model) -> list[str]:
         words.append(f"The --repeat pair alone (two sessions, no weight) reads as a payload of its own{size}: a session change of the payload's shape. Every interval counts "
                      "it, known to one degree of freedom from one pair: where it is large the intervals are wide.")
     if report["session_pair"] is None:
-        words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the payload "
-                     "leaves: a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) "
-                     "reads as a payload, and the intervals do not count it.")
+        words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the "
+                     "payload leaves: " + WITHOUT_REPEAT)
     return words
