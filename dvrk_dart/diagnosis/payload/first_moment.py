@@ -146,32 +146,35 @@ class FirstMomentPayload(Effect):
         at least |m c| / reach (no part of a payload lies beyond the link's
         envelope, so a small mass far out, all inertia, is not a payload) and
         TIED_MASS_FLOOR_KG."""
-        h = np.asarray(p[1:4], dtype=float)
+        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
         norm = float(np.linalg.norm(h))
         candidates = (float(p[0]), norm / self.reach_m, TIED_MASS_FLOOR_KG)
-        gradients = (np.eye(4)[0], np.r_[0.0, h / max(norm * self.reach_m, 1e-300)], np.zeros(4))
+        gradients = (np.eye(FIRST_MOMENT_COLUMNS)[0], np.r_[0.0, h / max(norm * self.reach_m, 1e-300)], np.zeros(FIRST_MOMENT_COLUMNS))
         k = int(np.argmax(candidates))
         return candidates[k], gradients[k]
 
     def coefficients(self, p):
         m, _ = self._tied_mass(p)
-        return np.concatenate([p[:4], point_mass_parameters(1.0 / m, np.asarray(p[1:4], dtype=float))[4:], p[4:]])
+        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
+        return np.concatenate([p[:FIRST_MOMENT_COLUMNS], point_mass_parameters(1.0 / m, h)[FIRST_MOMENT_COLUMNS:], p[FIRST_MOMENT_COLUMNS:]])
 
     def coefficients_jacobian(self, p):
         m, dm = self._tied_mass(p)
-        h = np.asarray(p[1:4], dtype=float)
+        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
         J = np.zeros((self.n_columns, self.n_parameters))
-        J[:4, :4] = np.eye(4)
-        J[4:BODY_PARAMETERS, 1:4] = point_mass_parameters_jacobian(1.0 / m, h)[4:, 1:4]
-        J[4:BODY_PARAMETERS, :4] -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[4:], dm)
-        J[BODY_PARAMETERS:, 4:] = np.eye(FIRST_MOMENT_COLUMNS)
+        k = FIRST_MOMENT_COLUMNS  # (m, m c); the second moment's six rows follow
+        J[:k, :k] = np.eye(k)
+        J[k:BODY_PARAMETERS, 1:k] = point_mass_parameters_jacobian(1.0 / m, h)[k:, 1:]
+        J[k:BODY_PARAMETERS, :k] -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
+        J[BODY_PARAMETERS:, k:] = np.eye(FIRST_MOMENT_COLUMNS)
         return J
 
     def initial_guesses(self, linear_solution):
         """The unconstrained solution's (m, m c) and J1's path, and the same with
         the mass raised to put the payload within FIRST_MOMENT_PRIOR_LENGTH_M."""
-        start = np.clip(np.r_[linear_solution[:4], linear_solution[BODY_PARAMETERS:]], self.lower, self.upper)
-        return [start, np.r_[max(start[0], np.linalg.norm(start[1:4]) / FIRST_MOMENT_PRIOR_LENGTH_M), start[1:]].clip(self.lower, self.upper)]
+        start = np.clip(np.r_[linear_solution[:FIRST_MOMENT_COLUMNS], linear_solution[BODY_PARAMETERS:]], self.lower, self.upper)
+        raised = max(start[0], np.linalg.norm(start[1:FIRST_MOMENT_COLUMNS]) / FIRST_MOMENT_PRIOR_LENGTH_M)
+        return [start, np.r_[raised, start[1:]].clip(self.lower, self.upper)]
 
     def sim_contribution(self, p):
         return None  # a first moment without a position is not a body: added by regressor
