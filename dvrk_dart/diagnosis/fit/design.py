@@ -183,11 +183,9 @@ class Fitter:
             lb = np.concatenate([e.lower for e in effects]) * d
             ub = np.concatenate([e.upper for e in effects]) * d
             # the Occam prior of a payload: energy * prior * (beta / scale)^2 (linear: beta = p)
-            scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_columns, np.inf)) for e in effects])
-            if np.any(np.isfinite(scales)):
-                rows = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / scales / d
-                keep = np.isfinite(scales)
-                M = np.vstack([M, np.diag(rows)[keep]])
+            weights, keep = _prior_weights(effects, energy)
+            if keep.any():
+                M = np.vstack([M, np.diag(weights / d)[keep]])
                 y = np.concatenate([y, np.zeros(int(keep.sum()))])
             sol = scipy.optimize.lsq_linear(M, y, bounds=(lb, ub), method="bvls" if len(idx) <= 60 else "trf")
             beta = sol.x / d
@@ -212,9 +210,8 @@ class Fitter:
         scale = np.linalg.norm(K, axis=0)
         scale[scale == 0.0] = 1.0
         lower, upper = (np.concatenate([getattr(e, side) for e in effects]) * scale for side in ("lower", "upper"))
-        scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_parameters, np.inf)) for e in effects])
-        keep = np.isfinite(scales)
-        prior = np.diag(math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / np.where(keep, scales, 1.0) / scale)[keep]
+        weights, keep = _prior_weights(effects, energy)
+        prior = np.diag(weights / scale)[keep]
         sol = scipy.optimize.lsq_linear(np.vstack([K / scale, prior]), np.concatenate([y, np.zeros(int(keep.sum()))]),
                                         bounds=(lower, upper), method="bvls" if len(scale) <= 60 else "trf")
         p, start, params = sol.x / scale, 0, {}
@@ -234,11 +231,8 @@ class Fitter:
         def beta_of(p):
             return np.concatenate([e.coefficients(p[ps]) for e, ps in zip(effects, p_slices)])
 
-        # the Occam prior's rows: sqrt(prior * energy) * p / scale, per parameter (`prior_scales`)
-        scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_parameters, np.inf)) for e in effects])
-        keep = np.flatnonzero(np.isfinite(scales))
-        P = np.zeros((len(keep), len(lower)))
-        P[np.arange(len(keep)), keep] = math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / scales[keep]
+        weights, keep = _prior_weights(effects, energy)
+        P = np.diag(weights)[keep]
 
         def residual(p):
             return np.concatenate([M @ (d * beta_of(p)) - y, P @ p])
@@ -263,6 +257,15 @@ class Fitter:
             if best is None or sol.cost < best.cost:
                 best = sol
         return {i: best.x[ps].copy() for i, ps in zip(chosen, p_slices)}
+
+
+def _prior_weights(effects: Sequence[Effect], energy: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Occam prior per parameter (`prior_scales`; linear effects: per
+    coefficient): its rows weigh p by sqrt(prior * energy) / scale; and which
+    parameters have one."""
+    scales = np.concatenate([getattr(e, "prior_scales", np.full(e.n_parameters, np.inf)) for e in effects])
+    keep = np.isfinite(scales)
+    return math.sqrt(PAYLOAD_MASS_PRIOR_PER_KG2 * max(energy, 0.0)) / np.where(keep, scales, 1.0) * keep, keep
 
 
 def sse(beta: np.ndarray, A: np.ndarray, g: np.ndarray, s: np.ndarray) -> np.ndarray:
