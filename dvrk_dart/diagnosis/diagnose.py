@@ -37,7 +37,7 @@ from dvrk_dart.diagnosis.fit.result import (
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
-from dvrk_dart.diagnosis.fit.session_floor import gap_split, session_floor
+from dvrk_dart.diagnosis.fit.session_floor import card_repeat, gap_split, session_floor
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm
@@ -111,10 +111,13 @@ def diagnose(
     Returns the diagnosis dict (the contract of diagnosis.json)."""
     measured_list = list(measured) if isinstance(measured, (list, tuple)) else [measured]
     several = baseline is not None or len(measured_list) > 1
+    repeat_source = "--repeat" if repeat is not None else "none: no --repeat and no --baseline"
+    if repeat is None and baseline is not None:
+        repeat, repeat_source = card_repeat(arm.model, baseline, [*measured_list, *(train or []), *(holdout or [])])
     problem = build_problem(arm, measured_list, baseline, train, holdout, repeat, simulate=simulate, base_config=base_config,
                             effects=effects, payload_model=payload_model or ("first_moment" if baseline is not None else "point"),
                             payload_at=payload_at, nuisance=several if nuisance_offsets is None else bool(nuisance_offsets),
-                            processing=processing, folds=folds, topics=topics)
+                            processing=processing, folds=folds, topics=topics, repeat_source=repeat_source)
     selection, dropped = select(problem, max_effects), []
     while True:  # a selected effect whose re-simulation fails or drifts is dropped with the reason; the diagnosis goes on
         try:
@@ -131,6 +134,9 @@ def diagnose(
     split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor, arm.model)
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
+    for report in first_moments:
+        if problem.repeat_run is not None and problem.repeat_source != "--repeat":
+            report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
     if out_dir is None:
         return result
@@ -175,8 +181,15 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
     session_fit = _session_fit(problem, s)
     reports = [first_moment_report(problem.arm, s.selector, s.selected, i, s.final.params, s.cross_validated.fold_params, problem.at_index,
                                    session_fit) for i in selected_moments]
+    # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
+    other_motion = not any(r.role is RunRole.DIFFERENCE for r in problem.train_runs)
     for report in reports:
-        report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
+        if not other_motion:
+            report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
+            continue
+        for part in filter(None, (report, report.get("payload_at"))):
+            _j1_not_determined(part)
+        report["words"].append(f"J1's gravity effort at q = 0 is not determined: {J1_OTHER_MOTION}.")
     return reports, points
 
 
@@ -191,6 +204,16 @@ def _payload_candidates(problem: Problem, s: Selection) -> list[dict]:
         return -candidate["cross_validated_fraction"]
 
     return sorted(points, key=by_fraction) + sorted(moments, key=by_fraction)
+
+
+#: why J1's payload effort at q = 0 is not determined when a run of another motion is fitted with the baseline
+J1_OTHER_MOTION = ("no run has the baseline's motion, and a run of another motion moves J1's constant effort by its own friction "
+                   "and centripetal means, which cannot be told from the payload's J1 effort at q = 0")
+
+
+def _j1_not_determined(part: dict) -> None:
+    part["gravity_efforts_at_q0"][0] = part["gravity_efforts_at_q0_interval"][0] = None
+    part.setdefault("not_determined", {})["gravity_efforts_at_q0"] = J1_OTHER_MOTION
 
 
 def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) -> str:
@@ -239,6 +262,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
             "joints": [j for j, on in zip(JOINT_NAMES, offsets) if on], "source": problem.offset_joints_source},
         session_floor=floor.tolist() if floor is not None else None,
         repeat=problem.repeat_run.name if problem.repeat_run is not None else None,
+        repeat_source=problem.repeat_source,
         gap_split={"runs": "holdout" if holdout_runs else "train", "joints": split},
         baseline=train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         train_runs=[r.name for r in train_runs],

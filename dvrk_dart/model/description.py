@@ -104,6 +104,8 @@ class PsmModel:
     identification_mass_bounds_kg: dict[int, float] = field(default_factory=dict)
     model_angles: dict[str, LinearExpr] = field(default_factory=dict)
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
+    #: two reference recordings of one motion in two sessions ([sessions] repeat_pair: manifest names)
+    session_repeat_pair: tuple[str, ...] = ()
     #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
     controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()
@@ -370,6 +372,7 @@ def load_model(path: Path | str) -> PsmModel:
         identification_mass_bounds_kg={int(k): float(v) for k, v in checks.get("identification_mass_bounds_kg", {}).items()},
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
+        session_repeat_pair=_session_repeat_pair(raw, path),
         controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
         processing=_upstream_processing(raw, path),
@@ -387,6 +390,14 @@ def _dvrk_topics(raw: dict, path: Path) -> DvrkTopics:
     if len(topics.joint_names) != N_JOINTS:
         raise DvrkDartError(f"{path}: [dvrk_topics] names {len(topics.joint_names)} joints, the model has {N_JOINTS}")
     return topics
+
+
+def _session_repeat_pair(raw: dict, path: Path) -> tuple[str, ...]:
+    """[sessions] repeat_pair: two reference files (manifest names), or none."""
+    pair = tuple(str(name) for name in raw.get("sessions", {}).get("repeat_pair", ()))
+    if len(pair) not in (0, 2):
+        raise DvrkDartError(f"{path}: [sessions] repeat_pair names {len(pair)} files, expected 2")
+    return pair
 
 
 def _session_offset_joints(raw: dict, path: Path) -> tuple[str, ...] | None:

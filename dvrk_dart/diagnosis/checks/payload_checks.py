@@ -102,10 +102,13 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
         verdicts.append(_mass_verdict(payload, m_true, tol, title))
         at = payload.get("payload_at")
         if at:
-            error = at["mass_kg"] / m_true - 1.0
-            verdicts.append({"check": f"{title}: mass with --payload-at (hand position) within {tol:.0%} of {m_true} kg",
-                             "passed": abs(error) <= tol,
-                             "value": f"{at['mass_kg']:.3f} kg ({error:+.0%}), interval {at['mass_kg_interval'][0]:.3f}-{at['mass_kg_interval'][1]:.3f} kg"})
+            check = f"{title}: mass with --payload-at (hand position) within {tol:.0%} of {m_true} kg"
+            if at["mass_kg"] is None:
+                verdicts.append({"check": check, "passed": False, "value": f"not determined: {at.get('not_determined', {}).get('mass_kg', '')}"})
+            else:
+                error = at["mass_kg"] / m_true - 1.0
+                verdicts.append({"check": check, "passed": abs(error) <= tol,
+                                 "value": f"{at['mass_kg']:.3f} kg ({error:+.0%}), interval {at['mass_kg_interval'][0]:.3f}-{at['mass_kg_interval'][1]:.3f} kg"})
     top = result["effects"][0] if result.get("effects") else None
     verdicts.append({"check": f"{title}: the payload is the top finding (the runs minus their baseline), not a model error common to both",
                      "passed": bool(top and top["kind"] in WITHHELD_KINDS),
@@ -148,10 +151,10 @@ def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
     first = answer_sentence(result).split(":")[0]
     fit = result.get("payload") or result.get("payload_not_distinguished") or {}
     rows = [("the payload-shaped fit", fit), ("at the hand position", fit.get("payload_at") or {})]
-    intervals = [(f"{where}, q{j + 1}", (part.get("gravity_efforts_at_q0_interval") or [None, None])[j]) for where, part in rows for j in (0, 1)]
-    open_intervals = [f"{name} [{i[0]:+.3f}, {i[1]:+.3f}]" if i else f"{name}: none" for name, i in intervals]
-    reasons = fit.get("not_determined", {})
-    holds = all((i is not None and i[0] <= 0.0 <= i[1]) or (i is None and bool(reasons)) for _, i in intervals)
+    intervals = [(f"{where}, q{j + 1}", (part.get("gravity_efforts_at_q0_interval") or [None, None])[j], part.get("not_determined"))
+                 for where, part in rows for j in (0, 1)]
+    open_intervals = [f"{name} [{i[0]:+.3f}, {i[1]:+.3f}]" if i else f"{name}: none" for name, i, _ in intervals]
+    holds = all((i is not None and i[0] <= 0.0 <= i[1]) or (i is None and bool(reasons)) for _, i, reasons in intervals)
     verdicts = [{"check": "null pair (one-no-weight against one, no weight in either): no payload reported", "passed": result.get("payload") is None,
                  "value": "none" if result.get("payload") is None else f"a payload on {result['payload']['link']}"},
                 {"check": "null pair: the answer's first sentence names no payload", "passed": "a payload on" not in first, "value": first},

@@ -59,6 +59,8 @@ class Problem:
     offset_joints: np.ndarray | None
     offset_joints_source: str | None
     folds: int
+    #: where the --repeat came from (the option, the model card's repeat pair, or none and why)
+    repeat_source: str | None = None
     train_columns: list[np.ndarray] = field(default_factory=list, repr=False)
     holdout_columns: list[np.ndarray] = field(default_factory=list, repr=False)
     train_grams: Grams | None = field(default=None, repr=False)
@@ -165,7 +167,8 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
 
 def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
                   simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
-                  nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics()) -> Problem:
+                  nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics(),
+                  repeat_source: str | None = None) -> Problem:
     """The runs prepared by role (simulated, aligned on their baseline), the
     design of the candidate effects and the Gram blocks of every run."""
     effects, at_index = _effects(arm, effects, payload_model, base_config, payload_at)
@@ -194,7 +197,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     # other motions fitted with the baseline need the shared errors apart from the change
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
     problem = Problem(arm, effects, Design(effects, every_effect_a_change), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
-                      len(measured_list), at_index, nuisance, offset_joints, offset_source, folds)
+                      len(measured_list), at_index, nuisance, offset_joints, offset_source, folds, repeat_source)
     _add_grams(problem)
     return problem
 

@@ -185,6 +185,8 @@ class Diagnosis:
     nuisance_offset_joints: dict | None
     session_floor: list | None
     repeat: str | None
+    #: where the --repeat came from: the option, the model card's repeat pair, or none and why
+    repeat_source: str | None
     gap_split: dict
     baseline: str | None
     train_runs: list

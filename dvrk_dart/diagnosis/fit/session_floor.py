@@ -22,12 +22,14 @@ J1 effort at q = 0 is then determined.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, sha256_of
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -95,3 +97,26 @@ def repeatable_share(before, after, floor):
     repeatable = np.square(before) - np.square(floor)
     left = np.maximum(np.square(after) - np.square(floor), 0.0)
     return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
+
+
+def card_repeat(model: PsmModel, baseline, given_runs: list) -> tuple[str | None, str]:
+    """(the --repeat the model card gives a baseline, where it comes from): a
+    baseline that is one of [sessions] repeat_pair's files (by content) gets
+    the other, unless that one is among the runs given (then it is no second
+    session of them); else None and why."""
+    pair = model.session_repeat_pair
+    files = manifest()["files"]
+    digests = {name: files[name]["sha256"] for name in pair if name in files}
+    if len(digests) != 2 or not isinstance(baseline, (str, Path)):
+        return None, "none: no --repeat, and the model card names no repeat pair"
+    specs = [part for spec in given_runs for part in (spec if isinstance(spec, tuple) else (spec,))]  # (run, its baseline) pairs too
+    given = {sha256_of(resolve_run(spec)) for spec in specs if isinstance(spec, (str, Path))}
+    mine = sha256_of(resolve_run(baseline))
+    for name, other in zip(pair, reversed(pair)):
+        if digests[name] != mine:
+            continue
+        if digests[other] in given:
+            return None, f"none: no --repeat, and the model card's repeat pair's other run ({other}) is among the runs studied"
+        shorthand = next((short for short, file in RUNS.items() if file == other), other)
+        return shorthand, f"the model card's repeat pair ([sessions] repeat_pair: {name} and {other}, one motion in two sessions)"
+    return None, "none: no --repeat, and the baseline is not one of the model card's repeat pair"

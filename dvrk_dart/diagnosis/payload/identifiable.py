@@ -28,8 +28,10 @@ from dvrk_dart.diagnosis.payload.payload import (
 )
 from dvrk_dart.diagnosis.payload.payload_report import (
     MASS_IDENTIFIED_RATIO,
+    SWAMPED,
     WITHOUT_REPEAT,
     pitch_shaft_offsets,
+    swamp,
 )
 from dvrk_dart.diagnosis.fit.selection import (
     GAIN_FAILURE_QUANTILE,
@@ -138,6 +140,28 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
     return ties
 
 
+def _session_shares(arm: Arm, effect: FirstMomentPayload, session_params: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
+    """One session's share (|reading| / sqrt(2), as `session_floor`) of what the
+    --repeat pair alone reads as each quantity."""
+    return {key: np.abs(v) / math.sqrt(2.0) for key, v in _quantities(arm, effect, session_params, gravity).items()}
+
+
+def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tuple[int, dict]], effect: FirstMomentPayload) -> None:
+    """Every interval spans the tied links' estimates: the link is not determined."""
+    others = [(selector.design.effects[j], q) for j, q in ties]
+    report["tied_links"] = [e.link_name for e, _ in others]
+    if any(_mass_unseen(arm, selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
+        report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
+    for e, q in others:
+        for key, v in _quantities(arm, e, q, _gravity_at_zero(arm, e.link_key)).items():
+            interval = np.asarray(report[f"{key}_interval"], dtype=float)
+            v = np.asarray(v, dtype=float)
+            if interval.ndim == 1:
+                report[f"{key}_interval"] = [float(min(interval[0], v)), float(max(interval[1], v))]
+            else:
+                report[f"{key}_interval"] = np.stack([np.minimum(interval[:, 0], v), np.maximum(interval[:, 1], v)], axis=1).tolist()
+
+
 def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
                         at_index: int | None = None, session_fit: SessionFit | None = None) -> dict:
     """The payload as the efforts determine it: first moment (base frame, q = 0)
@@ -146,86 +170,109 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     position (`at_index`, a PayloadAtPosition in the design), its mass.
 
     session_fit: the same effects fitted on two sessions of the run without the
-    weight (`--repeat` against the baseline): what they read there, divided by
-    sqrt(2) (one session's share, as `session_floor`), is added to every
-    interval in quadrature; the time-segment folds of one session cannot see it."""
+    weight (`--repeat` against the baseline): one session's share of what they
+    read there is added to every interval in quadrature (the time-segment folds
+    of one session cannot see it), and a quantity it reaches is not determined (`swamp`)."""
     effect: FirstMomentPayload = selector.design.effects[index]
     gravity = _gravity_at_zero(arm, effect.link_key)
     p = fit_params[index]
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
     report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f]))
-    if session_fit is not None:
-        session = {key: np.abs(v) / math.sqrt(2.0) for key, v in _quantities(arm, effect, session_fit(chosen)[index], gravity).items()}
-        for key, spread in session.items():
-            _widen(report, key, spread)
+    session = _session_shares(arm, effect, session_fit(chosen)[index], gravity) if session_fit is not None else {}
+    for key, spread in session.items():
+        _widen(report, key, spread)
+    if session:
         report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
     if _mass_unseen(arm, selector, index):
         report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
     ties = tied_payloads(selector, chosen, index)
     if ties:  # the link is not determined: every interval spans the tied links' estimates
-        others = [(selector.design.effects[j], q) for j, q in ties]
-        report["tied_links"] = [e.link_name for e, _ in others]
-        if any(_mass_unseen(arm, selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
-            report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
-        for e, q in others:
-            for key, v in _quantities(arm, e, q, _gravity_at_zero(arm, e.link_key)).items():
-                interval = np.asarray(report[f"{key}_interval"], dtype=float)
-                v = np.asarray(v, dtype=float)
-                if interval.ndim == 1:
-                    report[f"{key}_interval"] = [float(min(interval[0], v)), float(max(interval[1], v))]
-                else:
-                    report[f"{key}_interval"] = np.stack([np.minimum(interval[:, 0], v), np.maximum(interval[:, 1], v)], axis=1).tolist()
-    lo, hi = report["mass_kg_interval"]
-    mass_identified = bool(lo > 0.0 and hi / lo <= MASS_IDENTIFIED_RATIO)
+        _span_tied_links(report, arm, selector, ties, effect)
+    for key, spread in session.items():
+        swamp(report, key, spread, report.setdefault("not_determined", {}))
+    mass, mass_interval = report["mass_kg"], report["mass_kg_interval"]
+    mass_identified = bool(mass is not None and mass_interval[0] > 0.0 and mass_interval[1] / mass_interval[0] <= MASS_IDENTIFIED_RATIO)
     report["mass_identified"] = mass_identified
     report["position_m"] = (np.asarray(p[1:4]) / p[0]).tolist() if mass_identified else None
-    report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(report["first_moment_base_at_q0_kg_m"]))
+    moment = report["first_moment_base_at_q0_kg_m"]
+    report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
+    words = _first_moment_words(report, arm, effect, bool(ties))
+    if at_index is not None:
+        report["payload_at"] = _at_position(arm, selector, chosen, index, at_index, session_fit)
+        report["position_m"] = report["payload_at"]["position_m"]
+        at = report["payload_at"]
+        words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
+                     f"{_text(at['mass_kg'], at['mass_kg_interval'], 'kg', '.3f')}.")
+    if session_fit is None:
+        words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "
+                     "which share their sessions: " + WITHOUT_REPEAT)
+    elif report.get("not_determined"):
+        words.append(f"Not determined: {', '.join(report['not_determined'])}: {SWAMPED}.")
+    report["words"] = words
+    return report
+
+
+def _text(value, interval, unit: str, number: str) -> str:
+    """A value with its interval, or "not determined"."""
+    if value is None:
+        return "not determined"
+    return f"{value:{number}} {unit} (interval {interval[0]:{number}} to {interval[1]:{number}})"
+
+
+def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied: bool) -> list[str]:
     units = [arm.model.effort_unit(j) for j in JOINT_NAMES]
-    moment = np.asarray(report["first_moment_base_at_q0_kg_m"])
+    moment = ", ".join("not determined" if v is None else f"{v:+.4f}" for v in report["first_moment_base_at_q0_kg_m"])
+    efforts = ", ".join(f"{j} {'not determined' if v is None else f'{v:+.3f} {u}'}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units))
     words = [
-        ("The best-fitting payload's first moment" if ties else "The efforts determine the payload's first moment") + f" m·c = ({moment[0]:+.4f}, {moment[1]:+.4f}, {moment[2]:+.4f}) kg·m "
+        ("The best-fitting payload's first moment" if tied else "The efforts determine the payload's first moment") + f" m·c = ({moment}) kg·m "
         f"(base frame, q = 0, as a body on {report['first_moment_reference_link']}; pitch shaft centre at the base origin, shaft along base x, "
         "+y towards the remote centre of motion, +z up) "
-        f"and its gravity efforts at q = 0: " + ", ".join(f"{j} {v:+.3f} {u}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units)) + ".",
+        f"and its gravity efforts at q = 0: {efforts}.",
+        f"J1's effort changes with q1 at {_text(report['q1_gravity_slope_at_q0_nm_per_rad'], report['q1_gravity_slope_at_q0_nm_per_rad_interval'], 'N·m/rad', '+.3f')} "
+        "at q = 0: the J1 signature that scales with the weight.",
     ]
-    slope, (slope_lo, slope_hi) = report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"]
-    words.append(f"J1's effort changes with q1 at {slope:+.3f} N·m/rad at q = 0 (interval {slope_lo:+.3f} to {slope_hi:+.3f}): the J1 signature "
-                 "that scales with the weight.")
     if effect.equivalent_links:
         words.append(f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts.")
-    elif not ties:
+    elif not tied:
         words.append(f"The link ({effect.link_name}) is the only one whose payload gives these efforts.")
-    if ties:
+    if tied:
         words.append(f"Payloads on {', '.join(report['tied_links'])} explain the efforts as well (held-out scores within the bootstrap noise): "
                      "the link is not determined, and every interval spans their estimates too.")
-    if mass_identified:
-        words.append(f"The mass is identified: {p[0]:.3f} kg (interval {lo:.3f}-{hi:.3f} kg), seen through the link's translation or the inertia at several speeds.")
+    if report["mass_identified"]:
+        words.append(f"The mass is identified: {_text(report['mass_kg'], report['mass_kg_interval'], 'kg', '.3f')}, "
+                     "seen through the link's translation or the inertia at several speeds.")
+    elif report["mass_kg"] is None:
+        words.append(f"The mass is not determined: {SWAMPED}.")
     else:
+        lo, hi = report["mass_kg_interval"]
         words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed axis sees m·c only, "
                      "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
     words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
                  "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
                  "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "
                  "the first moment and the mass above are read from the other joints, where the model's geometry holds.")
-    if at_index is not None:
-        at: PayloadAtPosition = selector.design.effects[at_index]
-        at_set = [at_index if i == index else i for i in chosen]
-        at_cv = selector.cross_validate(at_set)
-        at_p = selector.fit_all(at_set).params[at_index]
-        m = float(at_p[0])
-        m_lo, m_hi = jackknife_interval(np.array(m), np.array([f[at_index][0] for f in at_cv.fold_params if at_index in f])).tolist()
-        if session_fit is not None:
-            spread = abs(session_fit(at_set)[at_index][0]) / math.sqrt(2.0)
-            m_lo, m_hi = m - math.hypot(m - m_lo, spread), m + math.hypot(m_hi - m, spread)
-        at_gravity = _gravity_efforts(_gravity_at_zero(arm, at.link_key), point_mass_parameters(m, at.position), at_p[1:])
-        report["payload_at"] = {"link": at.link_name, "position_m": at.position.tolist(), "mass_kg": m, "mass_kg_interval": [m_lo, m_hi],
-                                "gravity_efforts_at_q0": at_gravity.tolist(), "cross_validated_fraction": at_cv.fraction}
-        report["position_m"] = at.position.tolist()
-        words.append(f"At the given position ({at.link_name}, {np.round(at.position, 3).tolist()} m in its frame) the mass is {m:.3f} kg "
-                     f"(interval {m_lo:.3f}-{m_hi:.3f} kg).")
-    if session_fit is None:
-        words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "
-                     "which share their sessions: " + WITHOUT_REPEAT)
-    report["words"] = words
+    return words
+
+
+def _at_position(arm: Arm, selector: Selector, chosen: list[int], index: int, at_index: int, session_fit: SessionFit | None) -> dict:
+    """The selected payload as a point mass at the given position: its mass and
+    gravity efforts at q = 0, each with its jackknife interval widened by one
+    session's share of the --repeat pair's reading, or None where that swamps it."""
+    at: PayloadAtPosition = selector.design.effects[at_index]
+    at_set = [at_index if i == index else i for i in chosen]
+    at_cv = selector.cross_validate(at_set)
+    gravity = _gravity_at_zero(arm, at.link_key)
+
+    def quantities(q: np.ndarray) -> dict[str, np.ndarray]:
+        return {"mass_kg": np.array(q[0]), "gravity_efforts_at_q0": _gravity_efforts(gravity, point_mass_parameters(q[0], at.position), q[1:])}
+
+    report = {"link": at.link_name, "position_m": at.position.tolist(), "cross_validated_fraction": at_cv.fraction}
+    report.update(_with_intervals(quantities(selector.fit_all(at_set).params[at_index]),
+                                  [quantities(f[at_index]) for f in at_cv.fold_params if at_index in f]))
+    if session_fit is not None:
+        session = {key: np.abs(v) / math.sqrt(2.0) for key, v in quantities(session_fit(at_set)[at_index]).items()}
+        for key, spread in session.items():
+            _widen(report, key, spread)
+            swamp(report, key, spread, report.setdefault("not_determined", {}))
     return report

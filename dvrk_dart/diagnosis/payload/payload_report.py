@@ -20,6 +20,28 @@ MASS_IDENTIFIED_RATIO = 1.7
 #: what a payload report without --repeat (the baseline's motion in another session) says of its intervals
 WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) reads as a "
                   "payload, and the intervals do not count it.")
+#: why a quantity the session change swamps is not determined
+SWAMPED = ("a session change alone (the --repeat pair: the same motion in two sessions, no weight) reads it at least as large: "
+           "the runs do not tell the payload's share from a session's")
+
+
+def swamp(report: dict, key: str, session_share, reasons: dict) -> None:
+    """Each component of report[key] whose size the session change the repeat
+    pair reads (`session_share`: one session's spread) reaches is not
+    determined: None, its interval None, the reason in `reasons`."""
+    values = report[key]
+    scalar = not isinstance(values, list)
+    values, intervals = ([values], [report[f"{key}_interval"]]) if scalar else (list(values), list(report[f"{key}_interval"]))
+    shares = np.atleast_1d(np.abs(np.asarray(session_share, dtype=float)))
+    swamped = [v is not None and s > 0.0 and abs(v) <= s for v, s in zip(values, shares)]
+    if not any(swamped):
+        return
+    values = [None if w else v for v, w in zip(values, swamped)]
+    intervals = [None if w else i for i, w in zip(intervals, swamped)]
+    report[key], report[f"{key}_interval"] = (values[0], intervals[0]) if scalar else (values, intervals)
+    reasons[key] = SWAMPED
+
+
 #: masses tried when profiling a selected payload's mass (kg, geometric grid)
 PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
 

@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
-from dvrk_dart.diagnosis.payload.payload_report import WITHOUT_REPEAT, pitch_shaft_offsets
+from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, pitch_shaft_offsets, swamp
 from dvrk_dart.diagnosis.payload.periodic_payload import (
     INTERVAL_PROBABILITY,
     Pair,
@@ -110,6 +110,9 @@ def _report_quantities(fits: Fits, maps: dict[str, np.ndarray], not_seen: dict[s
         session[key] = reads[0] if scalar else reads
         if not determined.all():
             reasons[key] = not_seen.get(key, "the efforts do not determine it (the runs' motion does not excite it)")
+        if fits.session is not None:  # the session change's spread, as the interval counts it
+            read, read_se, _ = fits.session.standard_error(jacobian)
+            swamp(report, key, np.sqrt(np.maximum(read**2 - read_se**2, 0.0)), reasons)
     return report, reasons, session
 
 
@@ -266,6 +269,9 @@ def _words(report: dict, model) -> list[str]:
         size = "" if j2 is None else f" (J2's effort at q = 0 {j2:+.3f} N·m)"
         words.append(f"The --repeat pair alone (two sessions, no weight) reads as a payload of its own{size}: a session change of the payload's shape. Every interval counts "
                      "it, known to one degree of freedom from one pair: where it is large the intervals are wide.")
+    swamped = [key for key, reason in report["not_determined"].items() if reason == SWAMPED]
+    if swamped:
+        words.append(f"Not determined: {', '.join(swamped)}: {SWAMPED}.")
     if report["session_pair"] is None:
         words.append("Without --repeat (the baseline's motion in another session) the session scatter is read only from what the "
                      "payload leaves: " + WITHOUT_REPEAT)
