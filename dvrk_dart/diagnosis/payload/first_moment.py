@@ -29,6 +29,10 @@ Fitting it with the payload, not with offsets, springs or time shifts, keeps
 it where it scales with the weight; the placement and the mass are then read
 from J2..J7, where the model's geometry holds (the insertion-stage weight:
 J2 efforts at 0.91 of the hand placement's prediction, correlation 0.98).
+The path's inertia about the yaw axis is tied to its (m, m c) as the
+payload's is: J1's row of the body's second moment. Left out (as it was), a
+payload on the yaw link, whose efforts J1 alone sees, had no inertia but q1's
+armature (blind suite, with a baseline: q1 left at 1.7x the noise).
 """
 
 from __future__ import annotations
@@ -53,6 +57,8 @@ YAW_PATH_JOINT = 0
 #: do not see (e.g. along the yaw axis of a link that only translates in the
 #: parallelogram), which would otherwise run to their bounds
 FIRST_MOMENT_PRIOR_LENGTH_M = 0.1
+#: a body's second moment: its last six dynamic parameters
+SECOND_MOMENT_COLUMNS = BODY_PARAMETERS - FIRST_MOMENT_COLUMNS
 #: the tied second moment (|m c|^2 I - (m c)(m c)^T) / m divides by at least
 #: this mass (kg): a first moment with no mass is a point at infinity
 TIED_MASS_FLOOR_KG = 1e-3
@@ -131,48 +137,60 @@ class FirstMomentPayload(Effect):
 
     @property
     def n_columns(self) -> int:
-        return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS
+        return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS + SECOND_MOMENT_COLUMNS
 
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
-        """The body's ten columns and J1's path."""
-        return _with_yaw_path(features, self.link_key, features.body_regressor[:, :, features.body_columns(self.link_key)])
+        """The body's ten columns, J1's path, and J1's row of the second moment
+        (the path's inertia about the yaw axis: a payload on the yaw link has no other)."""
+        body = features.body_regressor[:, :, features.body_columns(self.link_key)]
+        path_inertia = np.zeros(body.shape[:2] + (SECOND_MOMENT_COLUMNS,))
+        path_inertia[:, YAW_PATH_JOINT] = body[:, YAW_PATH_JOINT, FIRST_MOMENT_COLUMNS:]
+        return np.concatenate([_with_yaw_path(features, self.link_key, body), path_inertia], axis=2)
 
     def first_moment_columns(self, features: TrajectoryFeatures) -> np.ndarray:
         """(N, 7, 8) the efforts linear in the parameters, the second moment left out."""
         return _with_yaw_path(features, self.link_key, features.first_moment_columns(self.link_key))
 
-    def _tied_mass(self, p) -> tuple[float, np.ndarray]:
-        """The mass the tied second moment divides by, and its gradient in (m, m c):
+    def _tied_mass(self, mh) -> tuple[float, np.ndarray]:
+        """The mass a tied second moment divides by, and its gradient in (m, m c):
         at least |m c| / reach (no part of a payload lies beyond the link's
         envelope, so a small mass far out, all inertia, is not a payload) and
         TIED_MASS_FLOOR_KG."""
-        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
+        h = np.asarray(mh[1:FIRST_MOMENT_COLUMNS], dtype=float)
         norm = float(np.linalg.norm(h))
-        candidates = (float(p[0]), norm / self.reach_m, TIED_MASS_FLOOR_KG)
+        candidates = (float(mh[0]), norm / self.reach_m, TIED_MASS_FLOOR_KG)
         gradients = (np.eye(FIRST_MOMENT_COLUMNS)[0], np.r_[0.0, h / max(norm * self.reach_m, 1e-300)], np.zeros(FIRST_MOMENT_COLUMNS))
         k = int(np.argmax(candidates))
         return candidates[k], gradients[k]
 
+    def _tied_second_moment(self, mh) -> tuple[np.ndarray, np.ndarray]:
+        """A point mass's second moment (|m c|^2 I - (m c)(m c)^T) / m (6,) and its (6, 4) jacobian in (m, m c)."""
+        m, dm = self._tied_mass(mh)
+        h = np.asarray(mh[1:FIRST_MOMENT_COLUMNS], dtype=float)
+        k = FIRST_MOMENT_COLUMNS
+        J = np.zeros((SECOND_MOMENT_COLUMNS, k))
+        J[:, 1:] = point_mass_parameters_jacobian(1.0 / m, h)[k:, 1:]
+        J -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
+        return point_mass_parameters(1.0 / m, h)[k:], J
+
     def coefficients(self, p):
-        m, _ = self._tied_mass(p)
-        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
-        return np.concatenate([p[:FIRST_MOMENT_COLUMNS], point_mass_parameters(1.0 / m, h)[FIRST_MOMENT_COLUMNS:], p[FIRST_MOMENT_COLUMNS:]])
+        body, path = p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:]
+        return np.concatenate([body, self._tied_second_moment(body)[0], path, self._tied_second_moment(path)[0]])
 
     def coefficients_jacobian(self, p):
-        m, dm = self._tied_mass(p)
-        h = np.asarray(p[1:FIRST_MOMENT_COLUMNS], dtype=float)
+        k = FIRST_MOMENT_COLUMNS
         J = np.zeros((self.n_columns, self.n_parameters))
-        k = FIRST_MOMENT_COLUMNS  # (m, m c); the second moment's six rows follow
-        J[:k, :k] = np.eye(k)
-        J[k:BODY_PARAMETERS, 1:k] = point_mass_parameters_jacobian(1.0 / m, h)[k:, 1:]
-        J[k:BODY_PARAMETERS, :k] -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
-        J[BODY_PARAMETERS:, k:] = np.eye(FIRST_MOMENT_COLUMNS)
+        for rows, columns in ((slice(0, BODY_PARAMETERS), slice(0, k)), (slice(BODY_PARAMETERS, self.n_columns), slice(k, 2 * k))):
+            start = rows.start
+            J[start:start + k, columns] = np.eye(k)  # (m, m c) themselves; their tied second moment's six rows follow
+            J[start + k:rows.stop, columns] = self._tied_second_moment(p[columns])[1]
         return J
 
     def initial_guesses(self, linear_solution):
         """The unconstrained solution's (m, m c) and J1's path, and the same with
         the mass raised to put the payload within FIRST_MOMENT_PRIOR_LENGTH_M."""
-        start = np.clip(np.r_[linear_solution[:FIRST_MOMENT_COLUMNS], linear_solution[BODY_PARAMETERS:]], self.lower, self.upper)
+        path = linear_solution[BODY_PARAMETERS:BODY_PARAMETERS + FIRST_MOMENT_COLUMNS]
+        start = np.clip(np.r_[linear_solution[:FIRST_MOMENT_COLUMNS], path], self.lower, self.upper)
         raised = max(start[0], np.linalg.norm(start[1:FIRST_MOMENT_COLUMNS]) / FIRST_MOMENT_PRIOR_LENGTH_M)
         return [start, np.r_[raised, start[1:]].clip(self.lower, self.upper)]
 
