@@ -93,3 +93,26 @@ def test_the_pitch_angle_load_is_simulated_as_its_regressor_says(arm, segment):
     assert np.max(np.abs(added - load.effort(features, p))) < 1e-12
     assert np.max(np.abs(added[:, 2] - (0.1 * np.sin(state.q[:, 1]) + 0.2 * np.cos(state.q[:, 1])))) < 1e-12
     assert load.name in {e.name for e in candidate_effects(arm)}
+
+
+def test_a_payload_on_the_yaw_link_has_its_inertia_in_j1(arm, segment):
+    """J1 sees a payload through its own path (m, m c); the path's inertia about
+    the yaw axis is tied to it as a point mass's: 0.2 kg on the yaw link gives
+    J1 the point mass's whole effort (its only joint), the coefficients'
+    Jacobian matches finite differences."""
+    from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+    from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+
+    state = segment.head(200)
+    ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, ref, sample_rate_hz())
+    effect, mass, position = FirstMomentPayload(arm.model, 1), 0.2, np.array([0.10, 0.05, 0.0])
+    p = np.r_[mass, mass * position, mass, mass * position]
+    effort = effect.columns(features) @ effect.coefficients(p)
+    body = features.body_regressor[:, :, features.body_columns(1)] @ point_mass_parameters(mass, position)
+    inertia = mass * position @ position * np.abs(state.ddq[:, 0]).max()
+    assert inertia > 1e-3  # what the path would miss without its second moment (N·m)
+    np.testing.assert_allclose(effort[:, 0], body[:, 0], atol=1e-9)
+    step = 1e-7 * np.eye(len(p))
+    numeric = np.stack([(effect.coefficients(p + d) - effect.coefficients(p - d)) / 2e-7 for d in step], axis=1)
+    np.testing.assert_allclose(effect.coefficients_jacobian(p), numeric, atol=1e-6)

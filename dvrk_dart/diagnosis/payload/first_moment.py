@@ -163,19 +163,22 @@ class FirstMomentPayload(Effect):
         k = int(np.argmax(candidates))
         return candidates[k], gradients[k]
 
-    def _tied_second_moment(self, mh) -> tuple[np.ndarray, np.ndarray]:
-        """A point mass's second moment (|m c|^2 I - (m c)(m c)^T) / m (6,) and its (6, 4) jacobian in (m, m c)."""
+    def _tied_second_moment(self, mh) -> np.ndarray:
+        """A point mass's second moment (|m c|^2 I - (m c)(m c)^T) / m (6,) from (m, m c)."""
+        return point_mass_parameters(1.0 / self._tied_mass(mh)[0], np.asarray(mh[1:FIRST_MOMENT_COLUMNS], dtype=float))[FIRST_MOMENT_COLUMNS:]
+
+    def _tied_second_moment_jacobian(self, mh) -> np.ndarray:
+        """(6, 4): d(_tied_second_moment)/d(m, m c)."""
         m, dm = self._tied_mass(mh)
         h = np.asarray(mh[1:FIRST_MOMENT_COLUMNS], dtype=float)
         k = FIRST_MOMENT_COLUMNS
         J = np.zeros((SECOND_MOMENT_COLUMNS, k))
         J[:, 1:] = point_mass_parameters_jacobian(1.0 / m, h)[k:, 1:]
-        J -= np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
-        return point_mass_parameters(1.0 / m, h)[k:], J
+        return J - np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
 
     def coefficients(self, p):
         body, path = p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:]
-        return np.concatenate([body, self._tied_second_moment(body)[0], path, self._tied_second_moment(path)[0]])
+        return np.concatenate([body, self._tied_second_moment(body), path, self._tied_second_moment(path)])
 
     def coefficients_jacobian(self, p):
         k = FIRST_MOMENT_COLUMNS
@@ -183,7 +186,7 @@ class FirstMomentPayload(Effect):
         for rows, columns in ((slice(0, BODY_PARAMETERS), slice(0, k)), (slice(BODY_PARAMETERS, self.n_columns), slice(k, 2 * k))):
             start = rows.start
             J[start:start + k, columns] = np.eye(k)  # (m, m c) themselves; their tied second moment's six rows follow
-            J[start + k:rows.stop, columns] = self._tied_second_moment(p[columns])[1]
+            J[start + k:rows.stop, columns] = self._tied_second_moment_jacobian(p[columns])
         return J
 
     def initial_guesses(self, linear_solution):
