@@ -106,3 +106,17 @@ def test_sessions_name_known_joints(tmp_path):
     bad.write_text(model.source.read_text().replace('offset_joints = ["q2", "q3", "q4"]', 'offset_joints = ["q2", "yaw"]'))
     with pytest.raises(DvrkDartError, match=r"\[sessions\] offset_joints: unknown joint\(s\) yaw"):
         load_model(bad)
+
+
+def test_a_repeat_pair_names_two_files(tmp_path):
+    """[sessions] repeat_pair: two manifest names, else a one-line error naming the file."""
+    import re
+
+    from dvrk_dart.paths import PROJECT_DIR
+
+    card = (PROJECT_DIR / "models" / "psm" / "psm.toml").read_text()
+    assert load_model(PROJECT_DIR / "models" / "psm" / "psm.toml").session_repeat_pair == ("one_no_weight_results.csv", "one_results.csv")
+    bad = tmp_path / "psm.toml"
+    bad.write_text(re.sub(r"repeat_pair = \[.*\]", 'repeat_pair = ["one_results.csv"]', card))
+    with pytest.raises(DvrkDartError, match="repeat_pair names 1 files"):
+        load_model(bad)

@@ -7,6 +7,7 @@ and the runs' Gram blocks the selection works on."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Sequence
 
@@ -73,6 +74,12 @@ class Problem:
         """(7,) bool: the joints every run recorded (the others have no weight and no figure)."""
         runs = self.train_runs + self.holdout_runs + [r for r in (self.baseline_run, self.repeat_run) if r is not None]
         return np.all([r.state.measured for r in runs], axis=0)
+
+    @cached_property
+    def train_totals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The training Gram blocks summed over the folds (A, g, s): every candidate's training fraction reads them."""
+        grams = self.train_grams
+        return grams.A.sum(0), grams.g.sum(0), grams.s.sum(0)
 
     @property
     def has_baseline(self) -> bool:

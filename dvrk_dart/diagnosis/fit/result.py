@@ -59,8 +59,8 @@ def without_last_effect(selection: Selection) -> Selection:
 
 
 def train_fraction(problem: Problem, beta: np.ndarray) -> float:
-    grams = problem.train_grams
-    return weighted_fraction(sse(beta, grams.A.sum(0), grams.g.sum(0), grams.s.sum(0)), grams.s.sum(0), problem.joint_weights)
+    A, g, s = problem.train_totals
+    return weighted_fraction(sse(beta, A, g, s), s, problem.joint_weights)
 
 
 def holdout_fraction(problem: Problem, beta: np.ndarray) -> float | None:

@@ -29,10 +29,12 @@ Fitting it with the payload, not with offsets, springs or time shifts, keeps
 it where it scales with the weight; the placement and the mass are then read
 from J2..J7, where the model's geometry holds (the insertion-stage weight:
 J2 efforts at 0.91 of the hand placement's prediction, correlation 0.98).
-The path's inertia about the yaw axis is tied to its (m, m c) as the
-payload's is: J1's row of the body's second moment. Left out (as it was), a
-payload on the yaw link, whose efforts J1 alone sees, had no inertia but q1's
-armature (blind suite, with a baseline: q1 left at 1.7x the noise).
+J1 sees the payload's inertia as the body's: J1's row of the tied second
+moment. Left out (as it was), a payload on the yaw link, whose efforts J1
+alone sees, had no inertia but q1's armature (blind suite, with a baseline:
+q1 left at 1.7x the noise); tied to the path's own (m, m c) instead (tried),
+its free mass let the inertia take J1's constant and slope (a 105 g J1 effort
+at q = 0 of -0.041 N·m read as -0.002).
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, arm_reach_m, join
 from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters, point_mass_parameters_jacobian
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import Payload
 
 #: the joint whose payload efforts get a first moment of their own (the yaw joint)
@@ -140,8 +142,8 @@ class FirstMomentPayload(Effect):
         return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS + SECOND_MOMENT_COLUMNS
 
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
-        """The body's ten columns, J1's path, and J1's row of the second moment
-        (the path's inertia about the yaw axis: a payload on the yaw link has no other)."""
+        """The body's ten columns, J1's path, and J1's row of the body's second
+        moment (the payload's inertia as J1 sees it: a payload on the yaw link has no other)."""
         body = features.body_regressor[:, :, features.body_columns(self.link_key)]
         path_inertia = np.zeros(body.shape[:2] + (SECOND_MOMENT_COLUMNS,))
         path_inertia[:, YAW_PATH_JOINT] = body[:, YAW_PATH_JOINT, FIRST_MOMENT_COLUMNS:]
@@ -177,23 +179,25 @@ class FirstMomentPayload(Effect):
         return J - np.outer(point_mass_parameters(1.0 / m ** 2, h)[k:], dm)
 
     def coefficients(self, p):
-        body, path = p[:FIRST_MOMENT_COLUMNS], p[FIRST_MOMENT_COLUMNS:]
-        return np.concatenate([body, self._tied_second_moment(body), path, self._tied_second_moment(path)])
+        body, second = p[:FIRST_MOMENT_COLUMNS], self._tied_second_moment(p[:FIRST_MOMENT_COLUMNS])
+        return np.concatenate([body, second, p[FIRST_MOMENT_COLUMNS:], second])
 
     def coefficients_jacobian(self, p):
         k = FIRST_MOMENT_COLUMNS
         J = np.zeros((self.n_columns, self.n_parameters))
-        for rows, columns in ((slice(0, BODY_PARAMETERS), slice(0, k)), (slice(BODY_PARAMETERS, self.n_columns), slice(k, 2 * k))):
-            start = rows.start
-            J[start:start + k, columns] = np.eye(k)  # (m, m c) themselves; their tied second moment's six rows follow
-            J[start + k:rows.stop, columns] = self._tied_second_moment_jacobian(p[columns])
+        J[:k, :k] = np.eye(k)  # (m, m c), then their tied second moment: the body's and J1's row of it
+        J[k:BODY_PARAMETERS, :k] = J[BODY_PARAMETERS + k:, :k] = self._tied_second_moment_jacobian(p[:k])
+        J[BODY_PARAMETERS:BODY_PARAMETERS + k, k:] = np.eye(k)  # J1's path
         return J
 
     def initial_guesses(self, linear_solution):
         """The unconstrained solution's (m, m c) and J1's path, and the same with
-        the mass raised to put the payload within FIRST_MOMENT_PRIOR_LENGTH_M."""
+        the mass raised to put the payload within FIRST_MOMENT_PRIOR_LENGTH_M; a
+        payload J1 alone sees (on the yaw link) starts its (m, m c) from J1's
+        path: seen only through the tied inertia, they have no gradient at zero."""
         path = linear_solution[BODY_PARAMETERS:BODY_PARAMETERS + FIRST_MOMENT_COLUMNS]
-        start = np.clip(np.r_[linear_solution[:FIRST_MOMENT_COLUMNS], path], self.lower, self.upper)
+        body = path if tuple(self.joints) == (JOINT_NAMES[YAW_PATH_JOINT],) else linear_solution[:FIRST_MOMENT_COLUMNS]
+        start = np.clip(np.r_[body, path], self.lower, self.upper)
         raised = max(start[0], np.linalg.norm(start[1:FIRST_MOMENT_COLUMNS]) / FIRST_MOMENT_PRIOR_LENGTH_M)
         return [start, np.r_[raised, start[1:]].clip(self.lower, self.upper)]
 
@@ -235,8 +239,12 @@ class PayloadAtPosition(Effect):
     prior_scales = np.full(1 + FIRST_MOMENT_COLUMNS, np.inf)
 
     def columns(self, features):
+        """The point mass per kg, J1's row its path's (m, m c) and its own inertia about the link's origin (known per kg)."""
         body = features.body_regressor[:, :, features.body_columns(self.link_key)]
-        return _with_yaw_path(features, self.link_key, (body @ point_mass_parameters(1.0, self.position))[:, :, None])
+        unit = point_mass_parameters(1.0, self.position)
+        columns = _with_yaw_path(features, self.link_key, (body @ unit)[:, :, None])
+        columns[:, YAW_PATH_JOINT, 0] = body[:, YAW_PATH_JOINT, FIRST_MOMENT_COLUMNS:] @ unit[FIRST_MOMENT_COLUMNS:]
+        return columns
 
     def sim_contribution(self, p):
         return SimContribution(payloads=(Payload(link=self.link_key, mass_kg=float(p[0]), position_m=tuple(float(x) for x in self.position)),))
