@@ -223,7 +223,8 @@ def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) 
         return (f"J1's value at q = 0 is barely determined: sessions move J1's constant ({source}), so each run's offset takes it, "
                 "and over the runs' yaw range cos q1 hardly differs from one.")
     return (f"J1's value at q = 0 is read from the constant change of J1's effort, which sessions do not move ({source}; runs get no "
-            "J1 offset), less the mean of the payload's own centripetal efforts (J1 sees its inertia).")
+            "J1 offset); it includes the mean of the payload's own centripetal efforts, which the first moment does not model "
+            "(proportional to the mass, like the gravity effort).")
 
 
 # --------------------------------------------------------------------- result

@@ -29,12 +29,16 @@ Fitting it with the payload, not with offsets, springs or time shifts, keeps
 it where it scales with the weight; the placement and the mass are then read
 from J2..J7, where the model's geometry holds (the insertion-stage weight:
 J2 efforts at 0.91 of the hand placement's prediction, correlation 0.98).
-J1 sees the payload's inertia as the body's: J1's row of the tied second
-moment. Left out (as it was), a payload on the yaw link, whose efforts J1
-alone sees, had no inertia but q1's armature (blind suite, with a baseline:
-q1 left at 1.7x the noise); tied to the path's own (m, m c) instead (tried),
-its free mass let the inertia take J1's constant and slope (a 105 g J1 effort
-at q = 0 of -0.041 N·m read as -0.002).
+A payload on the yaw link, whose efforts J1 alone sees, has J1's row of its
+tied second moment too: left out (as it was), it had no inertia but q1's
+armature (blind suite, with a baseline: q1 left at 1.7x the noise). On the
+other links J1 sees the path's first moment only: J1's row of the tied
+second moment there (tried) named a parallelogram payload on the tool roll
+link (the equivalent links' origins differ, their second moments too), and
+tied to the path's own (m, m c) (tried) the path's free mass let the inertia
+take J1's constant and slope (a 105 g J1 effort at q = 0 of -0.041 N·m read
+as -0.002). `PayloadAtPosition`'s point mass, whose position is given, has its
+inertia in J1's row (per kg).
 """
 
 from __future__ import annotations
@@ -107,6 +111,8 @@ class FirstMomentPayload(Effect):
         #: whether gravity sees the mass apart from m c (`payload.mass_seen_by_gravity`)
         self.mass_seen = mass_seen
         self.joints = joints_moving_link(model, key)
+        #: J1 alone sees the payload (the yaw link): J1's row carries its tied inertia too
+        self.j1_inertia = tuple(self.joints) == (JOINT_NAMES[YAW_PATH_JOINT],)
         # the largest first moment a plausible payload has: the heaviest mass at
         # the far end of the link's envelope, along each axis
         reach = np.maximum(np.abs(self.envelope.lower), np.abs(self.envelope.upper))
@@ -139,15 +145,18 @@ class FirstMomentPayload(Effect):
 
     @property
     def n_columns(self) -> int:
-        return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS + SECOND_MOMENT_COLUMNS
+        return BODY_PARAMETERS + FIRST_MOMENT_COLUMNS + (SECOND_MOMENT_COLUMNS if self.j1_inertia else 0)
 
     def columns(self, features: TrajectoryFeatures) -> np.ndarray:
-        """The body's ten columns, J1's path, and J1's row of the body's second
-        moment (the payload's inertia as J1 sees it: a payload on the yaw link has no other)."""
+        """The body's ten columns and J1's path; on the yaw link, J1's row of the
+        body's second moment (the payload's inertia: J1 alone sees it)."""
         body = features.body_regressor[:, :, features.body_columns(self.link_key)]
-        path_inertia = np.zeros(body.shape[:2] + (SECOND_MOMENT_COLUMNS,))
-        path_inertia[:, YAW_PATH_JOINT] = body[:, YAW_PATH_JOINT, FIRST_MOMENT_COLUMNS:]
-        return np.concatenate([_with_yaw_path(features, self.link_key, body), path_inertia], axis=2)
+        columns = _with_yaw_path(features, self.link_key, body)
+        if not self.j1_inertia:
+            return columns
+        inertia = np.zeros(body.shape[:2] + (SECOND_MOMENT_COLUMNS,))
+        inertia[:, YAW_PATH_JOINT] = body[:, YAW_PATH_JOINT, FIRST_MOMENT_COLUMNS:]
+        return np.concatenate([columns, inertia], axis=2)
 
     def first_moment_columns(self, features: TrajectoryFeatures) -> np.ndarray:
         """(N, 7, 8) the efforts linear in the parameters, the second moment left out."""
@@ -180,14 +189,15 @@ class FirstMomentPayload(Effect):
 
     def coefficients(self, p):
         body, second = p[:FIRST_MOMENT_COLUMNS], self._tied_second_moment(p[:FIRST_MOMENT_COLUMNS])
-        return np.concatenate([body, second, p[FIRST_MOMENT_COLUMNS:], second])
+        return np.concatenate([body, second, p[FIRST_MOMENT_COLUMNS:]] + ([second] if self.j1_inertia else []))
 
     def coefficients_jacobian(self, p):
         k = FIRST_MOMENT_COLUMNS
         J = np.zeros((self.n_columns, self.n_parameters))
-        J[:k, :k] = np.eye(k)  # (m, m c), then their tied second moment: the body's and J1's row of it
-        J[k:BODY_PARAMETERS, :k] = J[BODY_PARAMETERS + k:, :k] = self._tied_second_moment_jacobian(p[:k])
+        J[:k, :k] = np.eye(k)  # (m, m c), then their tied second moment (and J1's row of it on the yaw link)
+        J[k:BODY_PARAMETERS, :k] = self._tied_second_moment_jacobian(p[:k])
         J[BODY_PARAMETERS:BODY_PARAMETERS + k, k:] = np.eye(k)  # J1's path
+        J[BODY_PARAMETERS + k:, :k] = J[k:BODY_PARAMETERS, :k] if self.j1_inertia else 0.0
         return J
 
     def initial_guesses(self, linear_solution):
@@ -196,7 +206,7 @@ class FirstMomentPayload(Effect):
         payload J1 alone sees (on the yaw link) starts its (m, m c) from J1's
         path: seen only through the tied inertia, they have no gradient at zero."""
         path = linear_solution[BODY_PARAMETERS:BODY_PARAMETERS + FIRST_MOMENT_COLUMNS]
-        body = path if tuple(self.joints) == (JOINT_NAMES[YAW_PATH_JOINT],) else linear_solution[:FIRST_MOMENT_COLUMNS]
+        body = path if self.j1_inertia else linear_solution[:FIRST_MOMENT_COLUMNS]
         start = np.clip(np.r_[body, path], self.lower, self.upper)
         raised = max(start[0], np.linalg.norm(start[1:FIRST_MOMENT_COLUMNS]) / FIRST_MOMENT_PRIOR_LENGTH_M)
         return [start, np.r_[raised, start[1:]].clip(self.lower, self.upper)]
