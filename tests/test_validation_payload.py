@@ -197,6 +197,6 @@ def test_j1_at_q0_is_not_determined_without_a_run_of_the_baselines_motion(arm):
     at = hand_position_on_link(arm, {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_horizontal_m": 0.165, "check_height_m": 0.020})
     payload = diagnose("one-105g-half", baseline="one-no-weight", repeat="one", arm=arm, figures=False, profile_payload_mass=False,
                        payload_at=at)["payload"]
-    assert payload["gravity_efforts_at_q0"][0] is None and payload["not_determined"]["gravity_efforts_at_q0"] == J1_OTHER_MOTION
+    assert payload["gravity_efforts_at_q0"][0] is None and J1_OTHER_MOTION in payload["not_determined"]["gravity_efforts_at_q0"]
     j2 = payload["payload_at"]["gravity_efforts_at_q0"][1]
     assert j2 is not None and -0.3 < j2 < -0.1  # 105 g about 16.5 cm from the pitch shaft: about -0.17 N·m

@@ -183,12 +183,14 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
                                    session_fit) for i in selected_moments]
     # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
     other_motion = not any(r.role is RunRole.DIFFERENCE for r in problem.train_runs)
+    offsets = problem.offset_joints if problem.offset_joints is not None else np.zeros(N_JOINTS, bool)
     for report in reports:
+        _offset_constants_not_determined(report, offsets)
         if not other_motion:
             report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
             continue
         for part in filter(None, (report, report.get("payload_at"))):
-            _j1_not_determined(part)
+            _effort_not_determined(part, 0, J1_OTHER_MOTION)
         report["words"].append(f"J1's gravity effort at q = 0 is not determined: {J1_OTHER_MOTION}.")
     return reports, points
 
@@ -211,9 +213,27 @@ J1_OTHER_MOTION = ("no run has the baseline's motion, and a run of another motio
                    "and centripetal means, which cannot be told from the payload's J1 effort at q = 0")
 
 
-def _j1_not_determined(part: dict) -> None:
-    part["gravity_efforts_at_q0"][0] = part["gravity_efforts_at_q0_interval"][0] = None
-    part.setdefault("not_determined", {})["gravity_efforts_at_q0"] = J1_OTHER_MOTION
+def _effort_not_determined(part: dict, joint: int, reason: str) -> None:
+    """A gravity effort at q = 0 reported as None, with the reason (joined to any other's)."""
+    part["gravity_efforts_at_q0"][joint] = part["gravity_efforts_at_q0_interval"][joint] = None
+    reasons = part.setdefault("not_determined", {})
+    text = f"{JOINT_NAMES[joint]}: {reason}"
+    reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
+
+
+#: why the first moment's gravity effort at q = 0 is not determined on a joint whose constant each run's offset takes
+OFFSET_TAKES_CONSTANT = ("each run's offset takes the joint's constant effort (sessions move it), so the payload's effort there at q = 0 "
+                         "rests on how the effort bends over the runs' range, which the fit's prior on the first moment decides as much "
+                         "as the data; --payload-at ties it to the position's geometry")
+
+
+def _offset_constants_not_determined(report: dict, offsets: np.ndarray) -> None:
+    """The first moment's gravity efforts at q = 0 on the joints whose constant the runs' offsets take: None, with the reason."""
+    joints = [j for j in np.flatnonzero(offsets[:3]) if report["gravity_efforts_at_q0"][j] not in (None, 0.0)]
+    for j in joints:
+        _effort_not_determined(report, j, OFFSET_TAKES_CONSTANT)
+    if joints:
+        report["words"].append(f"Not determined: the gravity effort at q = 0 on {', '.join(JOINT_NAMES[j] for j in joints)}: {OFFSET_TAKES_CONSTANT}.")
 
 
 def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) -> str:

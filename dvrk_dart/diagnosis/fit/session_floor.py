@@ -107,8 +107,10 @@ def card_repeat(model: PsmModel, baseline, given_runs: list) -> tuple[str | None
     pair = model.session_repeat_pair
     files = manifest()["files"]
     digests = {name: files[name]["sha256"] for name in pair if name in files}
-    if len(digests) != 2 or not isinstance(baseline, (str, Path)):
+    if len(digests) != 2:
         return None, "none: no --repeat, and the model card names no repeat pair"
+    if not isinstance(baseline, (str, Path)):
+        return None, "none: no --repeat, and the baseline is no file to compare with the model card's repeat pair"
     specs = [part for spec in given_runs for part in (spec if isinstance(spec, tuple) else (spec,))]  # (run, its baseline) pairs too
     given = {sha256_of(resolve_run(spec)) for spec in specs if isinstance(spec, (str, Path))}
     mine = sha256_of(resolve_run(baseline))
