@@ -18,7 +18,7 @@ from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import first_moment_report
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
-from dvrk_dart.diagnosis.payload.payload_report import describe_payload, mass_profile
+from dvrk_dart.diagnosis.payload.payload_report import describe_payload, effort_not_determined, mass_profile
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
 from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
@@ -179,19 +179,17 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
         return [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
                                         effects[i]) for i in selected_moments[:1]], points
     session_fit = _session_fit(problem, s)
-    reports = [first_moment_report(problem.arm, s.selector, s.selected, i, s.final.params, s.cross_validated.fold_params, problem.at_index,
-                                   session_fit) for i in selected_moments]
     # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
     other_motion = not any(r.role is RunRole.DIFFERENCE for r in problem.train_runs)
     offsets = problem.offset_joints if problem.offset_joints is not None else np.zeros(N_JOINTS, bool)
+    undetermined = {**{int(j): OFFSET_TAKES_CONSTANT for j in np.flatnonzero(offsets[:3])}, **({0: J1_OTHER_MOTION} if other_motion else {})}
+    reports = [first_moment_report(problem.arm, s.selector, s.selected, i, s.final.params, s.cross_validated.fold_params, problem.at_index,
+                                   session_fit, undetermined) for i in selected_moments]
     for report in reports:
-        _offset_constants_not_determined(report, offsets)
         if not other_motion:
             report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
-            continue
-        for part in filter(None, (report, report.get("payload_at"))):
-            _effort_not_determined(part, 0, J1_OTHER_MOTION)
-        report["words"].append(f"J1's gravity effort at q = 0 is not determined: {J1_OTHER_MOTION}.")
+        elif report.get("payload_at"):
+            effort_not_determined(report["payload_at"], 0, J1_OTHER_MOTION)
     return reports, points
 
 
@@ -213,27 +211,10 @@ J1_OTHER_MOTION = ("no run has the baseline's motion, and a run of another motio
                    "and centripetal means, which cannot be told from the payload's J1 effort at q = 0")
 
 
-def _effort_not_determined(part: dict, joint: int, reason: str) -> None:
-    """A gravity effort at q = 0 reported as None, with the reason (joined to any other's)."""
-    part["gravity_efforts_at_q0"][joint] = part["gravity_efforts_at_q0_interval"][joint] = None
-    reasons = part.setdefault("not_determined", {})
-    text = f"{JOINT_NAMES[joint]}: {reason}"
-    reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
-
-
 #: why the first moment's gravity effort at q = 0 is not determined on a joint whose constant each run's offset takes
 OFFSET_TAKES_CONSTANT = ("each run's offset takes the joint's constant effort (sessions move it), so the payload's effort there at q = 0 "
                          "rests on how the effort bends over the runs' range, which the fit's prior on the first moment decides as much "
                          "as the data; --payload-at ties it to the position's geometry")
-
-
-def _offset_constants_not_determined(report: dict, offsets: np.ndarray) -> None:
-    """The first moment's gravity efforts at q = 0 on the joints whose constant the runs' offsets take: None, with the reason."""
-    joints = [j for j in np.flatnonzero(offsets[:3]) if report["gravity_efforts_at_q0"][j] not in (None, 0.0)]
-    for j in joints:
-        _effort_not_determined(report, j, OFFSET_TAKES_CONSTANT)
-    if joints:
-        report["words"].append(f"Not determined: the gravity effort at q = 0 on {', '.join(JOINT_NAMES[j] for j in joints)}: {OFFSET_TAKES_CONSTANT}.")
 
 
 def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) -> str:

@@ -30,6 +30,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     MASS_IDENTIFIED_RATIO,
     SWAMPED,
     WITHOUT_REPEAT,
+    effort_not_determined,
     pitch_shaft_offsets,
     swamp,
 )
@@ -163,7 +164,8 @@ def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tupl
 
 
 def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
-                        at_index: int | None = None, session_fit: SessionFit | None = None) -> dict:
+                        at_index: int | None = None, session_fit: SessionFit | None = None,
+                        efforts_not_determined: dict[int, str] | None = None) -> dict:
     """The payload as the efforts determine it: first moment (base frame, q = 0)
     and gravity efforts at q = 0 per joint, each with its interval; the mass
     with its interval and whether it is identified; with a payload at a given
@@ -172,7 +174,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     session_fit: the same effects fitted on two sessions of the run without the
     weight (`--repeat` against the baseline): one session's share of what they
     read there is added to every interval in quadrature (the time-segment folds
-    of one session cannot see it), and a quantity it reaches is not determined (`swamp`)."""
+    of one session cannot see it), and a quantity it reaches is not determined (`swamp`).
+    efforts_not_determined: joint -> why its gravity effort at q = 0 is not determined."""
     effect: FirstMomentPayload = selector.design.effects[index]
     gravity = _gravity_at_zero(arm, effect.link_key)
     p = fit_params[index]
@@ -191,6 +194,9 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
         _span_tied_links(report, arm, selector, ties, effect)
     for key, spread in session.items():
         swamp(report, key, spread, report.setdefault("not_determined", {}))
+    for joint, reason in (efforts_not_determined or {}).items():
+        if report["gravity_efforts_at_q0"][joint] not in (None, 0.0):
+            effort_not_determined(report, joint, reason)
     mass, mass_interval = report["mass_kg"], report["mass_kg_interval"]
     mass_identified = bool(mass is not None and mass_interval[0] > 0.0 and mass_interval[1] / mass_interval[0] <= MASS_IDENTIFIED_RATIO)
     report["mass_identified"] = mass_identified
@@ -207,8 +213,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     if session_fit is None:
         words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "
                      "which share their sessions: " + WITHOUT_REPEAT)
-    elif report.get("not_determined"):
-        words.append(f"Not determined: {', '.join(report['not_determined'])}: {SWAMPED}.")
+    if report.get("not_determined"):
+        words.append("Not determined: " + "; ".join(f"{key} ({reason})" for key, reason in report["not_determined"].items()) + ".")
     report["words"] = words
     return report
 

@@ -12,7 +12,7 @@ from dvrk_dart.diagnosis.payload.payload import PointPayload, point_mass_paramet
 from dvrk_dart.diagnosis.fit.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.joints import N_JOINTS, PITCH
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PITCH
 
 #: a payload's mass counts as identified when its interval's ends are within
 #: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
@@ -40,6 +40,14 @@ def swamp(report: dict, key: str, session_share, reasons: dict) -> None:
     intervals = [None if w else i for i, w in zip(intervals, swamped)]
     report[key], report[f"{key}_interval"] = (values[0], intervals[0]) if scalar else (values, intervals)
     reasons[key] = SWAMPED
+
+
+def effort_not_determined(report: dict, joint: int, reason: str) -> None:
+    """report's gravity effort at q = 0 on `joint` as None, with the reason (joined to any other joint's)."""
+    report["gravity_efforts_at_q0"][joint] = report["gravity_efforts_at_q0_interval"][joint] = None
+    reasons = report.setdefault("not_determined", {})
+    text = f"{JOINT_NAMES[joint]}: {reason}"
+    reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
 
 
 #: masses tried when profiling a selected payload's mass (kg, geometric grid)
