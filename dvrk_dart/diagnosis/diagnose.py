@@ -221,7 +221,7 @@ def _j1_constant_sentence(offset_joints: np.ndarray | None, source: str | None) 
     """What determines the payload's J1 effort at q = 0: the constant change of
     J1's effort, unless each run's offset takes it."""
     if offset_joints is not None and offset_joints[0]:
-        return (f"J1's value at q = 0 is barely determined: sessions move J1's constant ({source}), so each run's offset takes it, "
+        return (f"J1's value at q = 0 is not determined: sessions move J1's constant ({source}), so each run's offset takes it, "
                 "and over the runs' yaw range cos q1 hardly differs from one.")
     return (f"J1's value at q = 0 is read from the constant change of J1's effort, which sessions do not move ({source}; runs get no "
             "J1 offset); it includes the mean of the payload's own centripetal efforts, which the first moment does not model "
