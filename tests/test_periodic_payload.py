@@ -107,7 +107,7 @@ def test_intervals_hold_on_simulated_pairs_at_the_measured_noise_and_session_sca
             fit = fit_payload([Pair("run", y, X, noise_run), Pair("one", y_repeat, np.zeros_like(X), repeat_pair.noise)], offsets)
             repeat_alone = fit_payload([Pair("one", y_repeat, Xr, repeat_pair.noise)], offsets)
             for name, jacobian in maps.items():
-                _, interval, _ = interval_with_session(fit, repeat_alone, jacobian)
+                _, interval, _, _ = interval_with_session(fit, repeat_alone, jacobian)
                 seen = fit.determined(jacobian) & (np.abs(jacobian).max(axis=1) > 0)  # a quantity that is zero for every payload is not reported
                 truth_value = np.atleast_1d(values[name])
                 for k in np.flatnonzero(seen):

@@ -141,10 +141,10 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
     return ties
 
 
-def _session_shares(arm: Arm, effect: FirstMomentPayload, session_params: np.ndarray, gravity: np.ndarray) -> dict[str, np.ndarray]:
+def _session_shares(read: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """One session's share (|reading| / sqrt(2), as `session_floor`) of what the
     --repeat pair alone reads as each quantity."""
-    return {key: np.abs(v) / math.sqrt(2.0) for key, v in _quantities(arm, effect, session_params, gravity).items()}
+    return {key: np.abs(v) / math.sqrt(2.0) for key, v in read.items()}
 
 
 def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tuple[int, dict]], effect: FirstMomentPayload) -> None:
@@ -182,7 +182,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
     report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f]))
-    session = _session_shares(arm, effect, session_fit(chosen)[index], gravity) if session_fit is not None else {}
+    session = _session_shares(_quantities(arm, effect, session_fit(chosen)[index], gravity)) if session_fit is not None else {}
     for key, spread in session.items():
         _widen(report, key, spread)
     if session:
@@ -277,8 +277,7 @@ def _at_position(arm: Arm, selector: Selector, chosen: list[int], index: int, at
     report.update(_with_intervals(quantities(selector.fit_all(at_set).params[at_index]),
                                   [quantities(f[at_index]) for f in at_cv.fold_params if at_index in f]))
     if session_fit is not None:
-        session = {key: np.abs(v) / math.sqrt(2.0) for key, v in quantities(session_fit(at_set)[at_index]).items()}
-        for key, spread in session.items():
+        for key, spread in _session_shares(quantities(session_fit(at_set)[at_index])).items():
             _widen(report, key, spread)
             swamp(report, key, spread, report.setdefault("not_determined", {}))
     return report

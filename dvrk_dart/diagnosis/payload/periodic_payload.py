@@ -195,9 +195,10 @@ def central_interval(value: np.ndarray, se: np.ndarray, dof: np.ndarray) -> np.n
     return np.stack([value - t * se, value + t * se])
 
 
-def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None, jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Value, (2, ...) interval and the --repeat pair's reading of the linear
-    quantity `jacobian` @ p. `session_fit`: the same design fitted on the
+def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None,
+                          jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Value, (2, ...) interval, the --repeat pair's reading of the linear
+    quantity `jacobian` @ p and the session spread the interval counts. `session_fit`: the same design fitted on the
     --repeat pair alone (two sessions, no payload): what it reads, r, is a
     session change of the payload's own shape (an offset of q2's zero, the
     counterweight's cable), which the harmonic-by-harmonic session variance
@@ -207,11 +208,12 @@ def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None, jacob
     estimate's: wide where the session change dominates."""
     value, se, dof = fit.standard_error(jacobian)
     if session_fit is None:
-        return value, central_interval(value, se, dof), None
+        return value, central_interval(value, se, dof), None, None
     read, read_se, _ = session_fit.standard_error(jacobian)
-    total = se**2 + np.maximum(read**2 - read_se**2, 0.0)
+    session = np.maximum(read**2 - read_se**2, 0.0)
+    total = se**2 + session
     dof = total**2 / np.maximum(se**4 / dof + read**4, 1e-300)
-    return value, central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), read
+    return value, central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), read, np.sqrt(session)
 
 
 def _design(pairs: list[Pair], offset_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[slice]]:

@@ -100,7 +100,7 @@ def _report_quantities(fits: Fits, maps: dict[str, np.ndarray], not_seen: dict[s
     what the --repeat pair alone reads of each (None without it)."""
     report, reasons, session = {}, {}, {}
     for key, jacobian in maps.items():
-        value, interval, read = interval_with_session(fits.main, fits.session, jacobian)
+        value, interval, read, spread = interval_with_session(fits.main, fits.session, jacobian)
         determined = fits.main.determined(jacobian) & (key not in not_seen)
         values = [float(v) if d else None for v, d in zip(value, determined)]
         intervals = [[float(lo), float(hi)] if d else None for lo, hi, d in zip(*interval, determined)]
@@ -110,9 +110,8 @@ def _report_quantities(fits: Fits, maps: dict[str, np.ndarray], not_seen: dict[s
         session[key] = reads[0] if scalar else reads
         if not determined.all():
             reasons[key] = not_seen.get(key, "the efforts do not determine it (the runs' motion does not excite it)")
-        if fits.session is not None:  # the session change's spread, as the interval counts it
-            read, read_se, _ = fits.session.standard_error(jacobian)
-            swamp(report, key, np.sqrt(np.maximum(read**2 - read_se**2, 0.0)), reasons)
+        if spread is not None:  # the session change's spread, as the interval counts it
+            swamp(report, key, spread, reasons)
     return report, reasons, session
 
 
