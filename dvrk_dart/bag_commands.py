@@ -20,7 +20,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from dvrk_dart.io.bags import is_bag, load_bag_run
     from dvrk_dart.io.outputs import MARKER, check_writable_folder, enclosing_output
     from dvrk_dart.io.reference_data import sample_rate_hz
-    from dvrk_dart.model.description import load_model
+    from dvrk_dart.model.model_file import load_model
 
     topics = reading_options(args)
     if topics.rate != sample_rate_hz():
@@ -70,7 +70,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from dvrk_dart.io.bag_writer import export_run
     from dvrk_dart.io.bags import check_arm_namespace
     from dvrk_dart.io.outputs import check_writable_folder
-    from dvrk_dart.model.description import load_model
+    from dvrk_dart.model.model_file import load_model
 
     run_dir, bag = Path(args.run_dir), Path(args.bag)
     if run_dir.resolve() in bag.absolute().resolve().parents:

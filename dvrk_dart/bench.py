@@ -14,7 +14,8 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import central_difference
 from dvrk_dart.io.arm import load_arm
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, load_model
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE
+from dvrk_dart.model.model_file import load_model
 
 #: (key, target, "lower" if smaller is better else "higher", unit, what the target stands for)
 TARGETS = {

@@ -120,7 +120,7 @@ def _replay_processing(args: argparse.Namespace) -> bool:
     if recorded is None:  # the default of every command: periodic where the run is a periodic excitation
         from dvrk_dart.io.reference_data import load_run, resolve_run
         from dvrk_dart.io.signal import process_all
-        from dvrk_dart.model.description import load_model
+        from dvrk_dart.model.model_file import load_model
 
         [processed], note = process_all([load_run(resolve_run(args.measured), load_model(arm_model_file(args)), reading_options(args))], None)
         args.processing = processed.processing

@@ -7,7 +7,7 @@ import pytest
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.model.description import load_model
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.parameters import load_parameters
 from arms import PSM
 

@@ -12,7 +12,8 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import sha256_of
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.paths import MODELS_DIR
 
 RUN_LOG = "run.mcap"

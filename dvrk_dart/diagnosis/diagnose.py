@@ -118,16 +118,7 @@ def diagnose(
                             effects=effects, payload_model=payload_model or ("first_moment" if baseline is not None else "point"),
                             payload_at=payload_at, nuisance=several if nuisance_offsets is None else bool(nuisance_offsets),
                             processing=processing, folds=folds, topics=topics, repeat_source=repeat_source)
-    selection, dropped = select(problem, max_effects), []
-    while True:  # a selected effect whose re-simulation fails or drifts is dropped with the reason; the diagnosis goes on
-        try:
-            after = resimulate(problem, selection, simulate, base_config)
-            break
-        except DvrkDartError as exc:
-            if not selection.selected:
-                raise
-            dropped.append({"effect": problem.effects[selection.selected[-1]].name, "reason": str(exc)})
-            selection = without_last_effect(selection)
+    selection, after, dropped = _resimulated(problem, select(problem, max_effects), simulate, base_config)
     entries = effect_entries(problem, selection)
     floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
@@ -145,6 +136,21 @@ def diagnose(
     if write_json:
         write_json_atomic(Path(out_dir) / "diagnosis.json", result)
     return result
+
+
+def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | None, base_config: SimConfig):
+    """The selection re-simulated: a selected effect whose re-simulation fails or
+    drifts is dropped with the reason (the last first) and the diagnosis goes on.
+    Returns (selection kept, its re-simulation, [{effect, reason}])."""
+    dropped = []
+    while True:
+        try:
+            return selection, resimulate(problem, selection, simulate, base_config), dropped
+        except DvrkDartError as exc:
+            if not selection.selected:
+                raise
+            dropped.append({"effect": problem.effects[selection.selected[-1]].name, "reason": str(exc)})
+            selection = without_last_effect(selection)
 
 
 # ------------------------------------------------------------------- payloads

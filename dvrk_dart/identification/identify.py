@@ -31,7 +31,8 @@ from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve, reso
 from dvrk_dart.io.signal import ProcessedRun, process_all
 from dvrk_dart.metrics import per_measured_joint, relative_error, rms
 from dvrk_dart.io.bags import BagTopics
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel, load_model
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
 

@@ -118,10 +118,28 @@ def _processing(result: IdentificationResult) -> dict:
     }
 
 
-def summary(result: IdentificationResult) -> dict:
-    layout, base, wls, cfg = result.regressor.layout, result.base, result.wls, result.config
-    theta = result.theta
-    units = parameter_units(result)
+#: what summary()'s figures mean (identification.json's "definitions")
+DEFINITIONS = {
+    "relative_error": "||tau_predicted - tau_measured|| / ||tau_measured|| per joint (metrics.relative_error)",
+    "rms": "root mean square of tau_predicted - tau_measured per joint, N·m (N for q3)",
+    "condition_number": "of the training runs' base regressor with unit-norm columns",
+    "noise_sigma": "upstream: per-joint residual standard deviation of the first, unweighted fit (the weights); "
+                   "periodic: per-joint RMS of the measured noise of the efforts' harmonic coefficients (the weights are per coefficient)",
+    "residual_autocorrelation_samples": "upstream: integrated autocorrelation time of that residual (the covariance counts this many "
+                                        "samples as one); periodic: 1 (the coefficients' noises are independent)",
+    "standard_error": "upstream: from the residual (model error included); periodic: from the measured noise alone "
+                      "(what repeating the run would scatter the estimate by; the model's own error is not in it)",
+}
+
+
+#: how each friction link's pre-sliding distance is chosen
+PRESLIDING_DEFINITION = ("per friction link: the distance over which its Coulomb friction reverses (Dahl; 0 = sign), "
+                         "chosen on the training runs by their weighted fit's residual (sum over fitted joints of "
+                         "(rms / rms with sign)^2), from the bounds file's [presliding] candidates")
+
+
+def _errors(result: IdentificationResult):
+    """The fit's errors on its runs; the prior's and the reference parameters' on the held-out runs' first period."""
     errors = {
         "train": {run.name: {"whole_run": result.errors(run)} for run in result.train},
         "holdout": {
@@ -133,6 +151,14 @@ def summary(result: IdentificationResult) -> dict:
     }
     reference = reference_theta(result)
     reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0], sign_law=True) for run in result.holdout} if reference else {}
+    return errors, prior_errors, reference, reference_errors
+
+
+def summary(result: IdentificationResult) -> dict:
+    layout, base, wls, cfg = result.regressor.layout, result.base, result.wls, result.config
+    theta = result.theta
+    units = parameter_units(result)
+    errors, prior_errors, reference, reference_errors = _errors(result)
     se = wls.standard_errors
     return {
         "joints": list(JOINT_NAMES),
@@ -150,22 +176,10 @@ def summary(result: IdentificationResult) -> dict:
         "versions": software_versions(),
         "processing": _processing(result),
         "presliding": {
-            "definition": "per friction link: the distance over which its Coulomb friction reverses (Dahl; 0 = sign), "
-                          "chosen on the training runs by their weighted fit's residual (sum over fitted joints of "
-                          "(rms / rms with sign)^2), from the bounds file's [presliding] candidates",
+            "definition": PRESLIDING_DEFINITION,
             "links": result.presliding_choice,
         },
-        "definitions": {
-            "relative_error": "||tau_predicted - tau_measured|| / ||tau_measured|| per joint (metrics.relative_error)",
-            "rms": "root mean square of tau_predicted - tau_measured per joint, N·m (N for q3)",
-            "condition_number": "of the training runs' base regressor with unit-norm columns",
-            "noise_sigma": "upstream: per-joint residual standard deviation of the first, unweighted fit (the weights); "
-                           "periodic: per-joint RMS of the measured noise of the efforts' harmonic coefficients (the weights are per coefficient)",
-            "residual_autocorrelation_samples": "upstream: integrated autocorrelation time of that residual (the covariance counts this many "
-                                                "samples as one); periodic: 1 (the coefficients' noises are independent)",
-            "standard_error": "upstream: from the residual (model error included); periodic: from the measured noise alone "
-                              "(what repeating the run would scatter the estimate by; the model's own error is not in it)",
-        },
+        "definitions": DEFINITIONS,
         "errors": errors,
         "prior_errors_first_period": prior_errors,
         "reference": {

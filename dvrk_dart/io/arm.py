@@ -8,7 +8,8 @@ from functools import cache
 from pathlib import Path
 
 from dvrk_dart.io.reference_data import resolve
-from dvrk_dart.model.description import PsmModel, load_model
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.parameters import IdentifiedParameters, load_parameters
 

@@ -24,7 +24,8 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun, check_joint_ranges, sample_rate_hz
 from dvrk_dart.io.outputs import MARKER
 from dvrk_dart.io.signal import MIN_ROWS
-from dvrk_dart.model.description import DvrkTopics, PsmModel, load_model
+from dvrk_dart.model.description import DvrkTopics, PsmModel
+from dvrk_dart.model.model_file import load_model
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: a gap this long is missing data, not jitter: at 200 Hz it is 10 messages,

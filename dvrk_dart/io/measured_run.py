@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.description import PsmModel, load_model
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
 from dvrk_dart.paths import MODELS_DIR, PROJECT_DIR
 

@@ -1,7 +1,7 @@
 """The modified-DH frames of an arm's model description: each frame's
 parameters are linear expressions of the seven coordinates q1..q7
 (`LinearExpr`), a `Link` is a frame with its body's flags, and `dh_transform`
-is Craig's modified-DH transform (model/description.py reads them)."""
+is Craig's modified-DH transform (model/model_file.py reads them)."""
 
 from __future__ import annotations
 

@@ -82,7 +82,7 @@ def code_fingerprint() -> str:
 
 
 def inputs_fingerprint(config: RunConfig, code: str) -> str:
-    from dvrk_dart.model.description import load_model
+    from dvrk_dart.model.model_file import load_model
     from dvrk_dart.runs.runner import arm_model_file, inputs_used, scenario_of
 
     scenario, model_file = scenario_of(config), arm_model_file(config)

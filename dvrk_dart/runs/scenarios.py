@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, load_model, resolve_arm_model
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, resolve_arm_model
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES

@@ -74,7 +74,7 @@ def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
 
 def _measured_run(config: UncertaintyConfig):
     from dvrk_dart.io.reference_data import load_run, resolve_run
-    from dvrk_dart.model.description import load_model
+    from dvrk_dart.model.model_file import load_model
 
     return load_run(resolve_run(config.measured), load_model(config.arm_model), config.topics)
 

@@ -199,58 +199,8 @@ def build(model: PsmModel, params: IdentifiedParameters, config: SimConfig) -> D
     world.setGravity(gravity_in_base(model, config.gravity_tilt_rad))
     configure_solver(world)
     skel = dart.dynamics.Skeleton("psm")
-
-    bodies: dict[int, dart.dynamics.BodyNode] = {}
-    joints: dict[int, dart.dynamics.Joint] = {}
-    fixed_frames: dict[int, tuple[int, np.ndarray]] = {}
-    # where a link frame sits: (key of the DART body it rides on, 0 = base; offset)
-    anchor: dict[int, tuple[int, np.ndarray]] = {0: (0, np.eye(4))}
-    zero = np.zeros(N_JOINTS)
-    moving: list[Link] = []
-    for link in model.links.values():
-        if not link.body:
-            continue
-        if link.key == model.counterweight_link and config.counterweight == "off":
-            continue
-        parent_body, parent_offset = anchor[link.parent]
-        placement = parent_offset @ link.transform(zero)
-        if link.joint_type == "fixed":
-            if params[link.key].mass > 0.0:
-                raise DvrkDartError(f"link {link.key} ({link.name}): a fixed link with mass is not supported")
-            anchor[link.key] = (parent_body, placement)
-            fixed_frames[link.key] = (parent_body, placement)
-            continue
-        parent_node = bodies.get(parent_body)
-        if link.joint_type == "revolute":
-            props = dart.dynamics.RevoluteJointProperties()
-        else:
-            props = dart.dynamics.PrismaticJointProperties()
-        props.mName = f"joint{link.key}_{link.name}"
-        props.mAxis = np.array([0.0, 0.0, 1.0])
-        props.mT_ParentBodyToJoint = _isometry(placement)
-        props.mT_ChildBodyToJoint = dart.math.Isometry3.Identity()
-        create = skel.createRevoluteJointAndBodyNodePair if link.joint_type == "revolute" else skel.createPrismaticJointAndBodyNodePair
-        joint, body = create(parent_node, props) if parent_node is not None else create(None, props)
-        body.setName(f"link{link.key}_{link.name}")
-        mass, com, inertia = body_inertia(link, params)
-        body.setInertia(dart.dynamics.Inertia(mass, com, inertia))
-        joint.setActuatorType(dart.dynamics.ActuatorType.FORCE)
-        bodies[link.key] = body
-        joints[link.key] = joint
-        anchor[link.key] = (link.key, np.eye(4))
-        moving.append(link)
-
-    payload_bodies = []
-    for i, payload in enumerate(config.payloads):
-        if payload.link not in bodies:
-            raise DvrkDartError(f"payload {i}: link {payload.link} has no body in this simulation")
-        joint, body = skel.createWeldJointAndBodyNodePair(bodies[payload.link])
-        T = np.eye(4)
-        T[:3, 3] = payload.position_m
-        joint.setTransformFromParentBodyNode(_isometry(T))
-        body.setName(f"payload{i}_on_link{payload.link}")
-        body.setInertia(dart.dynamics.Inertia(payload.mass_kg, np.zeros(3), PAYLOAD_INERTIA_KG_M2 * np.eye(3)))
-        payload_bodies.append(body)
+    bodies, joints, fixed_frames, moving = _tree(skel, model, params, config)
+    payload_bodies = _add_payloads(skel, bodies, config.payloads)
 
     world.addSkeleton(skel)
     dof_links = tuple(_link_of_dof(skel, joints))
@@ -279,11 +229,78 @@ def build(model: PsmModel, params: IdentifiedParameters, config: SimConfig) -> D
         payload_bodies=payload_bodies,
     )
     # Close the loops in a configuration where they are closed (the linear relations at q = 0).
-    skel.setPositions(G @ zero)
+    skel.setPositions(G @ np.zeros(N_JOINTS))
     skel.setVelocities(np.zeros(skel.getNumDofs()))
     for closure in model.loop_closures:
         psm.closures.append(_close_loop(psm, closure))
     return psm
+
+
+def _tree(skel, model: PsmModel, params: IdentifiedParameters, config: SimConfig):
+    """The links' bodies and one-dof joints on `skel`, placed at q = 0 (a fixed
+    link rides on its parent's body). Returns (bodies, joints, fixed frames:
+    key -> (body key, offset), the moving links)."""
+    bodies: dict[int, dart.dynamics.BodyNode] = {}
+    joints: dict[int, dart.dynamics.Joint] = {}
+    fixed_frames: dict[int, tuple[int, np.ndarray]] = {}
+    # where a link frame sits: (key of the DART body it rides on, 0 = base; offset)
+    anchor: dict[int, tuple[int, np.ndarray]] = {0: (0, np.eye(4))}
+    zero = np.zeros(N_JOINTS)
+    moving: list[Link] = []
+    for link in model.links.values():
+        if not link.body:
+            continue
+        if link.key == model.counterweight_link and config.counterweight == "off":
+            continue
+        parent_body, parent_offset = anchor[link.parent]
+        placement = parent_offset @ link.transform(zero)
+        if link.joint_type == "fixed":
+            if params[link.key].mass > 0.0:
+                raise DvrkDartError(f"link {link.key} ({link.name}): a fixed link with mass is not supported")
+            anchor[link.key] = (parent_body, placement)
+            fixed_frames[link.key] = (parent_body, placement)
+            continue
+        joint, body = _joint_and_body(skel, bodies.get(parent_body), link, placement)
+        mass, com, inertia = body_inertia(link, params)
+        body.setInertia(dart.dynamics.Inertia(mass, com, inertia))
+        bodies[link.key] = body
+        joints[link.key] = joint
+        anchor[link.key] = (link.key, np.eye(4))
+        moving.append(link)
+    return bodies, joints, fixed_frames, moving
+
+
+def _joint_and_body(skel, parent_node, link: Link, placement: np.ndarray):
+    """A force-actuated revolute or prismatic joint about z of `placement`, and its body."""
+    if link.joint_type == "revolute":
+        props = dart.dynamics.RevoluteJointProperties()
+    else:
+        props = dart.dynamics.PrismaticJointProperties()
+    props.mName = f"joint{link.key}_{link.name}"
+    props.mAxis = np.array([0.0, 0.0, 1.0])
+    props.mT_ParentBodyToJoint = _isometry(placement)
+    props.mT_ChildBodyToJoint = dart.math.Isometry3.Identity()
+    create = skel.createRevoluteJointAndBodyNodePair if link.joint_type == "revolute" else skel.createPrismaticJointAndBodyNodePair
+    joint, body = create(parent_node, props) if parent_node is not None else create(None, props)
+    body.setName(f"link{link.key}_{link.name}")
+    joint.setActuatorType(dart.dynamics.ActuatorType.FORCE)
+    return joint, body
+
+
+def _add_payloads(skel, bodies: dict, payloads) -> list:
+    """Each payload a point-like body welded to its link's body."""
+    payload_bodies = []
+    for i, payload in enumerate(payloads):
+        if payload.link not in bodies:
+            raise DvrkDartError(f"payload {i}: link {payload.link} has no body in this simulation")
+        joint, body = skel.createWeldJointAndBodyNodePair(bodies[payload.link])
+        T = np.eye(4)
+        T[:3, 3] = payload.position_m
+        joint.setTransformFromParentBodyNode(_isometry(T))
+        body.setName(f"payload{i}_on_link{payload.link}")
+        body.setInertia(dart.dynamics.Inertia(payload.mass_kg, np.zeros(3), PAYLOAD_INERTIA_KG_M2 * np.eye(3)))
+        payload_bodies.append(body)
+    return payload_bodies
 
 
 def _link_of_dof(skel, joints: dict[int, dart.dynamics.Joint]) -> list[int]:

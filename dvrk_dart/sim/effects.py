@@ -54,7 +54,7 @@ from dvrk_dart.model.identified import spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim.builder import DartPsm
-from dvrk_dart.sim.config import SimConfig, position_load_table
+from dvrk_dart.sim.config import JointEffects, SimConfig, position_load_table
 
 
 @dataclass(frozen=True)
@@ -148,97 +148,127 @@ class EffectsPlacement:
     explicit: ExplicitEffects
 
 
+@dataclass
+class _Placing:
+    """What place_effects accumulates: per DART dof, then per coordinate q1..q7."""
+
+    damping: np.ndarray
+    stiffness_x: np.ndarray
+    coulomb_x: np.ndarray
+    coulomb_dofs: list[int] = field(default_factory=list)  # the dofs whose DART Coulomb row is set
+    coulomb: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    viscous: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    stiffness: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    armature: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    friction_links: list[Link] = field(default_factory=list)  # motor-side links: explicit, on their variable's rate
+    presliding: list[PreslidingFriction] = field(default_factory=list)  # Coulomb over a pre-sliding distance: explicit, with its state
+    linkage_springs: list[Link] = field(default_factory=list)  # nonlinear springs: explicit, at the start-of-step position
+
+    def set_coulomb(self, dof: int, value: float) -> None:
+        self.coulomb_x[dof] = value
+        self.coulomb_dofs.append(dof)
+
+
 def place_effects(model: PsmModel, params: IdentifiedParameters, config: SimConfig, psm: DartPsm) -> EffectsPlacement:
     """Put the selected physical effects on DART joints where the mapping is
     exact (Coulomb friction is set on `psm`'s skeleton here); return the rest
     as explicit per-coordinate terms."""
     n = psm.n_dofs
-    damping, stiffness_x, coulomb_x = np.zeros(n), np.zeros(n), np.zeros(n)
-    coulomb_dofs: list[int] = []
-
-    def set_coulomb(dof: int, value: float) -> None:
-        coulomb_x[dof] = value
-        coulomb_dofs.append(dof)
-
-    coulomb, viscous, stiffness, offset, armature = (np.zeros(N_JOINTS) for _ in range(5))
-    dof_of = {key: i for i, key in enumerate(psm.dof_links)}
-    friction_links = []  # motor-side links: explicit, on their variable's rate
-    presliding = []  # Coulomb over a pre-sliding distance: explicit, with its state
-    linkage_springs = []  # nonlinear springs: explicit, at the start-of-step position
-    for link in model.links.values():
-        p = params[link.key]
-        dof = dof_of.get(link.key)
-        on_own_dof = dof is not None and dof in set(psm.actuated_dofs)
-        if config.friction and link.friction and (p.coulomb or p.viscous):
-            if p.presliding > 0.0 and p.coulomb:
-                presliding.append(PreslidingFriction(link.variable.coeffs, p.coulomb, p.presliding))
-            if on_own_dof:
-                # not DART's joint damping: see the module docstring (implicit, applied by the simulator)
-                damping[dof] = p.viscous
-                if p.presliding <= 0.0:
-                    set_coulomb(dof, p.coulomb)
-            else:
-                friction_links.append(link)
-        if config.offsets and link.friction and p.offset:
-            offset += p.offset * link.variable.coeffs
-        if config.spring and link.spring and p.spring and link.spring_linkage is not None:
-            linkage_springs.append(link)
-        elif config.spring and link.spring and p.spring:
-            if not on_own_dof:
-                raise DvrkDartError(f"link {link.key}: a spring on a variable without its own joint is not supported")
-            # not DART's joint spring: see the module docstring (implicit, rest at 0)
-            stiffness_x[dof] = p.spring
-        if config.motor_inertia and link.motor_inertia and p.motor_inertia:
-            j = int(np.flatnonzero(link.variable.coeffs)[0])
-            armature[j] += p.motor_inertia * link.variable.coeffs[j]
+    acc = _Placing(np.zeros(n), np.zeros(n), np.zeros(n))
+    _place_identified(acc, model, params, config, psm)
     extra = config.extra
     extra_arm = np.asarray(extra.armature, dtype=float)
     if np.any(extra_arm < 0.0):
         raise DvrkDartError("SimConfig.extra.armature must be >= 0 (a physical armature)")
-    armature += extra_arm
-    offset += np.asarray(extra.offset, dtype=float)
-    # extras on q1..q4 are DART joint physics (the actuated dof is the coordinate);
-    # on the motor coordinates q5..q7 they are explicit.
+    acc.armature += extra_arm
+    acc.offset += np.asarray(extra.offset, dtype=float)
     reversal = np.asarray(extra.coulomb_reversal_velocity, dtype=float)
     if np.any(reversal < 0.0):
         raise DvrkDartError("SimConfig.extra.coulomb_reversal_velocity must be >= 0")
     smooth = reversal > 0.0
-    smooth_coulomb = np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0)
     distances = np.asarray(extra.coulomb_presliding, dtype=float)
     if np.any(distances < 0.0) or np.any(distances[smooth] > 0.0):
         raise DvrkDartError("SimConfig.extra.coulomb_presliding must be >= 0, and 0 where a tanh reversal is set")
-    for j in np.flatnonzero(distances > 0.0):
-        presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], float(extra.coulomb[j]), float(distances[j])))
-    for key, fc, fv, distance in extra.link_friction:
-        if int(key) not in model.links or not distance >= 0.0:
-            raise DvrkDartError(f"SimConfig.extra.link_friction: link {key} of {model.source.name} with a pre-sliding distance >= 0 expected")
-        presliding.append(PreslidingFriction(model.links[int(key)].variable.coeffs, float(fc), float(distance), float(fv)))
-    for entry in extra.position_friction:
-        j, distance, values = int(entry[0]), float(entry[1]), entry[2:]
-        half = len(values) // 2
-        presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], 0.0, distance, 0.0, tuple(values[:half]), tuple(values[half:])))
-    for j in range(N_JOINTS):
-        dof = psm.actuated_dofs[j]
-        direct = np.count_nonzero(psm.A[j]) == 1 and psm.A[j, j] == 1.0
-        # a smooth or pre-sliding reversal has no LCP row
-        sharp_coulomb = 0.0 if smooth[j] or distances[j] > 0.0 else extra.coulomb[j]
-        if direct:
-            damping[dof] = damping[dof] + extra.viscous[j]
-            set_coulomb(dof, coulomb_x[dof] + sharp_coulomb)
-            stiffness_x[dof] = stiffness_x[dof] + extra.stiffness[j]
-        else:
-            coulomb[j] += sharp_coulomb
-            viscous[j] += extra.viscous[j]
-            stiffness[j] += extra.stiffness[j]
-    for dof in dict.fromkeys(coulomb_dofs):
-        psm.skeleton.getDof(dof).setCoulombFriction(coulomb_x[dof])
+    _place_extra_presliding(acc, model, extra, distances)
+    _place_extra_joint_terms(acc, extra, psm, sharp=~smooth & (distances <= 0.0))
+    for dof in dict.fromkeys(acc.coulomb_dofs):
+        psm.skeleton.getDof(dof).setCoulombFriction(acc.coulomb_x[dof])
     explicit = ExplicitEffects(
-        coulomb, viscous, stiffness, offset, armature, smooth_coulomb, np.where(smooth, reversal, 1.0), tuple(friction_links), params,
-        tuple(linkage_springs), tuple(presliding), np.asarray(extra.directional_armature, dtype=float),
+        acc.coulomb, acc.viscous, acc.stiffness, acc.offset, acc.armature,
+        np.where(smooth, np.asarray(extra.coulomb, dtype=float), 0.0), np.where(smooth, reversal, 1.0),
+        tuple(acc.friction_links), params, tuple(acc.linkage_springs), tuple(acc.presliding),
+        np.asarray(extra.directional_armature, dtype=float),
         tuple(tuple(float(v) for v in entry) for entry in extra.angle_load),
         tuple(_checked_position_loads(extra.position_load)),
     )
-    return EffectsPlacement(damping, stiffness_x, coulomb_x, explicit)
+    return EffectsPlacement(acc.damping, acc.stiffness_x, acc.coulomb_x, explicit)
+
+
+def _place_identified(acc: _Placing, model: PsmModel, params: IdentifiedParameters, config: SimConfig, psm: DartPsm) -> None:
+    """The identified parameters' friction, offsets, springs and motor inertia, per link."""
+    dof_of = {key: i for i, key in enumerate(psm.dof_links)}
+    actuated = set(psm.actuated_dofs)
+    for link in model.links.values():
+        p = params[link.key]
+        dof = dof_of.get(link.key)
+        on_own_dof = dof is not None and dof in actuated
+        if config.friction and link.friction and (p.coulomb or p.viscous):
+            if p.presliding > 0.0 and p.coulomb:
+                acc.presliding.append(PreslidingFriction(link.variable.coeffs, p.coulomb, p.presliding))
+            if on_own_dof:
+                # not DART's joint damping: see the module docstring (implicit, applied by the simulator)
+                acc.damping[dof] = p.viscous
+                if p.presliding <= 0.0:
+                    acc.set_coulomb(dof, p.coulomb)
+            else:
+                acc.friction_links.append(link)
+        if config.offsets and link.friction and p.offset:
+            acc.offset += p.offset * link.variable.coeffs
+        if config.spring and link.spring and p.spring and link.spring_linkage is not None:
+            acc.linkage_springs.append(link)
+        elif config.spring and link.spring and p.spring:
+            if not on_own_dof:
+                raise DvrkDartError(f"link {link.key}: a spring on a variable without its own joint is not supported")
+            # not DART's joint spring: see the module docstring (implicit, rest at 0)
+            acc.stiffness_x[dof] = p.spring
+        if config.motor_inertia and link.motor_inertia and p.motor_inertia:
+            j = int(np.flatnonzero(link.variable.coeffs)[0])
+            acc.armature[j] += p.motor_inertia * link.variable.coeffs[j]
+
+
+def _place_extra_presliding(acc: _Placing, model: PsmModel, extra: JointEffects, distances: np.ndarray) -> None:
+    """The extras' Coulomb frictions over a pre-sliding distance (per coordinate,
+    per link, piecewise linear in a position): explicit, each with its Dahl state."""
+    for j in np.flatnonzero(distances > 0.0):
+        acc.presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], float(extra.coulomb[j]), float(distances[j])))
+    for key, fc, fv, distance in extra.link_friction:
+        if int(key) not in model.links or not distance >= 0.0:
+            raise DvrkDartError(f"SimConfig.extra.link_friction: link {key} of {model.source.name} with a pre-sliding distance >= 0 expected")
+        acc.presliding.append(PreslidingFriction(model.links[int(key)].variable.coeffs, float(fc), float(distance), float(fv)))
+    for entry in extra.position_friction:
+        j, distance, values = int(entry[0]), float(entry[1]), entry[2:]
+        half = len(values) // 2
+        acc.presliding.append(PreslidingFriction(np.eye(N_JOINTS)[j], 0.0, distance, 0.0, tuple(values[:half]), tuple(values[half:])))
+
+
+def _place_extra_joint_terms(acc: _Placing, extra: JointEffects, psm: DartPsm, sharp: np.ndarray) -> None:
+    """The extras' viscous, sharp Coulomb (`sharp`: joints without a smooth or
+    pre-sliding reversal, which have no LCP row) and stiffness: DART joint
+    physics on q1..q4 (the actuated dof is the coordinate), explicit on the
+    motor coordinates q5..q7."""
+    for j in range(N_JOINTS):
+        dof = psm.actuated_dofs[j]
+        direct = np.count_nonzero(psm.A[j]) == 1 and psm.A[j, j] == 1.0
+        sharp_coulomb = extra.coulomb[j] if sharp[j] else 0.0
+        if direct:
+            acc.damping[dof] = acc.damping[dof] + extra.viscous[j]
+            acc.set_coulomb(dof, acc.coulomb_x[dof] + sharp_coulomb)
+            acc.stiffness_x[dof] = acc.stiffness_x[dof] + extra.stiffness[j]
+        else:
+            acc.coulomb[j] += sharp_coulomb
+            acc.viscous[j] += extra.viscous[j]
+            acc.stiffness[j] += extra.stiffness[j]
 
 
 def _checked_position_loads(entries) -> list[tuple[int, int, np.ndarray, np.ndarray]]:

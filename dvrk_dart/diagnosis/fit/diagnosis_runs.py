@@ -19,7 +19,8 @@ from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
 from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, process, process_periodic, same_motion  # noqa: F401
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
-from dvrk_dart.model.description import PsmModel, load_model
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.model_file import load_model
 from dvrk_dart.sim.config import SimConfig
 
 #: two recordings of one motion may start this far apart (a share of the shorter

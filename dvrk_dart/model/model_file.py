@@ -1,0 +1,232 @@
+"""Reading an arm's model description file (`models/psm/psm.toml`,
+`models/mtm/mtm.toml`) into a `PsmModel` (model/description.py), with
+one-line errors naming the file and the entry. The single reader of the file."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.description import DvrkTopics, ForcePoint, LoopClosure, PsmModel, UpstreamProcessing
+from dvrk_dart.model.dh import DHFrame, LinearExpr, Link
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+
+
+class _ExpressionReader:
+    """Turns {name = coefficient} tables into LinearExpr, naming the offending entry."""
+
+    def __init__(self, path: Path, constants: dict[str, float]):
+        self.path = path
+        self.constants = constants
+        self.model_angles: dict[str, LinearExpr] = {}
+
+    def read(self, table: object, where: str) -> LinearExpr:
+        if not isinstance(table, dict):
+            raise DvrkDartError(f"{self.path}: {where} must be a table {{name = coefficient}}")
+        expr = LinearExpr.constant(0.0)
+        for name, coeff in table.items():
+            if not isinstance(coeff, (int, float)) or not math.isfinite(coeff):
+                raise DvrkDartError(f"{self.path}: {where}.{name} must be a finite number")
+            expr = expr + self._term(name, where).scaled(float(coeff))
+        return expr
+
+    def _term(self, name: str, where: str) -> LinearExpr:
+        if name == "pi":
+            return LinearExpr.constant(math.pi)
+        if name in self.constants:
+            return LinearExpr.constant(self.constants[name])
+        if name in JOINT_NAMES:
+            coeffs = np.zeros(N_JOINTS)
+            coeffs[JOINT_NAMES.index(name)] = 1.0
+            return LinearExpr(coeffs, 0.0)
+        if name in self.model_angles:
+            return self.model_angles[name]
+        raise DvrkDartError(f"{self.path}: {where} uses unknown name '{name}'")
+
+
+def _require(table: dict, key: str, path: Path, where: str):
+    if key not in table:
+        raise DvrkDartError(f"{path}: {where} is missing '{key}'")
+    return table[key]
+
+
+DIAGNOSIS_BASES = ("inertial", "identified")
+
+
+def _force_point(raw: dict, path: Path, links: dict) -> ForcePoint | None:
+    table = raw.get("force_point")
+    if table is None:
+        return None
+    name = str(_require(table, "link", path, "[force_point]"))
+    keys = [k for k, link in links.items() if link.name == name]
+    if not keys:
+        raise DvrkDartError(f"{path}: [force_point] link '{name}' is not a link of the model")
+    joints = tuple(JOINT_NAMES.index(j) for j in _require(table, "joints", path, "[force_point]"))
+    return ForcePoint(keys[0], str(table.get("point", name)), joints, float(_require(table, "min_lever_m", path, "[force_point]")))
+
+
+def _diagnosis_base(raw: dict, path: Path) -> str:
+    base = raw.get("diagnosis", {}).get("base", "inertial")
+    if base not in DIAGNOSIS_BASES:
+        raise DvrkDartError(f"{path}: [diagnosis] base must be one of {', '.join(DIAGNOSIS_BASES)}, not {base!r}")
+    return base
+
+
+def _upstream_processing(raw: dict, path: Path) -> UpstreamProcessing:
+    table = _require(raw, "processing", path, "file")
+    try:
+        return UpstreamProcessing(float(table["cutoff_parameter_hz"]), int(table["first_period_samples"]))
+    except (KeyError, TypeError, ValueError):
+        raise DvrkDartError(f"{path}: [processing] needs cutoff_parameter_hz (a number) and first_period_samples (an integer)") from None
+
+
+def load_model(path: Path | str) -> PsmModel:
+    """Read and check an arm's model description file."""
+    path = Path(path)
+    raw = _read_toml(path)
+    constants = {k: float(v) for k, v in _require(raw, "constants", path, "file").items()}
+    reader = _ExpressionReader(path, constants)
+    for name, table in raw.get("model_angles", {}).items():
+        reader.model_angles[name] = reader.read(table, f"model_angles.{name}")
+    groups = tuple(_require(raw, "groups", path, "file"))
+    links = _links(raw, path, reader, groups)
+    cw = raw.get("counterweight")
+    if cw is not None and int(cw["link"]) not in links:
+        raise DvrkDartError(f"{path}: [counterweight] names unknown link {cw['link']}")
+    limits = _require(raw, "joint_limits", path, "file")
+    coupling = _require(raw, "dvrk_coupling", path, "file")
+    checks = raw.get("parameter_checks", {})
+    return PsmModel(
+        name=raw.get("name", path.stem),
+        source=path,
+        constants=constants,
+        gravity=np.array(raw.get("gravity_m_s2", [0.0, 0.0, -9.81]), dtype=float),
+        default_parameters=raw.get("default_parameters", "params.json"),
+        links=links,
+        tool_tip=_tool_tip(raw, path, reader),
+        loop_closures=_loop_closures(raw, path, reader, links),
+        counterweight_link=int(cw["link"]) if cw is not None else None,
+        counterweight_ratio=float(cw.get("ratio", 1.0)) if cw is not None else 0.0,
+        joint_lower=np.array(limits["lower"], dtype=float),
+        joint_upper=np.array(limits["upper"], dtype=float),
+        dvrk_coupling_matrix=np.array(_require(coupling, "matrix", path, "[dvrk_coupling]"), dtype=float),
+        dvrk_coupling_columns=_coupling_columns(coupling, path),
+        dvrk_velocity_limits=np.array(raw["dvrk_velocity_limits"]["upper"], dtype=float) if "dvrk_velocity_limits" in raw else None,
+        inertia_tolerance=float(checks.get("inertia_tolerance_kg_m2", 0.0)),
+        max_link_mass_kg=float(checks.get("max_link_mass_kg", float("inf"))),
+        max_com_distance_m=float(checks.get("max_com_distance_m", float("inf"))),
+        identification_mass_bounds_kg={int(k): float(v) for k, v in checks.get("identification_mass_bounds_kg", {}).items()},
+        model_angles=dict(reader.model_angles),
+        session_offset_joints=_session_offset_joints(raw, path),
+        session_repeat_pair=_session_repeat_pair(raw, path),
+        controller_gains=dict(raw.get("controllers", {})),
+        groups=groups,
+        processing=_upstream_processing(raw, path),
+        dvrk_topics=_dvrk_topics(raw, path),
+        project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
+        diagnosis_base=_diagnosis_base(raw, path),
+        force_point=_force_point(raw, path, links),
+    )
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise DvrkDartError(f"{path}: model file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
+
+
+def _links(raw: dict, path: Path, reader: _ExpressionReader, groups: tuple[str, ...]) -> dict[int, Link]:
+    """[[links]], parents before children, each in one of the file's groups."""
+    links: dict[int, Link] = {}
+    for entry in _require(raw, "links", path, "file"):
+        key = int(_require(entry, "key", path, "a link"))
+        where = f"links[key={key}]"
+        parent = int(_require(entry, "parent", path, where))
+        if parent != 0 and parent not in links:
+            raise DvrkDartError(f"{path}: {where} has parent {parent} not defined before it")
+        group = _require(entry, "group", path, where)
+        if group not in groups:
+            raise DvrkDartError(f"{path}: {where} has group '{group}', expected one of {', '.join(groups)} (the file's groups)")
+        link = Link(
+            parent=parent,
+            **{k: reader.read(entry.get(k, {}), f"{where}.{k}") for k in ("a", "alpha", "d", "theta")},
+            key=key,
+            name=_require(entry, "name", path, where),
+            group=group,
+            body=bool(entry.get("body", True)),
+            inertia=bool(entry.get("inertia", False)),
+            friction=bool(entry.get("friction", False)),
+            motor_inertia=bool(entry.get("motor_inertia", False)),
+            spring=bool(entry.get("spring", False)),
+            spring_linkage={k: float(v) for k, v in entry["spring_linkage"].items()} if "spring_linkage" in entry else None,
+            cable_polynomial=tuple(float(c) for c in entry["cable_polynomial"]) if "cable_polynomial" in entry else None,
+        )
+        _ = link.joint_type  # raises on a link with two variables
+        links[key] = link
+    return links
+
+
+def _tool_tip(raw: dict, path: Path, reader: _ExpressionReader) -> DHFrame:
+    tip = _require(raw, "tool_tip", path, "file")
+    return DHFrame(parent=int(tip["parent"]), **{k: reader.read(tip.get(k, {}), f"tool_tip.{k}") for k in ("a", "alpha", "d", "theta")})
+
+
+def _loop_closures(raw: dict, path: Path, reader: _ExpressionReader, links: dict[int, Link]) -> tuple[LoopClosure, ...]:
+    closures = tuple(
+        LoopClosure(
+            name=c["name"],
+            link=int(c["link"]),
+            other=int(c["other"]),
+            point_in_link=np.array(
+                [float(reader.read(c["point"].get(ax, {}), f"loop_closures.{c['name']}.point.{ax}").const) for ax in "xyz"]
+            ),
+        )
+        for c in raw.get("loop_closures", [])
+    )
+    for c in closures:
+        for k in (c.link, c.other):
+            if k not in links:
+                raise DvrkDartError(f"{path}: loop closure '{c.name}' names unknown link {k}")
+    return closures
+
+
+def _coupling_columns(coupling: dict, path: Path) -> tuple[int, ...]:
+    columns = tuple(int(c) for c in _require(coupling, "columns", path, "[dvrk_coupling]"))
+    if any(not 0 <= c < N_JOINTS for c in columns):
+        raise DvrkDartError(f"{path}: [dvrk_coupling] columns must be 0..{N_JOINTS - 1} (0 is q1)")
+    return columns
+
+
+def _dvrk_topics(raw: dict, path: Path) -> DvrkTopics:
+    table = _require(raw, "dvrk_topics", path, "file")
+    topics = DvrkTopics(str(_require(table, "namespace", path, "[dvrk_topics]")), tuple(_require(table, "arm_joints", path, "[dvrk_topics]")),
+                        tuple(table.get("jaw_joints", ())))
+    if len(topics.joint_names) != N_JOINTS:
+        raise DvrkDartError(f"{path}: [dvrk_topics] names {len(topics.joint_names)} joints, the model has {N_JOINTS}")
+    return topics
+
+
+def _session_repeat_pair(raw: dict, path: Path) -> tuple[str, ...]:
+    """[sessions] repeat_pair: two reference files (manifest names), or none."""
+    pair = tuple(str(name) for name in raw.get("sessions", {}).get("repeat_pair", ()))
+    if len(pair) not in (0, 2):
+        raise DvrkDartError(f"{path}: [sessions] repeat_pair names {len(pair)} files, expected 2")
+    return pair
+
+
+def _session_offset_joints(raw: dict, path: Path) -> tuple[str, ...] | None:
+    """[sessions] offset_joints: joint names (q1..q7) whose constant effort moves between sessions."""
+    if "sessions" not in raw:
+        return None
+    names = tuple(raw["sessions"].get("offset_joints", ()))
+    unknown = [n for n in names if n not in JOINT_NAMES]
+    if unknown:
+        raise DvrkDartError(f"{path}: [sessions] offset_joints: unknown joint(s) {', '.join(map(str, unknown))} (known: {', '.join(JOINT_NAMES)})")
+    return names
