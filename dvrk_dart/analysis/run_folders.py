@@ -96,11 +96,11 @@ def run_identity(name: str, config: dict, model: PsmModel) -> tuple[str, str, st
 
 
 def load_run_folder(run_dir: str | os.PathLike) -> LoadedRun:
+    from dvrk_dart.io.mcap_log import TOPIC_BODIES
     from dvrk_dart.io.mcap_read import read_mcap
 
     run_dir = Path(run_dir)
-    record = read_mcap(run_dir / RUN_LOG)
-    record.body_positions = {}  # the largest arrays, unused here: keep the worker's reply small
+    record = read_mcap(run_dir / RUN_LOG, without=(TOPIC_BODIES,))  # the largest topic, unused here: not decoded
     config = read_json(run_dir / CONFIG_FILE) or record.config
     metrics = read_json(run_dir / METRICS_FILE) or record.metrics
     model = load_model(run_model_file(config))

@@ -45,8 +45,9 @@ def _array(values: list) -> np.ndarray:
     return np.array(values, dtype=float)
 
 
-def read_mcap(path: str | os.PathLike) -> RunRecord:
-    """Rebuild the RunRecord that `write_mcap` wrote (config/metrics come back as JSON types)."""
+def read_mcap(path: str | os.PathLike, without: tuple[str, ...] = ()) -> RunRecord:
+    """Rebuild the RunRecord that `write_mcap` wrote (config/metrics come back as JSON types).
+    `without`: topics not decoded (e.g. TOPIC_BODIES, the largest: no body_positions)."""
     path = Path(path)
     raw: dict[str, list[bytes]] = {}
     with open(path, "rb") as stream:
@@ -54,7 +55,8 @@ def read_mcap(path: str | os.PathLike) -> RunRecord:
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         # file order, not log-time order: keeps equal stamps in the order they were written
         for _, channel, message in reader.iter_messages(log_time_order=False):
-            raw.setdefault(channel.topic, []).append(message.data)
+            if channel.topic not in without:
+                raw.setdefault(channel.topic, []).append(message.data)
     # one JSON array per topic: a run's ~50 000 messages decoded in one call each
     messages: dict[str, list[dict]] = {topic: json.loads(b"[" + b",".join(items) + b"]") for topic, items in raw.items()}
 
