@@ -161,6 +161,19 @@ def test_unexciting_run_is_refused_in_one_line(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_too_short_a_run_is_refused_in_one_line(tmp_path, capsys):
+    """402 rows of a real 3-joint run: the upstream processing keeps 2 samples,
+    6 equations for 26 base parameters (was a LinAlgError traceback)."""
+    rows = np.loadtxt(resolve_run("2018-test1"), delimiter=",")[1000:1402]
+    run = tmp_path / "short.csv"
+    np.savetxt(run, rows, delimiter=",")
+    out = tmp_path / "out"
+    assert main(["identify", "--runs", str(run), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "short.csv" in err and "6 equations" in err and "26 base parameters" in err
+    assert not out.exists()
+
+
 def test_inconsistent_runs_are_refused(tmp_path, capsys):
     bad = tmp_path / "twenty.csv"
     np.savetxt(bad, np.zeros((500, 20)), delimiter=",")

@@ -130,6 +130,23 @@ def condition_number(A: np.ndarray) -> float:
     return float(np.linalg.cond(A / norms))
 
 
+def _checked_condition_number(A: np.ndarray, what: str, rows: str) -> float:
+    """The condition number of the stacked regressor A (equations x base
+    parameters), refusing in one line a fit with no more equations than
+    parameters (a run too short) or one the motion does not excite."""
+    n_rows, n_base = A.shape
+    if n_rows <= n_base:
+        raise DvrkDartError(f"{what}: {n_rows} equations ({rows} x fitted joints) after processing, the fit needs more "
+                            f"than its {n_base} base parameters: use longer runs")
+    cond = condition_number(A)
+    if not cond < MAX_CONDITION_NUMBER:
+        raise DvrkDartError(
+            f"{what}: the motion does not excite the base parameters (regressor condition number {cond:.3g}, "
+            f"at most {MAX_CONDITION_NUMBER:.0e} is usable): use an excitation trajectory"
+        )
+    return cond
+
+
 @dataclass(frozen=True)
 class WeightedFit:
     joints: np.ndarray  # indices of the fitted joints
@@ -152,12 +169,7 @@ def fit_weighted(Yb: np.ndarray, tau: np.ndarray, joints: np.ndarray, what: str)
     joints = np.asarray(joints)
     A = Yb[:, joints, :]
     n_samples, n_base = len(Yb), Yb.shape[2]
-    cond = condition_number(A.reshape(-1, n_base))
-    if not cond < MAX_CONDITION_NUMBER:
-        raise DvrkDartError(
-            f"{what}: the motion does not excite the base parameters (regressor condition number {cond:.3g}, "
-            f"at most {MAX_CONDITION_NUMBER:.0e} is usable): use an excitation trajectory"
-        )
+    cond = _checked_condition_number(A.reshape(-1, n_base), what, "samples")
     beta0 = np.linalg.lstsq(A.reshape(-1, n_base), tau[:, joints].reshape(-1), rcond=None)[0]
     residual = tau[:, joints] - A @ beta0
     sigma = np.full(len(JOINT_NAMES), np.nan)
@@ -186,12 +198,7 @@ def fit_weighted_periodic(coefficients_Y: np.ndarray, coefficients_tau: np.ndarr
     joints = np.asarray(joints)
     A, b = coefficients_Y[:, joints, :], coefficients_tau[:, joints]
     n_base = A.shape[2]
-    cond = condition_number(A.reshape(-1, n_base))
-    if not cond < MAX_CONDITION_NUMBER:
-        raise DvrkDartError(
-            f"{what}: the motion does not excite the base parameters (regressor condition number {cond:.3g}, "
-            f"at most {MAX_CONDITION_NUMBER:.0e} is usable): use an excitation trajectory"
-        )
+    cond = _checked_condition_number(A.reshape(-1, n_base), what, "harmonic coefficients")
     beta0 = np.linalg.lstsq(A.reshape(-1, n_base), b.reshape(-1), rcond=None)[0]
     weights = 1.0 / np.sqrt(np.maximum(variance[:, joints], np.finfo(float).tiny))
     Aw = (A * weights[:, :, None]).reshape(-1, n_base)
