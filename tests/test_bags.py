@@ -248,7 +248,7 @@ def _bad_bags(tmp_path, run):
     back[arm.topic][400] = back[arm.topic][398]
     bags["backwards"] = (write_bag(tmp_path / "back", topics, stamps_ns=back), ["/PSM1/measured_js", "stamps go backwards", "t = 1.9"])
     short = jittered_topics(run, rows=slice(0, 300))
-    bags["short"] = (write_bag(tmp_path / "short", short[0], stamps_ns=short[1]), ["/PSM1/measured_js", "/PSM1/jaw/measured_js", "at least 402 needed"])
+    bags["short"] = (write_bag(tmp_path / "short", short[0], stamps_ns=short[1]), ["/PSM1/measured_js", "/PSM1/jaw/measured_js", "at least 410 needed"])
     return bags
 
 

@@ -259,7 +259,7 @@ def test_the_row_count_message_states_what_the_processing_needs(tmp_path, capsys
     short = measured_csv(tmp_path, "short.csv", rows=1)
     code, lines = cli(capsys, "model-errors", "--measured", short)
     assert_one_line_error(code, lines, f"1 rows, at least {MIN_ROWS} needed")
-    assert MIN_ROWS == 402
+    assert MIN_ROWS == 410  # 200 trimmed from each end, 10 kept
 
 
 def test_diagnose_leaves_no_out_folder_on_input_errors(tmp_path, capsys):

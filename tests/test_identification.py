@@ -12,7 +12,7 @@ from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.base import find_base_parameters
 from dvrk_dart.identification.fit import DEFAULT_BOUNDS_FILE as DEFAULT_BOUNDS
-from dvrk_dart.identification.fit import load_bounds
+from dvrk_dart.identification.fit import fit_weighted, load_bounds
 from dvrk_dart.identification.identify import (
     IdentificationConfig,
     check_consistent_runs,
@@ -162,16 +162,20 @@ def test_unexciting_run_is_refused_in_one_line(tmp_path, capsys):
 
 
 def test_too_short_a_run_is_refused_in_one_line(tmp_path, capsys):
-    """402 rows of a real 3-joint run: the upstream processing keeps 2 samples,
-    6 equations for 26 base parameters (was a LinAlgError traceback)."""
+    """402 rows of a real 3-joint run left 2 samples after the processing's
+    trim: a LinAlgError traceback in the fit. Refused at loading now, and the
+    fit itself refuses fewer equations than base parameters."""
     rows = np.loadtxt(resolve_run("2018-test1"), delimiter=",")[1000:1402]
     run = tmp_path / "short.csv"
     np.savetxt(run, rows, delimiter=",")
     out = tmp_path / "out"
     assert main(["identify", "--runs", str(run), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "short.csv" in err and "6 equations" in err and "26 base parameters" in err
+    assert len(err.splitlines()) == 1 and "short.csv" in err and "402 rows, at least 410 needed" in err
     assert not out.exists()
+    Yb = np.random.default_rng(0).normal(size=(2, N_JOINTS, 26))
+    with pytest.raises(DvrkDartError, match="6 equations .* more than its 26 base parameters"):
+        fit_weighted(Yb, np.zeros((2, N_JOINTS)), np.array([0, 1, 2]), "--runs short.csv")
 
 
 def test_inconsistent_runs_are_refused(tmp_path, capsys):

@@ -45,7 +45,7 @@ GOOD_ROW = [0.1] * 21
         ([[0.1] * 20] * 100, "20 columns without a header row; known layouts: 21 columns"),
         ([GOOD_ROW] * 50 + [[0.1] * 5 + ["abc"] + [0.1] * 15] + [GOOD_ROW] * 49, "row 51, column q6: 'abc' is not a number"),
         ([GOOD_ROW] * 10 + [[0.1] * 14 + ["nan"] + [0.1] * 6] + [GOOD_ROW] * 89, "row 11, column tau1: missing, NaN or infinite"),
-        ([GOOD_ROW] * 10, "10 rows, at least 402 needed"),
+        ([GOOD_ROW] * 10, "10 rows, at least 410 needed"),
         ("", "file is empty"),
     ],
 )

@@ -23,7 +23,7 @@ from scipy.interpolate import CubicSpline
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun, check_joint_ranges, sample_rate_hz
 from dvrk_dart.io.outputs import MARKER
-from dvrk_dart.io.signal import MIN_ROWS
+from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS
 from dvrk_dart.model.description import DvrkTopics, PsmModel
 from dvrk_dart.model.model_file import load_model
 
@@ -264,7 +264,7 @@ def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = B
     if n < MIN_ROWS:
         raise DvrkDartError(
             f"{path}: topics {' and '.join(s.topic for s in read)} overlap for {max(span_s, 0.0):.3f} s: "
-            f"{max(n, 0)} samples at {rate:g} Hz, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)"
+            f"{max(n, 0)} samples at {rate:g} Hz, at least {MIN_ROWS} needed (the processing trims {CUT_SAMPLES} from each end)"
         )
     grid_s = np.arange(n) / rate
     values = [(_resample(samples, start_ns, grid_s), samples.position.shape[1]) for samples in read]

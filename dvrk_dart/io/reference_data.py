@@ -28,7 +28,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     sample_rate_hz,
 )
 from dvrk_dart.io.provenance import sha256_of  # noqa: F401  (re-exported)
-from dvrk_dart.io.signal import MIN_ROWS
+from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
 
@@ -241,7 +241,7 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     read = read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names)
     values = read.values
     if len(values) < MIN_ROWS:
-        raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {MIN_ROWS // 2 - 1} from each end)")
+        raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {CUT_SAMPLES} from each end)")
     check_joint_ranges(values[:, :N_JOINTS], path, model)
     rate, source = rate_of(path, read.rate_hz, topics.rate_hz)
     check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate

@@ -28,8 +28,10 @@ from dvrk_dart.io.measured_run import MeasuredRun, sample_rate_hz
 
 FILTER_ORDER = 6
 CUT_SAMPLES = 200
-#: the fewest samples the processing works on: the trimmed ends and one more
-MIN_ROWS = 2 * CUT_SAMPLES + 2
+#: the fewest samples a figure is computed on (an RMS of fewer is no statistic)
+MIN_KEPT_SAMPLES = 10
+#: the fewest rows a run needs: the processing's trimmed ends and those samples
+MIN_ROWS = 2 * CUT_SAMPLES + MIN_KEPT_SAMPLES
 #: the processings a measured run can go through
 PROCESSINGS = ("upstream", "periodic")
 

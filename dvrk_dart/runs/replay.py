@@ -20,7 +20,7 @@ from scipy.interpolate import CubicSpline
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
-from dvrk_dart.io.signal import ProcessedRun, process
+from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.description import PsmModel
@@ -72,19 +72,15 @@ def replay(
     return replay_processed(processed, measured, mode, config, duration_s, log_every, model, params)
 
 
-#: the fewest measured samples a replay compares with (an RMS of one sample is no statistic)
-MIN_COMPARED_SAMPLES = 10
-
-
 def replay_duration(processed: ProcessedRun, duration_s: float | None) -> float:
     """The replayed span: `duration_s`, or the whole processed run (checked against it)."""
     available = float(processed.t[-1] - processed.t[0])
     duration = available if duration_s is None else float(duration_s)
     if not 0.0 < duration <= available + 1e-12:
         raise DvrkDartError(f"--duration: {duration:g} s outside (0, {available:.3f}] s of the measured run")
-    shortest = (MIN_COMPARED_SAMPLES - 1) / processed.rate_hz
+    shortest = (MIN_KEPT_SAMPLES - 1) / processed.rate_hz
     if duration < shortest - 1e-12:
-        raise DvrkDartError(f"--duration: {duration:g} s holds fewer than {MIN_COMPARED_SAMPLES} samples of the measured run "
+        raise DvrkDartError(f"--duration: {duration:g} s holds fewer than {MIN_KEPT_SAMPLES} samples of the measured run "
                             f"(one every {1e3 / processed.rate_hz:g} ms): at least {shortest:g} s to compare anything")
     return duration
 
