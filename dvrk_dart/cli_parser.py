@@ -367,6 +367,8 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
         option = "--" + key.replace("_", "-")
         if option not in known or option == "--config":
             raise DvrkDartError(f"--config {path}: {key} is not an option of {argv[0]}")
+        if option in OUTPUT_OPTIONS and not isinstance(value, str):
+            raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
         if option not in rest:
             tokens += _tokens(option, value, path.parent)
     return [argv[0], *tokens, *rest[1:]]
@@ -377,9 +379,15 @@ def _option_strings(parser: argparse.ArgumentParser, command: str) -> set[str]:
     return set(subparsers.choices[command]._option_string_actions)
 
 
+#: options whose value is a folder the command writes: relative to the config file even before it exists
+OUTPUT_OPTIONS = ("--out", "--report")
+
+
 def _tokens(option: str, value, folder: Path) -> list[str]:
-    """An option's command-line tokens from a TOML value (a flag from a boolean; a path relative to the config file)."""
+    """An option's command-line tokens from a TOML value (a flag from a boolean; a path relative to the config
+    file: an output folder always, another value where that file exists, else a run name such as 'one')."""
     if isinstance(value, bool):
         return [option] if value else []
     values = value if isinstance(value, list) else [value]
-    return [option, *(str(folder / v) if isinstance(v, str) and (folder / v).exists() else str(v) for v in values)]
+    return [option, *(str(folder / v) if isinstance(v, str) and (option in OUTPUT_OPTIONS or (folder / v).exists()) else str(v)
+                      for v in values)]

@@ -24,3 +24,21 @@ def test_a_bad_config_file_is_one_line_naming_it(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0], err
         assert not (tmp_path / "never").exists()
+
+
+def test_an_output_folder_in_a_config_file_is_relative_to_the_file(tmp_path, capsys, monkeypatch):
+    """`out = "sub"` went to the current folder (only existing paths were taken
+    relative to the file); a number for a folder is refused in one line."""
+    configs, elsewhere = tmp_path / "configs", tmp_path / "elsewhere"
+    configs.mkdir()
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    config = configs / "replay.toml"
+    config.write_text('measured = "two"\nprocessing = "upstream"\nduration = 0.3\nmode = "velocity"\nout = "sub"\n')
+    assert main(["replay", "--config", str(config)]) == 0
+    assert (configs / "sub" / "config.json").is_file() and not (elsewhere / "sub").exists()
+    config.write_text('measured = "two"\nout = 3\n')
+    capsys.readouterr()
+    assert main(["replay", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "out must be a folder path" in err[0] and str(config) in err[0], err

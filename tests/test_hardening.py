@@ -130,6 +130,17 @@ def test_a_divergence_at_the_first_step_says_why_and_keeps_strict_json(tmp_path,
     assert (out / "config.json").is_file()
 
 
+def test_a_kinematic_path_out_of_the_joint_ranges_stops(tmp_path, capsys):
+    """A 50 m rectilinear path: the imposed joints left their ranges (q3 up to
+    50 m) with exit 0 and a tool tip on its path; now the run stops there."""
+    text = (Path(__file__).parents[1] / "pipelines" / "scenarios" / "rectilinear.toml").read_text()
+    assert "length_m = 0.09" in text
+    scenario = tmp_path / "long.toml"
+    scenario.write_text(text.replace("length_m = 0.09", "length_m = 50.0"))
+    code, lines = cli(capsys, "run", scenario, "--mode", "kinematic", "--duration", "0.5", "--out", tmp_path / "run")
+    assert_one_line_error(code, lines, "outside its range", "the path leaves what the arm can reach")
+
+
 # ---------------------------------------------------------------- 4. unreadable run logs are named
 
 

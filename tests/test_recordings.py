@@ -62,6 +62,12 @@ def test_the_commanded_trajectory_gives_the_design(capsys):
     given = cli_json(capsys, "model-errors", "--measured", str(TEST2), "--processing", "periodic",
                      "--excitation", str(DATA_2018 / "psm1_fourier_test2_commanded.csv"))
     assert given["design_harmonics"] == 5 and given["design_from"].startswith("--excitation")
+    # a design is for the periodic processing: never silently dropped
+    capsys.readouterr()
+    assert main(["model-errors", "--measured", str(TEST2), "--processing", "upstream",
+                 "--excitation", str(DATA_2018 / "psm1_fourier_test2_commanded.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--excitation" in err[0] and "upstream" in err[0], err
 
 
 def _write_header_csv(path: Path, run, columns: list[str], t: bool = True) -> Path:
@@ -85,6 +91,24 @@ def test_a_header_names_any_subset_of_joints(tmp_path):
     run = load_run(path, PSM)
     assert run.measured == ("q1", "q2") and abs(run.rate_hz - 100.0) < 1e-6
     assert np.allclose(run.q[:, :2], half.q[:, :2]) and not run.q[:, 2:].any() and not run.tau[:, 2:].any()
+
+
+def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):
+    """t, q1, dq1, tau1 of 10 s of a real 2018 run: q3 held at its lower limit
+    (0) is no divergence (it stopped the diagnosis at 1e-13 m past it), and the
+    payload-shaped fit's gravity effort has no figure on the joints not recorded."""
+    test1 = load_run(resolve_run("2018-test1"), PSM)
+    short = type(test1)(test1.path, test1.data.iloc[:2000].reset_index(drop=True), PSM)
+    path = _write_header_csv(tmp_path / "q1_only.csv", short, ["q1", "dq1", "tau1"])
+    out = tmp_path / "diagnosis"
+    assert main(["diagnose", "--measured", str(path), "--out", str(out), "--processing", "upstream"]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads((out / "diagnosis.json").read_text())
+    assert result["gap_before"]["train"][1:] == [None] * 6 and result["gap_before"]["train"][0] > 0.1
+    fit = result["gravity_mismatch"] or result["payload"]
+    if fit is not None:  # a payload-shaped fit: its efforts on q2..q7 are not given, with the reason
+        assert fit["gravity_efforts_at_q0"][1:] == [None] * 6 and "q2: not recorded" in fit["not_determined"]["gravity_efforts_at_q0"]
+    assert "on q2" not in printed and "on q3" not in printed
 
 
 def test_a_header_with_the_dvrk_joint_names(tmp_path):

@@ -38,6 +38,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import card_repeat, gap_split, session_floor
+from dvrk_dart.diagnosis.output.answer import effort_at_zero_words
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm
@@ -125,6 +126,8 @@ def diagnose(
     split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor, arm.model)
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
+    for report in [*first_moments, *points]:
+        _without_unrecorded_joints(report, problem.recorded)
     for report in first_moments:
         if problem.repeat_run is not None and problem.repeat_source != "--repeat":
             report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
@@ -154,6 +157,19 @@ def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | No
 
 
 # ------------------------------------------------------------------- payloads
+#: why a payload's gravity effort is not given on a joint the runs did not record
+NOT_RECORDED = "not recorded by the runs: no figure on it"
+
+
+def _without_unrecorded_joints(report: dict, recorded: np.ndarray) -> None:
+    """A payload report's gravity efforts at q = 0 (and at the hand position's)
+    null, with the reason, on the joints the runs did not record."""
+    for part in (report, report.get("payload_at")):
+        if part and part.get("gravity_efforts_at_q0") is not None:
+            for j in np.flatnonzero(~recorded[:len(part["gravity_efforts_at_q0"])]):
+                effort_not_determined(part, int(j), NOT_RECORDED)
+
+
 def _session_fit(problem: Problem, selection: Selection):
     """fit(chosen effects) on the --repeat pair (two sessions without the
     weight): what the effects read from a session change alone; None without it."""
@@ -251,7 +267,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     offsets, recorded = problem.offset_joints, problem.recorded
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
-    payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0]) if fits else None)
+    payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0], problem.arm.model) if fits else None)
     not_distinguished = None
     if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
         not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}
@@ -316,16 +332,16 @@ def payload_distinguished(fit: dict) -> bool:
     return mass is None or mass > 0.0
 
 
-def gravity_mismatch_of(fit: dict) -> dict:
+def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
     """A payload-shaped fit without a baseline: the arm's own gravity against
     the parameters (its mass distribution: another arm, instrument or session),
     reported by its efforts, not as a mass that was attached."""
-    efforts = fit.get("gravity_efforts_at_q0")
+    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), [model.effort_unit(j) for j in JOINT_NAMES]).lstrip(",")
     return {**fit,
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
                        "gravity (mass distribution) against the parameters, not a payload: record a baseline to isolate one",
             "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
-                      + ("" if not efforts or efforts[1] is None else f": {efforts[1]:+.3g} N·m on q2 at q = 0")
+                      + (f":{size}" if size else "")
                       + "; without a baseline run this is the arm's mass distribution, not a payload."]}
 
 

@@ -164,7 +164,12 @@ def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> Processed
 def process_all(runs: list[MeasuredRun], processing: str | None, design=None) -> tuple[list[ProcessedRun], str | None]:
     """Runs through one processing, and a note when the choice was not the user's:
     `None` is periodic where every run is a periodic excitation, else upstream
-    (the note says which run is not periodic and why)."""
+    (the note says which run is not periodic and why). With a `design` (the
+    user's --excitation) every run is read on it: periodic, or a one-line error."""
+    if design is not None and processing == "upstream":
+        raise DvrkDartError("--excitation: the excitation's design sets the periodic processing's harmonics; not with --processing upstream")
+    if design is not None:
+        processing = "periodic"
     if processing is not None:
         return [process(run, processing, design=design) for run in runs], None
     try:

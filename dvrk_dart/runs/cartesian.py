@@ -16,6 +16,7 @@ from dvrk_dart.io.record import RunRecord, pose_vector
 from dvrk_dart.runs.scenarios import Scenario
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.controllers import CartesianTorqueController, KinematicController
+from dvrk_dart.sim.readout import raise_if_out_of_range
 
 #: joints held by the velocity servo under torque control (the paper drives
 #: J1..J3 only; the identified tool links are massless)
@@ -40,6 +41,7 @@ class CartesianDriver:
         self.kinematic = KinematicController(arm)
         self.torque = CartesianTorqueController(arm)
         self.q_kin = self.q0.copy()
+        self.joint_lower, self.joint_upper = arm.model.joint_lower, arm.model.joint_upper
         self.reference_pose = np.zeros((steps, 7))
         self.command = np.full((steps, N_JOINTS), np.nan)
 
@@ -57,6 +59,9 @@ class CartesianDriver:
         t = k * self.dt
         self.reference_pose[k] = pose_vector(self.reference(t)[0])
         if self.mode == "kinematic":
+            # imposed, not simulated: nothing else stops a path that leaves the joints' ranges
+            raise_if_out_of_range(self.q_kin, self.joint_lower, self.joint_upper, f"step {k} (t = {t:.3f} s)",
+                                  ": the path leaves what the arm can reach")
             sim.set_kinematic(self.q_kin, self.closed_loop_velocity(t, self.q_kin))
 
     def advance(self, k: int, sim):

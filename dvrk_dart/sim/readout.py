@@ -21,11 +21,25 @@ import numpy as np
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 
+#: how far past a joint limit (m or rad) a coordinate may sit before the run counts as
+#: diverged: a joint held at its limit (an unrecorded q3 held at 0) sits there to 1e-13
+RANGE_TOLERANCE = 1e-6
+
 #: the loop-closure residual is checked for divergence every this many steps
 #: (50 ms at 1 ms: a diverging closed chain opens by far more than the limit
 #: within that); NaN and joint ranges are checked every step, and the logs
 #: hold the residual of every logged state
 CLOSURE_CHECK_EVERY_STEPS = 50
+
+
+def raise_if_out_of_range(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, where: str, why: str = "") -> None:
+    """SimulationDiverged naming the first coordinate of q beyond its range (by more than RANGE_TOLERANCE)."""
+    outside = np.flatnonzero((q < lower - RANGE_TOLERANCE) | (q > upper + RANGE_TOLERANCE))
+    if outside.size:
+        j = int(outside[0])
+        # repr: the shortest text that is the exact value, so the violation shows
+        raise SimulationDiverged(f"{where}: joint {JOINT_NAMES[j]} at {float(q[j])!r} outside its range "
+                                 f"[{float(lower[j])!r}, {float(upper[j])!r}]{why}")
 
 
 class ClosedChainReadout:
@@ -104,11 +118,7 @@ class ClosedChainReadout:
         if not finite:
             bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(v)))[0])
             raise SimulationDiverged(f"{where}: joint {self.skeleton.getDof(bad).getName()} is not finite")
-        outside = np.flatnonzero((q < lower) | (q > upper))
-        if outside.size:
-            j = int(outside[0])
-            # repr: the shortest text that is the exact value, so the violation shows
-            raise SimulationDiverged(f"{where}: joint {JOINT_NAMES[j]} at {float(q[j])!r} outside its range [{float(lower[j])!r}, {float(upper[j])!r}]")
+        raise_if_out_of_range(q, lower, upper, where)
         residuals = self.closure_residuals_m()
         name, worst = max(residuals.items(), key=lambda kv: kv[1], default=("", 0.0))
         if worst > self.config.closure_residual_limit_m:

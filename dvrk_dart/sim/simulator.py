@@ -57,7 +57,7 @@ from dvrk_dart.sim import kernels
 from dvrk_dart.sim.builder import DartPsm, build
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.effects import place_effects
-from dvrk_dart.sim.readout import ClosedChainReadout
+from dvrk_dart.sim.readout import RANGE_TOLERANCE, ClosedChainReadout
 from dvrk_dart.sim.torque_mode import TorqueMode
 
 #: position feedback of the velocity servo when a reference position is given:
@@ -135,7 +135,7 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._diag_q = np.diag_indices(N_JOINTS)
         self._zeros = np.zeros(N_JOINTS)
         self._range_mid = 0.5 * (model.joint_upper + model.joint_lower)
-        self._range_half = 0.5 * (model.joint_upper - model.joint_lower)
+        self._range_half = 0.5 * (model.joint_upper - model.joint_lower) + RANGE_TOLERANCE
         self._tendon_ideal = config.counterweight == "on"
         e = self._explicit
         self._has_armature = bool(np.any(e.armature) or np.any(e.directional_armature))

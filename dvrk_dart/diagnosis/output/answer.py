@@ -65,7 +65,19 @@ def _size_words(entry: dict) -> str:
     return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
 
 
-def _payload_size_words(payload: dict) -> str:
+def effort_at_zero_words(efforts: list | None, units: list[str]) -> str:
+    """', +0.25 N·m on q2 at q = 0': a payload's gravity effort at q = 0 on J2
+    (where a payload shows most), else on the first of J1..J3 that has one
+    (J2 not recorded or not determined); '' when none has."""
+    efforts = list(efforts or [])[:3]
+    shown = [j for j in (1, 0, 2) if j < len(efforts) and efforts[j] is not None]
+    if not shown:
+        return ""
+    j = shown[0]
+    return f", {efforts[j]:+.3g} {units[j]} on {JOINT_NAMES[j]} at q = 0"
+
+
+def _payload_size_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
     when one was given, else its gravity effort on J2 at q = 0."""
     at = payload.get("payload_at") or {}
@@ -73,8 +85,7 @@ def _payload_size_words(payload: dict) -> str:
         return f", {at['mass_kg']:.3g} kg at the hand position"
     if payload.get("mass_identified") and payload.get("mass_kg") is not None:
         return f", {payload['mass_kg']:.3g} kg"
-    efforts = payload.get("gravity_efforts_at_q0")
-    return "" if not efforts or efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+    return effort_at_zero_words(payload.get("gravity_efforts_at_q0"), units)
 
 
 def _row_share(split_row: dict) -> float | None:
@@ -121,10 +132,9 @@ def answer_sentence(result: dict) -> str:
     # the effect selected first (the largest gain) leads, a payload as any other
     payload_first = bool(selected) and selected[0].startswith("payload")
     if payload_first and payload:
-        lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload)})"
+        lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
     elif payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
-        efforts = mismatch.get("gravity_efforts_at_q0") or [None, None]
-        size = "" if efforts[1] is None else f", {efforts[1]:+.3g} N·m on q2 at q = 0"
+        size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"])
         lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
     elif selected:
         first = entries.get(selected[0], {"name": selected[0]})

@@ -44,7 +44,9 @@ def swamp(report: dict, key: str, session_share, reasons: dict) -> None:
 
 def effort_not_determined(report: dict, joint: int, reason: str) -> None:
     """report's gravity effort at q = 0 on `joint` as None, with the reason (joined to any other joint's)."""
-    report["gravity_efforts_at_q0"][joint] = report["gravity_efforts_at_q0_interval"][joint] = None
+    report["gravity_efforts_at_q0"][joint] = None
+    if report.get("gravity_efforts_at_q0_interval") is not None:
+        report["gravity_efforts_at_q0_interval"][joint] = None
     reasons = report.setdefault("not_determined", {})
     text = f"{JOINT_NAMES[joint]}: {reason}"
     reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
