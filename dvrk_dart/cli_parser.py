@@ -361,12 +361,15 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise DvrkDartError(f"--config {path}: not a readable TOML file ({str(exc).splitlines()[0]})") from None
     rest = argv[:at] + argv[at + 2:]
-    known = _option_strings(parser, argv[0])
+    known = _option_actions(parser, argv[0])
     tokens = []
     for key, value in table.items():
         option = "--" + key.replace("_", "-")
         if option not in known or option == "--config":
             raise DvrkDartError(f"--config {path}: {key} is not an option of {argv[0]}")
+        if isinstance(value, bool) != (known[option].nargs == 0):
+            raise DvrkDartError(f"--config {path}: {key} " + ("is a switch: true or false" if known[option].nargs == 0 else
+                                                               f"takes a value, not {str(value).lower()}"))
         if option in OUTPUT_OPTIONS and not isinstance(value, str):
             raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
         if option not in rest:
@@ -374,9 +377,9 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
     return [argv[0], *tokens, *rest[1:]]
 
 
-def _option_strings(parser: argparse.ArgumentParser, command: str) -> set[str]:
+def _option_actions(parser: argparse.ArgumentParser, command: str) -> dict[str, argparse.Action]:
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return set(subparsers.choices[command]._option_string_actions)
+    return dict(subparsers.choices[command]._option_string_actions)
 
 
 #: options whose value is a folder the command writes: relative to the config file even before it exists

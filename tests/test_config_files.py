@@ -42,3 +42,12 @@ def test_an_output_folder_in_a_config_file_is_relative_to_the_file(tmp_path, cap
     assert main(["replay", "--config", str(config)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "out must be a folder path" in err[0] and str(config) in err[0], err
+
+
+def test_a_boolean_for_an_option_that_takes_a_value_is_one_line(tmp_path, capsys):
+    config = tmp_path / "identify.toml"
+    config.write_text('runs = ["one"]\nreversal_velocity = true\n')
+    assert main(["identify", "--config", str(config), "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "reversal_velocity takes a value, not true" in err[0] and str(config) in err[0], err
+    assert not (tmp_path / "never").exists()
