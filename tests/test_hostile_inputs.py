@@ -84,7 +84,7 @@ def test_a_path_out_of_reach_is_an_error_not_a_result(tmp_path, capsys):
     assert "radius_m = 0.05" in source
     scenario.write_text(source.replace("radius_m = 0.05", "radius_m = 50.0"))
     code, lines, _ = cli(capsys, "run", scenario, "--duration", "0.2", "--out", tmp_path / "run")
-    assert code == 2 and "off the path" in lines[0], lines
+    assert code == 2 and "the path leaves what the arm can reach" in lines[0], lines
 
 
 def test_a_users_folder_named_like_a_half_built_one_is_kept(tmp_path, capsys):
