@@ -206,3 +206,13 @@ def test_import_never_writes_over_its_input(tmp_path, capsys, where):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "input" in err, err
     assert _snapshot(bag) == before
+
+
+def test_an_output_folder_that_cannot_be_made_is_named_as_given(tmp_path):
+    """Under a read-only place (/proc) the error named the hidden folder built
+    beside --out (/proc/.x.building-...), not the user's folder."""
+    with pytest.raises(DvrkDartError) as caught:
+        with building_folder(Path("/proc/dvrk-dart-test-out"), "run"):
+            pytest.fail("the folder cannot be built there")
+    message = str(caught.value)
+    assert message.startswith("/proc/dvrk-dart-test-out: the output folder cannot be made there") and ".building" not in message

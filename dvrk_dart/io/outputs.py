@@ -255,13 +255,16 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
     partial folder is removed."""
     check_output_folder(target, kind)
     target = normalised(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_building(target)
     building = target.with_name(f".{target.name}.building-{os.getpid()}-{uuid.uuid4().hex[:8]}")
     try:
         with signals_held():  # a Ctrl-C right after mkdir would leave the folder outside the try
-            building.mkdir()
-            (building / BUILDING_SENTINEL).touch()
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                remove_stale_building(target)
+                building.mkdir()
+                (building / BUILDING_SENTINEL).touch()
+            except OSError as exc:  # named by the user's folder, not by the hidden one built beside it
+                raise DvrkDartError(f"{target}: the output folder cannot be made there ({exc.strerror or exc})") from None
         yield building
         (building / BUILDING_SENTINEL).unlink()
         write_marker(building, kind)
