@@ -84,6 +84,14 @@ class OneLineParser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_args(self, args=None, namespace=None):
+        """An option the command does not have is its command's error (`see dvrk-dart diagnose --help`)."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            commands = next((a.choices for a in self._actions if isinstance(a, argparse._SubParsersAction)), {})
+            commands.get(getattr(parsed, "command", None), self).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
+
     def error(self, message: str):
         print(f"dvrk-dart: {self.prog.removeprefix('dvrk-dart').strip() + ': ' if self.prog != 'dvrk-dart' else ''}"
               f"{message} (see {self.prog} --help)", file=sys.stderr)

@@ -98,7 +98,7 @@ def test_a_users_folder_named_like_a_half_built_one_is_kept(tmp_path, capsys):
 
 # ------------------------------------------------ the third fuzz
 @pytest.mark.parametrize("argv, fragment", [
-    (["replay", "--measured", "one", "--dur", "3", "--duration", "4"], "unrecognized arguments: --dur"),  # no abbreviations
+    (["replay", "--measured", "one", "--dur", "3", "--duration", "4"], "replay: unrecognized arguments: --dur"),  # no abbreviations; the command named
     (["replay", "--measured", "one", "--dt", "1e-9"], "--dt"),  # 10^9 steps a second: refused, not run out of memory
     (["replay", "--measured", "one", "--dt", "1e-5", "--duration", "3600"], "steps"),
 ])
