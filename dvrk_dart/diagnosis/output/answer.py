@@ -79,7 +79,7 @@ def effort_at_zero_words(efforts: list | None, units: list[str]) -> str:
 
 def _payload_size_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
-    when one was given, else its gravity effort on J2 at q = 0."""
+    when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
     at = payload.get("payload_at") or {}
     if at.get("mass_kg") is not None:
         return f", {at['mass_kg']:.3g} kg at the hand position"
