@@ -382,3 +382,18 @@ def test_a_report_of_two_folders_holding_one_run_is_refused(tmp_path, capsys, a_
     shutil.copytree(a_run_folder, runs / "second")
     code, lines = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "site")
     assert_one_line_error(code, lines, "hold the same run")
+
+
+def test_a_user_named_copy_of_a_campaign_run_is_left_out_and_listed(tmp_path, capsys, a_run_folder):
+    """`dvrk-dart run spiral --out out/runs/spiral` beside the campaign's own
+    out/runs/spiral_velocity_cw-on: the report keeps the folder named after the
+    run and lists the other, instead of refusing the whole validation at its end."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    name = json.loads((a_run_folder / "config.json").read_text())["run"]
+    shutil.copytree(a_run_folder, runs / "mine")
+    shutil.copytree(a_run_folder, runs / name)
+    code, _ = cli(capsys, "report", "--runs", runs, "--out", tmp_path / "site")
+    assert code == 0
+    page = (tmp_path / "site" / "index.html").read_text()
+    assert f"mine: holds the run {name}, as {runs / name} does: left out" in page

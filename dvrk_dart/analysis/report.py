@@ -128,7 +128,7 @@ def verdict_section(analysis: Analysis) -> str:
                   missing=int((checks.status == STATUS_MISSING).sum()),
                   summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
                   detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
-                  unreadable=analysis.failures, stopped=stopped)
+                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped)
 
 
 def _closeness(row) -> float:

@@ -121,6 +121,7 @@ class Analysis:
     checks: pd.DataFrame
     comparison: pd.DataFrame
     failures: dict[str, str] = field(default_factory=dict)  # unreadable run folders -> error
+    left_out: dict[str, str] = field(default_factory=dict)  # folders holding a run another folder holds -> why
 
     def value(self, run: str, quantity: str, joint: str, regime: str = REGIME_ALL) -> float:
         rows = self.metrics[
@@ -252,6 +253,16 @@ def default_jobs() -> int:
     return os.cpu_count() or 1
 
 
+def _kept_of_two(kept: Path, other: Path, run: str) -> tuple[Path, Path]:
+    """Of two folders holding the same run, (the one reported, the one left
+    out): the folder named after its run, as the campaign names it, wins over
+    one a user named (`dvrk-dart run --out runs/mine`); two such are refused."""
+    for named, unnamed in ((kept, other), (other, kept)):
+        if named.name == run and unnamed.name != run:
+            return named, unnamed
+    raise DvrkDartError(f"--runs: {kept} and {other} hold the same run {run}: keep one of them")
+
+
 def analyze(
     runs_dir: str | os.PathLike,
     jobs: int | None = None,
@@ -267,16 +278,18 @@ def analyze(
             results = list(pool.map(_load_and_measure, map(str, folders)))
     else:
         results = [_load_and_measure(str(f)) for f in folders]
-    runs, tables, failures, folder_of = {}, [], {}, {}
+    runs, tables, failures, folder_of, left_out = {}, {}, {}, {}, {}
     for folder, (loaded, table, error) in zip(folders, results):
         if error is not None:
             failures[folder.name] = error
             continue
         if loaded.name in runs:
-            raise DvrkDartError(f"--runs: {folder_of[loaded.name]} and {folder} hold the same run {loaded.name}: keep one of them")
-        runs[loaded.name], folder_of[loaded.name] = loaded, folder
-        tables.append(table)
-    metrics = pd.concat(tables, ignore_index=True) if tables else pd.DataFrame(columns=METRICS_COLUMNS)
+            kept, other = _kept_of_two(folder_of[loaded.name], folder, loaded.name)
+            left_out[other.name] = f"holds the run {loaded.name}, as {kept} does: left out"
+            if kept is folder_of[loaded.name]:
+                continue
+        runs[loaded.name], tables[loaded.name], folder_of[loaded.name] = loaded, table, folder
+    metrics = pd.concat(tables.values(), ignore_index=True) if tables else pd.DataFrame(columns=METRICS_COLUMNS)
     metrics["value"] = metrics["value"].astype(float)
     return Analysis(
         runs_dir=Path(runs_dir),
@@ -285,6 +298,7 @@ def analyze(
         checks=evaluate_checks(metrics, checks),
         comparison=compare_with_published(metrics, published),
         failures=failures,
+        left_out=left_out,
     )
 
 
