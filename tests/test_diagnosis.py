@@ -31,6 +31,7 @@ from dvrk_dart.diagnosis.payload.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.output.answer import plain_name
 from dvrk_dart.diagnosis.output.regimes import residual_regimes
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
 from dvrk_dart.diagnosis.fit.session_floor import moved_constants
@@ -122,7 +123,7 @@ def test_injected_effect_ranks_first_with_its_size(arm, segment, noise_rms, name
     result, top = _recover(arm, segment, noise_scale * noise_rms, effect, p_true, seed=seed)
     assert top["name"] == name, [e["name"] for e in result["effects"][:3]]
     assert top["selected"]
-    values = [top["parameters"]["mass_kg"]] if top["kind"] == "payload" else list(top["parameters"].values())
+    values = [top["parameters"]["mass_kg"]] if top["kind"] in ("payload", "gravity_mismatch") else list(top["parameters"].values())
     if size_index is None:  # a tilt: both angles
         estimated, true = np.array(values[:2]), np.array(p_true)
         assert np.linalg.norm(estimated - true) < SIZE_TOLERANCE * np.linalg.norm(true)
@@ -167,6 +168,8 @@ def test_payload_mass_interval_when_only_its_moment_is_seen(arm, segment, noise_
     assert result["payload"] is None and result["payloads"] == []
     payload = result["gravity_mismatch"]
     assert "not a payload" in payload["words"][0]
+    assert not any(e["kind"] in ("payload", "payload_at_position") for e in result["effects"])  # the ranked effects' words too
+    assert result["effects"][0]["kind"] == "gravity_mismatch" and "gravity mismatch" in plain_name(result["effects"][0])
     assert payload["link"] in {truth.link_name, *truth.equivalent_links}
     lo, hi = payload["mass_interval_kg"]
     assert lo <= 0.15 <= hi and not payload["mass_profile"]["identifiable"]

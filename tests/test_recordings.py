@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from dvrk_dart.cli import main
@@ -109,6 +110,9 @@ def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):
     if fit is not None:  # a payload-shaped fit: its efforts on q2..q7 are not given, with the reason
         assert fit["gravity_efforts_at_q0"][1:] == [None] * 6 and "q2: not recorded" in fit["not_determined"]["gravity_efforts_at_q0"]
     assert "on q2" not in printed and "on q3" not in printed
+    figures = [Path(f).stem for f in result["where"]["figures"]]
+    assert "residual_before_q1" in figures and not any(f.endswith(("_q2", "_q4", "_q7")) for f in figures)
+    assert set(pd.read_csv(out / "where.csv").joint) == {"q1"}
 
 
 def test_a_header_with_the_dvrk_joint_names(tmp_path):

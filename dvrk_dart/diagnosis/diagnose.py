@@ -257,8 +257,9 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
         return None
     runs = problem.train_runs + problem.holdout_runs
     columns = problem.train_columns + problem.holdout_columns
-    return {r.name: dict(zip(JOINT_NAMES, (problem.demean_of(r) * (r.residual.mean(0) - (c @ s.final.beta).mean(0))).tolist()))
-            for r, c in zip(runs, columns)}
+    recorded = [j for j, on in zip(JOINT_NAMES, problem.recorded) if on]  # no offset on a joint the runs did not record
+    return {r.name: {j: v for j, v in zip(JOINT_NAMES, (problem.demean_of(r) * (r.residual.mean(0) - (c @ s.final.beta).mean(0))).tolist())
+                     if j in recorded} for r, c in zip(runs, columns)}
 
 
 def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floor, split, first_moments: list[dict],
@@ -282,7 +283,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         baseline_source={r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},
         nuisance_offsets=_nuisance_report(problem, s),
         nuisance_offset_joints=None if offsets is None else {
-            "joints": [j for j, on in zip(JOINT_NAMES, offsets) if on], "source": problem.offset_joints_source},
+            "joints": [j for j, on, seen in zip(JOINT_NAMES, offsets, recorded) if on and seen], "source": problem.offset_joints_source},
         session_floor=floor.tolist() if floor is not None else None,
         repeat=problem.repeat_run.name if problem.repeat_run is not None else None,
         repeat_source=problem.repeat_source,

@@ -128,7 +128,7 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
     if expected == "none":  # no class of the library: no false claim (not explained, or an equivalent to within the noise)
         named = result["explanation"]["words"] == "not explained" or bool(gap_ok)
     elif expected.startswith("payload:"):  # a payload on a link group (links of a group can have identical efforts)
-        named = top.get("kind") in ("payload", "payload_at_position") and top["parameters"].get("group") == expected.split(":", 1)[1]
+        named = top.get("kind") in ("payload", "payload_at_position", "gravity_mismatch") and top["parameters"].get("group") == expected.split(":", 1)[1]
     else:
         named = top["family"] == expected
     size_error = None

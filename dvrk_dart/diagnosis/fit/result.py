@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, Fit, per_joint_fraction, sse, weighted_fraction
+from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
 from dvrk_dart.diagnosis.fit.problem import Problem
@@ -81,6 +81,11 @@ def effect_entries(problem: Problem, selection: Selection) -> list[dict]:
     return [_entry(problem, selection, rank, i) for rank, i in enumerate(rank_order, start=1)]
 
 
+#: a payload-shaped effect without a baseline: the arm's mass distribution
+#: against the parameters; only a baseline run without the weight isolates a payload
+GRAVITY_MISMATCH_KIND = "gravity_mismatch"
+
+
 def _entry(problem: Problem, s: Selection, rank: int, i: int) -> dict:
     e = problem.effects[i]
     alone = s.selector.fit_all([i])
@@ -90,7 +95,7 @@ def _entry(problem: Problem, s: Selection, rank: int, i: int) -> dict:
     return {
         "rank": rank,
         "name": e.name,
-        "kind": e.kind,
+        "kind": e.kind if problem.has_baseline or e.kind not in WITHHELD_KINDS else GRAVITY_MISMATCH_KIND,
         "family": e.family,
         "joints": list(e.joints),
         "parameters": e.describe(p),

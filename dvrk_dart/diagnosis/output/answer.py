@@ -53,9 +53,9 @@ def plain_name(entry: dict) -> str:
         return f"{'a torsion spring' if name.startswith('torsion') else 'cable elasticity'} on {joints}"
     if kind == "load":  # AngleLoad: angle_load_<joint>_by_<source>
         return f"a load on {joints} set by {name.split('_by_')[-1]}'s angle, whatever the motion's direction (a cable, a harness)"
-    if kind in ("payload", "payload_at_position"):
+    if kind in ("payload", "payload_at_position", "gravity_mismatch"):
         link = name.split("_on_")[-1].split("_at_")[-1]
-        return f"a payload on the {link} link"
+        return f"a payload on the {link} link" if kind != "gravity_mismatch" else f"a gravity mismatch on the {link} link (mass distribution)"
     return _KIND_WORDS.get(kind, name).format(joints=joints)
 
 

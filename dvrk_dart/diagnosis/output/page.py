@@ -127,6 +127,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
     payload_words, payload_table = _payload(result)
     offset_joints = result.get("nuisance_offset_joints")
     return render("diagnosis/fragment.html", title=title, answer=answer_sentence(result), period_figures=period, period_figure=PERIOD_FIGURE,
+                  floor_measured=result.get("session_floor") is not None,
                   gap_table=_gap_table(result), gap_after_source=str(result.get("gap_after_source", "")), refit=result.get("refit"),
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],
                   n_selected=len([x for x in result.get("effects", []) if x.get("selected")]), n_shown=len(shown),

@@ -39,6 +39,8 @@ def residual_regimes(state: ProcessedRun, residual: np.ndarray, model: PsmModel)
         "pitch_q2": tercile_bins(q2, ("low", "middle", "high")),
     }
     for j, joint in enumerate(JOINT_NAMES):
+        if not state.measured[j]:
+            continue
         v, a, r = state.dq[:, j], state.ddq[:, j], residual[:, j]
         near = NEAR_ZERO_VELOCITY_FRACTION * np.max(np.abs(v))
         regimes = {
@@ -84,6 +86,8 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
     keep = np.linspace(0, len(state) - 1, min(len(state), MAX_PLOTTED_SAMPLES)).astype(int)
     paths = []
     for j, joint in enumerate(JOINT_NAMES):
+        if not state.measured[j]:  # a joint the run did not record has no figure
+            continue
         fig, axes = plt.subplots(1, 3, figsize=(12, 3.4), sharey=True)
         pu = model.position_unit(joint)
         for ax, x, xlabel in zip(axes, (state.q, state.dq, state.ddq), (f"{joint} ({pu})", f"d{joint} ({pu}/s)", f"dd{joint} ({pu}/s²)")):
