@@ -188,10 +188,11 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     summary = run_uncertainty(config, args.out, args.ray_address)
     print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays, {summary['wall_time_s']:.0f} s -> {args.out}")
     print(f"processing: {summary['processing']['processing']} ({summary['processing']['chosen_because']})")
-    print(f"{'joint':>6} {'inside':>7} {'outside rms':>12} {'model inside':>13}")
+    print(f"{'joint':>6} {'inside':>7} {'outside rms':>16} {'model inside':>13}")
     for j, name in enumerate(JOINT_NAMES):
-        print(f"{name:>6} {summary['measured_inside_band_fraction'][j]:7.3f} {summary['rms_measured_outside_band'][j]:12.4f} "
-              f"{summary['nominal_model_inside_band_fraction'][j]:13.3f} {summary['effort_units'][j]}")
+        inside, outside = summary["measured_inside_band_fraction"][j], summary["rms_measured_outside_band"][j]
+        measured = f"{'not measured':>24}" if inside is None else f"{inside:7.3f} {outside:11.4f} {summary['effort_units'][j]:<4}"
+        print(f"{name:>6} {measured} {summary['nominal_model_inside_band_fraction'][j]:13.3f}")
     for name, error in summary["failed_samples"].items():
         print(f"dvrk-dart: sample {name} failed: {error}", file=sys.stderr)
     return 0

@@ -55,6 +55,16 @@ def test_uncertainty_cli_writes_the_band_and_the_fractions(tmp_path, capsys):
     assert "inside" in capsys.readouterr().out
 
 
+def test_a_three_joint_run_has_no_band_figure_on_the_joints_it_did_not_record(tmp_path, capsys):
+    out = tmp_path / "mc"
+    assert main(["uncertainty", "--measured", "2018-test1", "--samples", "2", "--duration", "1", "--out", str(out)]) == 0
+    summary = json.loads((out / "uncertainty.json").read_text())
+    assert summary["recorded_joints"] == ["q1", "q2", "q3"]
+    for key in ("measured_inside_band_fraction", "rms_measured_outside_band", "rms_nominal_sim_vs_measured"):
+        assert summary[key][3:] == [None] * 4 and all(v is not None for v in summary[key][:3]), key
+    assert capsys.readouterr().out.count("not measured") == 4
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--params-cov", "missing.json"], "--params-cov: missing.json: file not found"),
     (["--relative-std", "2"], "--relative-std: 2: must be in (0, 1)"),

@@ -144,6 +144,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         low, high = np.quantile(sims, BAND_QUANTILES, axis=0)
         inside, gap = band_statistics(low, high, nominal["measured"])
         model_inside, _ = band_statistics(low, high, nominal["model"])
+        recorded = _measured_run(config).measured_mask
         summary = {
             "config": asdict(config),
             "measured_file": {**input_record(resolve_run(config.measured), arm.model, config.topics), "replayed_s": float(nominal["t"][-1] - nominal["t"][0])},
@@ -159,11 +160,12 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "band_quantiles": list(BAND_QUANTILES),
             "joints": list(JOINT_NAMES),
             "effort_units": [arm.model.effort_unit(j) for j in JOINT_NAMES],
-            "measured_inside_band_fraction": inside.tolist(),
-            "rms_measured_outside_band": gap.tolist(),
+            "recorded_joints": [j for j, on in zip(JOINT_NAMES, recorded) if on],
+            "measured_inside_band_fraction": _recorded_only(inside, recorded),
+            "rms_measured_outside_band": _recorded_only(gap, recorded),
             "nominal_model_inside_band_fraction": model_inside.tolist(),
             "band_width_rms": rms(high - low).tolist(),
-            "rms_nominal_sim_vs_measured": rms(nominal["sim"] - nominal["measured"]).tolist(),
+            "rms_nominal_sim_vs_measured": _recorded_only(rms(nominal["sim"] - nominal["measured"]), recorded),
             "wall_time_s": time.perf_counter() - start,
         }
         write_json_atomic(folder / "uncertainty.json", summary)
@@ -172,8 +174,13 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
                         f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
         pd.DataFrame(columns).to_csv(folder / "band.csv", index=False)
-        plot_bands(folder / "band.csv", folder / "figures", arm.model)
+        plot_bands(folder / "band.csv", folder / "figures", arm.model, tuple(j for j, on in zip(JOINT_NAMES[:3], recorded) if on))
     return summary
+
+
+def _recorded_only(values: np.ndarray, recorded: np.ndarray) -> list:
+    """Per joint, None where the run did not record the joint: no figure on it."""
+    return [float(v) if on else None for v, on in zip(values, recorded)]
 
 
 def plot_bands(band_csv: Path, folder: Path, model: PsmModel, joints: tuple[str, ...] = JOINT_NAMES[:3]) -> list[Path]:

@@ -84,7 +84,7 @@ def _band(result: dict) -> dict | None:
         return None
     rows = [[text_cell(f"{j} ({_unit(result, j)})"), text_cell(f"{band['measured_inside_band_fraction'][j]:.3f}"),
              text_cell(f"{band['rms_measured_outside_band'][j]:.4f}"), text_cell("outside" if j in band["joints_outside_band"] else "inside")]
-            for j in JOINT_NAMES[:3]]
+            for j in JOINT_NAMES[:3] if band["measured_inside_band_fraction"][j] is not None]
     return {"sentence": band_sentence(result), "rule": band["rule"], "parameters": str(band["parameters"]),
             "table": table(["joint", "measured inside the 5-95 % band", "RMS outside the band", "verdict"], rows, css="")}
 

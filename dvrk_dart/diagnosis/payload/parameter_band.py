@@ -34,7 +34,7 @@ def load_band(folder: str | Path) -> dict:
         raise DvrkDartError(f"--parameter-band: {folder} is not an output folder of `dvrk-dart uncertainty` (no uncertainty.json)")
     try:
         band = json.loads(path.read_text(encoding="utf-8"))
-        lengths = {key: len([float(v) for v in band[key]]) for key in ("measured_inside_band_fraction", "rms_measured_outside_band")}
+        lengths = {key: len([None if v is None else float(v) for v in band[key]]) for key in ("measured_inside_band_fraction", "rms_measured_outside_band")}
         measured = band["config"]["measured"]
         digest, replayed = str(band["measured_file"]["sha256"]), float(band["measured_file"]["replayed_s"])
     except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
@@ -61,7 +61,7 @@ def apply_band(result: dict, band: dict) -> dict:
     uncertainty or within it, and the per-joint band summary (a new dict)."""
     run = band_run(band, {name: entry["sha256"] for name, entry in result.get("inputs", {}).items()})
     inside = band["measured_inside_band_fraction"]
-    outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction < BAND_COVERAGE}
+    outside = {j for j, fraction in zip(JOINT_NAMES, inside) if fraction is not None and fraction < BAND_COVERAGE}
     effects = [{**effect, "beyond_parameter_uncertainty": bool(outside.intersection(effect["joints"]))} for effect in result["effects"]]
     selected = [e for e in effects if e["selected"]]
     return {**result, "effects": effects, "parameter_band": {
