@@ -199,3 +199,16 @@ def test_rate_and_a_time_column_must_agree(tmp_path, capsys):
     assert main(["model-errors", "--measured", str(path), "--rate", "100"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--rate 100" in err and "time column at 200 Hz" in err
+
+
+def test_a_wrong_time_column_is_named_as_what_to_correct(tmp_path, capsys):
+    """A t column at twice the rows' real spacing: the error says to correct the
+    column (a --rate beside it would be refused), and which rate fits."""
+    two = load_run(resolve_run("two"), PSM)
+    path = _write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
+    frame = pd.read_csv(path)
+    frame["t"] = frame["t"] * 2.0  # 100 Hz written, 200 Hz recorded
+    frame.to_csv(path, index=False)
+    assert main(["model-errors", "--measured", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "correct the time column, or remove it and give --rate 200" in err, err

@@ -39,6 +39,10 @@ def sample_rate_hz() -> float:
 RATE_TOLERANCE = 0.1
 
 
+#: where a rate comes from when a CSV's t column gives it (io.reference_data.rate_of)
+TIME_COLUMN_SOURCE = "its time column"
+
+
 def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
     """The velocity column against finite differences of the positions at the
     rate: a mismatch names the rate that fits. Each joint's least-squares
@@ -56,8 +60,10 @@ def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source
                             "or the velocities' sign flipped)")
     if abs(scale - 1.0) > RATE_TOLERANCE:
         fits = rate_hz / scale
+        fix = (f"correct the time column, or remove it and give --rate {fits:.4g}" if source == TIME_COLUMN_SOURCE
+               else f"--rate {fits:.4g}")
         raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
-                            f"column; the rate that fits is {fits:.4g} Hz (--rate {fits:.4g})")
+                            f"column; the rate that fits is {fits:.4g} Hz ({fix})")
 
 
 #: a row stands out as a glitch when its disagreement is this many times the

@@ -23,6 +23,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     MeasuredRun,
     check_glitches,
     check_joint_ranges,
+    TIME_COLUMN_SOURCE,
     check_rate,
     manifest,
     sample_rate_hz,
@@ -66,7 +67,7 @@ def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | N
             raise DvrkDartError(f"--rate {explicit:g}: {path} has a time column at {time_column_hz:.6g} Hz (leave --rate out)")
         return float(explicit), "--rate"
     if time_column_hz is not None:
-        return time_column_hz, "its time column"
+        return time_column_hz, TIME_COLUMN_SOURCE
     entry = manifest()["files"].get(Path(path).name, {})
     if "sample_rate_hz" in entry:
         return float(entry["sample_rate_hz"]), f"{MANIFEST_FILE.name} [{Path(path).name}]"
