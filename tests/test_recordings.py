@@ -212,3 +212,14 @@ def test_a_wrong_time_column_is_named_as_what_to_correct(tmp_path, capsys):
     assert main(["model-errors", "--measured", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "correct the time column, or remove it and give --rate 200" in err, err
+
+
+def test_a_baseline_of_another_motion_makes_the_default_processing_upstream():
+    """Periodic by default reads a payload on a run minus its baseline of the
+    same motion; 2018 test2 is another motion than test1: upstream, with why."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import NO_BASELINE_MOTION, choose_processing, with_baseline_motion
+
+    periodic = choose_processing(["2018-test1", "2018-test2"], None, PSM)
+    assert periodic.name == "periodic"
+    assert with_baseline_motion(periodic, "2018-test2", ["2018-test1"], PSM).why == NO_BASELINE_MOTION
+    assert with_baseline_motion(periodic, "2018-test1", ["2018-test1"], PSM) is periodic

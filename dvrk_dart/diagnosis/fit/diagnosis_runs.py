@@ -68,6 +68,24 @@ def choose_processing(specs, processing: str | None, model: PsmModel, topics: Ba
     return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs", topics)
 
 
+#: why the default processing falls back to upstream with a baseline of another motion
+NO_BASELINE_MOTION = ("upstream: no run has the baseline's motion, which a payload read on the harmonics needs "
+                      "(a run minus its baseline of the same motion)")
+
+
+def with_baseline_motion(processing: RunProcessing, baseline, measured_list: list, model: PsmModel) -> RunProcessing:
+    """The default periodic processing kept where a measured run has the
+    baseline's motion; else upstream, with the reason (a chosen default,
+    never the user's --processing: call it only when none was given)."""
+    if processing.name != "periodic" or baseline is None or isinstance(baseline, DiagnosisRun):
+        return processing
+    states = [s.state if isinstance(s, DiagnosisRun) else _load_state(s, model, processing)[1] for s in measured_list if not isinstance(s, tuple)]
+    base = _load_state(baseline, model, processing)[1]
+    if any(motion_offset(state, base) is not None for state in states):
+        return processing
+    return RunProcessing(why=NO_BASELINE_MOTION, topics=processing.topics)
+
+
 def processing_of(result: dict, topics: BagTopics = BagTopics()) -> RunProcessing:
     """The processing a diagnosis (its result dict) read and processed its runs with."""
     return RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"), topics=topics)

@@ -23,6 +23,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     RunRole,
     Simulate,
     choose_processing,
+    with_baseline_motion,
     loaded_states,
     prepare_run,
 )
@@ -183,6 +184,8 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat), arm.model, topics)
     # every command's default (None): periodic where every run is a periodic excitation, else upstream
     run_processing = choose_processing(all_specs, processing, arm.model, topics)
+    if processing is None:
+        run_processing = with_baseline_motion(run_processing, baseline, measured_list, arm.model)
 
     def as_run(spec, baseline=None):
         if isinstance(spec, tuple):
