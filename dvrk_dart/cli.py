@@ -168,6 +168,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"]) + f"   {kind}")
     for line in data["warnings"]:
         print(f"warning: {line}")
+    if not data["errors"].get("holdout"):
+        print("note: no --holdout run: how well these parameters carry to another motion is not measured (one short run "
+              "may not determine the arm)")
     print(f"friction law: {data['config']['friction_law']}")
     if args.friction_law == "tanh":
         print("note: errors above use the tanh law; params.json readers apply sign(v)")

@@ -178,6 +178,17 @@ def test_too_short_a_run_is_refused_in_one_line(tmp_path, capsys):
         fit_weighted(Yb, np.zeros((2, N_JOINTS)), np.array([0, 1, 2]), "--runs short.csv")
 
 
+def test_a_short_run_without_holdout_says_its_reach_is_not_measured(tmp_path, capsys):
+    """700 rows (3.5 s, not periodic) of a real 3-joint run: the fit runs, and
+    says how much it rests on and that nothing measured how far it carries."""
+    rows = np.loadtxt(resolve_run("2018-test1"), delimiter=",")[:700]
+    run = tmp_path / "short700.csv"
+    np.savetxt(run, rows, delimiter=",")
+    assert main(["identify", "--runs", str(run), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    assert "from 1 run(s), 1.5 s:" in printed and "note: no --holdout run" in printed
+
+
 def test_inconsistent_runs_are_refused(tmp_path, capsys):
     bad = tmp_path / "twenty.csv"
     np.savetxt(bad, np.zeros((500, 20)), delimiter=",")
