@@ -11,13 +11,18 @@ def rms(error: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.sqrt(np.mean(error**2, axis=axis))
 
 
+#: N·m or N: a reference effort whose RMS is below this is no effort (a joint
+#: a simulation leaves unloaded: ~1e-9), and a ratio to it is round-off
+NEGLIGIBLE_EFFORT_RMS = 1e-6
+
+
 def relative_error(actual: np.ndarray, reference: np.ndarray, axis: int = 0) -> np.ndarray:
     """||actual - reference|| / ||reference|| per joint (the upstream metric);
-    NaN (not determined) where the reference is zero throughout."""
+    NaN (not determined) where the reference is negligible throughout."""
     actual, reference = np.asarray(actual, dtype=float), np.asarray(reference, dtype=float)
     size = np.linalg.norm(reference, axis=axis)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(size > 0.0, np.linalg.norm(actual - reference, axis=axis) / size, np.nan)
+        return np.where(rms(reference, axis=axis) > NEGLIGIBLE_EFFORT_RMS, np.linalg.norm(actual - reference, axis=axis) / size, np.nan)
 
 
 def per_measured_joint(values, measured) -> list:
