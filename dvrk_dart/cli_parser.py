@@ -92,7 +92,15 @@ class OneLineParser(argparse.ArgumentParser):
             commands.get(getattr(parsed, "command", None), self).error(f"unrecognized arguments: {' '.join(extras)}")
         return parsed
 
+    def parse_known_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)  # to name a mistyped option (`error`)
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str):
+        """A missing required option is often a mistyped one: named first."""
+        unknown = [a.split("=")[0] for a in getattr(self, "_given", []) if a.startswith("--") and a.split("=")[0] not in self._option_string_actions]
+        if unknown and message.startswith("the following arguments are required"):
+            message = f"unrecognized arguments: {' '.join(unknown)} ({message})"
         print(f"dvrk-dart: {self.prog.removeprefix('dvrk-dart').strip() + ': ' if self.prog != 'dvrk-dart' else ''}"
               f"{message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)

@@ -110,6 +110,12 @@ def test_options_given_twice_by_abbreviation_or_beyond_memory_are_refused(tmp_pa
     assert not out.exists()
 
 
+def test_a_mistyped_required_option_is_named(capsys):
+    """`--ouput x` used to read only as "the following arguments are required: --out"."""
+    code, lines, _ = cli(capsys, "identify", "--runs", "2018-test1", "--ouput", "x")
+    assert code == 2 and len(lines) == 1 and "unrecognized arguments: --ouput" in lines[0] and "--out" in lines[0], lines
+
+
 def test_an_out_spelled_through_its_parent_is_replaced_in_place(tmp_path, capsys, monkeypatch):
     """`--out r/../r`: the folder is replaced (the user's file carried over),
     nothing is left hidden beside it; `--out .` inside it is refused."""
