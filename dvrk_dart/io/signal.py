@@ -175,7 +175,13 @@ def process_all(runs: list[MeasuredRun], processing: str | None, design=None) ->
     try:
         return [process_periodic(run, design=design) for run in runs], None
     except DvrkDartError as exc:
-        return [process(run) for run in runs], f"upstream processing: {exc}"
+        return [process(run) for run in runs], f"upstream processing: {not_periodic_reason(exc)}"
+
+
+def not_periodic_reason(exc: DvrkDartError) -> str:
+    """Why a run was read upstream by default: the periodic layer's refusal,
+    without the option the user did not give."""
+    return str(exc).replace("--processing periodic: ", "periodic processing: ")
 
 
 #: two runs share their motion (a baseline's gap is subtracted sample by sample)

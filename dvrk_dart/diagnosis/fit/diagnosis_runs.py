@@ -16,7 +16,7 @@ from dvrk_dart.diagnosis.effects.library import (
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
-from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, process, process_periodic, same_motion  # noqa: F401
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, process_periodic, same_motion  # noqa: F401
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -63,7 +63,7 @@ def choose_processing(specs, processing: str | None, model: PsmModel, topics: Ba
     except DvrkDartError as exc:
         if processing == "periodic":
             raise
-        return RunProcessing(why=f"upstream: {exc}", topics=topics)
+        return RunProcessing(why=f"upstream: {not_periodic_reason(exc)}", topics=topics)
     why = "--processing periodic" if processing == "periodic" else "every run is a periodic excitation"
     return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs", topics)
 

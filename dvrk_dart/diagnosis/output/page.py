@@ -63,7 +63,8 @@ def _effects_tables(result: dict, shown: list[dict]) -> tuple[Markup, Markup]:
     parameters = [[code_cell(e["name"]), text_cell(", ".join(
         f"{k} = {fmt(v) if isinstance(v, (int, float)) else v} {(e.get('units') or {}).get(k, '')}".rstrip()
         for k, v in e.get("parameters", {}).items()))] for e in shown]
-    return (table(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", "explained (held out)"], ranked, css=""),
+    held = "explained (held-out runs)" if result.get("holdout_runs") else "explained (held-out time segments)"
+    return (table(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", held], ranked, css=""),
             table(["effect", "parameters"], parameters, css=""))
 
 
