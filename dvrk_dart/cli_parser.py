@@ -28,12 +28,12 @@ from dvrk_dart.runs.config import MAX_STEP_S, MIN_STEP_S
 from dvrk_dart.sim.config import COUNTERWEIGHT_VARIANTS, MODES
 
 #: the PSM's reference runs by their short names, as the help lists them
-PSM_RUN_NAMES = "|".join(name for name in RUNS if reference_run_arm(name) == "psm")
+PSM_RUN_NAMES = "|".join(name for name in RUNS if reference_run_arm(name) == "psm") + " (with --arm-model mtm: " + "|".join(
+    name for name in RUNS if reference_run_arm(name) == "mtm") + ")"
 
 
 def _add_arm_model_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--arm-model", default=None, type=non_empty, help="the arm: psm, mtm (models/), a model folder or a description file (default psm; "
-                   "a scenario of another arm is refused)")
+    p.add_argument("--arm-model", default=None, type=non_empty, help="the arm: psm, mtm (models/), a model folder or a description file (default psm)")
 
 
 def _add_arm_options(p: argparse.ArgumentParser) -> None:
