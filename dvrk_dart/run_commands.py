@@ -51,8 +51,9 @@ def _print_effort_table(metrics: dict, dynamics: str | None, model) -> None:
     columns = [(key, label) for key, label in columns if metrics.get(key) is not None]
     if not columns:
         return
-    print(f"  RMS per joint, simulated arm: {dynamics or 'the scenario default'} "
-          "(--dynamics identified: every identified term as physics)" + (f"; model terms compared: {', '.join(terms)}" if terms else ""))
+    hint = " (--dynamics identified would simulate every identified term)" if dynamics in (None, "inertial") else ""
+    print(f"  RMS per joint, simulated arm: {dynamics or 'the scenario default'}{hint}"
+          + (f"; model terms compared: {', '.join(terms)}" if terms else ""))
     print(f"  {'joint':>6}  " + "  ".join(f"{label:>22}" for _, label in columns))
     recorded = metrics.get("measured_joints") or list(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES[:len(metrics[columns[0][0]])]):
@@ -93,8 +94,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    recorded = _replay_processing(args)
+    recorded, said = _replay_processing(args)
     config = _run_config(args, "replay", args.mode, measured=args.measured)
+    print(said)  # once the options are known good: an error is the only line
     try:
         return _run_and_write(config, Path(args.out) if args.out else None)
     except DvrkDartError as exc:
@@ -103,20 +105,19 @@ def cmd_replay(args: argparse.Namespace) -> int:
         raise
 
 
-def _replay_processing(args: argparse.Namespace) -> bool:
+def _replay_processing(args: argparse.Namespace) -> tuple[bool, str]:
     """Set a replay's processing (and harmonic cutoff) when --processing is not
     given: the one a --dynamics diagnosis file was fitted on, so that the replay
-    finds its figures; upstream otherwise. True when it came from the file."""
+    finds its figures; upstream otherwise. (True when it came from the file, the line saying it.)"""
     from dvrk_dart.runs.config import recorded_processing
 
     args.harmonics = None
     if args.processing is not None:
-        return False
+        return False, f"processing: {args.processing} (--processing {args.processing})"
     recorded = recorded_processing(args.dynamics)
     if args.duration is not None:
         args.processing = "upstream"
-        print("processing: upstream (--duration replays a part of the run, which has no projection of its own)")
-        return False
+        return False, "processing: upstream (--duration replays a part of the run, which has no projection of its own)"
     if recorded is None:  # the default of every command: periodic where the run is a periodic excitation
         from dvrk_dart.io.reference_data import load_run, resolve_run
         from dvrk_dart.io.signal import process_all
@@ -124,9 +125,7 @@ def _replay_processing(args: argparse.Namespace) -> bool:
 
         [processed], note = process_all([load_run(resolve_run(args.measured), load_model(arm_model_file(args)), reading_options(args))], None)
         args.processing = processed.processing
-        print(f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})")
-        return False
+        return False, f"processing: {args.processing} ({note or 'the default: the run is a periodic excitation'})"
     args.processing, args.harmonics = recorded
     cutoff = "" if args.harmonics is None else f", {args.harmonics} harmonics"
-    print(f"processing: {args.processing}{cutoff} (the one {args.dynamics} was fitted on)")
-    return True
+    return True, f"processing: {args.processing}{cutoff} (the one {args.dynamics} was fitted on)"

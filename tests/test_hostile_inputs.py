@@ -110,6 +110,12 @@ def test_options_given_twice_by_abbreviation_or_beyond_memory_are_refused(tmp_pa
     assert not out.exists()
 
 
+def test_a_replay_with_an_unknown_dynamics_prints_only_its_error(tmp_path, capsys):
+    code, lines, out = cli(capsys, "replay", "--measured", "two", "--dynamics", "identfied", "--out", tmp_path / "r")
+    assert code == 2 and len(lines) == 1 and "--dynamics" in lines[0] and out.strip() == "", out
+    assert not (tmp_path / "r").exists()
+
+
 def test_a_mistyped_required_option_is_named(capsys):
     """`--ouput x` used to read only as "the following arguments are required: --out"."""
     code, lines, _ = cli(capsys, "identify", "--runs", "2018-test1", "--ouput", "x")
