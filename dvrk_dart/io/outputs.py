@@ -129,7 +129,8 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     whole = normalised(path)
     owner = enclosing_output(path)
     if owner is not None:
-        raise DvrkDartError(f"{option}: {path} is part of {owner}, a folder dvrk-dart wrote: give a folder outside it")
+        raise DvrkDartError(f"{option}: {path} is part of {owner}, an output of dvrk-dart, which replacing it would break: "
+                            f"give another folder (a new name inside {owner} is fine)")
     if whole == Path.cwd() or whole in Path.cwd().parents:
         raise DvrkDartError(f"{option}: {path} is the current folder or holds it: give a folder beside or below it")
     if len(os.fsencode(whole.name)) + BUILDING_SUFFIX_BYTES > NAME_MAX_BYTES:
