@@ -158,7 +158,7 @@ def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: d
     shown, files = [], []
     for dataset in load_datasets():
         figures = dataset_figures(arm, dataset, out_dir, diagnosis_dir, identified or {})
-        print(f"dataset {dataset.name}: held-out {dataset.holdout}, " + "; ".join(
+        print(f"dataset {dataset.name}: held-out {dataset.holdout}, RMS J1..J3 (N·m, N·m, N; the last row a ratio): " + "; ".join(
             f"{label} " + " ".join("-" if v is None else f"{v:.4f}" for v in values[:3]) for label, values in _rows(figures)))
         print(f"dataset {dataset.name}: phantom force at the instrument on {dataset.holdout}, |F| RMS " + "; ".join(
             f"{label} {f['rms_n']:.3f} N" for label, f in figures["phantom_force"].items() if f["rms_n"] is not None))

@@ -43,7 +43,7 @@ def _identification_section(out_dir: Path) -> tuple[str, str]:
         own = data["errors"]["holdout"]["two"]["first_period"]["relative_error"]
         published = data["reference"]["errors_first_period"].get("two", {}).get("relative_error")
         print(f"identification ({processing}): {data['n_base']} base parameters from one -> {out_dir / folder}; "
-              f"held-out two {' '.join(f'{v:.4f}' for v in own)}"
+              f"held-out two, relative error of the first period J1..J7 {' '.join(f'{v:.4f}' for v in own)}"
               + (f" (published parameters {' '.join(f'{v:.4f}' for v in published)})" if published else ""))
         datas.append(data)
     return report_section(*datas)
@@ -70,7 +70,7 @@ def _periodic_section(out_dir: Path, runs_dir: Path):
 
     section = periodic_section(load_arm(DEFAULT_MODEL_FILE), out_dir / "periodic", runs_dir)
     figures = json.loads((out_dir / "periodic" / "periodic.json").read_text())
-    print("periodic: model vs measured on two (J1..J3), upstream "
+    print("periodic: model vs measured on two, RMS J1..J3 (N·m, N·m, N), upstream "
           + " ".join(f"{v:.4f}" for v in figures["model_vs_measured_two"]["upstream"][:3]) + ", periodic "
           + " ".join(f"{v:.4f}" for v in figures["model_vs_measured_two"]["periodic"][:3]) + "; session floor "
           + " ".join(f"{v:.4f}" for v in figures["session_floor"]["rms_difference"][:3]))
