@@ -158,7 +158,7 @@ def _session_floor_command(sub, commands) -> None:
     p.add_argument("--measured", type=measured_run, required=True, help=f"a measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--repeat", type=measured_run, required=True, help="the same trajectory recorded in another session")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    _add_processing_option(p, "periodic")
+    _add_processing_option(p, None)
     _add_arm_options(p)
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_session_floor)

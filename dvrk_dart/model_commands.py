@@ -113,7 +113,7 @@ class SessionFloorConfig:
 
     measured: str
     repeat: str
-    processing: str = "periodic"
+    processing: str | None = None  # every command's default: periodic where both runs are periodic excitations
     topics: BagTopics = BagTopics()
 
 
@@ -138,7 +138,7 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(table))
         return 0
-    print(f"identified model's residual, {args.measured} vs {args.repeat} ({args.processing} processing)")
+    print(f"identified model's residual, {args.measured} vs {args.repeat} ({table['runs'][args.measured]['processing']} processing)")
     print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
     noise = table["noise_predicted_rms"] or [math.nan] * len(JOINT_NAMES)
     verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)

@@ -132,6 +132,17 @@ def test_a_floor_needs_two_recordings_of_one_trajectory(capsys):
     assert "not the same trajectory" in capsys.readouterr().err
 
 
+def test_a_floor_of_runs_that_are_not_periodic_is_read_upstream_by_default(tmp_path, capsys):
+    """session-floor has every command's default: 1.4 periods of each session are no periodic excitation."""
+    paths = []
+    for name in ("one", "one-no-weight"):
+        rows = np.loadtxt(resolve_run(name), delimiter=",")[:1800]
+        paths.append(tmp_path / f"{name}.csv")
+        np.savetxt(paths[-1], rows, delimiter=",")
+    floor = cli_json(capsys, "session-floor", "--measured", paths[0], "--repeat", paths[1])
+    assert floor["runs"][str(paths[0])]["processing"] == "upstream" and all(np.isfinite(floor["rms_difference"][:3]))
+
+
 def test_a_periodic_run_refuses_nothing_of_the_upstream_processing(two):
     """The periodic ProcessedRun is a drop-in: same sample times, in_band projects
     a prediction on the run's harmonics (idempotent), upstream's leaves it."""

@@ -156,16 +156,18 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
         raise DvrkDartError("not the same motion sample by sample")
 
 
-def processed_pair(names: tuple[str, str], processing: str, model: PsmModel, topics: BagTopics = BagTopics()) -> list[ProcessedRun]:
-    """Two recordings of `model`'s arm through one processing; periodic ones on
-    their common (smaller) harmonic cutoff. The same file twice is refused."""
+def processed_pair(names: tuple[str, str], processing: str | None, model: PsmModel, topics: BagTopics = BagTopics()) -> list[ProcessedRun]:
+    """Two recordings of `model`'s arm through one processing (None: every
+    command's default); periodic ones on their common (smaller) harmonic
+    cutoff. The same file twice is refused."""
     from dvrk_dart.io.reference_data import distinct_inputs, load_run, resolve_run
-    from dvrk_dart.io.signal import process
+    from dvrk_dart.io.signal import process, process_all
 
     distinct_inputs([("--measured", names[0]), ("--repeat", names[1])], model, topics)  # a floor needs two sessions
     paths = [resolve_run(name) for name in names]
     measured = [load_run(path, model, topics) for path in paths]
-    runs = [process(run, processing) for run in measured]
+    runs, _ = process_all(measured, processing)
+    processing = runs[0].processing
     if processing == "periodic":
         harmonics = min(run.periodic.harmonics for run in runs)
         runs = [process(run, processing, harmonics) for run in measured]
