@@ -182,12 +182,26 @@ def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     """The long table of one run (columns METRICS_COLUMNS)."""
+    rows = _effort_rows(loaded)
+    rows += _position_rows(loaded, rows)
+    rows += _tracking_rows(loaded)
+    residual = loaded.record.closure_residual_m
+    if residual is not None and np.isfinite(residual).any():
+        rows.append(_row(ALL_COMPONENTS, "closure_residual_max", REGIME_ALL, np.nanmax(residual), "m"))
+    table = pd.DataFrame(rows, columns=["joint", "quantity", "regime", "value", "unit", "source"])
+    for column, value in (("counterweight", loaded.counterweight), ("mode", loaded.mode), ("scenario", loaded.scenario), ("run", loaded.name)):
+        table.insert(0, column, value)
+    return table[METRICS_COLUMNS]
+
+
+def _row(joint: str, quantity: str, regime: str, value: float, unit: str, source: str = RUN_LOG) -> tuple:
+    return (joint, quantity, regime, float(value), unit, source)
+
+
+def _effort_rows(loaded: LoadedRun) -> list[tuple]:
+    """RMS and relative error of every effort comparison the run has, per joint and regime, and the sample counts."""
     record, model = loaded.record, loaded.model
     rows: list[tuple] = []
-
-    def add(joint: str, quantity: str, regime: str, value: float, unit: str, source: str = RUN_LOG) -> None:
-        rows.append((joint, quantity, regime, float(value), unit, source))
-
     replay = record.effort_measured is not None
     sources = _effort_sources(record, loaded.config)
     counted: set[tuple[str, str]] = set()  # (joint, regime) whose sample count is in the table
@@ -202,48 +216,49 @@ def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
                 if n < MIN_REGIME_SAMPLES:
                     continue
                 a, b = actual[mask, j], reference[mask, j]
-                add(joint, f"rms_{name}", regime, rms(a - b), model.effort_unit(joint))
+                rows.append(_row(joint, f"rms_{name}", regime, rms(a - b), model.effort_unit(joint)))
                 if np.any(b != 0.0):  # a relative error to an all-zero reference (the massless tool) is undefined
-                    add(joint, f"rel_{name}", regime, relative_error(a, b), "1")
+                    rows.append(_row(joint, f"rel_{name}", regime, relative_error(a, b), "1"))
                 if (joint, regime) not in counted:  # from the first comparison: the simulated samples
                     counted.add((joint, regime))
-                    add(joint, "samples", regime, n, "1")
+                    rows.append(_row(joint, "samples", regime, n, "1"))
+    return rows
 
+
+def _position_rows(loaded: LoadedRun, effort_rows: list[tuple]) -> list[tuple]:
+    """A replay's position error, and the simulation's effort error beyond the model's at the measured state."""
+    record, model = loaded.record, loaded.model
+    rows: list[tuple] = []
     if record.q_measured is not None:
         finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
         if finite.sum() >= MIN_REGIME_SAMPLES:
             for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
-                add(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j]))
-
+                rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
-        sim_vs_measured = {row[0]: row[3] for row in rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}
+        sim_vs_measured = {row[0]: row[3] for row in effort_rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}
         for joint, value in zip(JOINT_NAMES, at_measured):
             value = math.nan if value is None else value
-            add(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, model.effort_unit(joint), METRICS_FILE)
+            rows.append(_row(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, model.effort_unit(joint), METRICS_FILE))
             if joint in sim_vs_measured:
-                add(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, model.effort_unit(joint))
+                rows.append(_row(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, model.effort_unit(joint)))
+    return rows
 
-    if loaded.tracking is not None:
-        position, orientation = loaded.tracking
-        finite = np.all(np.isfinite(position), axis=1) & np.all(np.isfinite(orientation), axis=1)
-        for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[finite])):
-            add(axis, "tracking_rms_position", REGIME_ALL, value, "m")
-        for axis, value in zip(CARTESIAN_ORIENTATION_AXES, rms(orientation[finite])):
-            add(axis, "tracking_rms_orientation", REGIME_ALL, value, "rad")
-        if loaded.mode == "torque":
-            after = finite & (record.t >= TORQUE_TRANSIENT_S)
-            if after.any():
-                for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[after])):
-                    add(axis, "tracking_rms_position_after_1s", REGIME_ALL, value, "m")
 
-    if record.closure_residual_m is not None and np.isfinite(record.closure_residual_m).any():
-        add(ALL_COMPONENTS, "closure_residual_max", REGIME_ALL, np.nanmax(record.closure_residual_m), "m")
-
-    table = pd.DataFrame(rows, columns=["joint", "quantity", "regime", "value", "unit", "source"])
-    for column, value in (("counterweight", loaded.counterweight), ("mode", loaded.mode), ("scenario", loaded.scenario), ("run", loaded.name)):
-        table.insert(0, column, value)
-    return table[METRICS_COLUMNS]
+def _tracking_rows(loaded: LoadedRun) -> list[tuple]:
+    """The instrument's Cartesian tracking error (and, in torque mode, after its first second)."""
+    if loaded.tracking is None:
+        return []
+    position, orientation = loaded.tracking
+    finite = np.all(np.isfinite(position), axis=1) & np.all(np.isfinite(orientation), axis=1)
+    rows = [_row(axis, "tracking_rms_position", REGIME_ALL, value, "m") for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[finite]))]
+    rows += [_row(axis, "tracking_rms_orientation", REGIME_ALL, value, "rad")
+             for axis, value in zip(CARTESIAN_ORIENTATION_AXES, rms(orientation[finite]))]
+    after = finite & (loaded.record.t >= TORQUE_TRANSIENT_S)
+    if loaded.mode == "torque" and after.any():
+        rows += [_row(axis, "tracking_rms_position_after_1s", REGIME_ALL, value, "m")
+                 for axis, value in zip(CARTESIAN_POSITION_AXES, rms(position[after]))]
+    return rows
 
 
 # ---------------------------------------------------------------- the whole folder

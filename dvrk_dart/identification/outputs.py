@@ -155,11 +155,8 @@ def _errors(result: IdentificationResult):
 
 
 def summary(result: IdentificationResult) -> dict:
-    layout, base, wls, cfg = result.regressor.layout, result.base, result.wls, result.config
-    theta = result.theta
-    units = parameter_units(result)
+    base, wls, cfg = result.base, result.wls, result.config
     errors, prior_errors, reference, reference_errors = _errors(result)
-    se = wls.standard_errors
     return {
         "joints": list(JOINT_NAMES),
         "effort_units": [result.model.effort_unit(j) for j in JOINT_NAMES],
@@ -192,11 +189,25 @@ def summary(result: IdentificationResult) -> dict:
         "noise_sigma": wls.sigma.tolist(),
         "residual_autocorrelation_samples": wls.autocorrelation_samples.tolist(),
         "rank_tolerance": base.tolerance,
-        "n_standard": len(layout),
+        "n_standard": len(result.regressor.layout),
         "n_base": len(base),
+        **_parameter_entries(result),
+        "convex_program": {
+            "solver": result.consistent.solver, "status": result.consistent.status,
+            "data_term": result.consistent.objective_data, "prior_term": result.consistent.objective_prior,
+        },
+        "timings_s": result.timings_s,
+    }
+
+
+def _parameter_entries(result: IdentificationResult) -> dict:
+    """The base and standard parameters, which the data determine, and the masses against their bounds."""
+    layout, base, wls, theta = result.regressor.layout, result.base, result.wls, result.theta
+    units = parameter_units(result)
+    return {
         "base_parameters": [
             {"name": name, "wls": float(b), "standard_error": float(s), "consistent": float(c)}
-            for name, b, s, c in zip(base.names, wls.beta, se, base.K @ theta)
+            for name, b, s, c in zip(base.names, wls.beta, wls.standard_errors, base.K @ theta)
         ],
         "standard_parameters": [
             {"name": n, "value": float(v), "unit": u, "identifiable": bool(i), "prior": float(p)}
@@ -211,11 +222,6 @@ def summary(result: IdentificationResult) -> dict:
             str(k): {"value": float(theta[layout.body_slice(k)][0]), "lower": result.bounds.mass_kg[k][0], "upper": result.bounds.mass_kg[k][1]}
             for k in layout.inertial_links
         },
-        "convex_program": {
-            "solver": result.consistent.solver, "status": result.consistent.status,
-            "data_term": result.consistent.objective_data, "prior_term": result.consistent.objective_prior,
-        },
-        "timings_s": result.timings_s,
     }
 
 

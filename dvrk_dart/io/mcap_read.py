@@ -49,26 +49,8 @@ def read_mcap(path: str | os.PathLike, without: tuple[str, ...] = ()) -> RunReco
     """Rebuild the RunRecord that `write_mcap` wrote (config/metrics come back as JSON types).
     `without`: topics not decoded (e.g. TOPIC_BODIES, the largest: no body_positions)."""
     path = Path(path)
-    raw: dict[str, list[bytes]] = {}
-    with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        # file order, not log-time order: keeps equal stamps in the order they were written
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.topic not in without:
-                raw.setdefault(channel.topic, []).append(message.data)
-    # one JSON array per topic: a run's ~50 000 messages decoded in one call each
-    messages: dict[str, list[dict]] = {topic: json.loads(b"[" + b",".join(items) + b"]") for topic, items in raw.items()}
-
-    run = metadata.get(METADATA_RUN)
-    if run is None or run.get("format") != FORMAT or TOPIC_SIM not in messages:
-        raise DvrkDartError(f"{path}: not a dvrk_dart run log (no '{METADATA_RUN}' metadata or no {TOPIC_SIM})")
-    if json.loads(run["joint_names"]) != list(JOINT_NAMES):
-        raise DvrkDartError(f"{path}: joint names {run['joint_names']} differ from {list(JOINT_NAMES)}")
-    n = len(messages[TOPIC_SIM])
-    for topic, items in messages.items():
-        if len(items) != n:
-            raise DvrkDartError(f"{path}: {topic} has {len(items)} messages, {TOPIC_SIM} has {n}")
+    metadata, messages = _decoded(path, without)
+    run = _checked_run(path, metadata, messages)
 
     def joint_field(topic: str, key: str) -> np.ndarray | None:
         items = messages.get(topic)
@@ -82,16 +64,7 @@ def read_mcap(path: str | os.PathLike, without: tuple[str, ...] = ()) -> RunReco
 
     def poses(topic: str) -> np.ndarray | None:
         items = messages.get(topic)
-        if items is None:
-            return None
-        return _array([_pose_row(m) for m in items])
-
-    body_positions: dict[str, np.ndarray] = {}
-    if TOPIC_BODIES in messages:
-        items = messages[TOPIC_BODIES]
-        names = [b["name"] for b in items[0]["bodies"]]
-        xyz = _array([[[b["position"]["x"], b["position"]["y"], b["position"]["z"]] for b in m["bodies"]] for m in items])
-        body_positions = {name: xyz[:, k, :].copy() for k, name in enumerate(names)}
+        return None if items is None else _array([_pose_row(m) for m in items])
 
     terms = [topic[len(TOPIC_MODEL_PREFIX):] for topic in messages if topic.startswith(TOPIC_MODEL_PREFIX)]
     residual = messages.get(TOPIC_CLOSURE_RESIDUAL)
@@ -111,7 +84,44 @@ def read_mcap(path: str | os.PathLike, without: tuple[str, ...] = ()) -> RunReco
         tool_pose=poses(TOPIC_TOOL_POSE),
         tool_pose_ref=poses(TOPIC_TOOL_POSE_REF),
         closure_residual_m=None if residual is None else _array([m["residual_m"] for m in residual]),
-        body_positions=body_positions,
+        body_positions=_body_positions(messages),
         markers={k: np.asarray(v, dtype=float) for k, v in _json_values(metadata.get(METADATA_MARKERS, {})).items()},
         metrics=_json_values(metadata.get(METADATA_METRICS, {})),
     )
+
+
+def _decoded(path: Path, without: tuple[str, ...]) -> tuple[dict, dict[str, list[dict]]]:
+    """The file's metadata records and its messages, decoded per topic."""
+    raw: dict[str, list[bytes]] = {}
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        # file order, not log-time order: keeps equal stamps in the order they were written
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.topic not in without:
+                raw.setdefault(channel.topic, []).append(message.data)
+    # one JSON array per topic: a run's ~50 000 messages decoded in one call each
+    return metadata, {topic: json.loads(b"[" + b",".join(items) + b"]") for topic, items in raw.items()}
+
+
+def _checked_run(path: Path, metadata: dict, messages: dict[str, list[dict]]) -> dict:
+    """The run's metadata record, once the file is known to be a whole dvrk_dart run log."""
+    run = metadata.get(METADATA_RUN)
+    if run is None or run.get("format") != FORMAT or TOPIC_SIM not in messages:
+        raise DvrkDartError(f"{path}: not a dvrk_dart run log (no '{METADATA_RUN}' metadata or no {TOPIC_SIM})")
+    if json.loads(run["joint_names"]) != list(JOINT_NAMES):
+        raise DvrkDartError(f"{path}: joint names {run['joint_names']} differ from {list(JOINT_NAMES)}")
+    n = len(messages[TOPIC_SIM])
+    for topic, items in messages.items():
+        if len(items) != n:
+            raise DvrkDartError(f"{path}: {topic} has {len(items)} messages, {TOPIC_SIM} has {n}")
+    return run
+
+
+def _body_positions(messages: dict[str, list[dict]]) -> dict[str, np.ndarray]:
+    if TOPIC_BODIES not in messages:
+        return {}
+    items = messages[TOPIC_BODIES]
+    names = [b["name"] for b in items[0]["bodies"]]
+    xyz = _array([[[b["position"]["x"], b["position"]["y"], b["position"]["z"]] for b in m["bodies"]] for m in items])
+    return {name: xyz[:, k, :].copy() for k, name in enumerate(names)}

@@ -128,19 +128,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
         paths = [folder / "params" / "nominal.json"] + [folder / "params" / f"sample_{i:04d}.json" for i in range(config.samples)]
         for path, params in zip(paths, [drawn.nominal, *drawn.samples]):
             path.write_text(json.dumps(params, indent=1))
-        tasks = [(config, str(p), processing) for p in paths]
-        results, failures = {}, {}
-        for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
-            if error is None:
-                results[Path(task[1]).name] = result
-            else:
-                failures[Path(task[1]).name] = error
-        if "nominal.json" not in results:
-            raise DvrkDartError(f"the nominal replay failed: {failures.get('nominal.json')}")
-        sims = np.stack([r["sim"] for name, r in sorted(results.items()) if name != "nominal.json"])
-        if len(sims) < 2:
-            raise DvrkDartError(f"only {len(sims)} sample replay(s) succeeded: no band ({next(iter(failures.values()), '')})")
-        nominal = results["nominal.json"]
+        nominal, sims, failures = _replayed_samples(config, paths, processing, ray_address)
         low, high = np.quantile(sims, BAND_QUANTILES, axis=0)
         inside, gap = band_statistics(low, high, nominal["measured"])
         model_inside, _ = band_statistics(low, high, nominal["model"])
@@ -169,13 +157,34 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "wall_time_s": time.perf_counter() - start,
         }
         write_json_atomic(folder / "uncertainty.json", summary)
-        columns = {"t": nominal["t"]}
-        for j, name in enumerate(JOINT_NAMES):
-            columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
-                        f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
-        pd.DataFrame(columns).to_csv(folder / "band.csv", index=False)
+        _write_band_csv(folder / "band.csv", nominal, low, high)
         plot_bands(folder / "band.csv", folder / "figures", arm.model, tuple(j for j, on in zip(JOINT_NAMES[:3], recorded) if on))
     return summary
+
+
+def _replayed_samples(config: UncertaintyConfig, paths: list[Path], processing: str, ray_address: str | None):
+    """The nominal replay, the samples' simulated efforts (samples, time, joint) and the failed replays' reasons."""
+    results, failures = {}, {}
+    tasks = [(config, str(p), processing) for p in paths]
+    for task, result, error in run_tasks(_replay, tasks, config.executor, config.jobs, ray_address, desc="samples", unit="replay"):
+        if error is None:
+            results[Path(task[1]).name] = result
+        else:
+            failures[Path(task[1]).name] = error
+    if "nominal.json" not in results:
+        raise DvrkDartError(f"the nominal replay failed: {failures.get('nominal.json')}")
+    sims = np.stack([r["sim"] for name, r in sorted(results.items()) if name != "nominal.json"])
+    if len(sims) < 2:
+        raise DvrkDartError(f"only {len(sims)} sample replay(s) succeeded: no band ({next(iter(failures.values()), '')})")
+    return results["nominal.json"], sims, failures
+
+
+def _write_band_csv(path: Path, nominal: dict, low: np.ndarray, high: np.ndarray) -> None:
+    columns = {"t": nominal["t"]}
+    for j, name in enumerate(JOINT_NAMES):
+        columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
+                    f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
+    pd.DataFrame(columns).to_csv(path, index=False)
 
 
 def _recorded_only(values: np.ndarray, recorded: np.ndarray) -> list:

@@ -95,6 +95,17 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self.last_external_force = np.zeros(3)
         self.skeleton = self.psm.skeleton
         self.world = self.psm.world
+        self._setup_coordinates(model)
+        self._setup_effects(model, params, config)
+        self.step_index = 0
+        self.last_effort = np.full(N_JOINTS, np.nan)
+        self.last_ddq = np.zeros(N_JOINTS)
+        self.last_counterweight_force = 0.0
+        self._setup_readout()
+        self.reset(np.zeros(N_JOINTS))
+
+    def _setup_coordinates(self, model: PsmModel) -> None:
+        """The maps between the joint coordinates q, the tree's dofs x and the reduced coordinates z."""
         n = self.psm.n_dofs
         self._A_inv = np.linalg.inv(self.psm.A)
         # generalized force on the dofs from a q-space force on the actuators: tau_x = S^T A^-T f
@@ -123,6 +134,14 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._coordinates_of_x = self._A_inv @ np.eye(n)[self.psm.actuated_dofs]  # q = B x
         self._counterweight_dof = -1 if self.psm.counterweight_dof is None else int(self.psm.counterweight_dof)
         self._no_reference = np.zeros(0)
+        self._diag = np.diag_indices(n)
+        self._diag_q = np.diag_indices(N_JOINTS)
+        self._zeros = np.zeros(N_JOINTS)
+        self._range_mid = 0.5 * (model.joint_upper + model.joint_lower)
+        self._range_half = 0.5 * (model.joint_upper - model.joint_lower) + RANGE_TOLERANCE
+
+    def _setup_effects(self, model: PsmModel, params: IdentifiedParameters, config: SimConfig) -> None:
+        """The identified friction and the configured effects, placed on the dofs, and the state they keep."""
         effects = place_effects(model, params, config, self.psm)
         self._implicit_damping = effects.damping
         self._implicit_stiffness = effects.stiffness
@@ -131,11 +150,6 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._pid_integral = 0.0
         self._implicit_diag = self.dt * self._implicit_damping + self.dt**2 * self._implicit_stiffness
         self._has_implicit = bool(np.any(self._implicit_diag))
-        self._diag = np.diag_indices(n)
-        self._diag_q = np.diag_indices(N_JOINTS)
-        self._zeros = np.zeros(N_JOINTS)
-        self._range_mid = 0.5 * (model.joint_upper + model.joint_lower)
-        self._range_half = 0.5 * (model.joint_upper - model.joint_lower) + RANGE_TOLERANCE
         self._tendon_ideal = config.counterweight == "on"
         e = self._explicit
         self._has_armature = bool(np.any(e.armature) or np.any(e.directional_armature))
@@ -143,12 +157,6 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._has_explicit = e.any_effort
         self._presliding: list[PreslidingState] = []
         self._presliding_z = np.zeros(len(e.presliding))
-        self.step_index = 0
-        self.last_effort = np.full(N_JOINTS, np.nan)
-        self.last_ddq = np.zeros(N_JOINTS)
-        self.last_counterweight_force = 0.0
-        self._setup_readout()
-        self.reset(np.zeros(N_JOINTS))
 
     # ------------------------------------------------------------- state
     def _x_of(self, q: np.ndarray) -> np.ndarray:
