@@ -113,6 +113,7 @@ def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):
     figures = [Path(f).stem for f in result["where"]["figures"]]
     assert "residual_before_q1" in figures and not any(f.endswith(("_q2", "_q4", "_q7")) for f in figures)
     assert set(pd.read_csv(out / "where.csv").joint) == {"q1"}
+    assert all("q1" in effect["joints"] for effect in result["effects"])  # no candidate on joints it cannot see
 
 
 def test_a_header_with_the_dvrk_joint_names(tmp_path):

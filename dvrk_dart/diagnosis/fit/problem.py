@@ -28,11 +28,12 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     prepare_run,
 )
 from dvrk_dart.diagnosis.fit.session_floor import session_offset_joints
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
-from dvrk_dart.model.joints import N_JOINTS
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
 #: joint weights are 1 / max(residual RMS, this): a joint whose residual is
@@ -173,6 +174,20 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
     return effects + [PayloadAtPosition(arm.model, key, position)], len(effects)
 
 
+def _on_recorded_joints(effects: list[Effect], at_index: int | None, runs: list) -> tuple[list[Effect], int | None]:
+    """The candidates that act on a joint every run recorded (one acting only on joints
+    a run did not record has nothing to fit), and the index of the payload at a given position."""
+    recorded = np.all([r.state.measured for r in runs if r is not None], axis=0)
+    names = {name for name, on in zip(JOINT_NAMES, recorded) if on}
+    at_effect = None if at_index is None else effects[at_index]
+    kept = [e for e in effects if names.intersection(e.joints)]
+    if at_effect is None:
+        return kept, None
+    if at_effect not in kept:
+        raise DvrkDartError(f"--payload-at: a payload there acts on {', '.join(at_effect.joints)}, which the runs did not record")
+    return kept, next(i for i, e in enumerate(kept) if e is at_effect)
+
+
 def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
                   simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
                   nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics(),
@@ -206,6 +221,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     # a baseline of the runs' own motion only: whatever differs may be any effect; runs of
     # other motions fitted with the baseline need the shared errors apart from the change
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
+    effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     problem = Problem(arm, effects, Design(effects, every_effect_a_change), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
                       len(measured_list), at_index, nuisance, offset_joints, offset_source, folds, repeat_source)
     _add_grams(problem)
