@@ -74,8 +74,7 @@ class Problem:
     @property
     def recorded(self) -> np.ndarray:
         """(7,) bool: the joints every run recorded (the others have no weight and no figure)."""
-        runs = self.train_runs + self.holdout_runs + [r for r in (self.baseline_run, self.repeat_run) if r is not None]
-        return np.all([r.state.measured for r in runs], axis=0)
+        return recorded_joints([*self.train_runs, *self.holdout_runs, self.baseline_run, self.repeat_run])
 
     @cached_property
     def train_totals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -174,11 +173,15 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
     return effects + [PayloadAtPosition(arm.model, key, position)], len(effects)
 
 
+def recorded_joints(runs: list) -> np.ndarray:
+    """(7,) bool: the joints every run recorded (None: a role without a run)."""
+    return np.all([r.state.measured for r in runs if r is not None], axis=0)
+
+
 def _on_recorded_joints(effects: list[Effect], at_index: int | None, runs: list) -> tuple[list[Effect], int | None]:
     """The candidates that act on a joint every run recorded (one acting only on joints
     a run did not record has nothing to fit), and the index of the payload at a given position."""
-    recorded = np.all([r.state.measured for r in runs if r is not None], axis=0)
-    names = {name for name, on in zip(JOINT_NAMES, recorded) if on}
+    names = {name for name, on in zip(JOINT_NAMES, recorded_joints(runs)) if on}
     at_effect = None if at_index is None else effects[at_index]
     kept = [e for e in effects if names.intersection(e.joints)]
     if at_effect is None:
