@@ -77,3 +77,17 @@ def test_the_pitch_angle_load_in_words():
     from dvrk_dart.diagnosis.output.answer import plain_name
 
     assert plain_name({"name": "angle_load_q3_by_q2", "kind": "load", "joints": ["q3"]}).startswith("a load on q3 set by q2's angle")
+
+
+def test_a_joint_below_the_average_words_is_named():
+    """2018's held-out shares (75 %, 69 %, 37 %) average to 'mostly', but q3's own
+    share is 'partly': the answer and diagnosis.json say so for q3."""
+    before = [0.324, 0.362, 0.699]
+    result = _result(before, [b * (1 - s) for b, s in zip(before, (0.75, 0.69, 0.37))], ["q1", "q2", "q3"])
+    explained = result["explanation"]
+    assert explained["words"] == "mostly explained" and explained["by_joint"]["q3"]["words"] == "partly explained"
+    assert explained["by_joint"]["q3"]["removed_share"] == pytest.approx(0.37)
+    sentence = answer_sentence(result)
+    assert sentence.startswith("The gap is mostly explained (on average over q1, q2, q3; partly on q3 37%) by"), sentence
+    uniform = _result(before, [b * 0.3 for b in before], ["q1", "q2", "q3"])
+    assert answer_sentence(uniform).startswith("The gap is mostly explained by")

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-from dvrk_dart.diagnosis.output.wording import explanation
+from dvrk_dart.diagnosis.output.wording import explanation, joints_apart
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -145,8 +145,11 @@ def answer_sentence(result: dict) -> str:
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
-    words = (result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
-                                                        [e for e in result.get("effects", []) if e["name"] in selected]))["words"]
+    explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
+                                                          [e for e in result.get("effects", []) if e["name"] in selected])
+    words, apart = explained["words"], joints_apart(explained)
+    if apart:
+        words += f" (on average over {', '.join(explained['joints'])}; {apart})"
     if result.get("payload_not_distinguished"):
         where = "no payload is distinguished from none (every interval contains zero); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
@@ -154,7 +157,7 @@ def answer_sentence(result: dict) -> str:
         where += ", against the simulation of the identified inertia alone"
     if lead == "no effect":
         sentence = beyond + f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
-    elif words == "not explained":
+    elif explained["words"] == "not explained":
         sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
     else:
         sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
