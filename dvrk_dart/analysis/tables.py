@@ -166,12 +166,16 @@ def _regime_masks(record, joint: int, finite: np.ndarray, replay: bool, model: P
     return masks
 
 
-def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
+def _effort_sources(record, config: dict, measured_joints: list[str] | None) -> dict[str, np.ndarray]:
+    """The efforts a run compares; a joint the replayed run did not record has no measured effort (NaN, no row)."""
     sources: dict[str, np.ndarray] = {}
     if record.effort_sim is not None and np.isfinite(record.effort_sim).any():
         sources["sim"] = record.effort_sim
     if record.effort_measured is not None:
-        sources["measured"] = record.effort_measured
+        measured = np.array(record.effort_measured, dtype=float)
+        if measured_joints is not None:
+            measured[:, [j for j, name in enumerate(JOINT_NAMES[:measured.shape[1]]) if name not in measured_joints]] = np.nan
+        sources["measured"] = measured
     if record.effort_model:
         present = tuple(t for t in TERMS if t in record.effort_model)
         sources["model_full"] = record.model_total(present)
@@ -182,7 +186,7 @@ def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
     """The long table of one run (columns METRICS_COLUMNS)."""
-    rows = _effort_rows(loaded)
+    rows = _in_band(loaded, _effort_rows(loaded))
     rows += _position_rows(loaded, rows)
     rows += _tracking_rows(loaded)
     residual = loaded.record.closure_residual_m
@@ -203,7 +207,7 @@ def _effort_rows(loaded: LoadedRun) -> list[tuple]:
     record, model = loaded.record, loaded.model
     rows: list[tuple] = []
     replay = record.effort_measured is not None
-    sources = _effort_sources(record, loaded.config)
+    sources = _effort_sources(record, loaded.config, loaded.metrics.get("measured_joints"))
     counted: set[tuple[str, str]] = set()  # (joint, regime) whose sample count is in the table
     for name, (actual_key, reference_key, _) in EFFORT_COMPARISONS.items():
         if actual_key not in sources or reference_key not in sources:
@@ -225,20 +229,36 @@ def _effort_rows(loaded: LoadedRun) -> list[tuple]:
     return rows
 
 
+def _in_band(loaded: LoadedRun, rows: list[tuple]) -> list[tuple]:
+    """A periodic replay compares the simulated efforts in the measured efforts'
+    band (metrics.json, at the measured samples): its whole-run RMS(simulated -
+    measured) is that figure, the one the replay printed; the regimes stay the log's."""
+    in_band = loaded.metrics.get("rms_sim_vs_measured") if loaded.metrics.get("in_band_note") else None
+    if not in_band:
+        return rows
+    by_joint = dict(zip(JOINT_NAMES, in_band))
+    return [_row(row[0], row[1], row[2], by_joint[row[0]], row[4], METRICS_FILE)
+            if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL and by_joint.get(row[0]) is not None else row
+            for row in rows]
+
+
 def _position_rows(loaded: LoadedRun, effort_rows: list[tuple]) -> list[tuple]:
     """A replay's position error, and the simulation's effort error beyond the model's at the measured state."""
     record, model = loaded.record, loaded.model
+    recorded = loaded.metrics.get("measured_joints") or list(JOINT_NAMES)
     rows: list[tuple] = []
     if record.q_measured is not None:
         finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
         if finite.sum() >= MIN_REGIME_SAMPLES:
             for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
-                rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
+                if JOINT_NAMES[j] in recorded:
+                    rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
         sim_vs_measured = {row[0]: row[3] for row in effort_rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}
         for joint, value in zip(JOINT_NAMES, at_measured):
-            value = math.nan if value is None else value
+            if value is None:  # not recorded
+                continue
             rows.append(_row(joint, "rms_model_full_vs_measured_at_measured_state", REGIME_ALL, value, model.effort_unit(joint), METRICS_FILE))
             if joint in sim_vs_measured:
                 rows.append(_row(joint, "rms_sim_vs_measured_excess", REGIME_ALL, sim_vs_measured[joint] - value, model.effort_unit(joint)))

@@ -98,15 +98,17 @@ def base_sim_config(arm: Arm) -> SimConfig:
     return SimConfig()
 
 
-def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path, topics: BagTopics = BagTopics()) -> None:
+def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path, processing: dict,
+                topics: BagTopics = BagTopics()) -> None:
     """MCAP and Rerun logs of the replay before (the diagnosis's base: the
     identified inertia, or the identified arm) and after (with the selected
-    effects as physics)."""
+    effects as physics), the run read in the diagnosis's `processing` (its
+    name and harmonics) so their figures are the diagnosis's."""
     from dvrk_dart.runs.campaign import write_run_folder
     from dvrk_dart.runs.replay import replay_processed
     from dvrk_dart.runs.runner import rcm_position
 
-    processed = process(load_run(resolve_run(measured), arm.model, topics))
+    processed = process(load_run(resolve_run(measured), arm.model, topics), processing["processing"], processing.get("harmonics"))
     for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
         record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
         record.name = f"diagnosis-{run_label(measured)}_{label}"
@@ -152,7 +154,7 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], page_title(result)))
     if c.logs:
-        log_replays(arm, c.measured[0], sim_config_of(result), out_dir, c.topics)
+        log_replays(arm, c.measured[0], sim_config_of(result), out_dir, result["processing"], c.topics)
     return result
 
 

@@ -21,7 +21,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process
-from dvrk_dart.metrics import rms
+from dvrk_dart.metrics import per_measured_joint, rms
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.identified import TERMS, IdentifiedModel
@@ -190,6 +190,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
     in_window = t_meas <= duration + 1e-9
     full_model = identified.predict(processed.q[in_window], processed.dq[in_window], processed.ddq[in_window], TERMS)
     sim_terms = simulated_terms(config)
+    recorded = processed.measured  # a joint the run did not record has no figure against it
     dynamic = mode != "kinematic" and len(t) > 0
     metrics = {
         "scenario": run_label(measured),
@@ -202,9 +203,9 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "realtime_factor": (log.steps_done * dt / wall) if wall > 0 else None,
         "model_terms_compared": list(sim_terms),
         "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if dynamic else None,
-        "rms_sim_vs_measured": rms(effort - tau_meas).tolist() if dynamic else None,
-        "rms_model_vs_measured": rms(full_model - processed.tau[in_window]).tolist(),
-        "rms_q_sim_vs_measured": rms(q - q_meas).tolist() if len(t) else None,
+        "rms_sim_vs_measured": per_measured_joint(rms(effort - tau_meas), recorded) if dynamic else None,
+        "rms_model_vs_measured": per_measured_joint(rms(full_model - processed.tau[in_window]), recorded),
+        "rms_q_sim_vs_measured": per_measured_joint(rms(q - q_meas), recorded) if len(t) else None,
         "closure_residual_max_m": float(np.max(record.closure_residual_m, initial=0.0)),
         "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
         "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(t) else 0.0,
@@ -234,8 +235,8 @@ def _in_band_metrics(processed: ProcessedRun, t: np.ndarray, effort: np.ndarray,
         return {"rms_sim_vs_measured": None, "rms_model_vs_measured": None,
                 "in_band_note": "a part of the run: the periodic comparison needs the whole run"}
     return {
-        "rms_sim_vs_measured": rms(in_band_at_samples(processed, t, effort) - processed.tau).tolist(),
-        "rms_model_vs_measured": rms(processed.in_band(full_model) - processed.tau).tolist(),
+        "rms_sim_vs_measured": per_measured_joint(rms(in_band_at_samples(processed, t, effort) - processed.tau), processed.measured),
+        "rms_model_vs_measured": per_measured_joint(rms(processed.in_band(full_model) - processed.tau), processed.measured),
         "in_band_note": "simulated and model efforts at the measured samples, projected on the excitation's harmonics",
     }
 
