@@ -9,6 +9,7 @@ from pathlib import Path
 import sys
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.paths import PIPELINES_DIR
 from dvrk_dart.option_types import (
     MAX_SAMPLES,
     RATE_HZ,
@@ -76,12 +77,22 @@ DESCRIPTION = ("dvrk-dart: a DART simulation of the dVRK PSM (and MTM) with its 
                + ", ".join(RUNS) + "; or any CSV or ROS bag.")
 
 
+class DefaultsShown(argparse.HelpFormatter):
+    """Every option's help says its default where it has a value and the help does not already say it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        shown = action.default not in (None, False, [], argparse.SUPPRESS) and "default" not in text and action.option_strings
+        return f"{text} (default: %(default)s)" if shown else text
+
+
 class OneLineParser(argparse.ArgumentParser):
     """Usage errors as every other error: one line naming the option, exit 2.
     No abbreviated options: `--dur 3 --duration 4` would give one option twice."""
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("allow_abbrev", False)
+        kwargs.setdefault("formatter_class", DefaultsShown)
         super().__init__(*args, **kwargs)
 
     def parse_args(self, args=None, namespace=None):
@@ -115,12 +126,12 @@ def build_parser(commands) -> argparse.ArgumentParser:
     return parser
 
 
-def _add_sim_options(p: argparse.ArgumentParser) -> None:
+def _add_sim_options(p: argparse.ArgumentParser, duration_help: str = "simulate only the first seconds") -> None:
     """The simulation's options of `run` and `replay`."""
     p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
                    help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
     p.add_argument("--dt", type=number_in(MIN_STEP_S, MAX_STEP_S, "s"), default=1e-3, help="simulation step (s)")
-    p.add_argument("--duration", type=SECONDS, default=None, help="simulate only the first seconds")
+    p.add_argument("--duration", type=SECONDS, default=None, help=duration_help)
     p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
                    help="the simulated arm: identified inertia only (the paper's), every identified term as physics, "
                         "or the simulation a diagnosis selected (default: the scenario's, else inertial)")
@@ -222,7 +233,8 @@ def _model_check_command(sub, commands) -> None:
 
 def _run_command(sub, commands) -> None:
     p = sub.add_parser("run", help="run one scenario variant")
-    p.add_argument("scenario", help="scenario name (pipelines/scenarios/) or .toml file")
+    named = ", ".join(sorted(path.stem for path in (PIPELINES_DIR / "scenarios").glob("*.toml")))
+    p.add_argument("scenario", help=f"a scenario of pipelines/scenarios/ ({named}) or a .toml file")
     p.add_argument("--mode", choices=MODES, help="default: the scenario's first mode")
     p.add_argument("--out", required=True, help="output folder of the run")
     _add_sim_options(p)
@@ -239,7 +251,7 @@ def _replay_command(sub, commands) -> None:
     p.add_argument("--out", help="output folder (default out/runs/<run name>)")
     _add_processing_option(p, None, "the one a --dynamics diagnosis file records, else periodic where the run is a periodic "
                                     "excitation, else upstream (said in the output)")
-    _add_sim_options(p)
+    _add_sim_options(p, "replay only the first seconds (read upstream: a part of a run has no periodic projection of its own)")
     _add_config_option(p)
     p.set_defaults(func=commands.cmd_replay)
 

@@ -58,6 +58,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
         "rms": per_measured_joint(rms(predicted - measured), processed.measured),
         "samples": len(measured),
+        "scored_on": "the first base period" if config.first_period else "the whole run",
         "terms": config.terms,
         **processed.summary(),
         "chosen_because": why,
@@ -76,9 +77,11 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         print(json_text(result), end="")
     else:
         periodic = result["processing"] == "periodic"
-        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples, {result['processing']} processing ({why})")
+        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples ({result['scored_on']}), "
+              f"{result['processing']} processing ({why})")
         if periodic:
-            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), {result['whole_periods']} whole periods, "
+            print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), "
+                  f"projection fitted on the run's {result['whole_periods']} whole periods, "
                   f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
                   f"from {result['design_from']})")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")

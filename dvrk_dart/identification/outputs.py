@@ -250,15 +250,16 @@ def _figure_png(result: IdentificationResult, run: RunData, title: str) -> str:
     n = min(run.processed.first_period_samples(), len(run.processed))
     t = run.processed.t[:n] - run.processed.t[0]
     predicted = result.predicted(run)[:n]
-    fig, axes = plt.subplots(len(JOINT_NAMES), 1, figsize=(10, 13), sharex=True)
-    for j, ax in enumerate(axes):
+    shown = [j for j, recorded in enumerate(run.processed.measured) if recorded]  # a joint not recorded has nothing to compare
+    fig, axes = plt.subplots(len(shown), 1, figsize=(10, 1.9 * len(shown)), sharex=True, squeeze=False)
+    for j, ax in zip(shown, axes[:, 0]):
         ax.plot(t, run.processed.tau[:n, j], color="#c0392b", lw=1.0, label="measured")
         ax.plot(t, predicted[:, j], color="#2c6fbb", lw=1.0, label="identified")
         ax.plot(t, predicted[:, j] - run.processed.tau[:n, j], color="k", lw=0.6, ls="--", label="difference")
         ax.set_ylabel(f"{JOINT_NAMES[j]} ({result.model.effort_unit(JOINT_NAMES[j])})")
         ax.grid(alpha=0.3)
-    axes[0].legend(ncol=3, loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("t (s), first base period")
+    axes[0, 0].legend(ncol=3, loc="upper right", fontsize=8)
+    axes[-1, 0].set_xlabel("t (s), first base period")
     fig.suptitle(title)
     fig.tight_layout()
     buffer = io.BytesIO()
