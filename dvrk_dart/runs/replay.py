@@ -205,6 +205,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if dynamic else None,
         "rms_sim_vs_measured": per_measured_joint(rms(effort - tau_meas), recorded) if dynamic else None,
         "rms_model_vs_measured": per_measured_joint(rms(full_model - processed.tau[in_window]), recorded),
+        "measured_samples": int(in_window.sum()),  # the model's figure's; the log's stop a step short of the last
         "rms_q_sim_vs_measured": per_measured_joint(rms(q - q_meas), recorded) if len(t) else None,
         "closure_residual_max_m": float(np.max(record.closure_residual_m, initial=0.0)),
         "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
