@@ -114,6 +114,9 @@ def _replay_processing(args: argparse.Namespace) -> tuple[bool, str]:
     from dvrk_dart.runs.config import recorded_processing
 
     args.harmonics = None
+    if args.processing == "periodic" and args.duration is not None:
+        raise DvrkDartError("--duration with --processing periodic: a part of a run has no periodic projection of its own; "
+                            "replay the whole run, or give --processing upstream")
     if args.processing is not None:
         return False, f"processing: {args.processing} (--processing {args.processing})"
     recorded = recorded_processing(args.dynamics)

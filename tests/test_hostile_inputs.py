@@ -303,6 +303,8 @@ def test_a_negative_friction_is_refused(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, fragment", [
     (["replay", "--measured", "two", "--duration", "1e-6"], "--duration"),
+    (["replay", "--measured", "two", "--duration", "5", "--processing", "periodic"], "--duration with --processing periodic"),
+    (["uncertainty", "--measured", "two", "--duration", "5", "--processing", "periodic"], "--duration with --processing periodic"),
     (["uncertainty", "--measured", "two", "--samples", "100000000"], "--samples"),
     (["uncertainty", "--measured", "two", "--samples", "2", "--jobs", "100000"], "--jobs"),
     (["excitation", "two", "--arm", "MTML"], "--arm MTML"),

@@ -99,7 +99,7 @@ def test_the_terms_are_simulated_as_fitted(arm, states):
 def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     """On the PSM's periodic held-out runs: J3 under the bar simulated, the
     words and the answer's clause; not on the MTM (no insertion), not with a
-    baseline, not on the upstream processing."""
+    baseline, not on the upstream processing, not without q3."""
     from pathlib import Path
 
     from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
@@ -115,3 +115,5 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     assert not insertion_applies(mtm, periodic, ["mtm-one"], ["mtm-two"], None)
     assert not insertion_applies(arm, periodic, ["one"], ["two"], "one-no-weight")
     assert not insertion_applies(arm, {"processing": {"processing": "upstream"}}, ["one"], ["two"], None)
+    # runs without q3 (a header CSV of q1 and q2: the study's terms have nothing to fit, its clause no figure)
+    assert not insertion_applies(arm, {**periodic, "recorded_joints": ["q1", "q2"]}, ["one"], ["two"], None)

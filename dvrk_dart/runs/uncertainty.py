@@ -64,6 +64,9 @@ def processing_of(config: UncertaintyConfig) -> tuple[str, str]:
     the excitation's harmonics (a whole run only)."""
     from dvrk_dart.io.signal import process_all
 
+    if config.processing == "periodic" and config.duration_s is not None:
+        raise DvrkDartError("--duration with --processing periodic: a part of a run has no periodic projection of its own; "
+                            "draw over the whole run, or give --processing upstream")
     if config.processing is not None:
         return config.processing, f"--processing {config.processing}"
     if config.duration_s is not None:

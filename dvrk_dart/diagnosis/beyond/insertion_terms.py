@@ -195,9 +195,10 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
 
 def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
     """The terms are studied on a PSM diagnosis of raw periodic runs (files,
-    names or processed runs) with held-out runs."""
+    names or processed runs) with held-out runs, every one of which recorded q3."""
     loadable = all(isinstance(spec, (str, Path, ProcessedRun)) for spec in [*train, *holdout])
-    return (bool(holdout) and baseline is None and loadable and has_insertion(arm)
+    insertion_recorded = JOINT_NAMES[INSERTION] in result.get("recorded_joints", JOINT_NAMES)
+    return (bool(holdout) and baseline is None and loadable and has_insertion(arm) and insertion_recorded
             and result["processing"]["processing"] == "periodic")
 
 
