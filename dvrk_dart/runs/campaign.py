@@ -67,7 +67,7 @@ def needs_diagnosis(config: RunConfig) -> bool:
 def config_name(config: RunConfig) -> str:
     from dvrk_dart.runs.runner import scenario_of
 
-    return run_name(scenario_of(config).name, config.mode, config.counterweight, config.dynamics_label, config.processing)
+    return run_name(scenario_of(config).name, config.mode, *config.name_parts)
 
 
 def code_fingerprint() -> str:

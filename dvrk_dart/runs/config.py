@@ -76,10 +76,25 @@ class RunConfig:
 
     @property
     def dynamics_label(self) -> str:
-        """Short name of the dynamics for run names: inertial, identified, diagnosed-<folder>."""
+        """Short name of the dynamics for run names: inertial, identified,
+        diagnosed-<folder> (its diagnosis.json), diagnosed-<folder>-<stem> (another file of it)."""
         if self.dynamics in DYNAMICS_CHOICES:
             return self.dynamics
-        return f"diagnosed-{Path(self.dynamics).resolve().parent.name}"
+        path = Path(self.dynamics).resolve()
+        return f"diagnosed-{path.parent.name}" + ("" if path.stem == "diagnosis" else f"-{path.stem}")
+
+    @property
+    def params_label(self) -> str | None:
+        """Short name of a --params file for run names: params-<folder> (its params.json), params-<stem> (another name)."""
+        if self.params_file is None:
+            return None
+        path = Path(self.params_file).resolve()
+        return f"params-{path.parent.name if path.stem == 'params' else path.stem}"
+
+    @property
+    def name_parts(self) -> tuple:
+        """What tells this run's name from another's beyond its scenario and mode (run_name's last arguments)."""
+        return self.counterweight, self.dynamics_label, self.processing, self.params_label
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -93,11 +108,12 @@ class RunConfig:
         return cls(**kept)
 
 
-def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream") -> str:
-    """The run folder's name; the paper's arm (inertial) and processing (upstream) keep the historical name."""
-    base = f"{scenario}_{mode}_cw-{counterweight}"
-    base = base if dynamics_label == "inertial" else f"{base}_{dynamics_label}"
-    return base if processing == "upstream" else f"{base}_{processing}"
+def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream",
+             params_label: str | None = None) -> str:
+    """The run folder's name; the paper's arm (inertial, the published parameters) and processing (upstream) keep the historical name."""
+    parts = [f"{scenario}_{mode}_cw-{counterweight}"]
+    parts += [label for label, usual in ((dynamics_label, "inertial"), (params_label, None), (processing, "upstream")) if label != usual]
+    return "_".join(parts)
 
 
 def sim_config_for(config: RunConfig) -> SimConfig:

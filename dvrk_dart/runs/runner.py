@@ -119,7 +119,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         if mode != "kinematic":
             add_model_efforts(arm, record)
         record.metrics = {**cartesian_metrics(record, mode, sim_config), **record.metrics}  # a divergence is the first error
-    record.name = run_name(scenario.name, mode, counterweight, config.dynamics_label, config.processing)
+    record.name = run_name(scenario.name, mode, *config.name_parts)
     record.config = {
         "run_config": config.to_dict(),
         "scenario": scenario.to_dict(),
