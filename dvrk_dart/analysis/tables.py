@@ -208,6 +208,8 @@ def _effort_rows(loaded: LoadedRun) -> list[tuple]:
     rows: list[tuple] = []
     replay = record.effort_measured is not None
     sources = _effort_sources(record, loaded.config, loaded.metrics.get("measured_joints"))
+    if _periodic_replay(loaded):  # measured in the harmonics' band, the log's efforts not: _in_band
+        sources.pop("measured", None)
     counted: set[tuple[str, str]] = set()  # (joint, regime) whose sample count is in the table
     for name, (actual_key, reference_key, _) in EFFORT_COMPARISONS.items():
         if actual_key not in sources or reference_key not in sources:
@@ -230,16 +232,19 @@ def _effort_rows(loaded: LoadedRun) -> list[tuple]:
 
 
 def _in_band(loaded: LoadedRun, rows: list[tuple]) -> list[tuple]:
-    """A periodic replay compares the simulated efforts in the measured efforts'
-    band (metrics.json, at the measured samples): its whole-run RMS(simulated -
-    measured) is that figure, the one the replay printed; the regimes stay the log's."""
-    in_band = loaded.metrics.get("rms_sim_vs_measured") if loaded.metrics.get("in_band_note") else None
-    if not in_band:
+    """A periodic replay's measured efforts are in the excitation's band: the
+    log's raw simulated and model efforts are not compared with them (_effort_rows
+    leaves them out); its whole-run RMS(simulated - measured) is metrics.json's,
+    in the same band at the measured samples (the figure the replay printed)."""
+    if not _periodic_replay(loaded):
         return rows
-    by_joint = dict(zip(JOINT_NAMES, in_band))
-    return [_row(row[0], row[1], row[2], by_joint[row[0]], row[4], METRICS_FILE)
-            if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL and by_joint.get(row[0]) is not None else row
-            for row in rows]
+    unit = loaded.model.effort_unit
+    return rows + [_row(joint, "rms_sim_vs_measured", REGIME_ALL, value, unit(joint), METRICS_FILE)
+                   for joint, value in zip(JOINT_NAMES, loaded.metrics.get("rms_sim_vs_measured") or []) if value is not None]
+
+
+def _periodic_replay(loaded: LoadedRun) -> bool:
+    return bool(loaded.metrics.get("in_band_note"))
 
 
 def _position_rows(loaded: LoadedRun, effort_rows: list[tuple]) -> list[tuple]:
