@@ -91,3 +91,16 @@ def test_a_joint_below_the_average_words_is_named():
     assert sentence.startswith("The gap is mostly explained (on average over q1, q2, q3; partly on q3 37%) by"), sentence
     uniform = _result(before, [b * 0.3 for b in before], ["q1", "q2", "q3"])
     assert answer_sentence(uniform).startswith("The gap is mostly explained by")
+
+
+def test_a_payload_size_whose_interval_holds_zero_is_not_a_size():
+    """The getting-started payload (one-105g against one-no-weight): J1's gravity
+    effort -0.006 N·m in [-0.026, +0.019], J2's not determined; the lead does not
+    quote -0.006 N·m as the payload's size. An interval off zero is quoted."""
+    from dvrk_dart.diagnosis.output.answer import effort_at_zero_words
+
+    units = [PSM.effort_unit(j) for j in JOINTS]
+    efforts, spans_zero = [-0.0057, None, 0.0, 0, 0, 0, 0], [[-0.026, 0.019], None, [0.0, 0.0]] + [[0.0, 0.0]] * 4
+    assert effort_at_zero_words(efforts, units, spans_zero) == ", size not determined: no gravity effort at q = 0 is told from zero"
+    assert effort_at_zero_words(efforts, units, [[-0.009, -0.002], *spans_zero[1:]]) == ", -0.0057 N·m on q1 at q = 0"
+    assert effort_at_zero_words(efforts, units) == ", -0.0057 N·m on q1 at q = 0"  # no intervals (no baseline): the fit's value

@@ -65,12 +65,18 @@ def _size_words(entry: dict) -> str:
     return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
 
 
-def effort_at_zero_words(efforts: list | None, units: list[str]) -> str:
+def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None) -> str:
     """', +0.25 N·m on q2 at q = 0': a payload's gravity effort at q = 0 on J2
     (where a payload shows most), else on the first of J1..J3 that has one
-    (J2 not recorded or not determined); '' when none has."""
+    (J2 not recorded or not determined); '' when none has. With `intervals`,
+    only an effort whose interval excludes zero is a size; when none does, the
+    size is said to be not determined."""
     efforts = list(efforts or [])[:3]
     shown = [j for j in (1, 0, 2) if j < len(efforts) and efforts[j] is not None]
+    if intervals is not None and any(interval is not None for interval in intervals[:3]):
+        shown = [j for j in shown if intervals[j] is not None and not intervals[j][0] <= 0.0 <= intervals[j][1]]
+        if not shown:
+            return ", size not determined: no gravity effort at q = 0 is told from zero"
     if not shown:
         return ""
     j = shown[0]
@@ -85,7 +91,7 @@ def _payload_size_words(payload: dict, units: list[str]) -> str:
         return f", {at['mass_kg']:.3g} kg at the hand position"
     if payload.get("mass_identified") and payload.get("mass_kg") is not None:
         return f", {payload['mass_kg']:.3g} kg"
-    return effort_at_zero_words(payload.get("gravity_efforts_at_q0"), units)
+    return effort_at_zero_words(payload.get("gravity_efforts_at_q0"), units, payload.get("gravity_efforts_at_q0_interval"))
 
 
 def _row_share(split_row: dict) -> float | None:
@@ -170,7 +176,7 @@ def answer_sentence(result: dict) -> str:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
     above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
     return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                       if above else ". What is left is at the session floor: no fixed effect can remove more.") + _refit_clause(result) + _insertion_clause(result)
+                       if above else f". What is left on {', '.join(joints)} is at the session floor: no fixed effect can remove more there.") + _refit_clause(result) + _insertion_clause(result)
 
 
 def _refit_clause(result: dict) -> str:

@@ -63,8 +63,9 @@ def _effects_tables(result: dict, shown: list[dict]) -> tuple[Markup, Markup]:
     parameters = [[code_cell(e["name"]), text_cell(", ".join(
         f"{k} = {fmt(v) if isinstance(v, (int, float)) else v} {(e.get('units') or {}).get(k, '')}".rstrip()
         for k, v in e.get("parameters", {}).items()))] for e in shown]
-    held = "explained (held-out runs)" if result.get("holdout_runs") else "explained (held-out time segments)"
-    return (table(["rank", "effect", "identifier", "joints", "selected", "role", "explained (train)", held], ranked, css=""),
+    held = "held-out runs" if result.get("holdout_runs") else "held-out time segments"
+    return (table(["rank", "effect", "identifier", "joints", "selected", "role", "fit's share of the squared gap, alone (train)",
+                   f"alone ({held})"], ranked, css=""),
             table(["effect", "parameters"], parameters, css=""))
 
 
