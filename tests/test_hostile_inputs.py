@@ -308,6 +308,7 @@ def test_a_negative_friction_is_refused(tmp_path, capsys):
     (["uncertainty", "--measured", "two", "--samples", "100000000"], "--samples"),
     (["uncertainty", "--measured", "two", "--samples", "2", "--jobs", "100000"], "--jobs"),
     (["excitation", "two", "--arm", "MTML"], "--arm MTML"),
+    (["excitation", "2018-test1"], "excitation '2018-test1': one of one, two (the identification's excitations), a Cartesian scenario (rectilinear"),
     (["run", "rectilinear", "--dynamics", "bogus"], "'bogus'"),
     (["identify", "--runs", "one", "--prior", "bogus"], "--prior bogus"),
 ])

@@ -154,6 +154,8 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
     ("t,q1,dq1", "q1 without tau"),
     ("t,q1,dq1,tau1,bogus", "'bogus' is not a known name"),
     ("t,q1,q1,dq1,tau1", "q of q1 given twice"),
+    (",t,q1,dq1,tau1", r"column 1 is empty \(an index column\? \(pandas"),  # to_csv's default index
+    ("t,q1,dq1,tau1,", "column 5 is empty .a trailing comma"),
 ])
 def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
     width = len(header.split(","))

@@ -126,7 +126,8 @@ class IdentificationResult:
         if not self.holdout:
             return []
         train, held = pooled(self.train), pooled(self.holdout)
-        return [f"{JOINT_NAMES[j]}: held-out RMS {held[j]:.3g} is {held[j] / train[j]:.1f}x the training RMS {train[j]:.3g}: "
+        pooling = "" if len(self.train) == len(self.holdout) == 1 else " (each pooled over its runs: the root of their mean square)"
+        return [f"{JOINT_NAMES[j]}: held-out RMS {held[j]:.3g} is {held[j] / train[j]:.1f}x the training RMS {train[j]:.3g}{pooling}: "
                 "the training runs do not determine the arm (record more runs or periods)"
                 for j in self.wls.joints if held[j] > HOLDOUT_OVERFIT_RATIO * train[j]]
 

@@ -96,7 +96,8 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
     columns, time_column, kinds = {}, None, set()
     for index, cell in enumerate(header):
         if not isinstance(cell, str) or not cell.strip():
-            raise DvrkDartError(f"{path}: header column {index + 1} is empty (a trailing comma?)")
+            why = "an index column? (pandas: to_csv(..., index=False))" if index == 0 else "a trailing comma?"
+            raise DvrkDartError(f"{path}: header column {index + 1} is empty ({why})")
         name = cell.strip()
         if name.lower() in TIME_NAMES:
             time_column = index

@@ -122,8 +122,12 @@ def fitted_excitation(name: str, rate_hz: float, model: PsmModel) -> Excitation:
 def cartesian_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
     """A Cartesian scenario's joint trajectory (its kinematic mode on `arm`), at rate_hz."""
     from dvrk_dart.runs.cartesian import CartesianDriver
-    from dvrk_dart.runs.scenarios import load_scenario
+    from dvrk_dart.runs.scenarios import available_scenarios, load_scenario
 
+    if not name.endswith(".toml") and name not in available_scenarios():
+        cartesian = [n for n in available_scenarios() if load_scenario(n).kind == "cartesian"]
+        raise DvrkDartError(f"excitation '{name}': one of {', '.join(EXCITATIONS)} (the identification's excitations), "
+                            f"a Cartesian scenario ({', '.join(cartesian)}) or a scenario's .toml file")
     scenario = load_scenario(name)
     if scenario.kind != "cartesian":
         raise DvrkDartError(f"'{name}' is a {scenario.kind} scenario: an excitation is {', '.join(EXCITATIONS)} or a Cartesian scenario")
