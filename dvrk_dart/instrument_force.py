@@ -16,7 +16,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.excitation_design import read_design
 from dvrk_dart.io.force_log import force_table, write_force_logs
-from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, process, process_all
 from dvrk_dart.io.arm import Arm
@@ -85,7 +85,8 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
         "definition": "F = J^-T (tau_measured - tau_model) over the point's joints, base frame; a direction whose lever "
                       "(singular value of J) is under min_lever_m is not determined (NaN in force.csv); the figures are "
                       "over the determined samples, *_all_samples_* over every sample",
-        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics)}, "versions": software_versions(),
+        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics)},
+        "params": file_record(arm.params.source), "versions": software_versions(),
     }
     if out_dir is not None:
         table = force_table(state.t, point_positions(arm.model, state.q, point.link), estimate.force, estimate.determined, estimate.lever_m)
@@ -115,7 +116,8 @@ def estimate_force_all(arm: Arm, q: np.ndarray, gap: np.ndarray) -> dict:
 
 def print_force_summary(s: dict) -> None:
     """What `dvrk-dart force` prints: the figures of force.json with their units."""
-    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}), {s['processing']} processing ({s['chosen_because']})")
+    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}, parameters {s['params']['path']}), "
+          f"{s['processing']} processing ({s['chosen_because']})")
     if s["rms_n"] is None:
         print(f"  not determined on any sample: the lever arm stays under {s['min_lever_m']} m")
         return

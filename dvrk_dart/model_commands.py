@@ -33,6 +33,7 @@ class ModelErrorsConfig:
 def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     """Per-joint relative and RMS error of the identified model on the run (`null` where a joint is not recorded)."""
     from dvrk_dart.io.excitation_design import read_design
+    from dvrk_dart.io.provenance import file_record
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
@@ -59,6 +60,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "rms": per_measured_joint(rms(predicted - measured), processed.measured),
         "samples": len(measured),
         "scored_on": "the first base period" if config.first_period else "the whole run",
+        "params": file_record(arm.params.source),
         "terms": config.terms,
         **processed.summary(),
         "chosen_because": why,
@@ -77,8 +79,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         print(json_text(result), end="")
     else:
         periodic = result["processing"] == "periodic"
-        print(f"identified model ({args.terms}) vs {args.measured}: {result['samples']} samples ({result['scored_on']}), "
-              f"{result['processing']} processing ({why})")
+        print(f"identified model ({args.terms}, parameters {result['params']['path']}) vs {args.measured}: "
+              f"{result['samples']} samples ({result['scored_on']}), {result['processing']} processing ({why})")
         if periodic:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), "
                   f"projection fitted on the run's {result['whole_periods']} whole periods, "

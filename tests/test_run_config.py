@@ -137,3 +137,17 @@ def test_runs_of_other_parameters_or_diagnosis_files_are_named_apart(tmp_path):
         {"dynamics": str(folder / "diagnosis.json")}, {"dynamics": str(folder / "one_configuration.json")})}
     assert names == {"replay-two_velocity_cw-on", "replay-two_velocity_cw-on_params-my-arm", "replay-two_velocity_cw-on_params-heavy",
                      "replay-two_velocity_cw-on_diagnosed-my-diagnosis", "replay-two_velocity_cw-on_diagnosed-my-diagnosis-one_configuration"}
+
+
+def test_model_errors_and_force_record_the_parameter_file(tmp_path, capsys):
+    """Two parameter files give two answers: each output names the file and its hash."""
+    from dvrk_dart.io.provenance import sha256_of
+
+    heavy = heavier_pitch_link(tmp_path)
+    capsys.readouterr()
+    assert main(["model-errors", "--measured", "two", "--processing", "upstream", "--params", str(heavy), "--json"]) == 0
+    errors = json.loads(capsys.readouterr().out)
+    assert errors["params"] == {"path": str(heavy), "sha256": sha256_of(heavy)}
+    assert main(["force", "--measured", "two", "--processing", "upstream", "--params", str(heavy), "--out", str(tmp_path / "force")]) == 0
+    assert str(heavy) in capsys.readouterr().out
+    assert json.loads((tmp_path / "force" / "force.json").read_text())["params"]["sha256"] == sha256_of(heavy)

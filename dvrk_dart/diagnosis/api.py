@@ -22,7 +22,7 @@ from dvrk_dart.diagnosis.beyond.refit import check_refit_inputs, refit_check
 from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import process
 from dvrk_dart.io.arm import Arm
@@ -148,7 +148,7 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
         beyond["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, found["processing"], c.topics)
     # the diagnosis and what was studied on top of it: built once here, written once
     result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base,
-              "params": {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)}, "versions": software_versions()}
+              "params": file_record(arm.params.source), "versions": software_versions()}
     result = {**result, **(_repeatable_shares(result) if holdout else {}), "wall_time_s": time.perf_counter() - start}
     _write_one_configuration(result, out_dir)
     write_json_atomic(out_dir / "diagnosis.json", result)

@@ -65,3 +65,8 @@ def sha256_of(path: Path) -> str:
             for chunk in iter(lambda: f.read(1 << 20), b""):
                 digest.update(chunk)
     return digest.hexdigest()
+
+
+def file_record(path: Path) -> dict[str, str]:
+    """A file an output rests on (the identified parameters, ...): its path and content hash."""
+    return {"path": str(path), "sha256": sha256_of(path)}
