@@ -209,7 +209,9 @@ def fit_weighted_periodic(coefficients_Y: np.ndarray, coefficients_tau: np.ndarr
     covariance = R_inverse @ R_inverse.T
     sigma = np.full(len(JOINT_NAMES), np.nan)
     sigma[joints] = np.sqrt(variance[:, joints].mean(axis=0))
-    return WeightedFit(joints, beta0, sigma, np.ones(len(JOINT_NAMES)), beta, covariance, cond, R, y)
+    uncorrelated = np.full(len(JOINT_NAMES), np.nan)  # the harmonics' residuals are independent: 1 sample each, fitted joints only
+    uncorrelated[joints] = 1.0
+    return WeightedFit(joints, beta0, sigma, uncorrelated, beta, covariance, cond, R, y)
 
 
 @dataclass(frozen=True)
