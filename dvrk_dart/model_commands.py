@@ -59,12 +59,24 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "relative_error": per_measured_joint(relative_error(predicted, measured), processed.measured),
         "rms": per_measured_joint(rms(predicted - measured), processed.measured),
         "samples": len(measured),
-        "scored_on": "the first base period" if config.first_period else "the whole run",
+        "scored_on": _scored_on(processed, config.first_period),
         "params": file_record(arm.params.source),
         "terms": config.terms,
         **processed.summary(),
         "chosen_because": why,
     }
+
+
+def _scored_on(processed, first_period: bool) -> str:
+    """What a model-errors figure is over: the whole run, the fitted period, or
+    upstream's window (the model card's, set for the identification's own runs)."""
+    if not first_period:
+        return "the whole run"
+    n = processed.first_period_samples()
+    seconds = f"{n * float(processed.t[1] - processed.t[0]):.4g} s"
+    if processed.periodic is not None:
+        return f"the first period, {seconds}"
+    return f"the model card's first base period, {seconds}: upstream's window, not this run's own period, which --processing periodic reads"
 
 
 def cmd_model_errors(args: argparse.Namespace) -> int:
