@@ -264,3 +264,18 @@ def test_a_periodic_replay_is_reported_in_its_band(tmp_path):
         assert simulated == pytest.approx(metrics["rms_sim_vs_measured"][j], rel=1e-12)
         assert abs(simulated - model) < 1e-3, (joint, simulated, model)
     assert not {"rms_model_full_vs_measured", "rms_model_inertial_vs_measured", "rel_sim_vs_measured"} & set(table.index.get_level_values(0))
+
+
+@needs_2018
+def test_a_joint_left_out_that_moves_the_others_efforts_is_said(tmp_path, capsys):
+    """2018 trajectory 1 without its q3 columns: held at 0, q3 moves the model's
+    efforts on q1 and q2 by more than their RMS (0.38 and 0.17 N·m instead of
+    0.10 and 0.12 with q3): said, naming q3; the 9-column file (the wrist held,
+    which moves nothing) says nothing."""
+    run = load_run(TEST1, PSM)
+    path = _write_header_csv(tmp_path / "q1_q2.csv", run, ["q1", "dq1", "tau1", "q2", "dq2", "tau2"])
+    without_q3 = cli_json(capsys, "model-errors", "--measured", str(path))
+    [note] = without_q3["unrecorded_joint_notes"]
+    assert note.startswith("q3 is not recorded") and "on q1 " in note and ", q2 " in note, note
+    assert without_q3["rms"][0] > 2 * cli_json(capsys, "model-errors", "--measured", str(TEST1))["rms"][0]
+    assert cli_json(capsys, "model-errors", "--measured", str(TEST1))["unrecorded_joint_notes"] == []

@@ -379,3 +379,16 @@ class IdentifiedModel:
     def predict(self, q, dq, ddq, terms: tuple[str, ...] | str = "all") -> np.ndarray:
         terms = parse_terms(terms) if isinstance(terms, str) else terms
         return self.efforts(q, dq, ddq, terms).total(terms)
+
+    def held_joint_change(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, joint: int) -> np.ndarray:
+        """Per joint, the largest change of the rigid-body efforts (inertia,
+        Coriolis, gravity) at the states (q, dq, ddq) when `joint` goes from
+        where `q` holds it to either end of its range: what holding a joint a
+        log did not record may cost the efforts of the others."""
+        held = self.predict(q, dq, ddq, INERTIAL_TERMS)
+        change = np.zeros(q.shape[1])
+        for end in (self.model.joint_lower[joint], self.model.joint_upper[joint]):
+            moved = np.array(q, dtype=float)
+            moved[:, joint] = end
+            change = np.maximum(change, np.max(np.abs(self.predict(moved, dq, ddq, INERTIAL_TERMS) - held), axis=0))
+        return change
