@@ -166,16 +166,12 @@ def _regime_masks(record, joint: int, finite: np.ndarray, replay: bool, model: P
     return masks
 
 
-def _effort_sources(record, config: dict, measured_joints: list[str] | None) -> dict[str, np.ndarray]:
-    """The efforts a run compares; a joint the replayed run did not record has no measured effort (NaN, no row)."""
+def _effort_sources(record, config: dict) -> dict[str, np.ndarray]:
     sources: dict[str, np.ndarray] = {}
     if record.effort_sim is not None and np.isfinite(record.effort_sim).any():
         sources["sim"] = record.effort_sim
     if record.effort_measured is not None:
-        measured = np.array(record.effort_measured, dtype=float)
-        if measured_joints is not None:
-            measured[:, [j for j, name in enumerate(JOINT_NAMES[:measured.shape[1]]) if name not in measured_joints]] = np.nan
-        sources["measured"] = measured
+        sources["measured"] = record.effort_measured
     if record.effort_model:
         present = tuple(t for t in TERMS if t in record.effort_model)
         sources["model_full"] = record.model_total(present)
@@ -185,10 +181,13 @@ def _effort_sources(record, config: dict, measured_joints: list[str] | None) -> 
 
 
 def run_metrics(loaded: LoadedRun) -> pd.DataFrame:
-    """The long table of one run (columns METRICS_COLUMNS)."""
+    """The long table of one run (columns METRICS_COLUMNS); a replay has no row
+    on a joint its measured run did not record (held, it is not measured)."""
     rows = _in_band(loaded, _effort_rows(loaded))
     rows += _position_rows(loaded, rows)
     rows += _tracking_rows(loaded)
+    unrecorded = set(JOINT_NAMES) - set(loaded.metrics.get("measured_joints") or JOINT_NAMES)
+    rows = [row for row in rows if row[0] not in unrecorded]
     residual = loaded.record.closure_residual_m
     if residual is not None and np.isfinite(residual).any():
         rows.append(_row(ALL_COMPONENTS, "closure_residual_max", REGIME_ALL, np.nanmax(residual), "m"))
@@ -207,7 +206,7 @@ def _effort_rows(loaded: LoadedRun) -> list[tuple]:
     record, model = loaded.record, loaded.model
     rows: list[tuple] = []
     replay = record.effort_measured is not None
-    sources = _effort_sources(record, loaded.config, loaded.metrics.get("measured_joints"))
+    sources = _effort_sources(record, loaded.config)
     if _periodic_replay(loaded):  # measured in the harmonics' band, the log's efforts not: _in_band
         sources.pop("measured", None)
     counted: set[tuple[str, str]] = set()  # (joint, regime) whose sample count is in the table
@@ -250,14 +249,12 @@ def _periodic_replay(loaded: LoadedRun) -> bool:
 def _position_rows(loaded: LoadedRun, effort_rows: list[tuple]) -> list[tuple]:
     """A replay's position error, and the simulation's effort error beyond the model's at the measured state."""
     record, model = loaded.record, loaded.model
-    recorded = loaded.metrics.get("measured_joints") or list(JOINT_NAMES)
     rows: list[tuple] = []
     if record.q_measured is not None:
         finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
         if finite.sum() >= MIN_REGIME_SAMPLES:
             for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
-                if JOINT_NAMES[j] in recorded:
-                    rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
+                rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
         sim_vs_measured = {row[0]: row[3] for row in effort_rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}

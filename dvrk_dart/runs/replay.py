@@ -190,7 +190,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
     in_window = t_meas <= duration + 1e-9
     full_model = identified.predict(processed.q[in_window], processed.dq[in_window], processed.ddq[in_window], TERMS)
     sim_terms = simulated_terms(config)
-    recorded = processed.measured  # a joint the run did not record has no figure against it
+    recorded = processed.measured  # a joint the run did not record has no figure against the run
     dynamic = mode != "kinematic" and len(t) > 0
     metrics = {
         "scenario": run_label(measured),
@@ -202,7 +202,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "wall_time_s": wall,
         "realtime_factor": (log.steps_done * dt / wall) if wall > 0 else None,
         "model_terms_compared": list(sim_terms),
-        "rms_sim_vs_model": rms(effort - record.model_total(sim_terms)).tolist() if dynamic else None,
+        "rms_sim_vs_model": per_measured_joint(rms(effort - record.model_total(sim_terms)), recorded) if dynamic else None,
         "rms_sim_vs_measured": per_measured_joint(rms(effort - tau_meas), recorded) if dynamic else None,
         "rms_model_vs_measured": per_measured_joint(rms(full_model - processed.tau[in_window]), recorded),
         "measured_samples": int(in_window.sum()),  # the model's figure's; the log's stop a step short of the last
