@@ -170,7 +170,7 @@ def answer_sentence(result: dict) -> str:
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
-        sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of the repeatable gap"
+        sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
     floor = result.get("session_floor")
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
