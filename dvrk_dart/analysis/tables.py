@@ -81,7 +81,8 @@ REGIME_DESCRIPTIONS = {
     REGIME_ALL: "every logged sample",
     REGIME_NEAR_ZERO_VELOCITY: "samples where the joint's simulated |dq| < {rad} rad/s ({m} m/s for q3)".format(**NEAR_ZERO_VELOCITY),
     REGIME_HIGH_ACCELERATION: f"samples where the joint's simulated |ddq| is at or above its {HIGH_ACCELERATION_PERCENTILE:g}th percentile in the run",
-    REGIME_FIRST_PERIOD: "replays only: the first base period of the excitation (upstream's test window: the arm's [processing] first_period_samples, the PSM's 1111 at 200 Hz)",
+    REGIME_FIRST_PERIOD: "replays only: upstream's test window, the arm's [processing] first_period_samples (the PSM's 1111 at 200 Hz, "
+                         "the first base period of its identification's excitations; not the period of a run of another design)",
 }
 
 # ---------------------------------------------------------------- quantities
