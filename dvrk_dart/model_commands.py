@@ -118,6 +118,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
                   f"projection fitted on the run's {result['whole_periods']} whole periods, "
                   f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
                   f"from {result['design_from']})")
+        if result.get("rate_note"):
+            print(f"note: {result['rate_note']}")
         for note in result["unrecorded_joint_notes"]:
             print(f"note: {note}")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")

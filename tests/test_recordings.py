@@ -278,3 +278,14 @@ def test_a_joint_left_out_that_moves_the_others_efforts_is_said(tmp_path, capsys
     assert note.startswith("q3 is not recorded") and "on q1 " in note and ", q2 " in note, note
     assert without_q3["rms"][0] > 2 * cli_json(capsys, "model-errors", "--measured", str(TEST1))["rms"][0]
     assert cli_json(capsys, "model-errors", "--measured", str(TEST1))["unrecorded_joint_notes"] == []
+
+
+def test_upstream_processing_of_another_rate_says_it_works_in_rows(tmp_path, capsys):
+    """The same motion logged at 100 Hz: upstream processing scales its cut-off
+    with the rate (upstream's half-speed runs), and says so; at 200 Hz nothing."""
+    one = load_run(resolve_run("one"), PSM)
+    every_other = type(one)(one.path, one.data.iloc[::2].reset_index(drop=True), PSM)
+    path = _write_header_csv(tmp_path / "one_100hz.csv", every_other, [f"{f}{j}" for j in range(1, 8) for f in ("q", "dq", "tau")])
+    slow = cli_json(capsys, "model-errors", "--measured", str(path), "--processing", "upstream")
+    assert "at 100 Hz its filter cuts 0.5x higher in Hz" in slow["rate_note"] and "--processing periodic" in slow["rate_note"]
+    assert "rate_note" not in cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")

@@ -97,8 +97,20 @@ class ProcessedRun:
     def summary(self) -> dict:
         """What every output records of the processing."""
         if self.periodic is None:
-            return {"processing": "upstream", "period_s": None, "harmonics": None, "noise_rms": None}
+            return {"processing": "upstream", "period_s": None, "harmonics": None, "noise_rms": None, **self._rows_note()}
         return self.periodic.summary()
+
+    def _rows_note(self) -> dict:
+        """Upstream processing works in rows, as upstream did: at another rate
+        its cut-off and first period scale with the rate (a log at another rate is
+        read as the excitation at another speed: upstream's half-speed runs)."""
+        scale = self.rate_hz / sample_rate_hz()
+        if abs(scale - 1.0) < 1e-3:
+            return {}
+        period = f" and its first period ({self.upstream_first_period} rows) lasts {1 / scale:.3g}x as long" if self.upstream_first_period else ""
+        return {"rate_note": f"upstream processing works in rows, as upstream did: at {self.rate_hz:g} Hz its filter cuts {scale:.3g}x "
+                             f"higher in Hz than at {sample_rate_hz():g} Hz{period}, as for the excitation played {scale:.3g}x as fast "
+                             "(upstream's half-speed runs); for the same motion logged at another rate, --processing periodic"}
 
 
 def central_difference(x: np.ndarray, h: float) -> np.ndarray:
