@@ -117,3 +117,4 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     assert not insertion_applies(arm, {"processing": {"processing": "upstream"}}, ["one"], ["two"], None)
     # runs without q3 (a header CSV of q1 and q2: the study's terms have nothing to fit, its clause no figure)
     assert not insertion_applies(arm, {**periodic, "recorded_joints": ["q1", "q2"]}, ["one"], ["two"], None)
+    assert not insertion_applies(arm, {**periodic, "recorded_joints": ["q1", "q3"]}, ["one"], ["two"], None)  # no pitch: no pitch loads

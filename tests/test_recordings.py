@@ -289,3 +289,16 @@ def test_upstream_processing_of_another_rate_says_it_works_in_rows(tmp_path, cap
     slow = cli_json(capsys, "model-errors", "--measured", str(path), "--processing", "upstream")
     assert "at 100 Hz its filter cuts 0.5x higher in Hz" in slow["rate_note"] and "--processing periodic" in slow["rate_note"]
     assert "rate_note" not in cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
+
+
+def test_runs_without_a_joint_in_common_are_refused_in_one_line(tmp_path, capsys):
+    """q2 in one file, q4..q7 in the other: no joint to diagnose them on (it ended in a traceback)."""
+    one = load_run(resolve_run("one"), PSM)
+    short = type(one)(one.path, one.data.iloc[:1200].reset_index(drop=True), PSM)
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", short, ["q2", "dq2", "tau2"])
+    wrist = _write_header_csv(tmp_path / "wrist.csv", short, [f"{f}{j}" for j in range(4, 8) for f in ("q", "dq", "tau")])
+    out = tmp_path / "diagnosis"
+    capsys.readouterr()
+    assert main(["diagnose", "--measured", str(only_q2), str(wrist), "--processing", "upstream", "--out", str(out)]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "no joint is recorded in every run (only_q2: q2; wrist: q4, q5, q6, q7)" in line and not out.exists()

@@ -195,10 +195,11 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
 
 def insertion_applies(arm: Arm, result: dict, train, holdout, baseline) -> bool:
     """The terms are studied on a PSM diagnosis of raw periodic runs (files,
-    names or processed runs) with held-out runs, every one of which recorded q3."""
+    names or processed runs) with held-out runs, every one of which recorded
+    q3 and q2 (the terms' loads are set by the pitch angle)."""
     loadable = all(isinstance(spec, (str, Path, ProcessedRun)) for spec in [*train, *holdout])
-    insertion_recorded = JOINT_NAMES[INSERTION] in result.get("recorded_joints", JOINT_NAMES)
-    return (bool(holdout) and baseline is None and loadable and has_insertion(arm) and insertion_recorded
+    recorded = {JOINT_NAMES[INSERTION], JOINT_NAMES[PITCH]} <= set(result.get("recorded_joints", JOINT_NAMES))
+    return (bool(holdout) and baseline is None and loadable and has_insertion(arm) and recorded
             and result["processing"]["processing"] == "periodic")
 
 

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dvrk_dart.errors import DvrkDartError
+
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.model.joints import N_JOINTS, PITCH, YAW
 from dvrk_dart.sim.config import JointEffects
@@ -71,6 +73,8 @@ def pitch_knots(train: list[ProcessedRun]) -> np.ndarray:
     """Evenly spaced from the lowest to the highest pitch of the training runs."""
     low = min(s.q[:, PITCH].min() for s in train)
     high = max(s.q[:, PITCH].max() for s in train)
+    if not high > low:
+        raise DvrkDartError("the training runs hold the pitch still: no load the pitch angle sets can be fitted")
     return np.linspace(low, high, int(np.ceil((high - low) / KNOT_SPACING_RAD)) + 1)
 
 

@@ -182,6 +182,9 @@ def _on_recorded_joints(effects: list[Effect], at_index: int | None, runs: list)
     """The candidates that act on a joint every run recorded (one acting only on joints
     a run did not record has nothing to fit), and the index of the payload at a given position."""
     names = {name for name, on in zip(JOINT_NAMES, recorded_joints(runs)) if on}
+    if not names:
+        each = "; ".join(f"{r.name}: {', '.join(n for n, on in zip(JOINT_NAMES, r.state.measured) if on)}" for r in runs if r is not None)
+        raise DvrkDartError(f"--measured: no joint is recorded in every run ({each}): nothing to compare them on")
     at_effect = None if at_index is None else effects[at_index]
     kept = [e for e in effects if names.intersection(e.joints)]
     if at_effect is None:
