@@ -302,3 +302,13 @@ def test_runs_without_a_joint_in_common_are_refused_in_one_line(tmp_path, capsys
     assert main(["diagnose", "--measured", str(only_q2), str(wrist), "--processing", "upstream", "--out", str(out)]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert "no joint is recorded in every run (only_q2: q2; wrist: q4, q5, q6, q7)" in line and not out.exists()
+
+
+def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
+    """q2 of "one" against "one-no-weight": the joints one holds at 0 are no session change (it read 0.44 RMS apart)."""
+    one = load_run(resolve_run("one"), PSM)
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, ["q2", "dq2", "tau2"])
+    capsys.readouterr()
+    assert main(["session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight"]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "--repeat one-no-weight: it records q1, q2, q3, q4, q5, q6, q7, the measured run q2" in line, line

@@ -145,7 +145,12 @@ def _verdict(ratio: float, moved_constant: bool) -> str:
 
 def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
     """Two recordings of one trajectory: the same period (periodic; the
-    positions are compared at the best phase later) or the same motion (upstream)."""
+    positions are compared at the best phase later) or the same motion
+    (upstream), with the same joints recorded (a joint one run holds at 0 would
+    read as a session change)."""
+    if not np.array_equal(a.measured, b.measured):
+        joints = [", ".join(n for n, on in zip(JOINT_NAMES, run.measured) if on) for run in (a, b)]
+        raise DvrkDartError(f"it records {joints[1]}, the measured run {joints[0]}: two sessions are compared on runs that record the same joints")
     if a.periodic is not None:
         pa, pb = a.periodic.period, b.periodic.period
         if abs(pa.period_s - pb.period_s) > SAME_PERIOD_FRACTION * pa.period_s:
