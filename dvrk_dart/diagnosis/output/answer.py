@@ -111,7 +111,9 @@ def beyond_identified_sentence(result: dict) -> str:
                    if combined else ((result.get("gap_after") or {}).get("holdout"), "the selected effects simulated in DART"))
     if not bar or not after:
         return ""
-    shown = [j for j in range(ANSWER_JOINTS) if bar[j] is not None and after[j] is not None]
+    recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
+    main = [j for j in recorded if j < ANSWER_JOINTS] or recorded  # J1..J3, else the wrist the runs recorded
+    shown = sorted(set(main) | {j for j in recorded if after[j] > bar[j]})  # and every joint made worse
     gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
     worse = [JOINT_NAMES[j] for j in shown if after[j] > bar[j]]
     if worse:
@@ -127,7 +129,8 @@ def answer_sentence(result: dict) -> str:
     the share of the repeatable gap removed, and what is left against the
     session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    shown = [j for j in range(ANSWER_JOINTS) if result["gap_before"][split][j] is not None]  # the joints the runs recorded
+    recorded = [j for j, gap in enumerate(result["gap_before"][split]) if gap is not None]  # the joints the runs recorded
+    shown = [j for j in recorded if j < ANSWER_JOINTS] or recorded  # J1..J3, else the wrist the runs recorded
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
     selected = list(result["selection"]["selected"])
