@@ -312,3 +312,16 @@ def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
     assert main(["session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight"]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert "--repeat one-no-weight: it records q1, q2, q3, q4, q5, q6, q7, the measured run q2" in line, line
+
+
+def test_a_still_arm_is_not_diagnosed(tmp_path, capsys):
+    """Every position constant: 7 effects were fitted to its zero gap, and the held-out run got worse by 2.5 N·m."""
+    one = load_run(resolve_run("one"), PSM)
+    still = type(one)(one.path, one.data.iloc[[0] * 1200].reset_index(drop=True), PSM)
+    still.data.iloc[:, 7:14] = 0.0  # no velocity
+    path = _write_header_csv(tmp_path / "still.csv", still, [f"{f}{j}" for j in range(1, 8) for f in ("q", "dq", "tau")], t=False)
+    out = tmp_path / "diagnosis"
+    capsys.readouterr()
+    assert main(["diagnose", "--measured", str(path), "--out", str(out)]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "still.csv: no recorded joint moves" in line and not out.exists()

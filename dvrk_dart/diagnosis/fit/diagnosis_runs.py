@@ -168,12 +168,19 @@ class DiagnosisRun:
 RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 
 
+#: a position span below this (rad or m) is round-off of a still joint, far below any encoder's step
+STILL_SPAN = 1e-9
+
+
 def _load_state(spec, model: PsmModel, processing: RunProcessing) -> tuple[str, ProcessedRun]:
     if isinstance(spec, ProcessedRun):
         return "run", spec
     path = Path(resolve_run(spec))
     stat = path.stat()
-    return run_label(spec), _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing, model.source)
+    state = _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing, model.source)
+    if not (np.ptp(state.q[:, state.measured], axis=0) > STILL_SPAN).any():  # nothing moves: no effect of motion can be told
+        raise DvrkDartError(f"{path}: no recorded joint moves (every position is constant): a gap is diagnosed along a motion")
+    return run_label(spec), state
 
 
 @lru_cache(maxsize=8)
