@@ -94,6 +94,7 @@ def test_friction_along_the_range_is_simulated_as_the_regressor_says(arm):
     by_formula = config_effort_by_formula(arm, config, state.q, state.dq, state.ddq)
     assert np.max(np.abs(by_formula - ref - injected)) < 1e-10
     assert np.all(injected[:, [0, *range(2, 7)]] == 0.0) and rms(injected[:, 1]) > 0.05
+    assert effect.size(p) == 0.30  # the largest level along the range, not the first knot's
     simulate = simulation_hook(arm, jobs=1)
     simulated = simulate(config, state) - simulate(SimConfig(), state)
     # DART's Dahl state runs on the simulated positions: the same to far below Fc (0.05-0.3 N·m)

@@ -175,6 +175,11 @@ class PositionFriction(Effect):
         out["reversal"] = f"Dahl over {self.presliding:g} {self.position_unit}, Fc piecewise linear in {self.joints[0]}"
         return out
 
+    def size(self, p) -> float:
+        """The largest Coulomb level along the range (the first knot's may be nil where the largest is not)."""
+        levels = np.asarray(p[:-1], dtype=float)
+        return float(levels[np.argmax(np.abs(levels))])
+
 
 def coupling_friction_links(model) -> list[int]:
     """Friction links whose variable couples two or more coordinates (the MTM's
