@@ -194,8 +194,10 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     print(f"{'joint':>6} {'inside':>7} {'outside rms':>16} {'model inside':>13}")
     for j, name in enumerate(JOINT_NAMES):
         inside, outside = summary["measured_inside_band_fraction"][j], summary["rms_measured_outside_band"][j]
-        measured = f"{'not measured':>24}" if inside is None else f"{inside:7.3f} {outside:11.4f} {summary['effort_units'][j]:<4}"
-        print(f"{name:>6} {measured} {summary['nominal_model_inside_band_fraction'][j]:13.3f}")
+        if inside is None:
+            print(f"{name:>6}  not measured (the run did not record {name}; the simulation held it)")
+            continue
+        print(f"{name:>6} {inside:7.3f} {outside:11.4f} {summary['effort_units'][j]:<4} {summary['nominal_model_inside_band_fraction'][j]:13.3f}")
     for name, error in summary["failed_samples"].items():
         print(f"dvrk-dart: sample {name} failed: {error}", file=sys.stderr)
     return 0

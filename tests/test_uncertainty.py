@@ -60,7 +60,8 @@ def test_a_three_joint_run_has_no_band_figure_on_the_joints_it_did_not_record(tm
     assert main(["uncertainty", "--measured", "2018-test1", "--samples", "2", "--duration", "1", "--out", str(out)]) == 0
     summary = json.loads((out / "uncertainty.json").read_text())
     assert summary["recorded_joints"] == ["q1", "q2", "q3"]
-    for key in ("measured_inside_band_fraction", "rms_measured_outside_band", "rms_nominal_sim_vs_measured"):
+    for key in ("measured_inside_band_fraction", "rms_measured_outside_band", "rms_nominal_sim_vs_measured",
+                "nominal_model_inside_band_fraction", "band_width_rms"):
         assert summary[key][3:] == [None] * 4 and all(v is not None for v in summary[key][:3]), key
     assert capsys.readouterr().out.count("not measured") == 4
 

@@ -154,8 +154,8 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "recorded_joints": [j for j, on in zip(JOINT_NAMES, recorded) if on],
             "measured_inside_band_fraction": _recorded_only(inside, recorded),
             "rms_measured_outside_band": _recorded_only(gap, recorded),
-            "nominal_model_inside_band_fraction": model_inside.tolist(),
-            "band_width_rms": rms(high - low).tolist(),
+            "nominal_model_inside_band_fraction": _recorded_only(model_inside, recorded),
+            "band_width_rms": _recorded_only(rms(high - low), recorded),
             "rms_nominal_sim_vs_measured": _recorded_only(rms(nominal["sim"] - nominal["measured"]), recorded),
             "wall_time_s": time.perf_counter() - start,
         }
