@@ -155,6 +155,7 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
     ("t,q1,q1,dq1,tau1", "q of q1 given twice"),
     (",t,q1,dq1,tau1", r"column 1 is empty \(an index column\? \(pandas"),  # to_csv's default index
     ("t,q1,dq1,tau1,", "column 5 is empty .a trailing comma"),
+    ("t;q1;dq1;tau1", "separated by commas; this file's by ';'"),
 ])
 def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
     width = len(header.split(","))

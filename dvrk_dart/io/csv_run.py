@@ -105,7 +105,9 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
         key = _header_key(name, dvrk_joints)
         if key is None:
             known = "t, q1..q7, dq1..dq7, tau1..tau7" + (f", position.<joint> (joints: {', '.join(dvrk_joints)})" if dvrk_joints else "")
-            raise DvrkDartError(f"{path}: header column {index + 1} '{name}' is not a known name ({known})")
+            separator = next((f" (the columns are separated by commas; this file's by '{c}')" for c in (";", "\t", " ") if c in name), "")
+            shown = name if len(name) <= 40 else name[:37] + "..."
+            raise DvrkDartError(f"{path}: header column {index + 1} '{shown}' is not a known name ({known}){separator}")
         field, joint, dvrk = key
         if (field, joint) in columns:
             raise DvrkDartError(f"{path}: header column {index + 1} '{name}': {field} of {joint} given twice")
