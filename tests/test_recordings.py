@@ -326,3 +326,12 @@ def test_a_still_arm_is_not_diagnosed(tmp_path, capsys):
     assert main(["diagnose", "--measured", str(path), "--out", str(out)]) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert "still.csv: no recorded joint moves" in line and not out.exists()
+
+
+def test_some_columns_of_a_recording_are_that_recording(tmp_path, capsys):
+    """Held out on q2 of the training run itself: refused as the same recording (it was scored as held out)."""
+    one = load_run(resolve_run("one"), PSM)
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, ["q2", "dq2", "tau2"])
+    capsys.readouterr()
+    assert main(["identify", "--runs", "one", "--holdout", str(only_q2), "--out", str(tmp_path / "id")]) == 2
+    assert "the same recording as --runs one (same positions)" in capsys.readouterr().err

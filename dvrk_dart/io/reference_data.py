@@ -190,20 +190,22 @@ def distinct_inputs(roles: list[tuple[str, str | Path]], model: PsmModel, topics
     """(option, run) pairs -> {run: {"role", "path", "sha256"}}; the same
     recording in two roles, or twice in one, is refused in one line naming
     both: the same path or content, or the same positions however the file was
-    written (line endings, digits, a trimmed copy)."""
-    seen: list[tuple[str, str, str, np.ndarray, float]] = []
+    written (line endings, digits, a trimmed copy, some of its columns)."""
+    seen: list[tuple[str, str, str, np.ndarray, float, np.ndarray]] = []
     inputs = {}
     for option, spec in roles:
         path = Path(resolve_run(spec))
         run = load_run(path, model, topics)
         record = input_record(path, model, topics)
         digest = record["sha256"]
-        for other_option, other, other_digest, other_q, other_rate in seen:
-            if digest == other_digest or same_recording_at_rates(run.q, run.rate_hz, other_q, other_rate):
+        for other_option, other, other_digest, other_q, other_rate, other_recorded in seen:
+            # a file of some of a recording's columns is that recording too (compared on the moving ones: still joints agree anywhere)
+            common = run.measured_mask & other_recorded & (np.ptp(run.q, axis=0) > 0) & (np.ptp(other_q, axis=0) > 0)
+            if digest == other_digest or (common.any() and same_recording_at_rates(run.q[:, common], run.rate_hz, other_q[:, common], other_rate)):
                 raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} "
                                     f"({'same content' if digest == other_digest else 'same positions'}): "
                                     "each role needs its own recording")
-        seen.append((option, str(spec), digest, run.q, run.rate_hz))
+        seen.append((option, str(spec), digest, run.q, run.rate_hz, run.measured_mask))
         inputs[str(spec)] = {"role": option, **record}
     return inputs
 
