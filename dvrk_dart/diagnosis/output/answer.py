@@ -102,6 +102,11 @@ def _row_share(split_row: dict) -> float | None:
     return None if math.isnan(share) else share
 
 
+def _main_joints(recorded: list[int]) -> list[int]:
+    """The joints an answer speaks of among those the runs recorded: J1..J3, else the wrist's."""
+    return [j for j in recorded if j < ANSWER_JOINTS] or recorded
+
+
 def beyond_identified_sentence(result: dict) -> str:
     """What the data show beyond the identified model, first: its gap on the
     held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
@@ -112,8 +117,7 @@ def beyond_identified_sentence(result: dict) -> str:
     if not bar or not after:
         return ""
     recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
-    main = [j for j in recorded if j < ANSWER_JOINTS] or recorded  # J1..J3, else the wrist the runs recorded
-    shown = sorted(set(main) | {j for j in recorded if after[j] > bar[j]})  # and every joint made worse
+    shown = sorted(set(_main_joints(recorded)) | {j for j in recorded if after[j] > bar[j]})  # and every joint made worse
     gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
     worse = [JOINT_NAMES[j] for j in shown if after[j] > bar[j]]
     if worse:
@@ -129,8 +133,7 @@ def answer_sentence(result: dict) -> str:
     the share of the repeatable gap removed, and what is left against the
     session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    recorded = [j for j, gap in enumerate(result["gap_before"][split]) if gap is not None]  # the joints the runs recorded
-    shown = [j for j in recorded if j < ANSWER_JOINTS] or recorded  # J1..J3, else the wrist the runs recorded
+    shown = _main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
     selected = list(result["selection"]["selected"])
