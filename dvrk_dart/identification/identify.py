@@ -157,7 +157,7 @@ def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, 
     notes += [f"{JOINT_NAMES[j]} left out: no training run moves it (held at {held[j]:.4g}; its own inertia, friction "
               "and offset are not determined)" for j in asked if recorded[j] and not moving[j]]
     if not len(fitted):
-        raise DvrkDartError("--runs: no joint of --joints is recorded and moved by the training runs: nothing to fit")
+        raise DvrkDartError("--runs: no joint (of --joints, where given) is recorded in every training run and moved by one: nothing to fit")
     return fitted, held, notes
 
 
