@@ -181,10 +181,10 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
         return 0
     print(f"identified model's residual, {args.measured} vs {args.repeat} ({table['runs'][args.measured]['processing']} processing)")
     print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
-    noise = table["noise_predicted_rms"] or [math.nan] * len(JOINT_NAMES)
+    noise = [f"{v:9.4f}" for v in table["noise_predicted_rms"]] if table["noise_predicted_rms"] else [f"{'-':>9}"] * len(JOINT_NAMES)
     verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES):
-        print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]:9.4f}  "
+        print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]}  "
               f"{arm.model.effort_unit(name)}: {verdicts[j]}")
     return 0
 
