@@ -83,6 +83,19 @@ def _write_header_csv(path: Path, run, columns: list[str], t: bool = True) -> Pa
     return path
 
 
+def _columns(*joints: int) -> list[str]:
+    """A header's q, dq and tau columns of the joints given (1-based)."""
+    return [f"{field}{j}" for j in joints for field in ("q", "dq", "tau")]
+
+
+def _refusal(capsys, *argv: str) -> str:
+    """The one line a refused command prints (exit 2)."""
+    capsys.readouterr()
+    assert main(list(argv)) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    return line
+
+
 def test_a_header_names_any_subset_of_joints(tmp_path):
     """q1, q2 with their velocities and efforts, a time column at 100 Hz: the
     file's own rate, the rest not measured (zeros, no say)."""
@@ -273,7 +286,7 @@ def test_a_joint_left_out_that_moves_the_others_efforts_is_said(tmp_path, capsys
     0.10 and 0.12 with q3): said, naming q3; the 9-column file (the wrist held,
     which moves nothing) says nothing."""
     run = load_run(TEST1, PSM)
-    path = _write_header_csv(tmp_path / "q1_q2.csv", run, ["q1", "dq1", "tau1", "q2", "dq2", "tau2"])
+    path = _write_header_csv(tmp_path / "q1_q2.csv", run, _columns(1, 2))
     without_q3 = cli_json(capsys, "model-errors", "--measured", str(path))
     [note] = without_q3["unrecorded_joint_notes"]
     assert note.startswith("q3 is not recorded") and "on q1 " in note and ", q2 " in note, note
@@ -286,7 +299,7 @@ def test_upstream_processing_of_another_rate_says_it_works_in_rows(tmp_path, cap
     with the rate (upstream's half-speed runs), and says so; at 200 Hz nothing."""
     one = load_run(resolve_run("one"), PSM)
     every_other = type(one)(one.path, one.data.iloc[::2].reset_index(drop=True), PSM)
-    path = _write_header_csv(tmp_path / "one_100hz.csv", every_other, [f"{f}{j}" for j in range(1, 8) for f in ("q", "dq", "tau")])
+    path = _write_header_csv(tmp_path / "one_100hz.csv", every_other, _columns(*range(1, 8)))
     slow = cli_json(capsys, "model-errors", "--measured", str(path), "--processing", "upstream")
     assert "at 100 Hz its filter cuts 0.5x higher in Hz" in slow["rate_note"] and "--processing periodic" in slow["rate_note"]
     assert "rate_note" not in cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
@@ -296,22 +309,18 @@ def test_runs_without_a_joint_in_common_are_refused_in_one_line(tmp_path, capsys
     """q2 in one file, q4..q7 in the other: no joint to diagnose them on (it ended in a traceback)."""
     one = load_run(resolve_run("one"), PSM)
     short = type(one)(one.path, one.data.iloc[:1200].reset_index(drop=True), PSM)
-    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", short, ["q2", "dq2", "tau2"])
-    wrist = _write_header_csv(tmp_path / "wrist.csv", short, [f"{f}{j}" for j in range(4, 8) for f in ("q", "dq", "tau")])
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", short, _columns(2))
+    wrist = _write_header_csv(tmp_path / "wrist.csv", short, _columns(*range(4, 8)))
     out = tmp_path / "diagnosis"
-    capsys.readouterr()
-    assert main(["diagnose", "--measured", str(only_q2), str(wrist), "--processing", "upstream", "--out", str(out)]) == 2
-    [line] = capsys.readouterr().err.strip().splitlines()
+    line = _refusal(capsys, "diagnose", "--measured", str(only_q2), str(wrist), "--processing", "upstream", "--out", str(out))
     assert "no joint is recorded in every run (only_q2: q2; wrist: q4, q5, q6, q7)" in line and not out.exists()
 
 
 def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
     """q2 of "one" against "one-no-weight": the joints one holds at 0 are no session change (it read 0.44 RMS apart)."""
     one = load_run(resolve_run("one"), PSM)
-    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, ["q2", "dq2", "tau2"])
-    capsys.readouterr()
-    assert main(["session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight"]) == 2
-    [line] = capsys.readouterr().err.strip().splitlines()
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, _columns(2))
+    line = _refusal(capsys, "session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight")
     assert "--repeat one-no-weight: it records q1, q2, q3, q4, q5, q6, q7, the measured run q2" in line, line
 
 
@@ -320,18 +329,15 @@ def test_a_still_arm_is_not_diagnosed(tmp_path, capsys):
     one = load_run(resolve_run("one"), PSM)
     still = type(one)(one.path, one.data.iloc[[0] * 1200].reset_index(drop=True), PSM)
     still.data.iloc[:, 7:14] = 0.0  # no velocity
-    path = _write_header_csv(tmp_path / "still.csv", still, [f"{f}{j}" for j in range(1, 8) for f in ("q", "dq", "tau")], t=False)
+    path = _write_header_csv(tmp_path / "still.csv", still, _columns(*range(1, 8)), t=False)
     out = tmp_path / "diagnosis"
-    capsys.readouterr()
-    assert main(["diagnose", "--measured", str(path), "--out", str(out)]) == 2
-    [line] = capsys.readouterr().err.strip().splitlines()
+    line = _refusal(capsys, "diagnose", "--measured", str(path), "--out", str(out))
     assert "still.csv: no recorded joint moves" in line and not out.exists()
 
 
 def test_some_columns_of_a_recording_are_that_recording(tmp_path, capsys):
     """Held out on q2 of the training run itself: refused as the same recording (it was scored as held out)."""
     one = load_run(resolve_run("one"), PSM)
-    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, ["q2", "dq2", "tau2"])
-    capsys.readouterr()
-    assert main(["identify", "--runs", "one", "--holdout", str(only_q2), "--out", str(tmp_path / "id")]) == 2
-    assert "the same recording as --runs one (same positions)" in capsys.readouterr().err
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, _columns(2))
+    line = _refusal(capsys, "identify", "--runs", "one", "--holdout", str(only_q2), "--out", str(tmp_path / "id"))
+    assert "the same recording as --runs one (same positions)" in line
