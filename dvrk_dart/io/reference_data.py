@@ -29,7 +29,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     sample_rate_hz,
 )
 from dvrk_dart.io.provenance import sha256_of  # noqa: F401  (re-exported)
-from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS
+from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, spanning_columns
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
 
@@ -200,7 +200,7 @@ def distinct_inputs(roles: list[tuple[str, str | Path]], model: PsmModel, topics
         digest = record["sha256"]
         for other_option, other, other_digest, other_q, other_rate, other_recorded in seen:
             # a file of some of a recording's columns is that recording too (compared on the moving ones: still joints agree anywhere)
-            common = run.measured_mask & other_recorded & (np.ptp(run.q, axis=0) > 0) & (np.ptp(other_q, axis=0) > 0)
+            common = run.measured_mask & other_recorded & spanning_columns(run.q) & spanning_columns(other_q)
             if digest == other_digest or (common.any() and same_recording_at_rates(run.q[:, common], run.rate_hz, other_q[:, common], other_rate)):
                 raise DvrkDartError(f"{option} {spec}: the same recording as {other_option} {other} "
                                     f"({'same content' if digest == other_digest else 'same positions'}): "

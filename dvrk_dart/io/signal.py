@@ -34,6 +34,13 @@ MIN_KEPT_SAMPLES = 10
 MIN_ROWS = 2 * CUT_SAMPLES + MIN_KEPT_SAMPLES
 #: the processings a measured run can go through
 PROCESSINGS = ("upstream", "periodic")
+#: a position span at or below this (rad or m) is a still joint's round-off, far below any encoder's step
+STILL_SPAN = 1e-9
+
+
+def spanning_columns(q: np.ndarray) -> np.ndarray:
+    """(n,) bool: the columns of positions that move at all (beyond STILL_SPAN)."""
+    return np.ptp(q, axis=0) > STILL_SPAN
 
 
 @dataclass(frozen=True)

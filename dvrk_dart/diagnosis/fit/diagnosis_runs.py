@@ -16,7 +16,8 @@ from dvrk_dart.diagnosis.effects.library import (
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
-from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, process_periodic, same_motion  # noqa: F401
+from dvrk_dart.io.signal import (  # noqa: F401
+    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, process_periodic, same_motion, spanning_columns)
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -168,17 +169,13 @@ class DiagnosisRun:
 RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 
 
-#: a position span below this (rad or m) is round-off of a still joint, far below any encoder's step
-STILL_SPAN = 1e-9
-
-
 def _load_state(spec, model: PsmModel, processing: RunProcessing) -> tuple[str, ProcessedRun]:
     if isinstance(spec, ProcessedRun):
         return "run", spec
     path = Path(resolve_run(spec))
     stat = path.stat()
     state = _load_processed(str(path), stat.st_mtime_ns, stat.st_size, processing, model.source)
-    if not (np.ptp(state.q[:, state.measured], axis=0) > STILL_SPAN).any():  # nothing moves: no effect of motion can be told
+    if not spanning_columns(state.q[:, state.measured]).any():  # nothing moves: no effect of motion can be told
         raise DvrkDartError(f"{path}: no recorded joint moves (every position is constant): a gap is diagnosed along a motion")
     return run_label(spec), state
 
