@@ -341,3 +341,16 @@ def test_some_columns_of_a_recording_are_that_recording(tmp_path, capsys):
     only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, _columns(2))
     line = _refusal(capsys, "identify", "--runs", "one", "--holdout", str(only_q2), "--out", str(tmp_path / "id"))
     assert "the same recording as --runs one (same positions)" in line
+
+
+@needs_2018
+def test_wrist_columns_padded_with_zeros_are_not_recorded(tmp_path, capsys):
+    """A 2018 log padded to 21 columns as a user would: the 9-column file's
+    figures, and none on the padded joints (their relative errors printed NaN)."""
+    log = np.loadtxt(TEST1, delimiter=",")
+    zeros = np.zeros((len(log), 4))
+    padded = tmp_path / "padded.csv"
+    np.savetxt(padded, np.hstack([log[:, 0:3], zeros, log[:, 3:6], zeros, log[:, 6:9], zeros]), delimiter=",")
+    assert load_run(padded, PSM).measured == ("q1", "q2", "q3")
+    figures = cli_json(capsys, "model-errors", "--measured", str(padded), "--processing", "upstream")
+    assert np.allclose(figures["rms"][:3], [0.1245, 0.1395, 0.5565], atol=5e-4) and figures["rms"][3:] == [None] * 4

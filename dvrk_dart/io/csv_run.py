@@ -9,7 +9,8 @@
   (`position.outer_yaw`, the arm's model card [dvrk_topics]) in the dVRK's;
   any subset of joints, each with its position, velocity and effort.
 
-A joint that is not recorded is *not measured* (`MeasuredRun.measured`): its
+A joint that is not recorded is *not measured* (`MeasuredRun.measured`), and so
+is one whose columns are all exactly zero (padding to fit a layout): its
 columns hold zeros (the arm held at zero) and no figure, fit or cutoff uses it.
 A time column gives the file its own rate (rows must be evenly spaced)."""
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -208,7 +210,19 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     if layout.time_column is not None and len(file_values) < MIN_TIME_ROWS:
         raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
-    return CsvValues(values, layout.joints, rate)
+    return CsvValues(values, _joints_with_values(file_values, layout, path), rate)
+
+
+def _joints_with_values(file_values: np.ndarray, layout: CsvLayout, path: Path) -> tuple[str, ...]:
+    """The layout's joints less those whose position, velocity and effort are
+    all exactly zero: columns a user padded to fit a layout (no encoder or
+    current sensor reads exactly zero for a whole run), read as not recorded."""
+    padded = [joint for joint in layout.joints
+              if not any(file_values[:, layout.columns[(field, joint)]].any() for field in FIELDS)]
+    if padded and len(padded) < len(layout.joints):
+        print(f"dvrk-dart: note: {path}: {', '.join(padded)}: every value zero, read as not recorded", file=sys.stderr)
+        return tuple(joint for joint in layout.joints if joint not in padded)
+    return layout.joints
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:
