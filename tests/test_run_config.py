@@ -125,8 +125,8 @@ def test_a_replay_with_a_diagnosis_file_takes_the_processing_it_was_fitted_on(tm
 
 
 def test_runs_of_other_parameters_or_diagnosis_files_are_named_apart(tmp_path):
-    """A replay with your own --params, or with a diagnosis's one_configuration.json,
-    is another run than the published or diagnosis.json one: its folder and the
+    """A replay with your own --params, with a diagnosis's one_configuration.json,
+    or of a run's first seconds (--duration), is another run than the published or diagnosis.json one: its folder and the
     report's run name say so (they shared one name, and `report` refused the folder)."""
     from dvrk_dart.runs.campaign import config_name
 
@@ -134,9 +134,10 @@ def test_runs_of_other_parameters_or_diagnosis_files_are_named_apart(tmp_path):
     folder.mkdir()
     names = {config_name(RunConfig("replay", "velocity", measured="two", **options)) for options in (
         {}, {"params_file": str(tmp_path / "my-arm" / "params.json")}, {"params_file": str(heavier_pitch_link(tmp_path))},
-        {"dynamics": str(folder / "diagnosis.json")}, {"dynamics": str(folder / "one_configuration.json")})}
+        {"dynamics": str(folder / "diagnosis.json")}, {"dynamics": str(folder / "one_configuration.json")}, {"duration_s": 10.0})}
     assert names == {"replay-two_velocity_cw-on", "replay-two_velocity_cw-on_params-my-arm", "replay-two_velocity_cw-on_params-heavy",
-                     "replay-two_velocity_cw-on_diagnosed-my-diagnosis", "replay-two_velocity_cw-on_diagnosed-my-diagnosis-one_configuration"}
+                     "replay-two_velocity_cw-on_diagnosed-my-diagnosis", "replay-two_velocity_cw-on_diagnosed-my-diagnosis-one_configuration",
+                     "replay-two_velocity_cw-on_first-10s"}
 
 
 def test_model_errors_and_force_record_the_parameter_file(tmp_path, capsys):

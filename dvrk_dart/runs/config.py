@@ -94,7 +94,12 @@ class RunConfig:
     @property
     def name_parts(self) -> tuple:
         """What tells this run's name from another's beyond its scenario and mode (run_name's last arguments)."""
-        return self.counterweight, self.dynamics_label, self.processing, self.params_label
+        return self.counterweight, self.dynamics_label, self.processing, self.params_label, self.duration_label
+
+    @property
+    def duration_label(self) -> str | None:
+        """first-<s>s for a --duration: a part of a run is not the whole run (the report would hold two of one name)."""
+        return None if self.duration_s is None else f"first-{self.duration_s:g}s"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -109,10 +114,11 @@ class RunConfig:
 
 
 def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream",
-             params_label: str | None = None) -> str:
+             params_label: str | None = None, duration_label: str | None = None) -> str:
     """The run folder's name; the paper's arm (inertial, the published parameters) and processing (upstream) keep the historical name."""
     parts = [f"{scenario}_{mode}_cw-{counterweight}"]
-    parts += [label for label, usual in ((dynamics_label, "inertial"), (params_label, None), (processing, "upstream")) if label != usual]
+    parts += [label for label, usual in ((dynamics_label, "inertial"), (params_label, None), (processing, "upstream"),
+                                          (duration_label, None)) if label != usual]
     return "_".join(parts)
 
 
