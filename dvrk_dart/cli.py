@@ -11,7 +11,7 @@ import sys
 import threading
 from pathlib import Path
 
-from dvrk_dart import cli_parser
+from dvrk_dart import cli_config, cli_parser
 from dvrk_dart.errors import DvrkDartError, interrupted, raise_if_interrupted
 from dvrk_dart.command_args import arm_model_file, command_arm, reading_options
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -256,7 +256,7 @@ def _parse(argv: list[str]) -> argparse.Namespace | int:
         return 2
     parser = build_parser()
     try:
-        return parser.parse_args(cli_parser.expand_config(argv, parser))
+        return parser.parse_args(cli_config.expand_config(argv, parser))
     except SystemExit as exc:  # --help, or a usage error already printed in one line
         return int(exc.code or 0)
     except DvrkDartError as exc:  # --config FILE.toml

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import os
-from pathlib import Path
 import sys
 
 from dvrk_dart.errors import DvrkDartError
@@ -370,55 +369,3 @@ def check_combinations(args: argparse.Namespace) -> None:
 def _add_config_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE.toml", help="the options as a TOML table (option = value; the command line's own "
                                                          "options win); a relative path in it is relative to the file")
-
-
-def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
-    """argv with `--config FILE.toml` replaced by the options it holds (those
-    not on the command line), so that every value goes through the option's
-    own checks; one-line errors name the file."""
-    import tomllib
-
-    if "--config" not in argv or not argv or argv[0] not in CONFIG_COMMANDS:
-        return argv
-    at = argv.index("--config")
-    if at + 1 >= len(argv):
-        raise DvrkDartError("--config: a TOML file is needed")
-    path = Path(argv[at + 1])
-    try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise DvrkDartError(f"--config {path}: not a readable TOML file ({str(exc).splitlines()[0]})") from None
-    rest = argv[:at] + argv[at + 2:]
-    known = _option_actions(parser, argv[0])
-    tokens = []
-    for key, value in table.items():
-        option = "--" + key.replace("_", "-")
-        if option not in known or option == "--config":
-            raise DvrkDartError(f"--config {path}: {key} is not an option of {argv[0]}")
-        if isinstance(value, bool) != (known[option].nargs == 0):
-            raise DvrkDartError(f"--config {path}: {key} " + ("is a switch: true or false" if known[option].nargs == 0 else
-                                                               f"takes a value, not {str(value).lower()}"))
-        if option in OUTPUT_OPTIONS and not isinstance(value, str):
-            raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
-        if option not in rest:
-            tokens += _tokens(option, value, path.parent)
-    return [argv[0], *tokens, *rest[1:]]
-
-
-def _option_actions(parser: argparse.ArgumentParser, command: str) -> dict[str, argparse.Action]:
-    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return dict(subparsers.choices[command]._option_string_actions)
-
-
-#: options whose value is a folder the command writes: relative to the config file even before it exists
-OUTPUT_OPTIONS = ("--out", "--report")
-
-
-def _tokens(option: str, value, folder: Path) -> list[str]:
-    """An option's command-line tokens from a TOML value (a flag from a boolean; a path relative to the config
-    file: an output folder always, another value where that file exists, else a run name such as 'one')."""
-    if isinstance(value, bool):
-        return [option] if value else []
-    values = value if isinstance(value, list) else [value]
-    return [option, *(str(folder / v) if isinstance(v, str) and (option in OUTPUT_OPTIONS or (folder / v).exists()) else str(v)
-                      for v in values)]
