@@ -193,7 +193,8 @@ def test_an_uneven_time_column_is_refused(tmp_path):
 
 @needs_2018
 def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
-    """The 3-joint runs: the wrist left out with a line each, no refusal. Its
+    """The 3-joint runs: the wrist left out with a line each, no refusal, its
+    own parameters the published ones in params.json. Its
     start transient left out, test1 alone determines the arm better than the
     published parameters on test2 (J1..J3); 3 s of it do not, and say so."""
     published = cli_json(capsys, "model-errors", "--measured", str(TEST2))["rms"][:3]
@@ -205,6 +206,10 @@ def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
     (held_out_errors,) = summary["errors"]["holdout"].values()
     held_out = held_out_errors["whole_run"]["rms"][:3]
     assert np.all(np.array(held_out) < np.array(published)), (held_out, published)
+    # the wrist's own friction, offsets and motor inertia: the published values, not zeros a 7-joint run would take as an arm
+    fitted, reference = (json.loads(path.read_text()) for path in (tmp_path / "one_run" / "params.json", PSM_PARAMS))
+    assert all(fitted[k][name] == reference[k][name] for k in ("11", "14") for name in ("Fc", "Fv", "Fo", "Im")), fitted["11"]
+    assert "26 parameters act on no fitted joint" in out
     three_seconds = tmp_path / "three_seconds.csv"
     np.savetxt(three_seconds, np.loadtxt(TEST1, delimiter=",")[500:1100], delimiter=",")
     assert main(["identify", "--runs", str(three_seconds), "--holdout", str(TEST2), "--processing", "upstream",

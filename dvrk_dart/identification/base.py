@@ -105,3 +105,20 @@ def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray
     residual = np.linalg.norm(np.eye(W.shape[1]) - basis @ basis.T, axis=0)
     names = tuple(_combination_name(row, regressor.layout.names) for row in K)
     return BaseParameters(independent, K, names, residual < 1e-6, RANK_TOLERANCE)
+
+
+def acting_on_none_of(regressor: Regressor, joints: np.ndarray, seed: int = 0) -> np.ndarray:
+    """The standard parameters whose efforts fall on none of `joints` at any
+    state (random states over the ranges) but on another joint: a left-out
+    joint's own friction, offset or motor inertia. No run of `joints`
+    determines them, and none of their figures depends on them."""
+    model = regressor.model
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
+    dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
+    ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
+    Y = regressor(q, dq, ddq)
+    on_joints = np.linalg.norm(Y[:, np.asarray(joints), :].reshape(-1, Y.shape[2]), axis=0)
+    anywhere = np.linalg.norm(Y.reshape(-1, Y.shape[2]), axis=0)
+    tolerance = ZERO_COLUMN_TOLERANCE * anywhere.max()
+    return np.flatnonzero((on_joints <= tolerance) & (anywhere > tolerance))

@@ -9,13 +9,13 @@ program; predictions and errors on the training and held-out runs.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.identification.base import BaseParameters, find_base_parameters
+from dvrk_dart.identification.base import BaseParameters, acting_on_none_of, find_base_parameters
 from dvrk_dart.identification.fit import (
     Bounds,
     ConsistentFit,
@@ -238,10 +238,33 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     timings["base_and_wls_s"] = time.perf_counter() - start - timings["load_and_regressor_s"]
     t0 = time.perf_counter()
     consistent = fit_consistent(wls, base, regressor.layout, bounds, prior, solver=config.solver)
+    consistent, reference_note = _reference_where_no_fitted_joint(consistent, regressor, joints, config, model)
+    left_out += reference_note
     timings["convex_program_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - start
     return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings,
                                 choice, left_out)
+
+
+def _reference_where_no_fitted_joint(consistent: ConsistentFit, regressor: Regressor, joints: np.ndarray,
+                                     config: IdentificationConfig, model: PsmModel) -> tuple[ConsistentFit, list[str]]:
+    """The parameters acting on no fitted joint (a left-out joint's own
+    friction, offset, motor inertia) take the reference's values: --prior's
+    file, else the arm's published parameters. Fitted with no prior they came
+    out about zero, and params.json gave a wrist without friction."""
+    alone = acting_on_none_of(regressor, joints, seed=config.seed)
+    if not len(alone):
+        return consistent, []
+    reference, source = _prior(config if config.prior != PRIOR_NONE else replace(config, prior=PRIOR_DEFAULT), model, regressor)
+    theta = consistent.theta.copy()
+    theta[alone] = reference[alone]
+    by_link: dict[str, list[str]] = {}
+    for i in alone:
+        link, name = regressor.layout.names[i].split(".", 1)
+        by_link.setdefault(link, []).append(name)
+    said = "; ".join(f"{link} {' '.join(names)}" for link, names in by_link.items())
+    return replace(consistent, theta=theta), [f"{len(alone)} parameters act on no fitted joint ({said}): "
+                                              f"not determined by these runs, params.json holds {source}'s values"]
 
 
 def _with_law(run: RunData, regressor: Regressor) -> RunData:

@@ -11,6 +11,9 @@ measured efforts at the logged times, and the metrics of metrics.json."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import time
 from pathlib import Path
 
@@ -242,14 +245,21 @@ def _in_band_metrics(processed: ProcessedRun, t: np.ndarray, effort: np.ndarray,
     }
 
 
+#: a step may be this fraction longer than the configured one to fit a whole number
+#: of times in a sample period (199.995 Hz: 1.00002 ms, not 0.83 ms and 6 steps)
+STEP_LENGTHENING = 1e-3
+
+
 def simulate_efforts(arm, config: SimConfig, processed: ProcessedRun) -> np.ndarray:
     """Simulated efforts at every sample of a processed run (velocity replay):
-    the `simulate` hook of the diagnosis. The run must be sampled at a multiple
-    of the simulation step."""
+    the `simulate` hook of the diagnosis. A run whose sample period is not a
+    multiple of the step (a time column read at 199.995 Hz, a 300 Hz logger) is
+    simulated with the step shortened to a whole fraction of its period: the
+    efforts are then read at its samples, not beside them."""
     period = float(processed.t[1] - processed.t[0])
-    every = int(round(period / config.dt_s))
-    if every < 1 or abs(every * config.dt_s - period) > 1e-9:
-        raise DvrkDartError(f"sample period {period} s is not a multiple of the step {config.dt_s} s")
+    every = max(1, math.ceil(period / config.dt_s - STEP_LENGTHENING))
+    if abs(every * config.dt_s - period) > 1e-9:
+        config = replace(config, dt_s=period / every)
     record = replay_processed(
         processed, "diagnosis", "velocity", config, None, every, arm.model, arm.params, through_last_sample=True
     )

@@ -87,12 +87,8 @@ def arm_of_run(config: RunConfig) -> Arm:
     return load_arm(arm_model_file(config), config.params_file)
 
 
-def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
-    """Run one configuration; the record carries its resolved config and metrics.
-    `arm` (model + parameters), when given, must be `arm_of_run(config)`."""
-    arm = arm or arm_of_run(config)
-    scenario = scenario_of(config)
-    mode, counterweight = config.mode, config.counterweight
+def _check_scenario_options(scenario: Scenario, mode: str, counterweight: str, arm: Arm) -> None:
+    """One line for a mode or counterweight the scenario (or the arm) does not have."""
     if mode not in scenario.modes:
         raise DvrkDartError(f"--mode: scenario '{scenario.name}' runs in {', '.join(scenario.modes)}, not '{mode}'")
     if counterweight not in scenario.counterweights:
@@ -101,6 +97,15 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         )
     if arm.model.counterweight_link is None and counterweight != "on":
         raise DvrkDartError(f"--counterweight {counterweight}: the {arm.model.folder.name} arm has no counterweight (only 'on': the arm as it is)")
+
+
+def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
+    """Run one configuration; the record carries its resolved config and metrics.
+    `arm` (model + parameters), when given, must be `arm_of_run(config)`."""
+    arm = arm or arm_of_run(config)
+    scenario = scenario_of(config)
+    mode, counterweight = config.mode, config.counterweight
+    _check_scenario_options(scenario, mode, counterweight, arm)
     sim_config = sim_config_for(config)
     duration = config.duration_s or scenario.duration_s
     start = time.perf_counter()

@@ -74,14 +74,7 @@ class TorqueMode:
             rhs = np.append(rhs, lam - bz[n])
         elif has_cw:
             rhs = np.append(rhs, -bz[n])
-        m = len(rows)
-        kkt = np.zeros((len(rhs) + m, len(rhs) + m))
-        kkt[: len(rhs), : len(rhs)] = Mz
-        if m:
-            C = np.array(rows)
-            kkt[: len(rhs), len(rhs) :] = -C.T
-            kkt[len(rhs) :, : len(rhs)] = C
-        sol = np.linalg.solve(kkt, np.concatenate([rhs, targets]))
+        sol = _solve_with_prescribed(Mz, rhs, rows, targets)
         ddq = sol[:n]
         ddf = float(sol[n]) if has_cw else 0.0
         multipliers = sol[len(rhs) :]
@@ -127,3 +120,16 @@ class TorqueMode:
             T[n, INSERTION] = self.model.counterweight_ratio
             return T.T @ Mz @ T, T.T @ bz, explicit
         return Mz[:n, :n], bz[:n], explicit
+
+
+def _solve_with_prescribed(Mz: np.ndarray, rhs: np.ndarray, rows: list, targets: list) -> np.ndarray:
+    """Accelerations and multipliers of Mz ddz = rhs + C^T mu with C ddz = targets
+    (the held joints' and an ideal tendon's prescribed accelerations): one KKT solve."""
+    n, m = len(rhs), len(rows)
+    kkt = np.zeros((n + m, n + m))
+    kkt[:n, :n] = Mz
+    if m:
+        C = np.array(rows)
+        kkt[:n, n:] = -C.T
+        kkt[n:, :n] = C
+    return np.linalg.solve(kkt, np.concatenate([rhs, targets]))
