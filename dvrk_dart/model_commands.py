@@ -69,14 +69,16 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
 
 
 def unrecorded_joint_notes(arm: Arm, processed, figures: np.ndarray) -> list[str]:
-    """A joint the run did not record is held where the log leaves it (0):
+    """A joint the run did not record is held where the log leaves it (0;
+    a joint with positions but no effort follows them):
     where sweeping it over its range moves the model's rigid-body efforts on a
     recorded joint by more than that joint's figure, the figure may be that
     joint's error, not the model's; said in one line per such joint."""
     every = max(1, len(processed.q) // 200)  # the run's states, every ~0.5 % of it
     states = (processed.q[::every], processed.dq[::every], processed.ddq[::every])
     notes = []
-    for j in np.flatnonzero(~np.asarray(processed.measured)):
+    positions_logged = np.ptp(processed.q, axis=0) > 0  # an effort not recorded, its joint's positions were
+    for j in np.flatnonzero(~np.asarray(processed.measured) & ~positions_logged):
         change = arm.identified.held_joint_change(*states, j)
         hurt = [k for k in np.flatnonzero(processed.measured) if change[k] > figures[k]]
         if hurt:

@@ -12,7 +12,7 @@ import pytest
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import SHARED_ROOT, load_run, resolve_run
-from arms import PSM
+from arms import PSM, PSM_ARM
 
 DATA_2018 = SHARED_ROOT / "wpi-2018"
 TEST1, TEST2 = DATA_2018 / "psm1_fourier_test1.csv", DATA_2018 / "psm1_fourier_test2.csv"
@@ -207,7 +207,7 @@ def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
     held_out = held_out_errors["whole_run"]["rms"][:3]
     assert np.all(np.array(held_out) < np.array(published)), (held_out, published)
     # the wrist's own friction, offsets and motor inertia: the published values, not zeros a 7-joint run would take as an arm
-    fitted, reference = (json.loads(path.read_text()) for path in (tmp_path / "one_run" / "params.json", PSM_PARAMS))
+    fitted, reference = (json.loads(path.read_text()) for path in (tmp_path / "one_run" / "params.json", PSM_ARM.params.source))
     assert all(fitted[k][name] == reference[k][name] for k in ("11", "14") for name in ("Fc", "Fv", "Fo", "Im")), fitted["11"]
     assert "26 parameters act on no fitted joint" in out
     three_seconds = tmp_path / "three_seconds.csv"
@@ -332,8 +332,9 @@ def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
 def test_a_still_arm_is_not_diagnosed(tmp_path, capsys):
     """Every position constant: 7 effects were fitted to its zero gap, and the held-out run got worse by 2.5 N·m."""
     one = load_run(resolve_run("one"), PSM)
-    still = type(one)(one.path, one.data.iloc[[0] * 1200].reset_index(drop=True), PSM)
-    still.data.iloc[:, 7:14] = 0.0  # no velocity
+    still = type(one)(one.path, one.data.iloc[:1200].reset_index(drop=True), PSM)
+    still.data.iloc[:, 1:8] = one.data.iloc[0, 1:8].to_numpy()  # positions held, efforts as measured
+    still.data.iloc[:, 8:15] = 0.0  # no velocity
     path = _write_header_csv(tmp_path / "still.csv", still, _columns(*range(1, 8)), t=False)
     out = tmp_path / "diagnosis"
     line = _refusal(capsys, "diagnose", "--measured", str(path), "--out", str(out))
@@ -359,3 +360,33 @@ def test_wrist_columns_padded_with_zeros_are_not_recorded(tmp_path, capsys):
     assert load_run(padded, PSM).measured == ("q1", "q2", "q3")
     figures = cli_json(capsys, "model-errors", "--measured", str(padded), "--processing", "upstream")
     assert np.allclose(figures["rms"][:3], [0.1245, 0.1395, 0.5565], atol=5e-4) and figures["rms"][3:] == [None] * 4
+
+
+def test_an_effort_column_that_never_changes_is_not_recorded(tmp_path, capsys):
+    """q7's effort all zero in "one" (a logger that did not read it): q7 set the
+    band of every joint (6 harmonics instead of 33) and lowered q3's figure 3x."""
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    values[:, 20] = 0.0
+    np.savetxt(tmp_path / "q7_effort_zero.csv", values, delimiter=",")
+    figures = cli_json(capsys, "model-errors", "--measured", str(tmp_path / "q7_effort_zero.csv"))
+    whole = cli_json(capsys, "model-errors", "--measured", "one")
+    assert figures["rms"][6] is None and figures["harmonics"] == whole["harmonics"]
+    assert np.allclose(figures["rms"][:6], whole["rms"][:6], rtol=1e-4)  # its start transient is read on q1..q6
+    values[:, 14:] = 0.0
+    np.savetxt(tmp_path / "no_effort.csv", values, delimiter=",")
+    assert "no_effort.csv: no effort column changes" in _refusal(capsys, "model-errors", "--measured", str(tmp_path / "no_effort.csv"))
+
+
+@pytest.mark.parametrize("broken, words", [
+    (lambda dq: dq * 0.0, "dq2 is zero while q2 moves"),
+    (lambda dq: -dq, "dq2 does not follow the finite differences of q2 at 200 Hz (correlation -1.00, scale -1; its sign flipped?)"),
+    (lambda dq: np.roll(dq, 600), "another joint's column?"),
+    (lambda dq: np.degrees(dq), "another unit?"),
+])
+def test_a_broken_velocity_column_is_refused_naming_it(tmp_path, capsys, broken, words):
+    """One joint's velocity column broken: the clock check reads the cleanest
+    joints and passed it, and q2's upstream relative error became 1.1-2.2."""
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    values[:, 8] = broken(values[:, 8])
+    np.savetxt(tmp_path / "broken.csv", values, delimiter=",")
+    assert words in _refusal(capsys, "model-errors", "--measured", str(tmp_path / "broken.csv"), "--processing", "upstream")

@@ -10,7 +10,7 @@
   any subset of joints, each with its position, velocity and effort.
 
 A joint that is not recorded is *not measured* (`MeasuredRun.measured`), and so
-is one whose columns are all exactly zero (padding to fit a layout): its
+is one whose effort column holds one value (zeros padding a layout): its
 columns hold zeros (the arm held at zero) and no figure, fit or cutoff uses it.
 A time column gives the file its own rate (rows must be evenly spaced)."""
 
@@ -214,15 +214,21 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
 
 
 def _joints_with_values(file_values: np.ndarray, layout: CsvLayout, path: Path) -> tuple[str, ...]:
-    """The layout's joints less those whose position, velocity and effort are
-    all exactly zero: columns a user padded to fit a layout (no encoder or
-    current sensor reads exactly zero for a whole run), read as not recorded."""
-    padded = [joint for joint in layout.joints
-              if not any(file_values[:, layout.columns[(field, joint)]].any() for field in FIELDS)]
-    if padded and len(padded) < len(layout.joints):
-        print(f"dvrk-dart: note: {path}: {', '.join(padded)}: every value zero, read as not recorded", file=sys.stderr)
-        return tuple(joint for joint in layout.joints if joint not in padded)
-    return layout.joints
+    """The layout's joints less those whose effort column never changes:
+    columns a user padded to fit a layout (all zero), or a logger that did not
+    read the joint's effort. No current sensor reads one value for a whole
+    run; such a column set the periodic band of every joint and gave figures
+    against zero. Read as not recorded (positions, if any, still drive the simulation)."""
+    constant = [joint for joint in layout.joints if np.ptp(file_values[:, layout.columns[("tau", joint)]]) == 0.0]
+    if not constant:
+        return layout.joints
+    if len(constant) == len(layout.joints):
+        raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
+    zero = [joint for joint in constant if not any(file_values[:, layout.columns[(field, joint)]].any() for field in FIELDS)]
+    said = [f"{', '.join(zero)}: every value zero"] if zero else []
+    said += [f"{', '.join(j for j in constant if j not in zero)}: the effort never changes"] if len(zero) < len(constant) else []
+    print(f"dvrk-dart: note: {path}: {'; '.join(said)}: read as not recorded", file=sys.stderr)
+    return tuple(joint for joint in layout.joints if joint not in constant)
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:

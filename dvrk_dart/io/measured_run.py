@@ -66,6 +66,32 @@ def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source
                             f"column; the rate that fits is {fits:.4g} Hz ({fix})")
 
 
+#: a moving joint's velocity column must correlate with its positions' finite
+#: differences this well, at a scale within this factor of 1 (the reference
+#: runs' noisiest, the MTM's wrist: 0.80 and 0.73; a sign flip, a zero or
+#: another joint's column: about -1, 0 or 0)
+VELOCITY_CORRELATION_MIN = 0.5
+VELOCITY_SCALE_FACTOR = 2.0
+
+
+def check_velocity_columns(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str) -> None:
+    """Each moving joint's velocity column against its own positions' finite
+    differences (check_rate reads the clock from the cleanest joints: one
+    broken column passed it and skewed every upstream figure of its joint)."""
+    differences = np.gradient(q, 1.0 / rate_hz, axis=0)
+    for j in np.flatnonzero(np.any(differences != 0.0, axis=0)):
+        name, position = CSV_COLUMNS[N_JOINTS + j], CSV_COLUMNS[j]
+        if not np.any(dq[:, j]):
+            raise DvrkDartError(f"{where}: {name} is zero while {position} moves: the velocity column was not recorded")
+        correlation = float(np.corrcoef(differences[:, j], dq[:, j])[0, 1])
+        scale = float(differences[:, j] @ dq[:, j] / (dq[:, j] @ dq[:, j]))
+        if correlation < VELOCITY_CORRELATION_MIN or not 1 / VELOCITY_SCALE_FACTOR <= scale <= VELOCITY_SCALE_FACTOR:
+            why = "its sign flipped?" if correlation < -VELOCITY_CORRELATION_MIN else \
+                "another joint's column?" if correlation < VELOCITY_CORRELATION_MIN else "another unit?"
+            raise DvrkDartError(f"{where}: {name} does not follow the finite differences of {position} at {rate_hz:g} Hz "
+                                f"(correlation {correlation:.2f}, scale {scale:.3g}; {why})")
+
+
 #: a row stands out as a glitch when its disagreement is this many times the
 #: 99th percentile of the column's (the reference runs' largest: 3.7 times)
 GLITCH_RATIO = 30.0

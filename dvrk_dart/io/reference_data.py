@@ -25,6 +25,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     check_joint_ranges,
     TIME_COLUMN_SOURCE,
     check_rate,
+    check_velocity_columns,
     manifest,
     sample_rate_hz,
 )
@@ -249,6 +250,7 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     rate, source = rate_of(path, read.rate_hz, topics.rate_hz)
     check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
+    check_velocity_columns(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path))
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)
     return MeasuredRun(path=path, data=data, model=model, measured=read.measured)
