@@ -142,6 +142,9 @@ def _model_errors_command(sub, commands) -> None:
     p.add_argument("--measured", type=measured_run, required=True, help=f"measured run: path (CSV or ROS bag), or {PSM_RUN_NAMES}")
     p.add_argument("--first-period", action="store_true", help="only the first base period (upstream: the arm model card's, as the identification used it; periodic: the fitted period)")
     _add_processing_option(p, None, excitation=True)
+    p.add_argument("--harmonics", type=positive_int, default=None, metavar="N",
+                   help="periodic processing on N harmonics of the base period, not the band read from the run "
+                        "(to compare with figures quoted at a fixed band; the default reads each joint's cutoff)")
     p.add_argument("--terms", default="all", help="all | inertial | comma list of inertia,coriolis,gravity,friction,offset,spring,motor_inertia")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _add_arm_options(p)

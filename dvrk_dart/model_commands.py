@@ -28,6 +28,7 @@ class ModelErrorsConfig:
     terms: str = "all"
     first_period: bool = False
     topics: BagTopics = BagTopics()
+    harmonics: int | None = None  # the periodic band imposed (--harmonics), else read from the run
 
 
 def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
@@ -41,8 +42,10 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
 
     terms = parse_terms(config.terms)
     design = read_design(config.excitation) if config.excitation else None
-    [processed], note = process_all([load_run(resolve_run(config.measured), arm.model, config.topics)], config.processing, design)
-    why = f"--processing {config.processing}" if config.processing else (note or "the default: the run is a periodic excitation")
+    [processed], note = process_all([load_run(resolve_run(config.measured), arm.model, config.topics)], config.processing, design,
+                                    config.harmonics)
+    why = f"--processing {config.processing}" if config.processing else \
+        f"--harmonics {config.harmonics}" if config.harmonics else (note or "the default: the run is a periodic excitation")
     with np.errstate(over="ignore", invalid="ignore"):
         predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
         sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))
@@ -93,7 +96,8 @@ def _scored_on(processed, first_period: bool) -> str:
     """What a model-errors figure is over: the whole run, the fitted period, or
     upstream's window (the model card's, set for the identification's own runs)."""
     if not first_period:
-        return "the whole run"
+        start, stop = processed.periodic.kept if processed.periodic is not None else (0, 0)
+        return f"rows {start + 1}-{stop}: the whole run after its start transient" if start > 0 else "the whole run"
     n = processed.first_period_samples()
     seconds = f"{n * float(processed.t[1] - processed.t[0]):.4g} s"
     if processed.periodic is not None:
@@ -106,7 +110,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
     from dvrk_dart.io.atomic import json_text
 
     arm = command_arm(args)
-    config = ModelErrorsConfig(args.measured, args.processing, args.excitation, args.terms, args.first_period, reading_options(args))
+    config = ModelErrorsConfig(args.measured, args.processing, args.excitation, args.terms, args.first_period, reading_options(args),
+                               args.harmonics)
     result = model_errors(arm, config)
     why = result["chosen_because"]
     if args.json:
@@ -118,7 +123,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         if periodic:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), "
                   f"projection fitted on the run's {result['whole_periods']} whole periods, "
-                  f"{result['harmonics']} harmonics (the smallest cutoff of the moving joints; design {result['design_harmonics']} "
+                  f"{result['harmonics']} harmonics ({'--harmonics' if args.harmonics else 'the smallest cutoff of the moving joints'}; "
+                  f"design {result['design_harmonics']} "
                   f"from {result['design_from']})")
         if result.get("rate_note"):
             print(f"note: {result['rate_note']}")

@@ -390,3 +390,16 @@ def test_a_broken_velocity_column_is_refused_naming_it(tmp_path, capsys, broken,
     values[:, 8] = broken(values[:, 8])
     np.savetxt(tmp_path / "broken.csv", values, delimiter=",")
     assert words in _refusal(capsys, "model-errors", "--measured", str(tmp_path / "broken.csv"), "--processing", "upstream")
+
+
+@needs_2018
+def test_the_data_readmes_ten_harmonic_figures(capsys):
+    """--harmonics imposes the band: the data README's figures at 10 harmonics
+    (computed by others, not by this project), J1..J3 of both runs, to 4 %."""
+    quoted = {TEST1: [0.095, 0.104, 0.216], TEST2: [0.082, 0.139, 0.164]}
+    for path, figures in quoted.items():
+        result = cli_json(capsys, "model-errors", "--measured", str(path), "--harmonics", "10")
+        assert result["harmonics"] == 10 and result["chosen_because"] == "--harmonics 10"
+        assert np.allclose(result["rms"][:3], figures, rtol=0.04), (path.name, result["rms"][:3])
+    assert "--harmonics: it imposes" in _refusal(capsys, "model-errors", "--measured", str(TEST1), "--harmonics", "10",
+                                                 "--processing", "upstream")

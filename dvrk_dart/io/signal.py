@@ -180,17 +180,20 @@ def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> Processed
     return ProcessedRun(run.t[kept], q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
 
 
-def process_all(runs: list[MeasuredRun], processing: str | None, design=None) -> tuple[list[ProcessedRun], str | None]:
+def process_all(runs: list[MeasuredRun], processing: str | None, design=None,
+                harmonics: int | None = None) -> tuple[list[ProcessedRun], str | None]:
     """Runs through one processing, and a note when the choice was not the user's:
     `None` is periodic where every run is a periodic excitation, else upstream
     (the note says which run is not periodic and why). With a `design` (the
-    user's --excitation) every run is read on it: periodic, or a one-line error."""
-    if design is not None and processing == "upstream":
-        raise DvrkDartError("--excitation: the excitation's design sets the periodic processing's harmonics; not with --processing upstream")
-    if design is not None:
-        processing = "periodic"
+    user's --excitation) or imposed `harmonics` (--harmonics) every run is read
+    periodic, or a one-line error."""
+    for given, option, what in ((design, "--excitation", "the excitation's design sets"), (harmonics, "--harmonics", "it imposes")):
+        if given is not None and processing == "upstream":
+            raise DvrkDartError(f"{option}: {what} the periodic processing's harmonics; not with --processing upstream")
+        if given is not None:
+            processing = "periodic"
     if processing is not None:
-        return [process(run, processing, design=design) for run in runs], None
+        return [process(run, processing, harmonics, design=design) for run in runs], None
     try:
         return [process_periodic(run, design=design) for run in runs], None
     except DvrkDartError as exc:
