@@ -166,6 +166,11 @@ def cmd_identify(args: argparse.Namespace) -> int:
             for span, e in spans.items():
                 label = f"{run_label(name)} {span.replace('_run', '')}"
                 print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"]) + f"   {kind}")
+    reference = data.get("reference") or {}
+    for name, e in (reference.get("errors_first_period") or {}).items():
+        label = f"{run_label(name)} first_period"
+        print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
+              + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
     for line in data["warnings"]:
         print(f"warning: {line}")
     if not data["errors"].get("holdout"):

@@ -31,7 +31,7 @@ from dvrk_dart.diagnosis.payload.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
-from dvrk_dart.diagnosis.output.answer import plain_name
+from dvrk_dart.diagnosis.output.answer import answer_sentence, plain_name
 from dvrk_dart.diagnosis.output.regimes import residual_regimes
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
 from dvrk_dart.diagnosis.fit.session_floor import moved_constants
@@ -77,6 +77,7 @@ DIAGNOSIS_KEYS = {
     "repeat", "repeat_source", "gap_split", "baseline", "train_runs", "holdout_runs", "inputs", "processing", "residual_definition", "simulated_source",
     "gap_before", "gap_after", "gap_after_source", "explained_fraction", "effects", "selection", "payload", "payloads",
     "payload_candidates", "sim_config", "not_in_simulation", "where", "recorded_joints", "gravity_mismatch", "explanation", "dropped_effects", "payload_not_distinguished",
+    "identified_terms",
 }
 EFFECT_KEYS = {
     "rank", "name", "kind", "family", "joints", "parameters", "units", "size", "explained_fraction", "explained_fraction_per_joint",
@@ -181,6 +182,21 @@ def test_tilt_at_real_noise_is_not_claimed(arm, segment, noise_rms):
     measured = synthesize_measurement(arm, segment, [(GravityTilt(arm), np.array([0.03, -0.025]))], noise_rms, seed=11)
     result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False, profile_payload_mass=False)
     assert max(result["effects"][0]["explained_fraction_per_joint"]["cross_validated"]) < 0.15
+
+
+def test_what_the_identified_model_has_is_said_to_be_its_own(arm, segment, noise_rms):
+    """The identified model's own friction, offsets, spring and motor inertia in
+    the measured efforts: what the inertia-only simulation misses is those
+    terms, and the answer says so; an armature the model does not have is not."""
+    from dvrk_dart.model.identified import NON_INERTIAL_TERMS
+
+    own = arm.identified.predict(segment.q, segment.dq, segment.ddq, NON_INERTIAL_TERMS)
+    measured = synthesize_measurement(arm, segment, [], noise_rms, seed=11, extra_effort=own)
+    carried = diagnose(measured, arm=arm, max_effects=4, figures=False, profile_payload_mass=False)["identified_terms"]
+    assert carried["share"] > 0.8 and carried["terms"] == list(NON_INERTIAL_TERMS), carried
+    foreign = synthesize_measurement(arm, segment, [(JointArmature(arm.model, "q3"), np.array([0.5]))], noise_rms, seed=12)
+    result = diagnose(foreign, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False, profile_payload_mass=False)
+    assert result["identified_terms"]["share"] < 0.2 and "beyond the identified model's terms" in answer_sentence(result), result["identified_terms"]
 
 
 def test_nothing_injected_selects_little(arm, segment, noise_rms):

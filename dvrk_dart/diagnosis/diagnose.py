@@ -20,6 +20,7 @@ from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import describe_payload, effort_not_determined, mass_profile
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
+from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
 from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
 from dvrk_dart.diagnosis.fit.result import (
@@ -131,7 +132,9 @@ def diagnose(
     for report in first_moments:
         if problem.repeat_run is not None and problem.repeat_source != "--repeat":
             report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
-    result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped).to_json()
+    carried = identified_terms_share(problem, selection, base_config)
+    result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped,
+                        carried).to_json()
     if out_dir is None:
         return result
     period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
@@ -272,7 +275,7 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
 
 
 def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floor, split, first_moments: list[dict],
-               points: list[dict], simulated: bool, dropped: list[dict]) -> Diagnosis:
+               points: list[dict], simulated: bool, dropped: list[dict], carried: dict | None) -> Diagnosis:
     train_runs, holdout_runs = problem.train_runs, problem.holdout_runs
     offsets, recorded = problem.offset_joints, problem.recorded
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
@@ -326,6 +329,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")]),
+        identified_terms=carried,
     )
 
 

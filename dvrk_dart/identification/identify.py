@@ -36,7 +36,7 @@ from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
 
-#: a held-out RMS this many times the training RMS on a fitted joint is a fit on too little data
+#: a held-out RMS this many times the training RMS on a fitted joint: the fit does not carry (too little data, or runs that differ)
 HOLDOUT_OVERFIT_RATIO = 2.0
 
 #: --prior values besides a file
@@ -128,7 +128,8 @@ class IdentificationResult:
         train, held = pooled(self.train), pooled(self.holdout)
         pooling = "" if len(self.train) == len(self.holdout) == 1 else " (each pooled over its runs: the root of their mean square)"
         return [f"{JOINT_NAMES[j]}: held-out RMS {held[j]:.3g} is {held[j] / train[j]:.1f}x the training RMS {train[j]:.3g}{pooling}: "
-                "the training runs do not determine the arm (record more runs or periods)"
+                "the fit does not carry to the held-out runs: too few runs or periods to determine the arm, or runs that "
+                "differ (another session, another state of the arm); more training runs tell the two apart"
                 for j in self.wls.joints if held[j] > HOLDOUT_OVERFIT_RATIO * train[j]]
 
 

@@ -221,6 +221,8 @@ class Diagnosis:
     dropped_effects: list
     #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/output/wording.py)
     explanation: dict
+    #: how much of the selected effects' efforts the identified model's non-inertial terms carry (fit/identified_terms.py)
+    identified_terms: dict | None = None
 
     def to_json(self) -> dict:
         """The diagnosis.json document (a fresh dict: the caller may add to it)."""

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-from dvrk_dart.diagnosis.output.wording import explanation, joints_apart
+from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -177,12 +177,31 @@ def answer_sentence(result: dict) -> str:
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
+    sentence += _identified_terms_clause(result)
     floor = result.get("session_floor")
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
     above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
     return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
                        if above else f". What is left on {', '.join(joints)} is at the session floor: no fixed effect can remove more there.") + _refit_clause(result) + _insertion_clause(result)
+
+
+def _identified_terms_clause(result: dict) -> str:
+    """Whether what was found is the identified model's own friction, offsets,
+    springs and motor inertia, which the inertia-only simulation leaves out."""
+    carried = result.get("identified_terms")
+    if not carried:
+        return ""
+    def percent(share: float) -> str:  # below zero the terms reproduce none of it (diagnosis.json keeps the value)
+        return f"{max(share, 0.0):.0%}"
+
+    joints = ", ".join(f"{name} {percent(share)}" for name, share in carried["by_joint"].items())
+    how = {"mostly explained": "most of", "partly explained": "part of", "not explained": "little of"}[words_for(carried["share"])]
+    meaning = {"most of": "mostly what the identified model already has and the simulation lacks",
+               "part of": "partly what the identified model already has",
+               "little of": "beyond the identified model's terms"}[how]
+    return (f"; the identified model's own {', '.join(carried['terms']).replace('_', ' ')} terms, which the simulation leaves out, "
+            f"carry {how} these effects' efforts ({percent(carried['share'])} on the training runs: {joints}): {meaning}")
 
 
 def _refit_clause(result: dict) -> str:
