@@ -74,8 +74,10 @@ def _run_and_write(config, out: Path | None) -> int:
     write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
     measured = metrics.get("measured_samples")
-    of_measured = f" (of the measured run's {measured}: the simulation ends at the last)" if measured == (metrics.get("samples") or 0) + 1 else ""
-    print(f"{record.name}: {metrics.get('samples')} samples{of_measured}, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
+    logged = metrics.get("samples") or 0
+    of_measured = (f" (of the measured run's {measured}: the simulation ends at the last)" if measured == logged + 1
+                   else f" logged, at the measured run's {measured} samples compared" if measured else "")
+    print(f"{record.name}: {logged} samples{of_measured}, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
     _print_effort_table(metrics, config.dynamics, arm.model)
     for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
         if metrics.get(key) is not None:

@@ -36,6 +36,8 @@ TIME_NAMES = ("t", "time", "time_s")
 HEADERLESS_JOINTS = {3 * N_JOINTS: JOINT_NAMES, 9: JOINT_NAMES[:3]}
 #: rows of a time column may be this far from even spacing (a fraction of the step)
 TIME_JITTER = 0.05
+#: the notes this process has printed (each once)
+_NOTES_SAID: set[str] = set()
 #: fewer rows are no recording (the processing's own minimum is checked by the loader)
 MIN_TIME_ROWS = 3
 
@@ -106,10 +108,14 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
             continue
         key = _header_key(name, dvrk_joints)
         if key is None:
-            known = "t, q1..q7, dq1..dq7, tau1..tau7" + (f", position.<joint> (joints: {', '.join(dvrk_joints)})" if dvrk_joints else "")
-            separator = next((f" (the columns are separated by commas; this file's by '{c}')" for c in (";", "\t", " ") if c in name), "")
+            known = "t or time, q1..q7, dq1..dq7, tau1..tau7" + (
+                f", position|velocity|effort.<joint> (joints: {', '.join(dvrk_joints)})" if dvrk_joints else "")
+            # a whole row in one cell: another separator (a name with a space, "t (ms)", is only a name)
+            separator = next((f" (the columns are separated by commas; this file's by '{c}')" for c in (";", "\t", " ")
+                              if c in name and len(header) == 1), "")
+            unit = " (give the time in seconds, under the name t)" if name.lower().split()[0] in TIME_NAMES else ""
             shown = name if len(name) <= 40 else name[:37] + "..."
-            raise DvrkDartError(f"{path}: header column {index + 1} '{shown}' is not a known name ({known}){separator}")
+            raise DvrkDartError(f"{path}: header column {index + 1} '{shown}' is not a known name ({known}){separator}{unit}")
         field, joint, dvrk = key
         if (field, joint) in columns:
             raise DvrkDartError(f"{path}: header column {index + 1} '{name}': {field} of {joint} given twice")
@@ -174,7 +180,8 @@ def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
     if len(uneven):
         row = int(uneven[0]) + 1 + first_row
         raise DvrkDartError(f"{path}: time column, row {row}: a step of {step[uneven[0]]:.6g} s where the rows are "
-                            f"{median:.6g} s apart (rows must be evenly spaced: resample first)")
+                            f"{median:.6g} s apart (rows must be evenly spaced: resample first, or drop the time column "
+                            "and give --rate)")
     return 1.0 / median
 
 
@@ -227,7 +234,10 @@ def _joints_with_values(file_values: np.ndarray, layout: CsvLayout, path: Path) 
     zero = [joint for joint in constant if not any(file_values[:, layout.columns[(field, joint)]].any() for field in FIELDS)]
     said = [f"{', '.join(zero)}: every value zero"] if zero else []
     said += [f"{', '.join(j for j in constant if j not in zero)}: the effort never changes"] if len(zero) < len(constant) else []
-    print(f"dvrk-dart: note: {path}: {'; '.join(said)}: read as not recorded", file=sys.stderr)
+    note = f"dvrk-dart: note: {path}: {'; '.join(said)}: read as not recorded"
+    if note not in _NOTES_SAID:  # a command may read a file more than once
+        _NOTES_SAID.add(note)
+        print(note, file=sys.stderr)
     return tuple(joint for joint in layout.joints if joint not in constant)
 
 

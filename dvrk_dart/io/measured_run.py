@@ -62,7 +62,10 @@ def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source
         fits = rate_hz / scale
         fix = (f"correct the time column, or remove it and give --rate {fits:.4g}" if source == TIME_COLUMN_SOURCE
                else f"--rate {fits:.4g}")
-        raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.2f} times the velocity "
+        unit = next((f"; a time column in {name}? give it in seconds" for name, factor in (("ms", 1e3), ("µs", 1e6), ("ns", 1e9))
+                     if source == TIME_COLUMN_SOURCE and abs(fits / (rate_hz * factor) - 1.0) < RATE_TOLERANCE), "")
+        fix += unit
+        raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.3g} times the velocity "
                             f"column; the rate that fits is {fits:.4g} Hz ({fix})")
 
 

@@ -84,7 +84,11 @@ def with_baseline_motion(processing: RunProcessing, baseline, measured_list: lis
     base = _load_state(baseline, model, processing)[1]
     if any(motion_offset(state, base) is not None for state in states):
         return processing
-    return RunProcessing(why=NO_BASELINE_MOTION, topics=processing.topics)
+    rates = sorted({f"{state.rate_hz:g}" for state in states if abs(state.rate_hz - base.rate_hz) > 1e-6 * base.rate_hz})
+    other_rate = (f"; the baseline is logged at {base.rate_hz:g} Hz, the runs at {', '.join(rates)} Hz: runs are matched sample by "
+                  "sample, so a baseline of the same motion at another rate reads as another motion (resample it to the runs' rate)"
+                  ) if rates else ""
+    return RunProcessing(why=NO_BASELINE_MOTION + other_rate, topics=processing.topics)
 
 
 def processing_of(result: dict, topics: BagTopics = BagTopics()) -> RunProcessing:
