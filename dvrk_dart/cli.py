@@ -165,7 +165,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         for name, spans in runs.items():
             for span, e in spans.items():
                 label = f"{run_label(name)} {span.replace('_run', '')}"
-                print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"]) + f"   {kind}")
+                fitted = [v if j in data["fitted_joints"] else None for j, v in zip(JOINT_NAMES, e["rms"])]  # no figure on a joint not fitted
+                print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in fitted) + f"   {kind}")
     reference = data.get("reference") or {}
     for name, e in (reference.get("errors_first_period") or {}).items():
         label = f"{run_label(name)} first_period"

@@ -39,6 +39,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     from dvrk_dart.io.signal import process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.identified import parse_terms
+    from dvrk_dart.model.unrecorded_joints import unrecorded_joint_notes
 
     terms = parse_terms(config.terms)
     design = read_design(config.excitation) if config.excitation else None
@@ -63,33 +64,12 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "rms": per_measured_joint(rms(predicted - measured), processed.measured),
         "samples": len(measured),
         "scored_on": _scored_on(processed, config.first_period),
-        "unrecorded_joint_notes": unrecorded_joint_notes(arm, processed, rms(predicted - measured)),
+        "unrecorded_joint_notes": unrecorded_joint_notes(arm.identified, processed, rms(predicted - measured)),
         "params": file_record(arm.params.source),
         "terms": config.terms,
         **processed.summary(),
         "chosen_because": why,
     }
-
-
-def unrecorded_joint_notes(arm: Arm, processed, figures: np.ndarray) -> list[str]:
-    """A joint the run did not record is held where the log leaves it (0;
-    a joint with positions but no effort follows them):
-    where sweeping it over its range moves the model's rigid-body efforts on a
-    recorded joint by more than that joint's figure, the figure may be that
-    joint's error, not the model's; said in one line per such joint."""
-    every = max(1, len(processed.q) // 200)  # the run's states, every ~0.5 % of it
-    states = (processed.q[::every], processed.dq[::every], processed.ddq[::every])
-    notes = []
-    positions_logged = np.ptp(processed.q, axis=0) > 0  # an effort not recorded, its joint's positions were
-    for j in np.flatnonzero(~np.asarray(processed.measured) & ~positions_logged):
-        change = arm.identified.held_joint_change(*states, j)
-        hurt = [k for k in np.flatnonzero(processed.measured) if change[k] > figures[k]]
-        if hurt:
-            unit = arm.model.position_unit(JOINT_NAMES[j])
-            moves = ", ".join(f"{JOINT_NAMES[k]} {change[k]:.3g} {arm.model.effort_unit(JOINT_NAMES[k])}" for k in hurt)
-            notes.append(f"{JOINT_NAMES[j]} is not recorded and held at 0 {unit}: over its range it moves the model's efforts "
-                         f"on {moves}, more than their figures: where the arm moved it, they carry that error")
-    return notes
 
 
 def _scored_on(processed, first_period: bool) -> str:

@@ -403,3 +403,17 @@ def test_the_data_readmes_ten_harmonic_figures(capsys):
         assert np.allclose(result["rms"][:3], figures, rtol=0.04), (path.name, result["rms"][:3])
     assert "--harmonics: it imposes" in _refusal(capsys, "model-errors", "--measured", str(TEST1), "--harmonics", "10",
                                                  "--processing", "upstream")
+
+
+def test_identify_says_when_joints_held_at_zero_move_the_fitted_ones(tmp_path, capsys):
+    """q2 alone (q1 and q3 not recorded, held at 0 by the fit): model-errors
+    said so, identify did not, and its held-out q2 was 10x its training figure."""
+    one = load_run(resolve_run("one"), PSM)
+    only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, _columns(2))
+    capsys.readouterr()
+    assert main(["identify", "--runs", str(only_q2), "--holdout", "two", "--out", str(tmp_path / "id")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: only_q2: q1 is not recorded and held at 0 rad" in out.replace(str(only_q2), "only_q2"), out
+    assert "q3 is not recorded and held at 0 m" in out
+    two_rows = [line.split() for line in out.splitlines() if line.startswith("two whole")]
+    assert two_rows and two_rows[0][2:9:2] == ["-", "-", "-", "-"], two_rows  # no figure on a joint not fitted

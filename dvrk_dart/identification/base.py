@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from dvrk_dart.identification.regressor import Regressor
+from dvrk_dart.identification.regressor import BODY_PARAMETER_NAMES, Regressor
 from dvrk_dart.model.joints import N_JOINTS
 
 #: |R_ii| / max |R_ii| below which a (unit-norm) column is dependent: the
@@ -108,10 +108,11 @@ def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray
 
 
 def acting_on_none_of(regressor: Regressor, joints: np.ndarray, seed: int = 0) -> np.ndarray:
-    """The standard parameters whose efforts fall on none of `joints` at any
-    state (random states over the ranges) but on another joint: a left-out
-    joint's own friction, offset or motor inertia. No run of `joints`
-    determines them, and none of their figures depends on them."""
+    """The joint-level parameters (friction, offset, motor inertia, spring:
+    not a body's inertia, whose parts are bound together by its physical
+    consistency) whose efforts fall on none of `joints` at any state (random
+    states over the ranges) but on another joint: a left-out joint's own. No
+    run of `joints` determines them, and none of their figures depends on them."""
     model = regressor.model
     rng = np.random.default_rng(seed)
     q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
@@ -121,4 +122,5 @@ def acting_on_none_of(regressor: Regressor, joints: np.ndarray, seed: int = 0) -
     on_joints = np.linalg.norm(Y[:, np.asarray(joints), :].reshape(-1, Y.shape[2]), axis=0)
     anywhere = np.linalg.norm(Y.reshape(-1, Y.shape[2]), axis=0)
     tolerance = ZERO_COLUMN_TOLERANCE * anywhere.max()
-    return np.flatnonzero((on_joints <= tolerance) & (anywhere > tolerance))
+    joint_level = np.array([name.split(".", 1)[1] not in BODY_PARAMETER_NAMES for name in regressor.layout.names])
+    return np.flatnonzero((on_joints <= tolerance) & (anywhere > tolerance) & joint_level)

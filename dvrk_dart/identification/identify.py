@@ -34,7 +34,9 @@ from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.parameters import load_parameters
+from dvrk_dart.model.unrecorded_joints import unrecorded_joint_notes
 
 #: a held-out RMS this many times the training RMS on a fitted joint: the fit does not carry (too little data, or runs that differ)
 HOLDOUT_OVERFIT_RATIO = 2.0
@@ -117,6 +119,18 @@ class IdentificationResult:
         periods = [run.processed.periodic.period.whole_periods for run in self.train if run.processed.periodic is not None]
         return {"runs": len(self.train), "seconds": float(sum(run.processed.t[-1] - run.processed.t[0] for run in self.train)),
                 "whole_periods": int(sum(periods)) if len(periods) == len(self.train) else None}
+
+    def unrecorded_joint_warnings(self) -> list[str]:
+        """A joint the training runs did not record, held at zero by the fit,
+        that moves a fitted joint's efforts (the reference parameters' model)
+        by more than its training figure: the fit absorbs that error."""
+        reference = IdentifiedModel(self.model, load_parameters(resolve(self.model.default_parameters), self.model))
+        fitted = np.isin(np.arange(len(JOINT_NAMES)), self.wls.joints)
+        notes = []
+        for run in self.train:
+            figures = np.where(fitted, [np.inf if v is None else v for v in self.errors(run)["rms"]], np.inf)
+            notes += [f"{run.name}: {note}" for note in unrecorded_joint_notes(reference, run.processed, figures)]
+        return notes
 
     def overfit_warnings(self) -> list[str]:
         """A fitted joint whose held-out RMS is far above its training RMS: too little data for the parameters."""
