@@ -417,3 +417,22 @@ def test_identify_says_when_joints_held_at_zero_move_the_fitted_ones(tmp_path, c
     assert "q3 is not recorded and held at 0 m" in out
     two_rows = [line.split() for line in out.splitlines() if line.startswith("two whole")]
     assert two_rows and two_rows[0][2:9:2] == ["-", "-", "-", "-"], two_rows  # no figure on a joint not fitted
+
+
+def test_a_run_whose_sample_period_is_not_a_whole_number_of_steps_is_simulated(tmp_path):
+    """Absolute ROS stamps read at 199.995 Hz: the diagnosis's re-simulation
+    refused ("sample period 0.0050001 s is not a multiple of the step"); its
+    step is now a whole fraction of the period, and the efforts are the 200 Hz run's."""
+    from dvrk_dart.io.signal import process
+    from dvrk_dart.runs.replay import simulate_efforts
+    from dvrk_dart.sim.config import SimConfig
+
+    one = load_run(resolve_run("one"), PSM)
+    part = type(one)(one.path, one.data.iloc[:1000].reset_index(drop=True), PSM)
+    part.data["t"] = np.arange(len(part.data)) / 199.995
+    path = _write_header_csv(tmp_path / "stamped.csv", part, _columns(*range(1, 8)))
+    stamped, even = (process(load_run(p, PSM)) for p in (path, _write_header_csv(tmp_path / "even.csv", part, _columns(*range(1, 8)), t=False)))
+    assert abs(stamped.rate_hz - 199.995) < 1e-6
+    efforts = simulate_efforts(PSM_ARM, SimConfig(), stamped)
+    assert efforts.shape == stamped.tau.shape
+    assert np.max(np.abs(efforts - simulate_efforts(PSM_ARM, SimConfig(), even))[100:-100]) < 0.01
