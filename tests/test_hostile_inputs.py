@@ -67,14 +67,15 @@ def test_session_floor_refuses_a_copy_written_otherwise(tmp_path, capsys):
 
 def test_zero_efforts_give_no_relative_error_and_no_warning(tmp_path, capsys):
     values = np.loadtxt(resolve_run("two"), delimiter=",")
-    values[:, 14:] = 0.0
-    values[:, 19] = 3e-9  # a joint a simulation leaves unloaded: round-off, not an effort (its ratio read 3e7)
+    values[:, 14:] = 0.0  # efforts never changing: not recorded (a padded layout)
+    values[:, 19] = 3e-9 * np.sign(np.sin(np.arange(len(values))))  # a joint a simulation leaves unloaded: round-off (its ratio read 3e7)
     path = tmp_path / "zeros.csv"
     np.savetxt(path, values, delimiter=",")
     code, lines, out = cli(capsys, "model-errors", "--measured", path, "--json")
-    assert code == 0 and lines == []
+    assert code == 0 and lines == [f"dvrk-dart: note: {path}: q1, q2, q3, q4, q5, q7: the effort never changes: read as not recorded"], lines
     result = json.loads(out)
-    assert all(v is None for v in result["relative_error"]) and all(np.isfinite(result["rms"]))
+    assert all(v is None for v in result["relative_error"]) and np.isfinite(result["rms"][5])
+    assert [v is None for v in result["rms"]] == [True] * 5 + [False, True]
 
 
 def test_a_path_out_of_reach_is_an_error_not_a_result(tmp_path, capsys):

@@ -147,7 +147,8 @@ def test_outputs_and_covariance(result, model, tmp_path):
 
 def _constant_pose_csv(path, rows=500):
     q = np.array([0.1, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0])
-    values = np.hstack([np.tile(q, (rows, 1)), np.zeros((rows, 7)), np.tile(np.linspace(0.1, 0.7, 7), (rows, 1))])
+    efforts = np.linspace(0.1, 0.7, 7) + 1e-3 * np.random.default_rng(0).standard_normal((rows, 7))  # a held arm's sensor noise
+    values = np.hstack([np.tile(q, (rows, 1)), np.zeros((rows, 7)), efforts])
     np.savetxt(path, values, delimiter=",")
     return path
 

@@ -217,28 +217,30 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     if layout.time_column is not None and len(file_values) < MIN_TIME_ROWS:
         raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
-    return CsvValues(values, _joints_with_values(file_values, layout, path), rate)
+    return CsvValues(values, layout.joints, rate)
 
 
-def _joints_with_values(file_values: np.ndarray, layout: CsvLayout, path: Path) -> tuple[str, ...]:
-    """The layout's joints less those whose effort column never changes:
-    columns a user padded to fit a layout (all zero), or a logger that did not
-    read the joint's effort. No current sensor reads one value for a whole
-    run; such a column set the periodic band of every joint and gave figures
-    against zero. Read as not recorded (positions, if any, still drive the simulation)."""
-    constant = [joint for joint in layout.joints if np.ptp(file_values[:, layout.columns[("tau", joint)]]) == 0.0]
+def joints_with_efforts(values: np.ndarray, measured: tuple[str, ...], path: Path) -> tuple[str, ...]:
+    """`measured` less the joints whose effort column never changes ((N, 21)
+    values in the model's coordinates): columns a user padded to fit a layout
+    (all zero), or a logger that did not read the joint's effort. No current
+    sensor reads one value for a whole run; such a column set the periodic
+    band of every joint and gave figures against zero. Read as not recorded
+    (positions, if any, still drive the simulation)."""
+    column = {joint: values[:, [k * N_JOINTS + JOINT_NAMES.index(joint) for k in range(3)]] for joint in measured}
+    constant = [joint for joint in measured if np.ptp(column[joint][:, 2]) == 0.0]
     if not constant:
-        return layout.joints
-    if len(constant) == len(layout.joints):
+        return measured
+    if len(constant) == len(measured):
         raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
-    zero = [joint for joint in constant if not any(file_values[:, layout.columns[(field, joint)]].any() for field in FIELDS)]
+    zero = [joint for joint in constant if not column[joint].any()]
     said = [f"{', '.join(zero)}: every value zero"] if zero else []
     said += [f"{', '.join(j for j in constant if j not in zero)}: the effort never changes"] if len(zero) < len(constant) else []
     note = f"dvrk-dart: note: {path}: {'; '.join(said)}: read as not recorded"
     if note not in _NOTES_SAID:  # a command may read a file more than once
         _NOTES_SAID.add(note)
         print(note, file=sys.stderr)
-    return tuple(joint for joint in layout.joints if joint not in constant)
+    return tuple(joint for joint in measured if joint not in constant)
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:
