@@ -436,3 +436,18 @@ def test_a_run_whose_sample_period_is_not_a_whole_number_of_steps_is_simulated(t
     efforts = simulate_efforts(PSM_ARM, SimConfig(), stamped)
     assert efforts.shape == stamped.tau.shape
     assert np.max(np.abs(efforts - simulate_efforts(PSM_ARM, SimConfig(), even))[100:-100]) < 0.01
+
+
+def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
+    """q4 held by its servo (encoder counts around 0.1 rad, a noisy velocity):
+    its velocity does not follow its positions, and the file is read."""
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    rng = np.random.default_rng(0)
+    values[:, 3] = 0.1 + 1e-4 * np.round(rng.standard_normal(len(values)))
+    values[:, 10] = 1e-3 * rng.standard_normal(len(values))
+    np.savetxt(tmp_path / "held_q4.csv", values, delimiter=",")
+    from dvrk_dart.io.measured_run import check_velocity_columns
+
+    assert load_run(tmp_path / "held_q4.csv", PSM).measured[3] == "q4"
+    with pytest.raises(DvrkDartError, match="does not follow"):  # were it checked alone, it would be refused
+        check_velocity_columns(values[:, 3:4], values[:, 10:11], 200.0, "held_q4.csv")

@@ -9,9 +9,10 @@
   (`position.outer_yaw`, the arm's model card [dvrk_topics]) in the dVRK's;
   any subset of joints, each with its position, velocity and effort.
 
-A joint that is not recorded is *not measured* (`MeasuredRun.measured`), and so
-is one whose effort column holds one value (zeros padding a layout): its
+A joint that is not recorded is *not measured* (`MeasuredRun.measured`): its
 columns hold zeros (the arm held at zero) and no figure, fit or cutoff uses it.
+So is one whose effort column holds one value (zeros padding a layout, a
+logger that did not read it: `joints_with_efforts`); its positions are kept.
 A time column gives the file its own rate (rows must be evenly spaced)."""
 
 from __future__ import annotations

@@ -80,9 +80,13 @@ VELOCITY_SCALE_FACTOR = 2.0
 def check_velocity_columns(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str) -> None:
     """Each moving joint's velocity column against its own positions' finite
     differences (check_rate reads the clock from the cleanest joints: one
-    broken column passed it and skewed every upstream figure of its joint)."""
+    broken column passed it and skewed every upstream figure of its joint). A
+    held joint (servo error, encoder counts: io/period.moving_joints) is not
+    checked: its velocity is noise."""
+    from dvrk_dart.io.period import moving_joints
+
     differences = np.gradient(q, 1.0 / rate_hz, axis=0)
-    for j in np.flatnonzero(np.any(differences != 0.0, axis=0)):
+    for j in np.flatnonzero(moving_joints(q)):
         name, position = CSV_COLUMNS[N_JOINTS + j], CSV_COLUMNS[j]
         if not np.any(dq[:, j]):
             raise DvrkDartError(f"{where}: {name} is zero while {position} moves: the velocity column was not recorded")
