@@ -71,6 +71,15 @@ def _combination_name(row: np.ndarray, standard_names: tuple[str, ...]) -> str:
     return text[2:] if text.startswith("+ ") else text
 
 
+def random_states(model, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(q, dq, ddq) at random over the joints' ranges: where structural properties of the regressor are read."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
+    dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
+    ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
+    return q, dq, ddq
+
+
 def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray | None = None,
                          held: dict[int, float] | None = None) -> BaseParameters:
     """Structural base parameters of the rows `joints` (default: all seven).
@@ -78,11 +87,7 @@ def find_base_parameters(regressor: Regressor, seed: int = 0, joints: np.ndarray
     hold them there too, so that the parameters only their motion would
     determine (a held wrist's own inertia, friction) leave the base, and the
     links beyond them count as one body with the link that carries them."""
-    model = regressor.model
-    rng = np.random.default_rng(seed)
-    q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
-    dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
-    ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
+    q, dq, ddq = random_states(regressor.model, seed)
     for j, position in (held or {}).items():
         q[:, j], dq[:, j], ddq[:, j] = position, 0.0, 0.0
     rows = np.arange(N_JOINTS) if joints is None else np.asarray(joints)
@@ -113,12 +118,7 @@ def acting_on_none_of(regressor: Regressor, joints: np.ndarray, seed: int = 0) -
     consistency) whose efforts fall on none of `joints` at any state (random
     states over the ranges) but on another joint: a left-out joint's own. No
     run of `joints` determines them, and none of their figures depends on them."""
-    model = regressor.model
-    rng = np.random.default_rng(seed)
-    q = rng.uniform(model.joint_lower, model.joint_upper, (RANDOM_SAMPLES, N_JOINTS))
-    dq = rng.uniform(-RANDOM_RATE, RANDOM_RATE, (RANDOM_SAMPLES, N_JOINTS))
-    ddq = rng.uniform(-RANDOM_ACCELERATION, RANDOM_ACCELERATION, (RANDOM_SAMPLES, N_JOINTS))
-    Y = regressor(q, dq, ddq)
+    Y = regressor(*random_states(regressor.model, seed))
     on_joints = np.linalg.norm(Y[:, np.asarray(joints), :].reshape(-1, Y.shape[2]), axis=0)
     anywhere = np.linalg.norm(Y.reshape(-1, Y.shape[2]), axis=0)
     tolerance = ZERO_COLUMN_TOLERANCE * anywhere.max()

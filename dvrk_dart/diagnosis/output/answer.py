@@ -186,6 +186,12 @@ def answer_sentence(result: dict) -> str:
                        if above else f". What is left on {', '.join(joints)} is at the session floor: no fixed effect can remove more there.") + _refit_clause(result) + _insertion_clause(result)
 
 
+#: the one rule's words (output/wording.py) for the share of the found efforts the identified terms carry
+CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified model already has and the simulation lacks"),
+                 "partly explained": ("part of", "partly what the identified model already has"),
+                 "not explained": ("little of", "beyond the identified model's terms")}
+
+
 def _identified_terms_clause(result: dict) -> str:
     """Whether what was found is the identified model's own friction, offsets,
     springs and motor inertia, which the inertia-only simulation leaves out."""
@@ -196,10 +202,7 @@ def _identified_terms_clause(result: dict) -> str:
         return f"{max(share, 0.0):.0%}"
 
     joints = ", ".join(f"{name} {percent(share)}" for name, share in carried["by_joint"].items())
-    how = {"mostly explained": "most of", "partly explained": "part of", "not explained": "little of"}[words_for(carried["share"])]
-    meaning = {"most of": "mostly what the identified model already has and the simulation lacks",
-               "part of": "partly what the identified model already has",
-               "little of": "beyond the identified model's terms"}[how]
+    how, meaning = CARRIED_WORDS[words_for(carried["share"])]
     return (f"; the identified model's own {', '.join(carried['terms']).replace('_', ' ')} terms, which the simulation leaves out, "
             f"carry {how} these effects' efforts ({percent(carried['share'])} on the training runs: {joints}): {meaning}")
 
