@@ -72,6 +72,17 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     }
 
 
+def _band_notes(asked: int | None, result: dict) -> list[str]:
+    """What an imposed band (--harmonics) became: capped at the layer's highest, or below the motion's own harmonics."""
+    if not asked:
+        return []
+    notes = [f"--harmonics {asked}: the periodic layer fits at most {result['harmonics']}"] if result["harmonics"] < asked else []
+    if result["harmonics"] < (result.get("design_harmonics") or 0):
+        notes.append(f"--harmonics {asked} is below the excitation's {result['design_harmonics']} harmonics: part of the motion "
+                     "and of its efforts is cut off")
+    return notes
+
+
 def _scored_on(processed, first_period: bool) -> str:
     """What a model-errors figure is over: the whole run, the fitted period, or
     upstream's window (the model card's, set for the identification's own runs)."""
@@ -108,6 +119,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
                   f"from {result['design_from']})")
         if result.get("rate_note"):
             print(f"note: {result['rate_note']}")
+        for note in _band_notes(args.harmonics, result):
+            print(f"note: {note}")
         for note in result["unrecorded_joint_notes"]:
             print(f"note: {note}")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")

@@ -379,17 +379,44 @@ def test_an_effort_column_that_never_changes_is_not_recorded(tmp_path, capsys):
 
 @pytest.mark.parametrize("broken, words", [
     (lambda dq: dq * 0.0, "dq2 is zero while q2 moves"),
-    (lambda dq: -dq, "dq2 does not follow the finite differences of q2 at 200 Hz (correlation -1.00, scale -1; its sign flipped?)"),
-    (lambda dq: np.roll(dq, 600), "another joint's column?"),
-    (lambda dq: np.degrees(dq), "another unit?"),
+    (lambda dq: -dq, "dq2 runs against the finite differences of q2 (correlation -1.00, scale -1): its sign flipped?"),
 ])
-def test_a_broken_velocity_column_is_refused_naming_it(tmp_path, capsys, broken, words):
+def test_a_zero_or_flipped_velocity_column_is_refused_naming_it(tmp_path, capsys, broken, words):
     """One joint's velocity column broken: the clock check reads the cleanest
     joints and passed it, and q2's upstream relative error became 1.1-2.2."""
     values = np.loadtxt(resolve_run("one"), delimiter=",")
     values[:, 8] = broken(values[:, 8])
     np.savetxt(tmp_path / "broken.csv", values, delimiter=",")
     assert words in _refusal(capsys, "model-errors", "--measured", str(tmp_path / "broken.csv"), "--processing", "upstream")
+
+
+@pytest.mark.parametrize("odd", [lambda dq: np.roll(dq, 600), np.degrees])
+def test_a_velocity_column_that_hardly_follows_its_positions_is_noted(tmp_path, capsys, odd):
+    """Another joint's column or another unit: noted, not refused (a slow
+    drift under a noisy velocity reads as poorly, and is still a log)."""
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    values[:, 8] = odd(values[:, 8])
+    np.savetxt(tmp_path / "odd.csv", values, delimiter=",")
+    capsys.readouterr()
+    assert main(["model-errors", "--measured", str(tmp_path / "odd.csv"), "--processing", "upstream"]) == 0
+    [note] = capsys.readouterr().err.strip().splitlines()
+    assert "dq2 hardly follows the finite differences of q2" in note
+
+
+def test_a_coupled_dvrk_joint_without_its_effort_takes_its_partners_with_it(tmp_path, capsys):
+    """effort.outer_wrist_pitch all zero in a dVRK-name header: the coupling
+    mixed the zero into q6 and q7's model efforts (q5 relative 1.2, no note)."""
+    one = load_run(resolve_run("one"), PSM)
+    to_dvrk = PSM.motor_map
+    columns = {"position": to_dvrk.positions_to_dvrk(one.q), "velocity": to_dvrk.positions_to_dvrk(one.dq),
+               "effort": to_dvrk.efforts_to_dvrk(one.tau)}
+    columns["effort"][:, 4] = 0.0  # outer_wrist_pitch's effort not read
+    table = {f"{field}.{name}": columns[field][:, j] for field in columns for j, name in enumerate(PSM.dvrk_topics.joint_names)}
+    pd.DataFrame(table).to_csv(tmp_path / "dvrk_names.csv", index=False)
+    figures = cli_json(capsys, "model-errors", "--measured", str(tmp_path / "dvrk_names.csv"), "--processing", "upstream")
+    assert figures["rms"][4:] == [None] * 3 and all(v is not None for v in figures["rms"][:4]), figures["rms"]
+    whole = cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
+    assert np.allclose(figures["rms"][:4], whole["rms"][:4], rtol=1e-6)
 
 
 @needs_2018
@@ -440,7 +467,7 @@ def test_a_run_whose_sample_period_is_not_a_whole_number_of_steps_is_simulated(t
 
 def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
     """q4 held by its servo (encoder counts around 0.1 rad, a noisy velocity):
-    its velocity does not follow its positions, and the file is read."""
+    its velocity does not follow its positions, and the file is read without a note."""
     values = np.loadtxt(resolve_run("one"), delimiter=",")
     rng = np.random.default_rng(0)
     values[:, 3] = 0.1 + 1e-4 * np.round(rng.standard_normal(len(values)))
@@ -449,5 +476,5 @@ def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
     from dvrk_dart.io.measured_run import check_velocity_columns
 
     assert load_run(tmp_path / "held_q4.csv", PSM).measured[3] == "q4"
-    with pytest.raises(DvrkDartError, match="does not follow"):  # were it checked alone, it would be refused
-        check_velocity_columns(values[:, 3:4], values[:, 10:11], 200.0, "held_q4.csv")
+    [note] = check_velocity_columns(values[:, 3:4], values[:, 10:11], 200.0, "held_q4.csv")  # were it checked alone: a note
+    assert "hardly follows" in note

@@ -132,6 +132,18 @@ class IdentificationResult:
             notes += [f"{run.name}: {note}" for note in unrecorded_joint_notes(reference, run.processed, figures)]
         return notes
 
+    def params_file_warnings(self) -> list[str]:
+        """A fit of some joints without a prior: the inertia only the others'
+        efforts would determine comes out about zero, and params.json's
+        efforts on those joints rest on it (q2 alone: q3 off by 10 N on a
+        7-joint run; 0.56 N with --prior default, 0.19 published)."""
+        others = [name for j, name in enumerate(JOINT_NAMES) if j not in self.wls.joints]
+        if not others or self.config.prior != PRIOR_NONE:
+            return []
+        return [f"params.json is fitted on {', '.join(JOINT_NAMES[j] for j in self.wls.joints)} only: its efforts on "
+                f"{', '.join(others)} rest on the inertia these runs leave free, about zero with --prior none (the default); "
+                "--prior default keeps the published values there"]
+
     def overfit_warnings(self) -> list[str]:
         """A fitted joint whose held-out RMS is far above its training RMS: too little data for the parameters."""
         def pooled(runs):

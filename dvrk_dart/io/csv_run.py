@@ -191,8 +191,9 @@ class CsvValues:
     """A CSV's values in the model's coordinates: (N, 21) q, dq, tau (zeros where not measured)."""
 
     values: np.ndarray
-    measured: tuple[str, ...]
+    measured: tuple[str, ...]  # the joints the file has columns of
     rate_hz: float | None  # from the time column, None without one
+    constant_efforts: dict  # joint -> why its effort is not recorded (`_constant_efforts`)
 
 
 def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValues:
@@ -218,30 +219,42 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     if layout.time_column is not None and len(file_values) < MIN_TIME_ROWS:
         raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
-    return CsvValues(values, layout.joints, rate)
+    return CsvValues(values, layout.joints, rate, _constant_efforts(file_values, layout, _coupled_joints(motor_map)))
 
 
-def joints_with_efforts(values: np.ndarray, measured: tuple[str, ...], path: Path) -> tuple[str, ...]:
-    """`measured` less the joints whose effort column never changes ((N, 21)
-    values in the model's coordinates): columns a user padded to fit a layout
-    (all zero), or a logger that did not read the joint's effort. No current
-    sensor reads one value for a whole run; such a column set the periodic
-    band of every joint and gave figures against zero. Read as not recorded
-    (positions, if any, still drive the simulation)."""
-    column = {joint: values[:, [k * N_JOINTS + JOINT_NAMES.index(joint) for k in range(3)]] for joint in measured}
-    constant = [joint for joint in measured if np.ptp(column[joint][:, 2]) == 0.0]
-    if not constant:
-        return measured
-    if len(constant) == len(measured):
+def _constant_efforts(file_values: np.ndarray, layout: CsvLayout, coupled: tuple[int, ...]) -> dict[str, str]:
+    """The layout's joints whose effort column (in the file, before any
+    coupling) never changes, each with why: zeros padding a layout, or a
+    logger that did not read it. No current sensor reads one value for a whole
+    run; such a column set the periodic band of every joint and gave figures
+    against zero. A coupled dVRK joint's lost effort takes its partners' with it."""
+    column = {joint: file_values[:, [layout.columns[(field, joint)] for field in FIELDS]] for joint in layout.joints}
+    constant = {joint: "every value zero" if not column[joint].any() else "the effort never changes"
+                for joint in layout.joints if np.ptp(column[joint][:, 2]) == 0.0}
+    if layout.dvrk_names:
+        partners = [JOINT_NAMES[j] for j in coupled if JOINT_NAMES[j] in layout.joints]
+        lost = [joint for joint in partners if joint in constant]
+        constant.update({joint: f"coupled to {', '.join(lost)}, whose effort never changes" for joint in partners
+                         if lost and joint not in constant})
+    return constant
+
+
+def joints_with_efforts(read: CsvValues, path: Path, notes: list[str] = ()) -> tuple[str, ...]:
+    """The joints read as recorded: those whose effort changes
+    (`_constant_efforts`: the others are not recorded, positions kept), with
+    one note on stderr per file and process; `notes`: the loader's others."""
+    by_why: dict[str, list[str]] = {}
+    for joint, why in read.constant_efforts.items():
+        by_why.setdefault(why, []).append(joint)
+    said = [f"{', '.join(joints)}: {why}" for why, joints in by_why.items()]
+    if len(read.constant_efforts) == len(read.measured):
         raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
-    zero = [joint for joint in constant if not column[joint].any()]
-    said = [f"{', '.join(zero)}: every value zero"] if zero else []
-    said += [f"{', '.join(j for j in constant if j not in zero)}: the effort never changes"] if len(zero) < len(constant) else []
-    note = f"dvrk-dart: note: {path}: {'; '.join(said)}: read as not recorded"
-    if note not in _NOTES_SAID:  # a command may read a file more than once
-        _NOTES_SAID.add(note)
-        print(note, file=sys.stderr)
-    return tuple(joint for joint in measured if joint not in constant)
+    lines = [*notes] + ([f"{path}: {'; '.join(said)}: read as not recorded"] if said else [])
+    for line in lines:
+        if line not in _NOTES_SAID:  # a command may read a file more than once
+            _NOTES_SAID.add(line)
+            print(f"dvrk-dart: note: {line}", file=sys.stderr)
+    return tuple(joint for joint in read.measured if joint not in read.constant_efforts)
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:

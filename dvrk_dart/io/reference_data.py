@@ -250,8 +250,8 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     rate, source = rate_of(path, read.rate_hz, topics.rate_hz)
     check_glitches(values, rate, str(path))  # first: a jump in the positions also skews the rate's estimate
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
-    check_velocity_columns(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path))
-    measured = joints_with_efforts(values, read.measured, path)  # last: its note only for a file that loads
+    velocity_notes = check_velocity_columns(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path))
+    measured = joints_with_efforts(read, path, velocity_notes)  # last: notes only for a file that loads
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)
     return MeasuredRun(path=path, data=data, model=model, measured=measured)

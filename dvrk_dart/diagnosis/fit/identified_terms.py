@@ -14,6 +14,8 @@ the identified base, `--dynamics identified`'s physics); not with a baseline
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from dvrk_dart.model.identified import NON_INERTIAL_TERMS
@@ -22,30 +24,38 @@ from dvrk_dart.sim.config import SimConfig, simulated_terms
 
 
 def identified_terms_share(problem, selection, base_config: SimConfig) -> dict | None:
-    """diagnosis.json's `identified_terms`: share per joint (1 - |found -
-    identified|^2 / |found|^2 on the training runs), over the acted joints
-    (energy-weighted), or None where it does not apply."""
+    """diagnosis.json's `identified_terms`: per joint the share of the selected
+    effects' efforts on the training runs that the identified model's
+    left-out terms reproduce, the subset of them (each whole) that does it
+    best (1 - residual energy / energy), and their mean over the acted joints
+    (N and N·m not added together); None where it does not apply."""
     left_out = tuple(term for term in NON_INERTIAL_TERMS if term not in simulated_terms(base_config))
     if problem.has_baseline or not left_out or not selection.selected:
         return None
-    found, carried = [], []
+    found, terms = [], []
     for run, columns in zip(problem.train_runs, problem.train_columns):
         state = run.state
         effort = columns @ selection.final.beta
-        identified = state.in_band(problem.arm.identified.predict(state.q, state.dq, state.ddq, left_out))
+        each = [state.in_band(problem.arm.identified.predict(state.q, state.dq, state.ddq, (term,))) for term in left_out]
         demean = problem.demean_of(run)
         if demean is not None:  # a run's own constant is a nuisance: neither side keeps it
-            effort, identified = (x - demean * x.mean(axis=0) for x in (effort, identified))
+            effort, *each = (x - demean * x.mean(axis=0) for x in (effort, *each))
         found.append(effort)
-        carried.append(identified)
-    found, carried = np.vstack(found), np.vstack(carried)
+        terms.append(np.stack(each, axis=-1))
+    found, terms = np.vstack(found), np.vstack(terms)  # (N, 7), (N, 7, terms)
     acted = sorted({JOINT_NAMES.index(j) for i in selection.selected for j in problem.effects[i].joints} & set(np.flatnonzero(problem.recorded)))
-    energy, error = np.sum(found**2, axis=0), np.sum((found - carried) ** 2, axis=0)
-    by_joint = {JOINT_NAMES[j]: float(1.0 - error[j] / energy[j]) for j in acted if energy[j] > 0}
+    by_joint = {}
+    for j in acted:
+        energy = float(found[:, j] @ found[:, j])
+        if energy > 0:
+            # the subset of the terms, each whole, closest to what was found (an offset found where the
+            # model has an offset and a friction is its offset; half the model's offset is none of it)
+            residual = min(float(np.sum((found[:, j] - terms[:, j, :] @ np.array(chosen)) ** 2))
+                           for chosen in itertools.product((0.0, 1.0), repeat=terms.shape[2]))
+            by_joint[JOINT_NAMES[j]] = 1.0 - residual / energy
     if not by_joint:
         return None
-    joints = [JOINT_NAMES.index(name) for name in by_joint]
-    return {"share": float(1.0 - error[joints].sum() / energy[joints].sum()), "by_joint": by_joint,
-            "terms": list(left_out), "runs": "train",
-            "definition": "1 - |selected effects' efforts - the identified model's efforts of the terms the base simulation leaves out|^2 / |selected effects' efforts|^2, "
-                          "summed over the joints the selected effects act on, on the training runs"}
+    return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "terms": list(left_out), "runs": "train",
+            "definition": "per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
+                          "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on the training runs; "
+                          "`share`: their mean over the joints the selected effects act on (each joint in its own unit)"}
