@@ -201,7 +201,7 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
     for j, name in enumerate(JOINT_NAMES):
         inside, outside = summary["measured_inside_band_fraction"][j], summary["rms_measured_outside_band"][j]
         if inside is None:
-            print(f"{name:>6}  not measured (the run did not record {name}; the simulation held it)")
+            print(f"{name:>6}  not measured (the run did not record its effort)")
             continue
         print(f"{name:>6} {inside:7.3f} {outside:11.4f} {summary['effort_units'][j]:<4} {summary['nominal_model_inside_band_fraction'][j]:13.3f}")
     for name, error in summary["failed_samples"].items():

@@ -127,7 +127,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if periodic else ""))
         for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
             if r is None:
-                print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record {name})")
+                print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record its effort)")
                 continue
             cutoff = f" {result['joint_cutoffs'][j]:9d}" if periodic else ""
             why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"

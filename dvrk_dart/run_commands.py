@@ -58,7 +58,7 @@ def _print_effort_table(metrics: dict, dynamics: str | None, model) -> None:
     recorded = metrics.get("measured_joints") or list(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES[:len(metrics[columns[0][0]])]):
         if name not in recorded:
-            print(f"  {name:>6}  not measured (the run did not record {name}; the simulation held it)")
+            print(f"  {name:>6}  not measured (the run did not record its effort)")
             continue
         print(f"  {name:>6}  " + "  ".join(f"{metrics[key][j]:18.5f} {model.effort_unit(name):<3}" for key, _ in columns))
 
