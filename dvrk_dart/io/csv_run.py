@@ -239,22 +239,25 @@ def _constant_efforts(file_values: np.ndarray, layout: CsvLayout, coupled: tuple
     return constant
 
 
-def joints_with_efforts(read: CsvValues, path: Path, notes: list[str] = ()) -> tuple[str, ...]:
-    """The joints read as recorded: those whose effort changes
-    (`_constant_efforts`: the others are not recorded, positions kept), with
-    one note on stderr per file and process; `notes`: the loader's others."""
+def joints_with_efforts(read: CsvValues, path: Path) -> tuple[tuple[str, ...], list[str]]:
+    """(the joints read as recorded, the note on the others): those whose
+    effort never changes (`_constant_efforts`) are not recorded, positions kept."""
+    if len(read.constant_efforts) == len(read.measured):
+        raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
     by_why: dict[str, list[str]] = {}
     for joint, why in read.constant_efforts.items():
         by_why.setdefault(why, []).append(joint)
-    said = [f"{', '.join(joints)}: {why}" for why, joints in by_why.items()]
-    if len(read.constant_efforts) == len(read.measured):
-        raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
-    lines = [*notes] + ([f"{path}: {'; '.join(said)}: read as not recorded"] if said else [])
-    for line in lines:
-        if line not in _NOTES_SAID:  # a command may read a file more than once
-            _NOTES_SAID.add(line)
-            print(f"dvrk-dart: note: {line}", file=sys.stderr)
-    return tuple(joint for joint in read.measured if joint not in read.constant_efforts)
+    said = "; ".join(f"{', '.join(joints)}: {why}" for why, joints in by_why.items())
+    return (tuple(joint for joint in read.measured if joint not in read.constant_efforts),
+            [f"{path}: {said}: read as not recorded"] if said else [])
+
+
+def say_once(notes: list[str]) -> None:
+    """Notes on stderr, each once per process (a command may read a file more than once)."""
+    for note in notes:
+        if note not in _NOTES_SAID:
+            _NOTES_SAID.add(note)
+            print(f"dvrk-dart: note: {note}", file=sys.stderr)
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:
@@ -264,8 +267,7 @@ def _coupled_joints(motor_map) -> tuple[int, ...]:
 
 def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, path: Path) -> np.ndarray:
     """The dVRK's joint values -> the model's coordinates (the coupled columns need each other)."""
-    coupled = [JOINT_NAMES[i] for i in range(N_JOINTS)[motor_map.columns]] if isinstance(motor_map.columns, slice) \
-        else [JOINT_NAMES[i] for i in motor_map.columns]
+    coupled = [JOINT_NAMES[i] for i in _coupled_joints(motor_map)]
     present = [j for j in coupled if j in joints]
     if present and len(present) != len(coupled):
         raise DvrkDartError(f"{path}: the dVRK's {', '.join(present)} without the joints coupled to them: "
