@@ -182,10 +182,16 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
         return 0
     print(f"identified model's residual, {args.measured} vs {args.repeat} ({table['runs'][args.measured]['processing']} processing)")
     print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
-    noise = [f"{v:9.4f}" for v in table["noise_predicted_rms"]] if table["noise_predicted_rms"] else [f"{'-':>9}"] * len(JOINT_NAMES)
+    def cell(value) -> str:
+        return f"{'-':>9}" if value is None else f"{value:9.4f}"
+
+    noise = table["noise_predicted_rms"] or [None] * len(JOINT_NAMES)
     verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES):
-        print(f"{name:>6} {table['rms_difference'][j]:9.4f} {table['rms_difference_demeaned'][j]:9.4f} {noise[j]}  "
+        if table["rms_difference"][j] is None:
+            print(f"{name:>6} {'-':>9} {'-':>9} {'-':>9}  not measured (a run did not record its effort)")
+            continue
+        print(f"{name:>6} {cell(table['rms_difference'][j])} {cell(table['rms_difference_demeaned'][j])} {cell(noise[j])}  "
               f"{arm.model.effort_unit(name)}: {verdicts[j]}")
     return 0
 

@@ -326,7 +326,25 @@ def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
     one = load_run(resolve_run("one"), PSM)
     only_q2 = _write_header_csv(tmp_path / "only_q2.csv", one, _columns(2))
     line = _refusal(capsys, "session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight")
-    assert "--repeat one-no-weight: it records q1, q2, q3, q4, q5, q6, q7, the measured run q2" in line, line
+    assert "--repeat one-no-weight: its positions move q1, q2, q3, q4, q5, q6, q7, the measured run's q2" in line, line
+
+
+def test_a_session_floor_gives_no_figure_on_a_joint_without_its_effort(tmp_path, capsys):
+    """Two 3-joint logs of one trajectory (q1..q3 of "one" and "one-no-weight"):
+    q4..q7 got verdicts of 1e290 times the noise; and an effort missing in one
+    run, its positions there, is compared on the joints both recorded."""
+    for name in ("one", "one-no-weight"):
+        values = np.loadtxt(resolve_run(name), delimiter=",")
+        np.savetxt(tmp_path / f"{name}_9.csv", np.hstack([values[:, 0:3], values[:, 7:10], values[:, 14:17]]), delimiter=",")
+    three = cli_json(capsys, "session-floor", "--measured", str(tmp_path / "one_9.csv"), "--repeat", str(tmp_path / "one-no-weight_9.csv"))
+    whole = cli_json(capsys, "session-floor", "--measured", "one", "--repeat", "one-no-weight")
+    assert three["rms_difference"][3:] == [None] * 4 and three["verdict"][3:] == [None] * 4
+    assert np.allclose(three["rms_difference"][:3], whole["rms_difference"][:3], rtol=0.05), (three["rms_difference"], whole["rms_difference"])
+    values = np.loadtxt(resolve_run("one"), delimiter=",")
+    values[:, 17] = 0.0  # q4's effort not read
+    np.savetxt(tmp_path / "one_no_tau4.csv", values, delimiter=",")
+    partial = cli_json(capsys, "session-floor", "--measured", str(tmp_path / "one_no_tau4.csv"), "--repeat", "one-no-weight")
+    assert partial["rms_difference"][3] is None and all(v is not None for i, v in enumerate(partial["rms_difference"]) if i != 3)
 
 
 def test_a_still_arm_is_not_diagnosed(tmp_path, capsys):

@@ -28,8 +28,8 @@ import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import HarmonicSeries
-from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion
-from dvrk_dart.metrics import rms
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion, spanning_columns
+from dvrk_dart.metrics import per_measured_joint, rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -115,23 +115,28 @@ def floor_table(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> dict:
     """Per joint: the RMS difference of the residuals, the same after each run's
     mean, what the runs' noise predicts for it, and which it is."""
     difference = residual_difference(arm, a, b)
+    both = np.asarray(a.measured) & np.asarray(b.measured)  # no figure on a joint either run did not record
+
+    def figures(values) -> list:
+        return per_measured_joint(values, both)
+
     result = {
         "joints": list(JOINT_NAMES), "units": [arm.model.effort_unit(j) for j in JOINT_NAMES],
-        "rms_difference": rms(difference).tolist(),
-        "rms_difference_demeaned": rms(difference - difference.mean(axis=0)).tolist(),
+        "rms_difference": figures(rms(difference)),
+        "rms_difference_demeaned": figures(rms(difference - difference.mean(axis=0))),
         "noise_predicted_rms": None, "ratio_to_noise": None, "verdict": None,
         "noise_reason": "upstream processing measures no noise (use --processing periodic)",
     }
     if a.periodic is None:
         return result
     predicted = np.hypot(residual_noise(arm, a), residual_noise(arm, b))
-    demeaned = np.asarray(result["rms_difference_demeaned"])
+    demeaned = rms(difference - difference.mean(axis=0))
     ratio = demeaned / np.maximum(predicted, np.finfo(float).tiny)
-    moved_constant = np.asarray(result["rms_difference"]) ** 2 - demeaned**2 > predicted**2
+    moved_constant = rms(difference) ** 2 - demeaned**2 > predicted**2
     result.update({
-        "noise_predicted_rms": predicted.tolist(), "ratio_to_noise": ratio.tolist(),
+        "noise_predicted_rms": figures(predicted), "ratio_to_noise": figures(ratio),
         "noise_reason": "each run's effort noise (lines between harmonics) and its positions' noise through the model, in squares",
-        "verdict": [_verdict(r, m) for r, m in zip(ratio, moved_constant)],
+        "verdict": [_verdict(r, m) if on else None for r, m, on in zip(ratio, moved_constant, both)],
     })
     return result
 
@@ -146,11 +151,14 @@ def _verdict(ratio: float, moved_constant: bool) -> str:
 def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
     """Two recordings of one trajectory: the same period (periodic; the
     positions are compared at the best phase later) or the same motion
-    (upstream), with the same joints recorded (a joint one run holds at 0 would
-    read as a session change)."""
-    if not np.array_equal(a.measured, b.measured):
-        joints = [", ".join(n for n, on in zip(JOINT_NAMES, run.measured) if on) for run in (a, b)]
-        raise DvrkDartError(f"it records {joints[1]}, the measured run {joints[0]}: two sessions are compared on runs that record the same joints")
+    (upstream), with the same joints' positions (a joint one run holds at 0
+    would read as a session change); the efforts are compared on the joints
+    both recorded."""
+    moving = [spanning_columns(run.q) for run in (a, b)]
+    if not np.array_equal(*moving):
+        joints = [", ".join(n for n, on in zip(JOINT_NAMES, m) if on) for m in moving]
+        raise DvrkDartError(f"its positions move {joints[1]}, the measured run's {joints[0]}: two sessions are compared on "
+                            "runs that record the same joints' positions")
     if a.periodic is not None:
         pa, pb = a.periodic.period, b.periodic.period
         if abs(pa.period_s - pb.period_s) > SAME_PERIOD_FRACTION * pa.period_s:
