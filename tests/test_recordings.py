@@ -496,3 +496,15 @@ def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
     assert load_run(tmp_path / "held_q4.csv", PSM).measured[3] == "q4"
     [note] = check_velocity_columns(values[:, 3:4], values[:, 10:11], 200.0, "held_q4.csv")  # were it checked alone: a note
     assert "hardly follows" in note
+
+
+def test_a_diagnosis_gives_no_session_floor_on_a_joint_not_recorded(tmp_path):
+    """3-joint logs with a --repeat: diagnosis.json's session floor read 0.0 on q4..q7."""
+    from dvrk_dart.diagnosis.diagnose import diagnose
+
+    for name in ("one", "one-no-weight"):
+        values = np.loadtxt(resolve_run(name), delimiter=",")
+        np.savetxt(tmp_path / f"{name}_9.csv", np.hstack([values[:, 0:3], values[:, 7:10], values[:, 14:17]]), delimiter=",")
+    result = diagnose(str(tmp_path / "one_9.csv"), repeat=str(tmp_path / "one-no-weight_9.csv"), arm=PSM_ARM, max_effects=2,
+                      figures=False, profile_payload_mass=False)
+    assert result["session_floor"][3:] == [None] * 4 and all(v > 0 for v in result["session_floor"][:3]), result["session_floor"]

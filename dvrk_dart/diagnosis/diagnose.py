@@ -44,6 +44,7 @@ from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.metrics import per_measured_joint
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
@@ -296,7 +297,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         nuisance_offsets=_nuisance_report(problem, s),
         nuisance_offset_joints=None if offsets is None else {
             "joints": [j for j, on, seen in zip(JOINT_NAMES, offsets, recorded) if on and seen], "source": problem.offset_joints_source},
-        session_floor=floor.tolist() if floor is not None else None,
+        session_floor=per_measured_joint(floor, recorded) if floor is not None else None,  # none on a joint not recorded
         repeat=problem.repeat_run.name if problem.repeat_run is not None else None,
         repeat_source=problem.repeat_source,
         gap_split={"runs": "holdout" if holdout_runs else "train", "joints": split},
