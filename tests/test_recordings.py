@@ -499,7 +499,8 @@ def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
 
 
 def test_a_diagnosis_gives_no_session_floor_on_a_joint_not_recorded(tmp_path):
-    """3-joint logs with a --repeat: diagnosis.json's session floor read 0.0 on q4..q7."""
+    """3-joint logs with a --repeat: diagnosis.json's session floor, the effects'
+    explained fractions and the payload candidates' efforts read 0.0 on q4..q7."""
     from dvrk_dart.diagnosis.diagnose import diagnose
 
     for name in ("one", "one-no-weight"):
@@ -508,3 +509,7 @@ def test_a_diagnosis_gives_no_session_floor_on_a_joint_not_recorded(tmp_path):
     result = diagnose(str(tmp_path / "one_9.csv"), repeat=str(tmp_path / "one-no-weight_9.csv"), arm=PSM_ARM, max_effects=2,
                       figures=False, profile_payload_mass=False)
     assert result["session_floor"][3:] == [None] * 4 and all(v > 0 for v in result["session_floor"][:3]), result["session_floor"]
+    for effect in result["effects"]:  # nor an explained fraction (they read 0.0)
+        assert effect["explained_fraction_per_joint"]["cross_validated"][3:] == [None] * 4
+    for candidate in result["payload_candidates"]:
+        assert candidate["gravity_efforts_at_q0"][3:] == [None] * 4, candidate["gravity_efforts_at_q0"]

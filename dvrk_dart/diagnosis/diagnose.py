@@ -238,7 +238,10 @@ def _payload_candidates(problem: Problem, s: Selection) -> list[dict]:
     def by_fraction(candidate: dict) -> float:
         return -candidate["cross_validated_fraction"]
 
-    return sorted(points, key=by_fraction) + sorted(moments, key=by_fraction)
+    candidates = sorted(points, key=by_fraction) + sorted(moments, key=by_fraction)
+    for candidate in candidates:
+        _without_unrecorded_joints(candidate, problem.recorded)
+    return candidates
 
 
 #: why J1's payload effort at q = 0 is not determined when a run of another motion is fitted with the baseline
