@@ -136,7 +136,7 @@ class IdentificationResult:
         """A fit of some joints without a prior: the inertia only the others'
         efforts would determine comes out about zero, and params.json's
         efforts on those joints rest on it (q2 alone: q3 off by 10 N on a
-        7-joint run; 0.56 N with --prior default, 0.19 published)."""
+        7-joint run; 0.56 N with --prior default, 0.12 published)."""
         others = [name for j, name in enumerate(JOINT_NAMES) if j not in self.wls.joints]
         if not others or self.config.prior != PRIOR_NONE:
             return []
