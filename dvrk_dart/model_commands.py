@@ -39,7 +39,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     from dvrk_dart.io.signal import process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.identified import parse_terms
-    from dvrk_dart.model.unrecorded_joints import unrecorded_joint_notes
+    from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 
     terms = parse_terms(config.terms)
     design = read_design(config.excitation) if config.excitation else None

@@ -36,7 +36,7 @@ from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.parameters import load_parameters
-from dvrk_dart.model.unrecorded_joints import unrecorded_joint_notes
+from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 
 #: a held-out RMS this many times the training RMS on a fitted joint: the fit does not carry (too little data, or runs that differ)
 HOLDOUT_OVERFIT_RATIO = 2.0

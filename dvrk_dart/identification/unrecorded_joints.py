@@ -1,10 +1,11 @@
 """What holding a joint a log did not record may cost the others' figures
-(model-errors and identify say it; model/ layer: the identified model's efforts)."""
+(model-errors and identify say it, from the identified model's efforts)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from dvrk_dart.io.signal import spanning_columns
 from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -18,7 +19,7 @@ def unrecorded_joint_notes(identified: IdentifiedModel, processed, figures: np.n
     processed run (q, dq, ddq, measured)."""
     every = max(1, len(processed.q) // 200)  # the run's states, every ~0.5 % of it
     states = (processed.q[::every], processed.dq[::every], processed.ddq[::every])
-    positions_logged = np.ptp(processed.q, axis=0) > 0  # an effort not recorded, its joint's positions were
+    positions_logged = spanning_columns(processed.q)  # an effort not recorded, its joint's positions were
     model, notes = identified.model, []
     for j in np.flatnonzero(~np.asarray(processed.measured) & ~positions_logged):
         change = identified.held_joint_change(*states, j)
