@@ -17,6 +17,7 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
     own checks; one-line errors name the file."""
     import tomllib
 
+    argv = [part for token in argv for part in (token.split("=", 1) if token.startswith("--config=") else [token])]
     if "--config" not in argv or not argv or argv[0] not in CONFIG_COMMANDS:
         return argv
     at = argv.index("--config")
@@ -39,8 +40,8 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
                                                                f"takes a value, not {str(value).lower()}"))
         if option in OUTPUT_OPTIONS and not isinstance(value, str):
             raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
-        if option not in rest:
-            tokens += _tokens(option, value, path.parent)
+        if option not in {token.split("=", 1)[0] for token in rest}:  # the command line's own value wins, --opt=value too
+            tokens += _tokens(option, value, path)
     return [argv[0], *tokens, *rest[1:]]
 
 
@@ -53,11 +54,24 @@ def _option_actions(parser: argparse.ArgumentParser, command: str) -> dict[str, 
 OUTPUT_OPTIONS = ("--out", "--report")
 
 
-def _tokens(option: str, value, folder: Path) -> list[str]:
+#: file names a value with one of these endings, or with a folder in it, is a path (else a name such as 'one')
+PATH_SUFFIXES = (".csv", ".bag", ".mcap", ".db3", ".json", ".toml", ".txt")
+
+
+def _tokens(option: str, value, config: Path) -> list[str]:
     """An option's command-line tokens from a TOML value (a flag from a boolean; a path relative to the config
-    file: an output folder always, another value where that file exists, else a run name such as 'one')."""
+    file: an output folder always, another value where that file exists, else a run name such as 'one'; a value
+    that reads as a path but is not beside the config file is an error, never a file of the current folder)."""
     if isinstance(value, bool):
         return [option] if value else []
-    values = value if isinstance(value, list) else [value]
-    return [option, *(str(folder / v) if isinstance(v, str) and (option in OUTPUT_OPTIONS or (folder / v).exists()) else str(v)
-                      for v in values)]
+    folder = config.parent
+    tokens = [option]
+    for v in value if isinstance(value, list) else [value]:
+        if isinstance(v, str) and (option in OUTPUT_OPTIONS or (folder / v).exists()):
+            tokens.append(str(folder / v))
+        elif isinstance(v, str) and ("/" in v or v.lower().endswith(PATH_SUFFIXES)) and not Path(v).is_absolute():
+            raise DvrkDartError(f"--config {config}: {option.removeprefix('--')} = {v!r}: no such file beside the config file "
+                                "(a relative path is read from the config file's folder)")
+        else:
+            tokens.append(str(v))
+    return tokens

@@ -18,7 +18,7 @@ from dvrk_dart.io.excitation_design import read_design
 from dvrk_dart.io.force_log import force_table, write_force_logs
 from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
-from dvrk_dart.io.signal import ProcessedRun, process, process_all
+from dvrk_dart.io.signal import ProcessedRun, chosen_because, process, process_all
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -41,13 +41,11 @@ def processed_run(config: ForceConfig, model: PsmModel) -> tuple[ProcessedRun, s
     --dynamics file or the default choose, and why."""
     run = load_run(resolve_run(config.measured), model, config.topics)
     design = read_design(config.excitation) if config.excitation else None
-    if config.processing is not None:
-        return process(run, config.processing, design=design), f"--processing {config.processing}"
     recorded = recorded_processing(config.dynamics)
-    if recorded is not None:
+    if recorded is not None and config.processing is None and design is None:
         return process(run, *recorded), f"the one {config.dynamics} was fitted on"
-    [state], note = process_all([run], None, design)
-    return state, note or "the default: the run is a periodic excitation"
+    [state], note = process_all([run], config.processing, design)  # refuses --excitation with upstream
+    return state, chosen_because(config.processing, config.excitation, None, note)
 
 
 def model_efforts(arm: Arm, config: ForceConfig, state: ProcessedRun) -> np.ndarray:
@@ -85,7 +83,8 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
         "definition": "F = J^-T (tau_measured - tau_model) over the point's joints, base frame; a direction whose lever "
                       "(singular value of J) is under min_lever_m is not determined (NaN in force.csv); the figures are "
                       "over the determined samples, *_all_samples_* over every sample",
-        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics)},
+        "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics),
+                   **({"excitation": file_record(Path(config.excitation))} if config.excitation else {})},
         "params": file_record(arm.params.source), "versions": software_versions(),
     }
     if out_dir is not None:

@@ -36,7 +36,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     from dvrk_dart.io.excitation_design import read_design
     from dvrk_dart.io.provenance import file_record
     from dvrk_dart.io.reference_data import load_run, resolve_run
-    from dvrk_dart.io.signal import process_all
+    from dvrk_dart.io.signal import chosen_because, process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.identified import parse_terms
     from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
@@ -45,8 +45,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     design = read_design(config.excitation) if config.excitation else None
     [processed], note = process_all([load_run(resolve_run(config.measured), arm.model, config.topics)], config.processing, design,
                                     config.harmonics)
-    why = f"--processing {config.processing}" if config.processing else \
-        f"--harmonics {config.harmonics}" if config.harmonics else (note or "the default: the run is a periodic excitation")
+    why = chosen_because(config.processing, config.excitation, config.harmonics, note)
     with np.errstate(over="ignore", invalid="ignore"):
         predicted = processed.in_band(arm.identified.predict(processed.q, processed.dq, processed.ddq, terms))
         sane = np.all(np.isfinite(predicted)) and np.all(np.isfinite(rms(predicted - processed.tau)))

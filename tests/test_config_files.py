@@ -51,3 +51,23 @@ def test_a_boolean_for_an_option_that_takes_a_value_is_one_line(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "reversal_velocity takes a value, not true" in err[0] and str(config) in err[0], err
     assert not (tmp_path / "never").exists()
+
+
+def test_config_with_an_equals_sign_is_read_and_a_path_not_beside_it_is_refused(tmp_path, capsys, monkeypatch):
+    """`--config=FILE` was ignored (the whole 30 s replayed); a relative file
+    missing beside the config file was read from the current folder instead."""
+    config = tmp_path / "replay.toml"
+    config.write_text('measured = "two"\nprocessing = "upstream"\nduration = 0.3\nmode = "velocity"\n')
+    out = tmp_path / "run"
+    assert main(["replay", f"--config={config}", "--out", str(out)]) == 0
+    assert json.loads((out / "config.json").read_text())["run_config"]["duration_s"] == 0.3
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / "data").mkdir(parents=True)
+    (elsewhere / "data" / "run.csv").write_text("0\n")
+    monkeypatch.chdir(elsewhere)
+    config.write_text('measured = "data/run.csv"\n')
+    capsys.readouterr()
+    assert main(["replay", "--config", str(config), "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such file beside the config file" in err[0] and str(config) in err[0], err
+    assert not (tmp_path / "never").exists()

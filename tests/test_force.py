@@ -89,3 +89,18 @@ def test_the_mtm_handle_force(tmp_path):
     assert main(["force", "--arm-model", "mtm", "--measured", "mtm-two", "--out", str(tmp_path / "mtm")]) == 0
     summary = json.loads((tmp_path / "mtm" / "force.json").read_text())
     assert summary["point_link"] == "wrist_platform" and 0.0 < summary["rms_n"] < 10.0
+
+
+def test_force_with_an_excitation_is_periodic_says_so_and_records_the_file(tmp_path, capsys):
+    """`--excitation` with `--processing upstream` ran and ignored the file; the file was not recorded."""
+    from test_recordings import DATA_2018
+
+    excitation = str(DATA_2018 / "psm1_fourier_test2_commanded.csv")
+    assert main(["force", "--measured", "2018-test2", "--excitation", excitation, "--processing", "upstream",
+                 "--out", str(tmp_path / "up")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--excitation" in err[0] and "upstream" in err[0] and not (tmp_path / "up").exists(), err
+    assert main(["force", "--measured", "2018-test2", "--excitation", excitation, "--out", str(tmp_path / "f")]) == 0
+    summary = json.loads((tmp_path / "f" / "force.json").read_text())
+    assert summary["processing"] == "periodic" and summary["chosen_because"].startswith("--excitation")
+    assert summary["inputs"]["excitation"]["path"] == excitation and len(summary["inputs"]["excitation"]["sha256"]) == 64

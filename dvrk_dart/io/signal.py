@@ -200,6 +200,17 @@ def process_all(runs: list[MeasuredRun], processing: str | None, design=None,
         return [process(run) for run in runs], f"upstream processing: {not_periodic_reason(exc)}"
 
 
+def chosen_because(processing: str | None, excitation=None, harmonics: int | None = None, note: str | None = None) -> str:
+    """Why a run went through its processing (`process_all`'s choice), in the options' words."""
+    if processing is not None:
+        return f"--processing {processing}"
+    if excitation is not None:
+        return f"--excitation {excitation}: the design sets the periodic band"
+    if harmonics is not None:
+        return f"--harmonics {harmonics}"
+    return note or "the default: the run is a periodic excitation"
+
+
 def not_periodic_reason(exc: DvrkDartError) -> str:
     """Why a run was read upstream by default: the periodic layer's refusal,
     without the option the user did not give."""
