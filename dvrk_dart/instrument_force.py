@@ -77,6 +77,7 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
     every_sample = estimate_force_all(arm, state.q, gap)
     summary = {
         "measured": run_label(config.measured), "dynamics": config.dynamics, "processing": state.processing, "chosen_because": why,
+        **{k: v for k, v in state.summary().items() if k == "rate_note"},
         "point": point.name, "point_link": arm.model.links[point.link].name, "min_lever_m": point.min_lever_m,
         **estimate.summary(), "rms_all_samples_n": every_sample["rms_n"], "p95_all_samples_n": every_sample["p95_n"],
         "rms_per_axis_all_samples_n": every_sample["rms_per_axis_n"],
@@ -117,6 +118,8 @@ def print_force_summary(s: dict) -> None:
     """What `dvrk-dart force` prints: the figures of force.json with their units."""
     print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}, parameters {s['params']['path']}), "
           f"{s['processing']} processing ({s['chosen_because']})")
+    if s.get("rate_note"):
+        print(f"  note: {s['rate_note']}")
     if s["rms_n"] is None:
         print(f"  not determined on any sample: the lever arm stays under {s['min_lever_m']} m")
         return

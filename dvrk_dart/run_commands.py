@@ -4,7 +4,6 @@ with their run configuration and printout (the parser is cli_parser.py)."""
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -71,20 +70,21 @@ def _run_and_write(config, out: Path | None) -> int:
     out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
     arm = arm_of_run(config)
     record = run(config, arm)
-    write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     metrics = record.metrics
+    if "error" in metrics:  # a run that stopped is no result: nothing written (validate's campaign keeps its logs, marked)
+        raise DvrkDartError(f"{record.name}: {metrics['error']}; nothing written to {out_dir}")
+    write_run_folder(record, out_dir, arm.model, inputs_fingerprint(config, code_fingerprint()))
     measured = metrics.get("measured_samples")
     logged = metrics.get("samples") or 0
     of_measured = (f" (of the measured run's {measured}: the simulation ends at the last)" if measured == logged + 1
                    else f" logged, at the measured run's {measured} samples compared" if measured else "")
     print(f"{record.name}: {logged} samples{of_measured}, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
+    if metrics.get("rate_note"):
+        print(f"note: {metrics['rate_note']}")
     _print_effort_table(metrics, config.dynamics, arm.model)
     for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
         if metrics.get(key) is not None:
             print(f"  {key}: {float(np.max(metrics[key])):.3g} {unit}")
-    if "error" in metrics:
-        print(f"dvrk-dart: {metrics['error']} (logged up to there in {out_dir})", file=sys.stderr)
-        return 2
     return 0
 
 

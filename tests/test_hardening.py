@@ -120,11 +120,19 @@ def test_a_divergence_at_the_first_step_says_why_and_keeps_strict_json(tmp_path,
         values[:, 0] = 1.599
         values[:, 7] = 50.0
 
+    from dvrk_dart.runs.campaign import write_run_folder
+    from dvrk_dart.runs.config import RunConfig
+    from dvrk_dart.runs.runner import run
+
     bad = measured_csv(tmp_path, "fling.csv", fling)
     out = tmp_path / "X"
     # upstream: the raw velocity column drives the replay (the periodic layer would smooth the fling away)
     code, lines = cli(capsys, "replay", "--measured", bad, "--out", out, "--processing", "upstream")
-    assert_one_line_error(code, lines, "step 1", "joint q1 at 1.6", "outside its range [-1.6, 1.6]")
+    assert_one_line_error(code, lines, "step 1", "joint q1 at 1.6", "outside its range [-1.6, 1.6]", "nothing written")
+    assert not out.exists()  # a run that stopped is no result
+    # validate's campaign keeps what was logged up to the divergence, as strict JSON
+    record = run(RunConfig("replay", "velocity", measured=str(bad), processing="upstream"), PSM_ARM)
+    write_run_folder(record, out, PSM_ARM.model)
     metrics = json.loads((out / "metrics.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in metrics.json"))
     assert "step 1" in metrics["error"] and metrics["samples"] == 0
     assert (out / "config.json").is_file()
@@ -397,3 +405,10 @@ def test_a_user_named_copy_of_a_campaign_run_is_left_out_and_listed(tmp_path, ca
     assert code == 0
     page = (tmp_path / "site" / "index.html").read_text()
     assert f"mine: holds the run {name}, as {runs / name} does: left out" in page
+
+
+def test_a_cartesian_run_longer_than_its_scenario_is_refused(tmp_path, capsys):
+    """`run rectilinear --duration 12` drew the 10 s line on to 0.108 m and named it first-12s."""
+    code, lines = cli(capsys, "run", "rectilinear", "--duration", "12", "--out", tmp_path / "d12")
+    assert_one_line_error(code, lines, "--duration 12", "rectilinear lasts 10 s")
+    assert not (tmp_path / "d12").exists()

@@ -108,6 +108,8 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     _check_scenario_options(scenario, mode, counterweight, arm)
     sim_config = sim_config_for(config)
     duration = config.duration_s or scenario.duration_s
+    if scenario.kind != "replay" and duration > scenario.duration_s:  # the path would go on past its end
+        raise DvrkDartError(f"--duration {duration:g}: the scenario {scenario.name} lasts {scenario.duration_s:g} s")
     start = time.perf_counter()
     if scenario.kind == "replay":
         from dvrk_dart.runs.replay import replay
