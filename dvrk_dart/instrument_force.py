@@ -61,7 +61,8 @@ def model_config(dynamics: str) -> SimConfig:
     try:
         return SimConfig.from_dict(json.loads(Path(dynamics).read_text(encoding="utf-8"))["sim_config"])
     except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise DvrkDartError(f"--dynamics: {dynamics}: not a diagnosis.json or one_configuration.json ({type(exc).__name__})") from None
+        why = str(exc) if isinstance(exc, ValueError) and str(exc).startswith("sim_config") else type(exc).__name__
+        raise DvrkDartError(f"--dynamics: {dynamics}: not a diagnosis.json or one_configuration.json ({why})") from None
 
 
 def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:

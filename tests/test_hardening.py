@@ -412,3 +412,19 @@ def test_a_cartesian_run_longer_than_its_scenario_is_refused(tmp_path, capsys):
     code, lines = cli(capsys, "run", "rectilinear", "--duration", "12", "--out", tmp_path / "d12")
     assert_one_line_error(code, lines, "--duration 12", "rectilinear lasts 10 s")
     assert not (tmp_path / "d12").exists()
+
+
+def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
+    """"friction": "false" switched friction on; a 3-angle tilt and a string limit ended in tracebacks."""
+    for sim_config, words in (({"friction": "false"}, "sim_config.friction: true or false"),
+                              ({"gravity_tilt_rad": [1, 2, 3]}, "sim_config.gravity_tilt_rad: a list of 2 numbers"),
+                              ({"closure_residual_limit_m": "x"}, "sim_config.closure_residual_limit_m: finite numbers"),
+                              ({"dt_s": -0.001}, "sim_config.dt_s: above zero"),
+                              ({"extra": {"coulomb": [0.1] * 6}}, "sim_config.extra.coulomb: a list of 7 numbers"),
+                              ({"bogus": 1}, "unknown key 'bogus'")):
+        dynamics = tmp_path / "d.json"
+        dynamics.write_text(json.dumps({"sim_config": sim_config}))
+        for command in (["replay", "--duration", "0.2"], ["force"]):
+            code, lines = cli(capsys, *command, "--measured", "two", "--dynamics", dynamics, "--out", tmp_path / "never")
+            assert_one_line_error(code, lines, "d.json", words)
+            assert not (tmp_path / "never").exists()

@@ -103,14 +103,69 @@ class SimConfig:
 
     @classmethod
     def from_dict(cls, raw: dict) -> "SimConfig":
-        """The inverse of to_dict (JSON lists back to tuples and dataclasses)."""
+        """The inverse of to_dict (JSON lists back to tuples and dataclasses); a
+        value of the wrong type or length is a ValueError naming its key (a hand-written
+        file's "friction": "false" switched friction on)."""
+        if not isinstance(raw, dict):
+            raise ValueError("sim_config: not an object")
         raw = dict(raw)
-        raw["extra"] = JointEffects(**{k: tuple(tuple(x) if isinstance(x, list) else x for x in v) for k, v in raw.get("extra", {}).items()})
-        raw["payloads"] = tuple(Payload(p["link"], p["mass_kg"], tuple(p["position_m"])) for p in raw.get("payloads", []))
-        raw["gravity_tilt_rad"] = tuple(raw.get("gravity_tilt_rad", cls.gravity_tilt_rad))
+        unknown = set(raw) - {f.name for f in fields(cls)}
+        if unknown:
+            raise ValueError(f"sim_config: unknown key {sorted(unknown)[0]!r}")
+        for name in ("friction", "offsets", "spring", "motor_inertia"):
+            if not isinstance(raw.get(name, False), bool):
+                raise ValueError(f"sim_config.{name}: true or false, not {raw[name]!r}")
+        if raw.get("counterweight", "on") not in COUNTERWEIGHT_VARIANTS:
+            raise ValueError(f"sim_config.counterweight: one of {', '.join(COUNTERWEIGHT_VARIANTS)}, not {raw['counterweight']!r}")
+        for name in ("dt_s", "closure_residual_limit_m"):
+            if not _numbers(raw.get(name, 1.0), f"sim_config.{name}", None) > 0.0:
+                raise ValueError(f"sim_config.{name}: above zero, not {raw[name]!r}")
+        raw["extra"] = _joint_effects(raw.get("extra", {}))
+        raw["payloads"] = tuple(_payload(p, i) for i, p in enumerate(_numbers_list(raw.get("payloads", []), "sim_config.payloads")))
+        raw["gravity_tilt_rad"] = _numbers(raw.get("gravity_tilt_rad", cls.gravity_tilt_rad), "sim_config.gravity_tilt_rad", 2)
         pid = raw.get("counterweight_pid")
-        raw["counterweight_pid"] = None if pid is None else tuple(pid)
+        raw["counterweight_pid"] = None if pid is None else _numbers(pid, "sim_config.counterweight_pid", 3)
         return cls(**raw)
+
+
+def _numbers_list(value, key: str) -> list:
+    if not isinstance(value, list):
+        raise ValueError(f"{key}: a list, not {value!r}")
+    return value
+
+
+def _numbers(value, key: str, length: int | None):
+    """A number (length None) or a tuple of `length` numbers (any length: 0), checked."""
+    values = value if length is not None else [value]
+    if length is not None and (not isinstance(value, (list, tuple)) or (length and len(value) != length)):
+        raise ValueError(f"{key}: a list of {length or 'some'} numbers, not {value!r}")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
+        raise ValueError(f"{key}: finite numbers only, not {value!r}")
+    return tuple(float(v) for v in values) if length is not None else float(value)
+
+
+def _joint_effects(raw) -> JointEffects:
+    if not isinstance(raw, dict):
+        raise ValueError(f"sim_config.extra: an object, not {raw!r}")
+    kinds = {f.name: f.default for f in fields(JointEffects)}
+    checked = {}
+    for name, value in raw.items():
+        if name not in kinds:
+            raise ValueError(f"sim_config.extra: unknown key {name!r}")
+        key = f"sim_config.extra.{name}"
+        checked[name] = (tuple(_numbers(entry, key, 0) for entry in _numbers_list(value, key)) if kinds[name] == ()
+                         else _numbers(value, key, len(kinds[name])))
+    return JointEffects(**checked)
+
+
+def _payload(raw, index: int) -> Payload:
+    key = f"sim_config.payloads[{index}]"
+    if not isinstance(raw, dict) or set(raw) != {"link", "mass_kg", "position_m"} or not isinstance(raw["link"], int):
+        raise ValueError(f"{key}: an object of link (an integer), mass_kg and position_m")
+    mass = _numbers(raw["mass_kg"], f"{key}.mass_kg", None)
+    if mass < 0.0:
+        raise ValueError(f"{key}.mass_kg: a mass is not negative ({mass:g})")
+    return Payload(raw["link"], mass, _numbers(raw["position_m"], f"{key}.position_m", 3))
 
 
 #: every identified term simulated as physics (the realistic arm, `--dynamics identified`)
