@@ -4,6 +4,7 @@ measured run in it."""
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from dvrk_dart.cli import main
@@ -64,6 +65,8 @@ def test_a_three_joint_run_has_no_band_figure_on_the_joints_it_did_not_record(tm
                 "nominal_model_inside_band_fraction", "band_width_rms"):
         assert summary[key][3:] == [None] * 4 and all(v is not None for v in summary[key][:3]), key
     assert capsys.readouterr().out.count("not measured") == 4
+    band = pd.read_csv(out / "band.csv")  # its measured columns read 0.0 on q4..q7
+    assert band[[f"q{j}_measured" for j in range(4, 8)]].isna().all().all() and band["q3_measured"].notna().all()
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -160,7 +160,7 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "wall_time_s": time.perf_counter() - start,
         }
         write_json_atomic(folder / "uncertainty.json", summary)
-        _write_band_csv(folder / "band.csv", nominal, low, high)
+        _write_band_csv(folder / "band.csv", nominal, low, high, recorded)
         plot_bands(folder / "band.csv", folder / "figures", arm.model, tuple(j for j, on in zip(JOINT_NAMES[:3], recorded) if on))
     return summary
 
@@ -182,10 +182,12 @@ def _replayed_samples(config: UncertaintyConfig, paths: list[Path], processing: 
     return results["nominal.json"], sims, failures
 
 
-def _write_band_csv(path: Path, nominal: dict, low: np.ndarray, high: np.ndarray) -> None:
+def _write_band_csv(path: Path, nominal: dict, low: np.ndarray, high: np.ndarray, recorded: np.ndarray) -> None:
+    """The band per joint; a joint the run did not record has an empty measured column (it read 0.0)."""
     columns = {"t": nominal["t"]}
     for j, name in enumerate(JOINT_NAMES):
-        columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": nominal["measured"][:, j],
+        measured = nominal["measured"][:, j] if recorded[j] else np.full(len(nominal["t"]), np.nan)
+        columns |= {f"{name}_band_low": low[:, j], f"{name}_band_high": high[:, j], f"{name}_measured": measured,
                     f"{name}_nominal_sim": nominal["sim"][:, j], f"{name}_nominal_model": nominal["model"][:, j]}
     pd.DataFrame(columns).to_csv(path, index=False)
 
