@@ -79,8 +79,9 @@ def _run_and_write(config, out: Path | None) -> int:
     of_measured = (f" (of the measured run's {measured}: the simulation ends at the last)" if measured == logged + 1
                    else f" logged, at the measured run's {measured} samples compared" if measured else "")
     print(f"{record.name}: {logged} samples{of_measured}, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
-    if metrics.get("rate_note"):
-        print(f"note: {metrics['rate_note']}")
+    for note in [metrics.get("rate_note"), *metrics.get("unrecorded_joint_notes", [])]:
+        if note:
+            print(f"note: {note}")
     _print_effort_table(metrics, config.dynamics, arm.model)
     for key, unit in (("tracking_rms_position", "m"), ("tracking_rms_orientation", "rad")):
         if metrics.get(key) is not None:

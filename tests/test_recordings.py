@@ -107,6 +107,18 @@ def test_a_header_names_any_subset_of_joints(tmp_path):
     assert np.allclose(run.q[:, :2], half.q[:, :2]) and not run.q[:, 2:].any() and not run.tau[:, 2:].any()
 
 
+def test_a_replay_says_what_a_joint_held_at_zero_costs_the_others(tmp_path, capsys):
+    """q1, q2 of "two" without q3: the replay printed q1/q2 figures three times the
+    full file's with no word (model-errors said it)."""
+    two = load_run(resolve_run("two"), PSM)
+    path = _write_header_csv(tmp_path / "two_q1q2.csv", two, ["q1", "q2", "dq1", "dq2", "tau1", "tau2"])
+    assert main(["replay", "--measured", str(path), "--duration", "2", "--out", str(tmp_path / "r")]) == 0
+    note = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("note: q3 is not recorded"))
+    assert "held at 0 m" in note and "q1" in note
+    metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert metrics["unrecorded_joint_notes"] == [note.removeprefix("note: ")]
+
+
 def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):
     """t, q1, dq1, tau1 of 10 s of a real 2018 run: q3 held at its lower limit
     (0) is no divergence (it stopped the diagnosis at 1e-13 m past it), and the
