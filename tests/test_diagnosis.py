@@ -535,11 +535,11 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     sentence = answer_sentence(result)
     assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
     assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
-    # q3: 1 - (0.18^2 - 0.05^2) / (0.65^2 - 0.05^2) of the repeatable gap removed
-    assert "q3 93% of that gap above the session floor" in sentence
-    assert "above the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
+    # q3: 1 - sqrt(0.18^2 - 0.05^2) / sqrt(0.65^2 - 0.05^2) of the gap above the floor removed (the words' measure)
+    assert "q3 73% of that gap above the session floor" in sentence
+    assert "over 1.5x the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
     result["session_floor"] = [0.06, 0.1, 0.15]
-    assert "at the session floor" in answer_sentence(result)
+    assert "within 1.5x the session floor" in answer_sentence(result)
 
 
 def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():

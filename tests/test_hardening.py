@@ -428,3 +428,12 @@ def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
             code, lines = cli(capsys, *command, "--measured", "two", "--dynamics", dynamics, "--out", tmp_path / "never")
             assert_one_line_error(code, lines, "d.json", words)
             assert not (tmp_path / "never").exists()
+
+
+def test_a_sim_config_reads_back_from_memory_and_from_json():
+    from dvrk_dart.sim.config import JointEffects, Payload, SimConfig
+
+    config = SimConfig(extra=JointEffects(position_friction=((2, 1e-4, 0.0, 0.1, 1.0, 2.0),)), payloads=(Payload(2, 0.1, (0.0, 0.0, 0.0)),),
+                       counterweight_pid=(1.0, 2.0, 3.0))
+    assert SimConfig.from_dict(config.to_dict()) == config
+    assert SimConfig.from_dict(json.loads(json.dumps(config.to_dict()))) == config

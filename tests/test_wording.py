@@ -104,3 +104,32 @@ def test_a_payload_size_whose_interval_holds_zero_is_not_a_size():
     assert effort_at_zero_words(efforts, units, spans_zero) == ", size not determined: no gravity effort at q = 0 is told from zero"
     assert effort_at_zero_words(efforts, units, [[-0.009, -0.002], *spans_zero[1:]]) == ", -0.0057 N·m on q1 at q = 0"
     assert effort_at_zero_words(efforts, units) == ", -0.0057 N·m on q1 at q = 0"  # no intervals (no baseline): the fit's value
+
+
+def test_above_a_session_floor_the_words_weigh_the_gap_above_it():
+    """The 105 g payload with --repeat: J1..J3's gap above the floor mostly removed, the wrist's gap at its
+    floor; a time shift acting on every joint brought the wrist into the average and the answer read 'not explained'."""
+    before, after = [0.087, 0.135, 0.090, 0.02, 0.02, 0.02, 0.02], [0.060, 0.070, 0.075, 0.02, 0.02, 0.02, 0.02]
+    floor = [0.05, 0.07, 0.07, 0.03, 0.03, 0.03, 0.03]
+    entries = [{"name": "time_shift", "joints": JOINTS, "selected": True}]
+    plain = explanation({"train": before}, {"train": after}, JOINTS, entries)
+    above = explanation({"train": before}, {"train": after}, JOINTS, entries, floor)
+    assert plain["words"] == "not explained" and above["words"] == "mostly explained", (plain, above)
+    assert above["joints"] == ["q1", "q2", "q3"] and above["above_session_floor"]
+    assert above["by_joint"]["q2"]["removed_share"] == pytest.approx(1.0)  # J2's gap left is at its floor
+
+
+def test_with_a_baseline_the_finding_leads_and_a_mass_that_may_be_none_is_no_size():
+    """A payload fitted beside a baseline of another motion came last in the answer, after the model
+    errors the runs share (friction of q7 led); a mass at the hand position with an interval holding zero was quoted."""
+    result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.1], ["q2"])
+    result["effects"][0]["role"] = "common_model_error"
+    result["effects"].append({"name": "payload_on_pitch", "kind": "payload", "joints": ["q1", "q2"], "selected": True, "role": "finding"})
+    result["selection"]["selected"] = ["friction_q2", "payload_on_pitch"]
+    result["payload"] = {"link": "pitch", "group": "parallelogram",
+                         "payload_at": {"mass_kg": 0.044, "mass_kg_interval": [-0.27, 0.36]}}
+    sentence = answer_sentence(result)
+    assert "by a payload on pitch (parallelogram, its mass at the hand position not determined" in sentence, sentence
+    assert "with 1 more effect (friction_q2)" in sentence and "0.044" not in sentence
+    result["payload"]["payload_at"]["mass_kg_interval"] = [0.02, 0.07]
+    assert "0.044 kg at the hand position" in answer_sentence(result)

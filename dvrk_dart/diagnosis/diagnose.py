@@ -332,7 +332,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         gravity_mismatch=mismatch,
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
-        explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")]),
+        explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")],
+                                per_measured_joint(floor, recorded) if floor is not None else None),
         identified_terms=carried,
     )
 

@@ -129,7 +129,7 @@ class SimConfig:
 
 
 def _numbers_list(value, key: str) -> list:
-    if not isinstance(value, list):
+    if not isinstance(value, (list, tuple)):  # a JSON list, or to_dict's tuple
         raise ValueError(f"{key}: a list, not {value!r}")
     return value
 
@@ -160,7 +160,7 @@ def _joint_effects(raw) -> JointEffects:
 
 def _payload(raw, index: int) -> Payload:
     key = f"sim_config.payloads[{index}]"
-    if not isinstance(raw, dict) or set(raw) != {"link", "mass_kg", "position_m"} or not isinstance(raw["link"], int):
+    if not isinstance(raw, dict) or set(raw) != {"link", "mass_kg", "position_m"} or isinstance(raw["link"], bool) or not isinstance(raw["link"], int):
         raise ValueError(f"{key}: an object of link (an integer), mass_kg and position_m")
     mass = _numbers(raw["mass_kg"], f"{key}.mass_kg", None)
     if mass < 0.0:

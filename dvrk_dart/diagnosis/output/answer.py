@@ -5,11 +5,9 @@ a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, words_for
+from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, share_above_floor, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -88,6 +86,9 @@ def _payload_size_words(payload: dict, units: list[str]) -> str:
     when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
     at = payload.get("payload_at") or {}
     if at.get("mass_kg") is not None:
+        interval = at.get("mass_kg_interval")
+        if interval is not None and not interval[0] > 0.0:  # a mass that may be none is no size
+            return f", its mass at the hand position not determined (interval {interval[0]:.3g} to {interval[1]:.3g} kg)"
         return f", {at['mass_kg']:.3g} kg at the hand position"
     if payload.get("mass_identified") and payload.get("mass_kg") is not None:
         return f", {payload['mass_kg']:.3g} kg"
@@ -95,11 +96,10 @@ def _payload_size_words(payload: dict, units: list[str]) -> str:
 
 
 def _row_share(split_row: dict) -> float | None:
-    """repeatable_share of a row of diagnosis.json's gap_split (None without a floor)."""
+    """The rule's share above the floor of a row of diagnosis.json's gap_split (None without a floor, or nothing above it)."""
     if split_row.get("session_floor") is None:
         return None
-    share = float(repeatable_share(split_row["before"], split_row["after"], split_row["session_floor"]))
-    return None if math.isnan(share) else share
+    return share_above_floor(split_row["before"], split_row["after"], split_row["session_floor"])
 
 
 def _main_joints(recorded: list[int]) -> list[int]:
@@ -136,8 +136,10 @@ def answer_sentence(result: dict) -> str:
     shown = _main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
-    selected = list(result["selection"]["selected"])
     entries = {e["name"]: e for e in result.get("effects", [])}
+    # with a baseline the findings (what the runs have and the baseline lacks) lead; the model errors the
+    # runs share with their baseline follow (a friction on q7 led a payload study's answer)
+    selected = sorted(result["selection"]["selected"], key=lambda n: (entries.get(n) or {}).get("role", "finding") != "finding")
     payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
     if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
         selected = [n for n in selected if not n.startswith("payload")] or selected
@@ -158,10 +160,13 @@ def answer_sentence(result: dict) -> str:
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
-                                                          [e for e in result.get("effects", []) if e["name"] in selected])
+                                                          [e for e in result.get("effects", []) if e["name"] in selected],
+                                                          result.get("session_floor"))
     words, apart = explained["words"], joints_apart(explained)
-    if apart:
-        words += f" (on average over {', '.join(explained['joints'])}; {apart})"
+    qualifiers = ["of the gap above the session floor"] if explained.get("above_session_floor") else []
+    qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
+    if qualifiers:
+        words += f" ({'; '.join(qualifiers)})"
     if result.get("payload_not_distinguished"):
         where = "no payload is distinguished from none (every interval contains zero); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
@@ -170,7 +175,7 @@ def answer_sentence(result: dict) -> str:
     if lead == "no effect":
         sentence = beyond + f"The gap is not explained: no effect of the library was selected; {where}, {gaps}"
     elif explained["words"] == "not explained":
-        sentence = beyond + f"The gap is not explained: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
+        sentence = beyond + f"The gap is {words}: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
     else:
         sentence = beyond + f"The gap is {words} by {lead}{more}: {where}, {gaps}"
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
@@ -182,8 +187,9 @@ def answer_sentence(result: dict) -> str:
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
     above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
-    return sentence + (f". What is left is above the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                       if above else f". What is left on {', '.join(joints)} is at the session floor: no fixed effect can remove more there.") + _refit_clause(result) + _insertion_clause(result)
+    return sentence + (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
+                       if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
+                       "change alone can leave it: no fixed effect is shown to remove more there.") + _refit_clause(result) + _insertion_clause(result)
 
 
 #: the one rule's words (output/wording.py) for the share of the found efforts the identified terms carry

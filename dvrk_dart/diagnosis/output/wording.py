@@ -9,6 +9,10 @@ selected effects remove, on the joints they act on.
 The share is 1 - after / before of the gap's RMS, averaged over the joints the
 selected effects act on (each joint in its own unit), on the held-out runs
 when there are, else on the training runs: the figures the answer prints.
+Where a --repeat measured the session floor, before and after are the gap
+above it (RMS-equivalents, sqrt(gap^2 - floor^2)): no fixed effect removes a
+session's change, so a payload found to within the floor was "not explained"
+(a joint with nothing above its floor does not count).
 Each joint's own share is kept beside it, and the joints whose own words
 differ from the average's are named with the words."""
 
@@ -20,8 +24,9 @@ import numpy as np
 
 MOSTLY_SHARE = 0.5
 PARTLY_SHARE = 0.2
-RULE = (f"1 - after/before of the gap's RMS, averaged over the joints the selected effects act on: above {MOSTLY_SHARE:.0%} "
-        f"'mostly explained', {PARTLY_SHARE:.0%}-{MOSTLY_SHARE:.0%} 'partly explained', below {PARTLY_SHARE:.0%} 'not explained'")
+RULE = (f"1 - after/before of the gap's RMS (above the session floor where a --repeat measured it), averaged over the joints the "
+        f"selected effects act on: above {MOSTLY_SHARE:.0%} 'mostly explained', {PARTLY_SHARE:.0%}-{MOSTLY_SHARE:.0%} 'partly explained', "
+        f"below {PARTLY_SHARE:.0%} 'not explained'")
 
 
 def words_for(share: float | None) -> str:
@@ -30,16 +35,33 @@ def words_for(share: float | None) -> str:
     return "mostly explained" if share > MOSTLY_SHARE else "partly explained"
 
 
-def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selected_entries: list[dict]) -> dict:
-    """diagnosis.json's `explanation`: the words, the share they rest on, the joints and the split."""
+def above_floor(gap: float, floor: float) -> float:
+    """The RMS-equivalent of a gap above the session floor, sqrt(gap^2 - floor^2) (0 at or below it)."""
+    return math.sqrt(max(gap * gap - floor * floor, 0.0))
+
+
+def share_above_floor(before: float, after: float, floor: float) -> float | None:
+    """1 - after/before of the gap above the floor (the rule's share); None where nothing is above it."""
+    repeatable = above_floor(before, floor)
+    return None if repeatable <= 0.0 else 1.0 - above_floor(after, floor) / repeatable
+
+
+def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selected_entries: list[dict],
+                floor: list | None = None) -> dict:
+    """diagnosis.json's `explanation`: the words, the share they rest on, the joints and the split
+    (`floor`: the session floor per joint, None where not measured)."""
     split = "holdout" if gap_after.get("holdout") else "train"
     acted = {j for entry in selected_entries for j in entry.get("joints", ())}
-    before, after = gap_before.get(split) or [], gap_after.get(split) or []
+    before, after = list(gap_before.get(split) or []), list(gap_after.get(split) or [])
+    for j, f in enumerate(floor or []):
+        if f is not None and j < len(before) and before[j] is not None and after[j] is not None:
+            before[j], after[j] = above_floor(before[j], f), above_floor(after[j], f)
     joints = [j for j, name in enumerate(joint_names)
               if name in acted and j < len(before) and before[j] is not None and after[j] is not None and before[j] > 0]
     shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in joints}
     share = float(np.mean(list(shares.values()))) if joints else None
     return {"words": words_for(share), "removed_share": share, "joints": list(shares), "runs": split, "rule": RULE,
+            "above_session_floor": floor is not None and any(f is not None for f in floor),
             "by_joint": {name: {"removed_share": s, "words": words_for(s)} for name, s in shares.items()}}
 
 
