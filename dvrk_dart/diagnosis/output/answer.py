@@ -42,8 +42,9 @@ def plain_name(entry: dict) -> str:
     if kind == "friction":
         if name.startswith("position_friction"):
             return f"friction of {joints} that changes along its range{how}"
-        if name.startswith("presliding_of_"):
-            return f"the identified friction of {joints} reversing gradually{how}"
+        if name.startswith("presliding_of_"):  # presliding_of_<link>_<distance>: the identified Coulomb level, its reversal spread
+            link, distance = name.removeprefix("presliding_of_").rsplit("_", 1)
+            return f"the identified friction of {link} ({joints}) reversing gradually over {distance} (pre-sliding)"
         if len(entry.get("joints", ())) > 1:
             return f"friction of the coupled joints {joints}{how}"
         return f"{'Stribeck ' if name.startswith('stribeck') else ''}friction of {joints}{how}"
@@ -60,7 +61,9 @@ def plain_name(entry: dict) -> str:
 def _size_words(entry: dict) -> str:
     size, units = entry.get("size"), entry.get("units") or {}
     unit = next(iter(units.values()), "")
-    return "" if not isinstance(size, (int, float)) else f", size {size:.3g} {unit}".rstrip()
+    if not isinstance(size, (int, float)):
+        return ""
+    return f", {size:.0%} of it" if unit == "1" else f", size {size:.3g} {unit}".rstrip()  # a share of an identified term
 
 
 def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None) -> str:
@@ -111,15 +114,22 @@ def beyond_identified_sentence(result: dict) -> str:
     """What the data show beyond the identified model, first: its gap on the
     held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
     bar = result.get("identified_model_gap_holdout")
+    if result.get("diagnosis_base", "inertial") != "inertial":  # the effects sit on the identified arm in DART: it is the bar
+        bar = (result.get("gap_before") or {}).get("holdout")
     combined = result.get("one_configuration")
     after, what = ((combined["gap_holdout"], "one DART configuration: the selected effects, J3's terms and the pitch-angle loads")
                    if combined else ((result.get("gap_after") or {}).get("holdout"), "the selected effects simulated in DART"))
     if not bar or not after:
         return ""
     recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
-    shown = sorted(set(_main_joints(recorded)) | {j for j in recorded if after[j] > bar[j]})  # and every joint made worse
+    acted = {JOINT_NAMES.index(j) for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
+    acted |= set(range(ANSWER_JOINTS)) if combined else set()  # J3's terms and the pitch loads act on J1..J3
+    made_worse = {j for j in recorded if after[j] > bar[j] and (j in acted or not result.get("effects"))}  # a joint nothing acts on keeps its figure
+    if result.get("diagnosis_base", "inertial") != "inertial" and not made_worse:
+        return ""  # the answer's own figures are these: said once
+    shown = sorted(set(_main_joints(recorded)) | made_worse)
     gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
-    worse = [JOINT_NAMES[j] for j in shown if after[j] > bar[j]]
+    worse = [JOINT_NAMES[j] for j in shown if j in made_worse]
     if worse:
         gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
     processing = result.get("processing") or {}
