@@ -64,7 +64,7 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
         study = {"gap_holdout_simulated": simulated, "gap_holdout_identified": 0.191, "gap_holdout_own_friction": 0.225,
                  "repeatable_gap_removed_share": None, "coefficients": coefficients}
         clause, sentence = _insertion_clause({"insertion_terms": study}), insertion_sentence(study)
-        assert ("J3's repeatable gap is friction" in clause) == carries and ("not determined" in clause) == (not carries), clause
+        assert (") carry to the held-out runs" in clause) == carries and ("do not carry" in clause) == (not carries), clause
         assert ("do not carry" in sentence) == (not carries), sentence
     result = {"identified_model_gap_holdout": [0.086, 0.144, 0.191], "units": ["N·m", "N·m", "N"],
               "one_configuration": {"gap_holdout": [0.066, 0.093, 0.412]}, "processing": {"processing": "periodic", "harmonics": 29}}

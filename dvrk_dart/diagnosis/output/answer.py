@@ -248,7 +248,8 @@ def _insertion_clause(result: dict) -> str:
     if study["gap_holdout_simulated"] >= study["gap_holdout_identified"]:  # fitted, but not what the held-out runs show
         return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) do not carry "
                 f"to the held-out runs: simulated, they leave J3 at {left}; what J3's gap is made of is not determined by these runs{together}.")
-    return f" J3's repeatable gap is friction along the stroke, in ddq3·sign(dq3) and a load in q2: simulated, they leave J3 at {left}{together}."
+    return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) carry to the "
+            f"held-out runs: simulated, they leave J3 at {left}; which physical effect each stands for is not determined by the runs{together}.")
 
 
 def offset_joints_sentence(offset_joints: dict) -> str:
