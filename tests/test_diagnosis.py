@@ -161,14 +161,14 @@ def test_payload_mass_interval_when_only_its_moment_is_seen(arm, segment, noise_
     """A payload on a link turning about the fixed pitch shaft: gravity sees m c
     only, so the diagnosis finds its family and reports a mass interval that
     contains the truth, not a mass it cannot pin. Without a baseline run it is
-    the arm's gravity against the parameters, not a payload, in the keys too."""
+    the arm's gravity against the parameters (a payload not told apart), in the keys too."""
     key = arm.model.link_by_name("pitch_bottom").key
     truth = PointPayload(arm.model, key, equivalent_keys=equivalent_payload_links(arm)[key])
     measured = synthesize_measurement(arm, segment, [(truth, np.array([0.15, 0.05, -0.20, 0.0]))], noise_rms, seed=3)
     result = diagnose(measured, arm=arm, max_effects=SYNTHETIC_MAX_EFFECTS, figures=False)
     assert result["payload"] is None and result["payloads"] == []
     payload = result["gravity_mismatch"]
-    assert "not a payload" in payload["words"][0]
+    assert "an attached mass are not told apart" in payload["words"][0]
     assert not any(e["kind"] in ("payload", "payload_at_position") for e in result["effects"])  # the ranked effects' words too
     assert result["effects"][0]["kind"] == "gravity_mismatch" and "gravity mismatch" in plain_name(result["effects"][0])
     assert payload["link"] in {truth.link_name, *truth.equivalent_links}

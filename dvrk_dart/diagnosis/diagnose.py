@@ -358,10 +358,11 @@ def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
     size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), [model.effort_unit(j) for j in JOINT_NAMES]).lstrip(",")
     return {**fit,
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
-                       "gravity (mass distribution) against the parameters, not a payload: record a baseline to isolate one",
+                       "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "
+                       "two are not told apart; record a baseline to isolate a payload",
             "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
                       + (f":{size}" if size else "")
-                      + "; without a baseline run this is the arm's mass distribution, not a payload."]}
+                      + "; without a baseline run the arm's mass distribution and an attached mass are not told apart."]}
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple, model: PsmModel) -> dict:

@@ -159,7 +159,8 @@ def answer_sentence(result: dict) -> str:
         lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
     elif payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"])
-        lead = f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters)"
+        lead = (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
+                "an attached mass not told apart without a baseline)")
     elif selected:
         first = entries.get(selected[0], {"name": selected[0]})
         lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
@@ -178,7 +179,8 @@ def answer_sentence(result: dict) -> str:
     if qualifiers:
         words += f" ({'; '.join(qualifiers)})"
     if result.get("payload_not_distinguished"):
-        where = "no payload is distinguished from none (every interval contains zero); " + where
+        where = ("no payload is distinguished from none (the payload-shaped fit's mass is not positive: a session change read "
+                 "as a payload); " + where)
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
     if beyond and result.get("diagnosis_base", "inertial") == "inertial":
         where += ", against the simulation of the identified inertia alone"
