@@ -148,3 +148,16 @@ def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_
     result["gap_after"]["holdout"] = [0.027, 0.0310, 0.032, 0.01, 0.01, 0.01, 0.01]  # q2 worse; q4..q7 worse but nothing acts there
     sentence = beyond_identified_sentence(result)
     assert "worse than the identified model on q2:" in sentence and "q6" not in sentence, sentence
+
+
+def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_model():
+    """'Mostly explained' against the inertia alone sat beside held-out figures 2-16 % under the identified model's."""
+    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+
+    result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
+    result["gap_before"]["holdout"], result["gap_after"]["holdout"] = result["gap_before"]["train"], result["gap_after"]["train"]
+    result["identified_model_gap_holdout"] = [0.0659, 0.117, 0.189, 0.01, 0.01, 0.01, 0.01]
+    sentence = beyond_identified_sentence(result)
+    assert "11% of the identified model's gap removed on average over q1, q2, q3: not explained beyond it" in sentence, sentence
+    result["gap_after"]["holdout"] = [0.0655, 0.0925, 0.421, 0.01, 0.01, 0.01, 0.01]
+    assert "the identified model's gap grown by" in beyond_identified_sentence(result)

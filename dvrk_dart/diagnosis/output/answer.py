@@ -132,6 +132,11 @@ def beyond_identified_sentence(result: dict) -> str:
     worse = [JOINT_NAMES[j] for j in shown if j in made_worse]
     if worse:
         gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
+    main = [j for j in _main_joints(recorded) if bar[j] > 0]
+    removed = sum(1.0 - after[j] / bar[j] for j in main) / len(main) if main else None
+    if removed is not None:  # the one rule's words, against the identified model instead of the inertia alone
+        change = f"{removed:.0%} of the identified model's gap removed" if removed >= 0 else f"the identified model's gap grown by {-removed:.0%}"
+        gaps += f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in main)}: {words_for(removed)} beyond it"
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
