@@ -36,8 +36,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     if owner is not None:
         raise DvrkDartError(f"--out: {out} is inside {owner}, a folder dvrk-dart wrote, which holds only what its command wrote: "
                             "write the CSV elsewhere")
-    if out.is_dir():
-        raise DvrkDartError(f"--out: {out} is a folder, not the CSV file to write")
+    if out.is_dir() or str(args.out).endswith(("/", "\\")):  # Path drops a trailing slash: bags/new/ named a file 'new'
+        raise DvrkDartError(f"--out: {args.out} is a folder, not the CSV file to write")
     if out.exists() and not out.is_file():
         raise DvrkDartError(f"--out: {out} is not a regular file (a device, a pipe): refusing to replace it")
     if out.exists() and not args.force:

@@ -271,6 +271,8 @@ def test_bad_bags_are_refused_in_one_line(tmp_path, run_two, capsys):
     assert main(["import", str(bags["short"][0]), "--out", str(tmp_path / "x.csv"), "--rate", "100"]) == 2
     assert "--rate" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+    assert main(["import", str(bags["short"][0]), "--out", f"{tmp_path / 'newdir'}/"]) == 2  # wrote a file named newdir
+    assert "is a folder, not the CSV file" in capsys.readouterr().err and not (tmp_path / "newdir").exists()
 
 
 def test_the_jaw_follows_the_arm_topic_and_one_clock_is_required(tmp_path, capsys, run_two):

@@ -161,3 +161,17 @@ def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_mo
     assert "11% of the identified model's gap removed on average over q1, q2, q3: not explained beyond it" in sentence, sentence
     result["gap_after"]["holdout"] = [0.0655, 0.0925, 0.421, 0.01, 0.01, 0.01, 0.01]
     assert "the identified model's gap grown by" in beyond_identified_sentence(result)
+
+
+def test_the_page_names_the_joints_in_the_arms_own_words():
+    """The MTM's page described PSM joints (q3 insertion, q4 tool roll): the words are the card's."""
+    from pathlib import Path
+
+    from dvrk_dart.diagnosis.output.page import diagnosis_page
+    from dvrk_dart.model.model_file import load_model
+
+    mtm = load_model(Path(__file__).parents[1] / "models" / "mtm" / "mtm.toml")
+    result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.1], ["q2"])
+    result["joint_words"] = mtm.joint_words
+    page = diagnosis_page(result, [], "mtm")
+    assert "wrist roll" in page and "insertion" not in page and "insertion" in PSM.joint_words

@@ -294,6 +294,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     return Diagnosis(
         joints=list(JOINT_NAMES),
         units=[problem.arm.model.effort_unit(j) for j in JOINT_NAMES],
+        joint_words=problem.arm.model.joint_words,
         measured=train_runs[0].name,
         measured_runs=[r.name for r in train_runs[: problem.n_measured]],
         baseline_source={r.name: r.baseline_source for r in train_runs if r.baseline_source is not None},

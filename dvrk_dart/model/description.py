@@ -107,6 +107,7 @@ class PsmModel:
     #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
     controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()
+    joint_words: str = ""  # the coordinates in words (the card's joint_words)
     processing: UpstreamProcessing | None = None  # [processing]: required of a model file
     dvrk_topics: DvrkTopics | None = None
     project_unphysical_bodies: bool = False  # DART gets the nearest physical body of a non-physical identified one

@@ -125,6 +125,7 @@ def load_model(path: Path | str) -> PsmModel:
         session_repeat_pair=_session_repeat_pair(raw, path),
         controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
+        joint_words=str(raw.get("joint_words", "")),
         processing=_upstream_processing(raw, path),
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),

@@ -184,6 +184,7 @@ class Diagnosis:
 
     joints: list
     units: list
+    joint_words: str
     measured: str
     measured_runs: list
     baseline_source: dict

@@ -24,8 +24,6 @@ SHOWN_EFFECTS = 12
 #: the figure of the residual over one period (diagnose writes it; the page shows it first)
 PERIOD_FIGURE = "residual_over_one_period"
 #: what the joint names mean (the identification model's coordinates)
-JOINT_WORDS = ("Joints: q1 yaw, q2 pitch, q3 insertion, q4 tool roll; q5, q6, q7 are the wrist pitch, wrist yaw and jaw "
-               "motor coordinates (the dVRK's wrist values through the instrument's coupling), not the wrist joints themselves.")
 #: an effect's role in a diagnosis with a baseline (diagnosis.json `effects[].role`)
 _ROLE_WORDS = {"finding": "finding", "common_model_error": "model error common to the runs and their baseline"}
 
@@ -133,7 +131,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
                   gap_table=_gap_table(result), gap_after_source=str(result.get("gap_after_source", "")), refit=result.get("refit"),
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],
                   n_selected=len([x for x in result.get("effects", []) if x.get("selected")]), n_shown=len(shown),
-                  n_effects=len(result.get("effects", [])), joint_words=JOINT_WORDS, effects_table=effects_table,
+                  n_effects=len(result.get("effects", [])), joint_words=result.get("joint_words", ""), effects_table=effects_table,
                   parameters_table=parameters_table, split_table=_split_table(result), split_runs=(result.get("gap_split") or {}).get("runs"),
                   repeat=str(result.get("repeat")), offset_joints=offset_joints_sentence(offset_joints) if offset_joints else "",
                   nuisance_offsets=[(run, ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
