@@ -418,7 +418,7 @@ def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
     """"friction": "false" switched friction on; a 3-angle tilt and a string limit ended in tracebacks."""
     for sim_config, words in (({"friction": "false"}, "sim_config.friction: true or false"),
                               ({"gravity_tilt_rad": [1, 2, 3]}, "sim_config.gravity_tilt_rad: a list of 2 numbers"),
-                              ({"closure_residual_limit_m": "x"}, "sim_config.closure_residual_limit_m: finite numbers"),
+                              ({"closure_residual_limit_m": "x"}, "sim_config.closure_residual_limit_m: not finite numbers"),
                               ({"dt_s": -0.001}, "sim_config.dt_s: above zero"),
                               ({"extra": {"coulomb": [0.1] * 6}}, "sim_config.extra.coulomb: a list of 7 numbers"),
                               ({"bogus": 1}, "unknown key 'bogus'")):

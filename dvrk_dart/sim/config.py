@@ -140,7 +140,7 @@ def _numbers(value, key: str, length: int | None):
     if length is not None and (not isinstance(value, (list, tuple)) or (length and len(value) != length)):
         raise ValueError(f"{key}: a list of {length or 'some'} numbers, not {value!r}")
     if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
-        raise ValueError(f"{key}: finite numbers only, not {value!r}")
+        raise ValueError(f"{key}: not finite numbers ({value!r})")
     return tuple(float(v) for v in values) if length is not None else float(value)
 
 
