@@ -123,9 +123,11 @@ def diagnose(
                             processing=processing, folds=folds, topics=topics, repeat_source=repeat_source)
     selection, after, dropped = _resimulated(problem, select(problem, max_effects), simulate, base_config)
     entries = effect_entries(problem, selection)
-    floor = session_floor(problem.reference_run, problem.repeat_run) if problem.repeat_run is not None else None
+    nuisance_joints = problem.offset_joints if problem.nuisance else None  # the floor without the constants the fit takes out
+    floor = session_floor(problem.reference_run, problem.repeat_run, nuisance_joints) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    split = gap_split(np.asarray(gaps([r.residual for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor, arm.model)
+    split = gap_split(np.asarray(gaps([problem.before_residual(r) for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor,
+                      arm.model)
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     for report in [*first_moments, *points]:
@@ -289,7 +291,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
         not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}
         payload_fits = []
-    gap_before = {"train": gaps([r.residual for r in train_runs], recorded), "holdout": gaps([r.residual for r in holdout_runs], recorded)}
+    gap_before = {split: gaps([problem.before_residual(r) for r in runs], recorded) for split, runs in (("train", train_runs), ("holdout", holdout_runs))}
     gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
     return Diagnosis(
         joints=list(JOINT_NAMES),

@@ -114,6 +114,13 @@ class Problem:
             return None
         return self.offset_joints if run.role is RunRole.DIFFERENCE else np.ones(N_JOINTS, dtype=bool)
 
+    def before_residual(self, run: DiagnosisRun) -> np.ndarray:
+        """The run's gap before any effect, its nuisance constants taken out as
+        the fit and the gap after take them out: a session's constant is no
+        effect's to explain (q2's counted as explained with a baseline)."""
+        demean = self.demean_of(run)
+        return run.residual if demean is None else run.residual - demean * run.residual.mean(axis=0)
+
     def grams_of(self, run: DiagnosisRun, columns: np.ndarray, folds: int) -> Grams:
         grams = Grams.of_run(self.design, self.features_of(run), run.residual, folds, self.demean_of(run), columns)
         noise = direction_noise(run)

@@ -39,11 +39,16 @@ from dvrk_dart.model.joints import JOINT_NAMES
 SESSION_OFFSET_STANDARD_ERRORS = 2.0
 
 
-def session_floor(a: DiagnosisRun, b: DiagnosisRun) -> np.ndarray:
-    """Per-joint RMS of one session's deviation, from two runs of the same motion."""
+def session_floor(a: DiagnosisRun, b: DiagnosisRun, constant_joints: np.ndarray | None = None) -> np.ndarray:
+    """Per-joint RMS of one session's deviation, from two runs of the same
+    motion (`constant_joints`: where a diagnosis fits each run's constant, the
+    difference's mean is no part of the floor)."""
     if not same_motion(a.state, b.state):
         raise DvrkDartError(f"--repeat {b.name}: not the same motion as {a.name} (a repeat is the same trajectory at the same speed)")
-    return rms(a.gap - b.gap) / math.sqrt(2.0)
+    difference = a.gap - b.gap
+    if constant_joints is not None:
+        difference = difference - np.asarray(constant_joints, dtype=float) * difference.mean(axis=0)
+    return rms(difference) / math.sqrt(2.0)
 
 
 def mean_standard_error(residual: np.ndarray, rate_hz: float) -> np.ndarray:
