@@ -154,6 +154,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
     result, data = identify_into_folder(config, args.out)
     processing = data["processing"]
     print(f"processing: {processing['processing']} ({processing['chosen_because']})")
+    for name, run in processing["runs"].items():
+        if run.get("rate_note"):
+            print(f"note: {name}: {run['rate_note']}")
     for line in data["left_out"]:
         print(f"note: {line}")
     extent = data["data"]

@@ -127,5 +127,6 @@ def print_force_summary(s: dict) -> None:
     axes = " / ".join(f"{v:.3f}" for v in s["rms_per_axis_n"])
     print(f"  |F| RMS {s['rms_n']:.3f} N, 95th percentile {s['p95_n']:.3f} N, per axis x / y / z {axes} N "
           f"(over the {s['determined_fraction']:.0%} of samples with every lever >= {s['min_lever_m']} m)")
+    print(f"  every sample, along the determined directions only: |F| RMS {s['determined_part_rms_n']:.3f} N")
     print(f"  every sample, the short levers included (there J^-T divides by a lever near zero): |F| RMS {s['rms_all_samples_n']:.3f} N, "
           f"95th percentile {s['p95_all_samples_n']:.3f} N")

@@ -123,12 +123,12 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         for note in result["unrecorded_joint_notes"]:
             print(f"note: {note}")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
-        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'cutoff':>9}" if periodic else ""))
+        print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'own cutoff':>10}  (its efforts' own harmonics; the band used is above)" if periodic else ""))
         for j, (name, rel, r) in enumerate(zip(JOINT_NAMES, result["relative_error"], result["rms"])):
             if r is None:
                 print(f"{name:>6} {'-':>9} {'-':>10}  not measured (the run did not record its effort)")
                 continue
-            cutoff = f" {result['joint_cutoffs'][j]:9d}" if periodic else ""
+            cutoff = f" {result['joint_cutoffs'][j]:10d}" if periodic else ""
             why = "" if math.isfinite(rel) else "  (relative error not determined: the measured efforts are zero)"
             print(f"{name:>6} {rel:9.4f} {r:10.4f} {arm.model.effort_unit(name)}{cutoff}{why}")
     return 0

@@ -222,6 +222,10 @@ def test_identify_fits_what_the_runs_excite(tmp_path, capsys):
     fitted, reference = (json.loads(path.read_text()) for path in (tmp_path / "one_run" / "params.json", PSM_ARM.params.source))
     assert all(fitted[k][name] == reference[k][name] for k in ("11", "14") for name in ("Fc", "Fv", "Fo", "Im")), fitted["11"]
     assert "26 parameters act on no fitted joint" in out
+    # and the tables say where their values come from (they read 'constraints and prior', prior 0.0)
+    held = {p["name"]: p for p in summary["standard_parameters"] if p["held_at_reference"]}
+    assert len(held) == 26 == len(summary["held_at_reference"]) and not set(held) & set(summary["set_by_constraints_and_prior"])
+    assert held["link11.Im"]["prior"] == held["link11.Im"]["value"] == reference["11"]["Im"]
     three_seconds = tmp_path / "three_seconds.csv"
     np.savetxt(three_seconds, np.loadtxt(TEST1, delimiter=",")[500:1100], delimiter=",")
     assert main(["identify", "--runs", str(three_seconds), "--holdout", str(TEST2), "--processing", "upstream",
@@ -318,7 +322,7 @@ def test_upstream_processing_of_another_rate_says_it_works_in_rows(tmp_path, cap
     every_other = type(one)(one.path, one.data.iloc[::2].reset_index(drop=True), PSM)
     path = _write_header_csv(tmp_path / "one_100hz.csv", every_other, _columns(*range(1, 8)))
     slow = cli_json(capsys, "model-errors", "--measured", str(path), "--processing", "upstream")
-    assert "at 100 Hz its filter cuts 0.5x higher in Hz" in slow["rate_note"] and "--processing periodic" in slow["rate_note"]
+    assert "at 100 Hz its filter's cut-off in Hz is 0.5x the one at 200 Hz" in slow["rate_note"] and "--processing periodic" in slow["rate_note"]
     assert "rate_note" not in cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
 
 

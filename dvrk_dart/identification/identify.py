@@ -94,6 +94,8 @@ class IdentificationResult:
     presliding_choice: dict = field(default_factory=dict)
     #: one line per joint of --joints the runs do not let the fit use
     left_out: list[str] = field(default_factory=list)
+    #: standard parameters acting on no fitted joint: params.json holds the reference's value (NaN elsewhere)
+    reference_theta: np.ndarray | None = None
 
     @property
     def theta(self) -> np.ndarray:
@@ -265,23 +267,23 @@ def identify(config: IdentificationConfig) -> IdentificationResult:
     timings["base_and_wls_s"] = time.perf_counter() - start - timings["load_and_regressor_s"]
     t0 = time.perf_counter()
     consistent = fit_consistent(wls, base, regressor.layout, bounds, prior, solver=config.solver)
-    consistent, reference_note = _reference_where_no_fitted_joint(consistent, regressor, joints, config, model)
+    consistent, reference_note, reference_theta = _reference_where_no_fitted_joint(consistent, regressor, joints, config, model)
     left_out += reference_note
     timings["convex_program_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - start
     return IdentificationResult(config, model, regressor, bounds, base, wls, consistent, prior, prior_source, train, holdout, note, timings,
-                                choice, left_out)
+                                choice, left_out, reference_theta)
 
 
 def _reference_where_no_fitted_joint(consistent: ConsistentFit, regressor: Regressor, joints: np.ndarray,
-                                     config: IdentificationConfig, model: PsmModel) -> tuple[ConsistentFit, list[str]]:
+                                     config: IdentificationConfig, model: PsmModel) -> tuple[ConsistentFit, list[str], np.ndarray | None]:
     """The parameters acting on no fitted joint (a left-out joint's own
     friction, offset, motor inertia) take the reference's values: --prior's
     file, else the arm's published parameters. Fitted with no prior they came
     out about zero, and params.json gave a wrist without friction."""
     alone = acting_on_none_of(regressor, joints, seed=config.seed)
     if not len(alone):
-        return consistent, []
+        return consistent, [], None
     reference, source = _prior(config if config.prior != PRIOR_NONE else replace(config, prior=PRIOR_DEFAULT), model, regressor)
     theta = consistent.theta.copy()
     theta[alone] = reference[alone]
@@ -290,8 +292,10 @@ def _reference_where_no_fitted_joint(consistent: ConsistentFit, regressor: Regre
         link, name = regressor.layout.names[i].split(".", 1)
         by_link.setdefault(link, []).append(name)
     said = "; ".join(f"{link} {' '.join(names)}" for link, names in by_link.items())
+    held = np.full(len(theta), np.nan)
+    held[alone] = reference[alone]
     return replace(consistent, theta=theta), [f"{len(alone)} parameters act on no fitted joint ({said}): "
-                                              f"not determined by these runs, params.json holds {source}'s values"]
+                                              f"not determined by these runs, params.json holds {source}'s values"], held
 
 
 def _with_law(run: RunData, regressor: Regressor) -> RunData:

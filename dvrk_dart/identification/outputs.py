@@ -204,17 +204,21 @@ def _parameter_entries(result: IdentificationResult) -> dict:
     """The base and standard parameters, which the data determine, and the masses against their bounds."""
     layout, base, wls, theta = result.regressor.layout, result.base, result.wls, result.theta
     units = parameter_units(result)
+    reference = result.reference_theta if result.reference_theta is not None else np.full(len(theta), np.nan)
+    held = ~np.isnan(reference)  # acting on no fitted joint: the reference's value, not the fit's
     return {
         "base_parameters": [
             {"name": name, "wls": float(b), "standard_error": float(s), "consistent": float(c)}
             for name, b, s, c in zip(base.names, wls.beta, wls.standard_errors, base.K @ theta)
         ],
         "standard_parameters": [
-            {"name": n, "value": float(v), "unit": u, "identifiable": bool(i), "prior": float(p)}
-            for n, v, u, i, p in zip(layout.names, theta, units, base.identifiable, result.prior_theta)
+            {"name": n, "value": float(v), "unit": u, "identifiable": bool(i), "held_at_reference": bool(h),
+             "prior": float(r if h else p)}  # a parameter held at the reference: its value's source
+            for n, v, u, i, p, r, h in zip(layout.names, theta, units, base.identifiable, result.prior_theta, reference, held)
         ],
         "identifiable": [n for n, i in zip(layout.names, base.identifiable) if i],
-        "set_by_constraints_and_prior": [n for n, i in zip(layout.names, base.identifiable) if not i],
+        "set_by_constraints_and_prior": [n for n, i, h in zip(layout.names, base.identifiable, held) if not i and not h],
+        "held_at_reference": [n for n, h in zip(layout.names, held) if h],
         "active_constraints": result.consistent.active,
         "pseudo_inertia_eigenvalues_kg_m2": pseudo_inertia_eigenvalues(result),
         "pseudo_inertia_margin_kg_m2": PSD_MARGIN_KG_M2,
@@ -287,7 +291,8 @@ def html_page(result: IdentificationResult, data: dict) -> str:
                for label, runs in (("training", result.train), ("held-out", result.holdout)) for run in runs]
     bodies = [[text_cell(f"link {key} ({result.model.links[int(key)].name})"), num_cell(m["value"]), num_cell(m["lower"]), num_cell(m["upper"]),
                num_cell(data["pseudo_inertia_eigenvalues_kg_m2"][key][0])] for key, m in data["masses_kg"].items()]
-    standard = [[text_cell(p["name"]), num_cell(p["value"]), text_cell(p["unit"]), text_cell("yes" if p["identifiable"] else "constraints and prior"),
+    standard = [[text_cell(p["name"]), num_cell(p["value"]), text_cell(p["unit"]), text_cell("yes" if p["identifiable"] else "held at the reference: acts on no fitted joint" if p.get("held_at_reference")
+                                                     else "constraints and prior"),
                  num_cell(p["prior"])] for p in data["standard_parameters"]]
     base = [[text_cell(b["name"]), num_cell(b["wls"]), num_cell(b["standard_error"]), num_cell(b["consistent"])] for b in data["base_parameters"]]
     return render("identification.html", title="dvrk-dart identification", data=data, fmt=fmt, max_condition_number=MAX_CONDITION_NUMBER,

@@ -115,9 +115,9 @@ class ProcessedRun:
         if abs(scale - 1.0) < 1e-3:
             return {}
         period = f" and its first period ({self.upstream_first_period} rows) lasts {1 / scale:.3g}x as long" if self.upstream_first_period else ""
-        return {"rate_note": f"upstream processing works in rows, as upstream did: at {self.rate_hz:g} Hz its filter cuts {scale:.3g}x "
-                             f"higher in Hz than at {sample_rate_hz():g} Hz{period}, as for the excitation played {scale:.3g}x as fast "
-                             "(upstream's half-speed runs); for the same motion logged at another rate, --processing periodic"}
+        return {"rate_note": f"upstream processing works in rows, as upstream did: at {self.rate_hz:g} Hz its filter's cut-off in Hz is "
+                             f"{scale:.3g}x the one at {sample_rate_hz():g} Hz{period}, as if the excitation were played {scale:.3g}x as "
+                             "fast (how upstream read its half-speed runs); for the same motion logged at another rate, --processing periodic"}
 
 
 def central_difference(x: np.ndarray, h: float) -> np.ndarray:
