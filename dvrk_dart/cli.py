@@ -177,6 +177,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
               + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
     for line in data["warnings"]:
         print(f"warning: {line}")
+    departure = data["consistent_departure"]
+    print(f"the physical fit (params.json) lies up to {departure['max_standard_errors']:.3g} standard errors from the weighted least "
+          f"squares ({departure['base_parameter']}; {departure['over_3_standard_errors']} of {departure['of']} base parameters over 3): "
+          "the standard errors leave out model error and the constraints")
     if not data["errors"].get("holdout"):
         print("note: no --holdout run: how well these parameters carry to another motion is not measured (one short run "
               "may not determine the arm)")

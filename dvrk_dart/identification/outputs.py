@@ -186,6 +186,7 @@ def summary(result: IdentificationResult) -> dict:
         },
         "condition_number": wls.condition_number,
         "condition_number_limit": MAX_CONDITION_NUMBER,
+        "consistent_departure": _consistent_departure(result),
         "noise_sigma": wls.sigma.tolist(),
         "residual_autocorrelation_samples": wls.autocorrelation_samples.tolist(),
         "rank_tolerance": base.tolerance,
@@ -283,6 +284,16 @@ def _error_table(result: IdentificationResult, data: dict) -> str:
                 rows.append(cells)
     header = ["run"] + [f"rel {j}" for j in JOINT_NAMES] + [f"RMS {j} ({u})" for j, u in zip(JOINT_NAMES, data["effort_units"])]
     return table(header, rows)
+
+
+def _consistent_departure(result: IdentificationResult) -> dict:
+    """How far the physically consistent fit lies from the weighted least squares, in the latter's standard
+    errors (largest over the base parameters): where it is many, the data and the constraints disagree and the
+    standard errors, which leave out model error, say little of the final values' uncertainty."""
+    distance = np.abs(result.base.K @ result.theta - result.wls.beta) / np.maximum(result.wls.standard_errors, 1e-300)
+    worst = int(np.argmax(distance))
+    return {"max_standard_errors": float(distance[worst]), "base_parameter": result.base.names[worst],
+            "over_3_standard_errors": int(np.sum(distance > 3.0)), "of": len(distance)}
 
 
 def html_page(result: IdentificationResult, data: dict) -> str:

@@ -15,7 +15,8 @@ def print_diagnosis(result: dict) -> None:
         for split, values in (result.get(key) or {}).items():
             if values is not None:
                 print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {u}" for j, v, u in zip(JOINT_NAMES, values, result["units"]) if v is not None))
-    selected = [e["name"] for e in result["effects"] if e.get("selected")]
+    selected = [e["name"] + (" (a gravity mismatch: no baseline isolates a payload)" if e.get("kind") == "gravity_mismatch" else "")
+                for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
     if result.get("refit"):
         print(result["refit"]["words"])
