@@ -377,9 +377,10 @@ def _write_outputs(out_dir: Path, run: DiagnosisRun, after: np.ndarray, figures:
     write_text_atomic(out_dir / "where.csv", table.to_csv(index=False))
     where = {"table": "where.csv", "run": run.name, "figures": []}
     if figures:
-        paths = plot_residuals(run.state, run.residual, out_dir / "figures", model, "residual_before")
-        paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after")
+        paths = plot_residuals(run.state, run.residual, out_dir / "figures", model, "residual_before", run.name)
+        paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after", run.name)
         period_run, period_after, floor = period
-        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model))
+        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model,
+                                 period_run.name))
         where["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     return where

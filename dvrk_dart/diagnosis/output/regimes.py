@@ -72,8 +72,9 @@ def residual_regimes(state: ProcessedRun, residual: np.ndarray, model: PsmModel)
     return pd.DataFrame(rows)
 
 
-def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str, model: PsmModel, label: str = "residual") -> list[Path]:
-    """One figure per joint: the residual against q, dq and ddq of that joint."""
+def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str, model: PsmModel, label: str = "residual",
+                   run: str = "") -> list[Path]:
+    """One figure per joint: the residual against q, dq and ddq of that joint (`run`: its name, in the title)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -95,7 +96,7 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
             ax.axhline(0.0, color="k", lw=0.5)
             ax.set_xlabel(xlabel)
         axes[0].set_ylabel(f"{label} ({model.effort_unit(joint)})")
-        fig.suptitle(f"{label} of {joint} (colour: velocity sign)")
+        fig.suptitle(f"{label} of {joint}{f' on {run}' if run else ''} (colour: velocity sign)")
         fig.tight_layout()
         target = folder / f"{label}_{joint}.png"
         with atomic_path(target) as tmp:
@@ -109,7 +110,7 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
 PERIOD_FIGURE_JOINTS = 3
 
 
-def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path, model: PsmModel) -> Path:
+def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path, model: PsmModel, run: str = "") -> Path:
     """The residual before and after the effects over the run's first period,
     one panel per main joint, ± the session floor as a band (when measured)."""
     import matplotlib
@@ -130,7 +131,7 @@ def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floo
         ax.set_ylabel(f"{JOINT_NAMES[j]} ({model.effort_unit(JOINT_NAMES[j])})")
     axes[0].legend(loc="upper right", ncol=3, fontsize=8)
     axes[-1].set_xlabel("time in the period (s)")
-    fig.suptitle("residual (measured - simulated) over one period")
+    fig.suptitle(f"residual (measured - simulated) over one period{f' of {run}' if run else ''}")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
