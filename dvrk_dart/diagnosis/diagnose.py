@@ -140,8 +140,11 @@ def diagnose(
                         carried).to_json()
     if out_dir is None:
         return result
-    period = (split_source[0][0], split_source[1][0], floor)  # the run the answer speaks of
-    result = {**result, "where": _write_outputs(Path(out_dir), problem.train_runs[0], after.train_after[0], figures, period, arm.model)}
+    # the run the answer speaks of; before and after both without the nuisance constants the fit takes out
+    period = (split_source[0][0], problem.before_residual(split_source[0][0]), split_source[1][0], floor)
+    where_run = problem.train_runs[0]
+    result = {**result, "where": _write_outputs(Path(out_dir), where_run, problem.before_residual(where_run), after.train_after[0], figures,
+                                                period, arm.model)}
     if write_json:
         write_json_atomic(Path(out_dir) / "diagnosis.json", result)
     return result
@@ -368,19 +371,21 @@ def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
                       + "; without a baseline run the arm's mass distribution and an attached mass are not told apart."]}
 
 
-def _write_outputs(out_dir: Path, run: DiagnosisRun, after: np.ndarray, figures: bool, period: tuple, model: PsmModel) -> dict:
-    """where.csv and the figures of the residual; returns diagnosis.json's `where`."""
+def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,
+                   model: PsmModel) -> dict:
+    """where.csv and the figures of the residual (`before`, `after`: the run's gap before and after the effects);
+    returns diagnosis.json's `where`."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    before_table = residual_regimes(run.state, run.residual, model).assign(stage="before")
+    before_table = residual_regimes(run.state, before, model).assign(stage="before")
     after_table = residual_regimes(run.state, after, model).assign(stage="after")
     table = pd.concat([before_table, after_table], ignore_index=True)
     write_text_atomic(out_dir / "where.csv", table.to_csv(index=False))
     where = {"table": "where.csv", "run": run.name, "figures": []}
     if figures:
-        paths = plot_residuals(run.state, run.residual, out_dir / "figures", model, "residual_before", run.name)
+        paths = plot_residuals(run.state, before, out_dir / "figures", model, "residual_before", run.name)
         paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after", run.name)
-        period_run, period_after, floor = period
-        paths.append(plot_period(period_run.state, period_run.residual, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model,
+        period_run, period_before, period_after, floor = period
+        paths.append(plot_period(period_run.state, period_before, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model,
                                  period_run.name))
         where["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     return where

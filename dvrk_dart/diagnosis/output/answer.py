@@ -143,6 +143,33 @@ def beyond_identified_sentence(result: dict) -> str:
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
 
 
+def _in_answer_order(result: dict) -> list[str]:
+    """The selected effects as the answer names them: with a baseline the findings (what the runs have and the
+    baseline lacks) first, the model errors the runs share with it after (a friction on q7 led a payload study's
+    answer); a payload-shaped fit that is no payload is not named first."""
+    entries = {e["name"]: e for e in result.get("effects", [])}
+    selected = sorted(result["selection"]["selected"], key=lambda n: (entries.get(n) or {}).get("role", "finding") != "finding")
+    if result.get("payload_not_distinguished"):
+        selected = [n for n in selected if not n.startswith("payload")] or selected
+    return selected
+
+
+def _lead_words(result: dict, selected: list[str]) -> str:
+    """The effect that leads the answer, in words, with its size (a payload as any other effect)."""
+    payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
+    payload_first = bool(selected) and selected[0].startswith("payload")
+    if payload_first and payload:
+        return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
+    if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
+        size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"])
+        return (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
+                "an attached mass not told apart without a baseline)")
+    if selected:
+        first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), {"name": selected[0]})
+        return f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
+    return "no effect"
+
+
 def answer_sentence(result: dict) -> str:
     """The diagnosis in one sentence: the main effect (what, where, how big),
     how far the gap shrinks on the main joints (held-out runs when there are),
@@ -152,26 +179,8 @@ def answer_sentence(result: dict) -> str:
     shown = _main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
-    entries = {e["name"]: e for e in result.get("effects", [])}
-    # with a baseline the findings (what the runs have and the baseline lacks) lead; the model errors the
-    # runs share with their baseline follow (a friction on q7 led a payload study's answer)
-    selected = sorted(result["selection"]["selected"], key=lambda n: (entries.get(n) or {}).get("role", "finding") != "finding")
-    payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
-    if result.get("payload_not_distinguished"):  # the payload-shaped fit is no finding: the other effects lead
-        selected = [n for n in selected if not n.startswith("payload")] or selected
-    # the effect selected first (the largest gain) leads, a payload as any other
-    payload_first = bool(selected) and selected[0].startswith("payload")
-    if payload_first and payload:
-        lead = f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
-    elif payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
-        size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"])
-        lead = (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
-                "an attached mass not told apart without a baseline)")
-    elif selected:
-        first = entries.get(selected[0], {"name": selected[0]})
-        lead = f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
-    else:
-        lead = "no effect"
+    selected = _in_answer_order(result)
+    lead = _lead_words(result, selected)
     others = selected[1:]
     more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
