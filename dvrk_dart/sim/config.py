@@ -139,7 +139,7 @@ def _numbers(value, key: str, length: int | None):
     values = value if length is not None else [value]
     if length is not None and (not isinstance(value, (list, tuple)) or (length and len(value) != length)):
         raise ValueError(f"{key}: a list of {length or 'some'} numbers, not {value!r}")
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
+    if not all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and np.isfinite(v) for v in values):
         raise ValueError(f"{key}: not finite numbers ({value!r})")
     return tuple(float(v) for v in values) if length is not None else float(value)
 
@@ -160,12 +160,13 @@ def _joint_effects(raw) -> JointEffects:
 
 def _payload(raw, index: int) -> Payload:
     key = f"sim_config.payloads[{index}]"
-    if not isinstance(raw, dict) or set(raw) != {"link", "mass_kg", "position_m"} or isinstance(raw["link"], bool) or not isinstance(raw["link"], int):
+    if not isinstance(raw, dict) or set(raw) != {"link", "mass_kg", "position_m"} or isinstance(raw["link"], bool) \
+            or not isinstance(raw["link"], (int, np.integer)):
         raise ValueError(f"{key}: an object of link (an integer), mass_kg and position_m")
     mass = _numbers(raw["mass_kg"], f"{key}.mass_kg", None)
     if mass < 0.0:
         raise ValueError(f"{key}.mass_kg: a mass is not negative ({mass:g})")
-    return Payload(raw["link"], mass, _numbers(raw["position_m"], f"{key}.position_m", 3))
+    return Payload(int(raw["link"]), mass, _numbers(raw["position_m"], f"{key}.position_m", 3))
 
 
 #: every identified term simulated as physics (the realistic arm, `--dynamics identified`)
