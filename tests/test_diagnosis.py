@@ -548,4 +548,20 @@ def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
 
     shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
     assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")
-    assert share_words(float(shares[1])) == f"{1 - (0.1**2 - 0.05**2) / (0.3**2 - 0.05**2):.0%}"
+    # RMS-equivalents above the floor, as the answer's words weigh them (not squares: 0.97 here)
+    assert share_words(float(shares[1])) == f"{1 - ((0.1**2 - 0.05**2) / (0.3**2 - 0.05**2)) ** 0.5:.0%}" == "71%"
+
+
+def test_a_mass_interval_holds_the_fit_between_grid_points():
+    """2018 test1's gravity mismatch: 0.612 kg fitted, profile grid points 0.502
+    (score under the best by more than its spread) and 0.632 (within it): the
+    interval's end is where the score crosses, not the grid point (it read
+    [0.632, 2.0], leaving out its own fit)."""
+    from dvrk_dart.diagnosis.payload.payload_report import _interval_within
+
+    masses = np.array([0.3987645279295233, 0.5020665656246561, 0.6321295367643321, 0.7958860011973393, 1.0020644346793832])
+    scores = np.array([0.9387, 0.9584, 0.9664, 0.9665, 0.9666])
+    lo, hi = _interval_within(masses, scores, 0.9666 - 0.0059)
+    assert 0.502 < lo < 0.612 and hi == masses[-1]
+    lo, hi = _interval_within(masses, np.array([0.5, 0.9, 1.0, 0.9, 0.5]), 0.95)  # both ends crossed, halfway in log mass
+    assert lo == pytest.approx(np.sqrt(masses[1] * masses[2])) and hi == pytest.approx(np.sqrt(masses[2] * masses[3]))

@@ -94,13 +94,18 @@ def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, m
     return rows
 
 
+def above_floor(gap, floor):
+    """The RMS-equivalent of a gap above the session floor, sqrt(gap^2 - floor^2) (0 at or below it)."""
+    gap, floor = np.asarray(gap, dtype=float), np.asarray(floor, dtype=float)
+    return np.sqrt(np.maximum(np.square(gap) - np.square(floor), 0.0))
+
+
 def repeatable_share(before, after, floor):
-    """The share of a gap's repeatable part (above the session floor, in
-    squares) that is gone after: 1 - (after^2 - floor^2) / (before^2 - floor^2),
-    per joint; NaN where nothing repeatable was there."""
-    before, after, floor = (np.asarray(x, dtype=float) for x in (before, after, floor))
-    repeatable = np.square(before) - np.square(floor)
-    left = np.maximum(np.square(after) - np.square(floor), 0.0)
+    """The share of a gap's repeatable part (above the session floor) that is
+    gone after, per joint: 1 - above_floor(after) / above_floor(before), in
+    RMS-equivalents as the diagnosis's words weigh it (output/wording.py);
+    NaN where nothing repeatable was there."""
+    repeatable, left = above_floor(before, floor), above_floor(after, floor)
     return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
 
 

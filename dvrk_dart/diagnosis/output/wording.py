@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from dvrk_dart.diagnosis.fit.session_floor import above_floor, repeatable_share
+
 MOSTLY_SHARE = 0.5
 PARTLY_SHARE = 0.2
 RULE = (f"1 - after/before of the gap's RMS (above the session floor where a --repeat measured it), averaged over the joints the "
@@ -35,15 +37,10 @@ def words_for(share: float | None) -> str:
     return "mostly explained" if share > MOSTLY_SHARE else "partly explained"
 
 
-def above_floor(gap: float, floor: float) -> float:
-    """The RMS-equivalent of a gap above the session floor, sqrt(gap^2 - floor^2) (0 at or below it)."""
-    return math.sqrt(max(gap * gap - floor * floor, 0.0))
-
-
 def share_above_floor(before: float, after: float, floor: float) -> float | None:
     """1 - after/before of the gap above the floor (the rule's share); None where nothing is above it."""
-    repeatable = above_floor(before, floor)
-    return None if repeatable <= 0.0 else 1.0 - above_floor(after, floor) / repeatable
+    share = float(repeatable_share(before, after, floor))
+    return None if math.isnan(share) else share
 
 
 def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selected_entries: list[dict],
@@ -55,7 +52,7 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
     before, after = list(gap_before.get(split) or []), list(gap_after.get(split) or [])
     for j, f in enumerate(floor or []):
         if f is not None and j < len(before) and before[j] is not None and after[j] is not None:
-            before[j], after[j] = above_floor(before[j], f), above_floor(after[j], f)
+            before[j], after[j] = float(above_floor(before[j], f)), float(above_floor(after[j], f))
     joints = [j for j, name in enumerate(joint_names)
               if name in acted and j < len(before) and before[j] is not None and after[j] is not None and before[j] > 0]
     shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in joints}

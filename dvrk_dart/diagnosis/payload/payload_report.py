@@ -128,8 +128,7 @@ def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
     fractions = np.array([best_scores[m].fraction for m in masses])
     k = int(np.argmax(fractions))
     spread = float(np.std(selector.bootstrap_fractions(best_scores[masses[k]].after)))
-    inside = [m for m, f in zip(masses, fractions) if f >= fractions[k] - spread]
-    lo, hi = min(inside), max(inside)
+    lo, hi = _interval_within(np.array(masses), fractions, fractions[k] - spread)
     return {
         "masses_kg": masses,
         "cross_validated_fraction": fractions.tolist(),
@@ -137,6 +136,23 @@ def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
         "mass_interval_kg": [lo, hi],
         "identifiable": bool(lo > masses[0] and hi < masses[-1] and hi / lo <= MASS_IDENTIFIED_RATIO),
     }
+
+
+def _interval_within(masses: np.ndarray, fractions: np.ndarray, threshold: float) -> tuple[float, float]:
+    """The masses whose score reaches `threshold`: each end where the score
+    crosses it, interpolated in log mass between the grid's last mass inside
+    and first outside (a grid point as the end put a fit between two grid
+    points outside its own interval), or the grid's end."""
+    inside = np.flatnonzero(fractions >= threshold)
+    first, last = int(inside[0]), int(inside[-1])
+
+    def crossing(i_in: int, i_out: int) -> float:
+        share = (fractions[i_in] - threshold) / (fractions[i_in] - fractions[i_out])
+        return float(np.exp(np.log(masses[i_in]) + share * (np.log(masses[i_out]) - np.log(masses[i_in]))))
+
+    lo = crossing(first, first - 1) if first > 0 else float(masses[0])
+    hi = crossing(last, last + 1) if last < len(masses) - 1 else float(masses[-1])
+    return lo, hi
 
 
 def pitch_shaft_offsets(arm: Arm, position_base: np.ndarray) -> dict:
