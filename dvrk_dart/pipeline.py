@@ -195,13 +195,15 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     summary["failures"].update(after["failures"])
     summary["runs"] += after["runs"]
     write_json_atomic(out_dir / "campaign.json", summary)
-    index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, contact, periodic, identification, uncertainty])
+    others = [*json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()), contact_verdict]
+    index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, contact, periodic, identification, uncertainty],
+                         campaign_verdicts=others)
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")
     for (check, title), status in verdicts.items():
         print(f"  [{status.upper():4}] {title}")
-    for verdict in [*json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()), contact_verdict]:
+    for verdict in others:
         print(f"  [{'PASS' if verdict['passed'] else 'FAIL'}] {verdict['check']}: {verdict['value']}")
     print(f"report: {index.resolve()}")
     for name, error in summary["failures"].items():

@@ -157,3 +157,13 @@ def test_a_periodic_run_refuses_nothing_of_the_upstream_processing(two):
     assert upstream.in_band(upstream.tau) is upstream.tau
     with pytest.raises(DvrkDartError, match="--processing"):
         process(two, "fourier")
+
+
+def test_held_out_runs_do_not_choose_the_diagnosis_band():
+    """A setting chosen on the held-out run is tuning on it: 2018's test2 has a
+    lower cutoff (29) than test1 (32); trained on test1, the band is test1's."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import choose_processing
+
+    trained = choose_processing(["2018-test1"], None, PSM, held_out=["2018-test2"])
+    assert (trained.name, trained.harmonics) == ("periodic", 32) and "not the held-out runs" in trained.why
+    assert choose_processing(["2018-test1", "2018-test2"], None, PSM).harmonics == 29

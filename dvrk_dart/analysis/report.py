@@ -109,8 +109,11 @@ def _verdict_row(check, label: str):
                text_cell(check.status.upper(), "status"), css=check.status)
 
 
-def verdict_section(analysis: Analysis) -> str:
+def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = None) -> str:
+    """The check runs' verdicts, and a line on validate's other verdicts
+    (diagnosis, contact: `campaign_verdicts`) so the page's first count is every check's."""
     checks = analysis.checks
+    others = campaign_verdicts or []
     passed = int((checks.status == STATUS_PASS).sum())
     total = len(checks)
     ok = passed == total and total > 0
@@ -128,7 +131,9 @@ def verdict_section(analysis: Analysis) -> str:
                   missing=int((checks.status == STATUS_MISSING).sum()),
                   summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
                   detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
-                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped)
+                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped,
+                  others_passed=sum(bool(v["passed"]) for v in others), others_total=len(others),
+                  others_failed=[f"{v['check']}: {v['value']}" for v in others if not v["passed"]])
 
 
 def _closeness(row) -> float:
@@ -326,8 +331,9 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
 
 
 def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None,
-                 allow_unreadable: bool = True) -> Path:
-    """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html.
+                 allow_unreadable: bool = True, campaign_verdicts: list[dict] | None = None) -> Path:
+    """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html
+    (`campaign_verdicts`: validate's verdicts beyond the check runs, counted in the verdicts' summary).
     Run folders that cannot be read are listed in the report, or, unless
     `allow_unreadable`, refuse the report before anything is written."""
     from dvrk_dart.analysis.figures import build_figures
@@ -352,11 +358,11 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         raise DvrkDartError(f"--runs: {runs_dir / name} cannot be read ({error}){others}; --allow-unreadable reports without them")
     published = load_published()
     with building_folder(out_dir, "report") as building:
-        write_analysis(analysis, building / ANALYSIS_DIR)
+        write_analysis(analysis, building / ANALYSIS_DIR, campaign_verdicts)
         figures = build_figures(analysis.runs, building, jobs=jobs)
         extras = _extra_items(extra_sections, building)
         navigation = ["verdicts", "comparison", "realistic-arm", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
-        sections = [verdict_section(analysis), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
+        sections = [verdict_section(analysis, campaign_verdicts), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
                     figures_section(figures), per_run_section(analysis)]
         page = render("validation_report.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                       runs_dir=str(runs_dir), n_runs=len(analysis.runs), analysis_dir=ANALYSIS_DIR, data_files=REPORT_DATA_FILES,

@@ -360,15 +360,20 @@ def _finite_or_none(value: float) -> float | None:
     return float(value) if value is not None and math.isfinite(value) else None
 
 
-def summary(analysis: Analysis) -> dict:
-    """summary.json: the runs, the verdicts and the comparison, JSON-clean (NaN -> null)."""
+def summary(analysis: Analysis, campaign_verdicts: list[dict] | None = None) -> dict:
+    """summary.json: the runs, the verdicts (the check runs', and validate's
+    others: `campaign_verdicts`) and the comparison, JSON-clean (NaN -> null)."""
     checks = analysis.checks
+    others = campaign_verdicts or []
     return {
         "runs_dir": str(analysis.runs_dir),
         "runs": [run_summary(r) for r in analysis.runs.values()],
         "unreadable_runs": analysis.failures,
         "checks_passed": int((checks.status == STATUS_PASS).sum()),
         "checks_total": len(checks),
+        "other_checks_passed": sum(bool(v["passed"]) for v in others),
+        "other_checks_total": len(others),
+        "other_checks_failed": [f"{v['check']}: {v['value']}" for v in others if not v["passed"]],
         "checks": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in checks.to_dict("records")],
         "comparison": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in analysis.comparison.to_dict("records")],
         "regimes": REGIME_DESCRIPTIONS,
@@ -376,7 +381,7 @@ def summary(analysis: Analysis) -> dict:
     }
 
 
-def write_analysis(analysis: Analysis, out_dir: str | os.PathLike) -> dict[str, Path]:
+def write_analysis(analysis: Analysis, out_dir: str | os.PathLike, campaign_verdicts: list[dict] | None = None) -> dict[str, Path]:
     """metrics.parquet/.csv, checks.csv, comparison.csv and summary.json in `out_dir` (atomically)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -393,5 +398,5 @@ def write_analysis(analysis: Analysis, out_dir: str | os.PathLike) -> dict[str, 
     write_text_atomic(files["metrics_csv"], analysis.metrics.to_csv(index=False, float_format=None))
     write_text_atomic(files["checks_csv"], analysis.checks.to_csv(index=False))
     write_text_atomic(files["comparison_csv"], analysis.comparison.to_csv(index=False))
-    write_json_atomic(files["summary_json"], summary(analysis))
+    write_json_atomic(files["summary_json"], summary(analysis, campaign_verdicts))
     return files

@@ -50,23 +50,27 @@ class RunProcessing:
         return {"processing": self.name, "harmonics": self.harmonics, "chosen_because": self.why}
 
 
-def choose_processing(specs, processing: str | None, model: PsmModel, topics: BagTopics = BagTopics()) -> RunProcessing:
+def choose_processing(specs, processing: str | None, model: PsmModel, topics: BagTopics = BagTopics(), held_out=()) -> RunProcessing:
     """`processing` None: periodic where every run (name or path) of `model`'s
     arm is a periodic excitation, else upstream, with the reason; periodic:
-    every run must be."""
+    every run must be. The band is the smallest cutoff of `specs`, the runs the
+    fit sees: the `held_out` runs must be periodic too, but they are scored on
+    that band, never choose it."""
     if processing == "upstream":
         return RunProcessing(topics=topics)
-    paths = [Path(resolve_run(s)) for s in _flat(specs) if isinstance(s, (str, Path))]
-    if not paths and processing is None:
+    fitted = [Path(resolve_run(s)) for s in _flat(specs) if isinstance(s, (str, Path))]
+    scored = [Path(resolve_run(s)) for s in _flat(held_out) if isinstance(s, (str, Path))]
+    if not fitted + scored and processing is None:
         return RunProcessing(why="no measured file among the runs", topics=topics)
     try:
-        cutoffs = [process_periodic(load_run(path, model, topics)).periodic.harmonics for path in paths]
+        cutoffs = [process_periodic(load_run(path, model, topics)).periodic.harmonics for path in fitted + scored][:len(fitted)]
     except DvrkDartError as exc:
         if processing == "periodic":
             raise
         return RunProcessing(why=f"upstream: {not_periodic_reason(exc)}", topics=topics)
     why = "--processing periodic" if processing == "periodic" else "every run is a periodic excitation"
-    return RunProcessing("periodic", min(cutoffs) if cutoffs else None, f"{why}; the smallest cutoff of the runs", topics)
+    return RunProcessing("periodic", min(cutoffs) if cutoffs else None,
+                         f"{why}; the smallest cutoff of the runs fitted{' (not the held-out runs)' if scored else ''}", topics)
 
 
 #: why the default processing falls back to upstream with a baseline of another motion

@@ -211,7 +211,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
     inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat), arm.model, topics)
     # every command's default (None): periodic where every run is a periodic excitation, else upstream
-    run_processing = choose_processing(all_specs, processing, arm.model, topics)
+    run_processing = choose_processing([baseline, *measured_list, *(train or []), repeat], processing, arm.model, topics, holdout or ())
     if processing is None:
         run_processing = with_baseline_motion(run_processing, baseline, measured_list, arm.model)
 
