@@ -121,7 +121,8 @@ def test_above_a_session_floor_the_words_weigh_the_gap_above_it():
 
 def test_with_a_baseline_the_finding_leads_and_a_mass_that_may_be_none_is_no_size():
     """A payload fitted beside a baseline of another motion came last in the answer, after the model
-    errors the runs share (friction of q7 led); a mass at the hand position with an interval holding zero was quoted."""
+    errors the runs share (friction of q7 led); then "mostly explained by a payload ... with 9 more effects" where the
+    nine common frictions removed most of it; a mass at the hand position with an interval holding zero was quoted."""
     result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.1], ["q2"])
     result["effects"][0]["role"] = "common_model_error"
     result["effects"].append({"name": "payload_on_pitch", "kind": "payload", "joints": ["q1", "q2"], "selected": True, "role": "finding"})
@@ -129,8 +130,9 @@ def test_with_a_baseline_the_finding_leads_and_a_mass_that_may_be_none_is_no_siz
     result["payload"] = {"link": "pitch", "group": "parallelogram",
                          "payload_at": {"mass_kg": 0.044, "mass_kg_interval": [-0.27, 0.36]}}
     sentence = answer_sentence(result)
-    assert "by a payload on pitch (parallelogram, its mass at the hand position not determined" in sentence, sentence
-    assert "with 1 more effect (friction_q2)" in sentence and "0.044" not in sentence
+    assert "by 2 effects together: a payload on pitch (parallelogram, its mass at the hand position not determined" in sentence, sentence
+    # the share is the effects' together: the common error is named as one, not as a help to the payload
+    assert "and 1 model error the runs share with their baseline (friction_q2)" in sentence and "0.044" not in sentence
     result["payload"]["payload_at"]["mass_kg_interval"] = [0.02, 0.07]
     assert "0.044 kg at the hand position" in answer_sentence(result)
 
@@ -161,6 +163,11 @@ def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_mo
     assert "11% of the identified model's gap removed on average over q1, q2, q3: not explained beyond it" in sentence, sentence
     result["gap_after"]["holdout"] = [0.0655, 0.0925, 0.421, 0.01, 0.01, 0.01, 0.01]
     assert "the identified model's gap grown by" in beyond_identified_sentence(result)
+    # with a session floor, the one rule's measure: the gap above it (RMS-equivalents), as the main sentence's
+    result["gap_after"]["holdout"] = [0.0345, 0.0597, 0.0803, 0.01, 0.01, 0.01, 0.01]
+    result["identified_model_gap_holdout"] = [0.0458, 0.095, 0.134, 0.01, 0.01, 0.01, 0.01]
+    result["session_floor"] = [0.00792, 0.0636, 0.0201, 0.001, 0.001, 0.001, 0.001]
+    assert "56% of the identified model's gap above the session floor removed" in beyond_identified_sentence(result)
 
 
 def test_the_page_names_the_joints_in_the_arms_own_words():

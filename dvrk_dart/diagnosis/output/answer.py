@@ -133,11 +133,16 @@ def beyond_identified_sentence(result: dict) -> str:
     worse = [JOINT_NAMES[j] for j in shown if j in made_worse]
     if worse:
         gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
-    main = [j for j in _main_joints(recorded) if bar[j] > 0]
-    removed = sum(1.0 - after[j] / bar[j] for j in main) / len(main) if main else None
-    if removed is not None:  # the one rule's words, against the identified model instead of the inertia alone
-        change = f"{removed:.0%} of the identified model's gap removed" if removed >= 0 else f"the identified model's gap grown by {-removed:.0%}"
-        gaps += f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in main)}: {words_for(removed)} beyond it"
+    floor = result.get("session_floor")
+    # the one rule (output/wording.py), against the identified model instead of the inertia alone: above the floor where there is one
+    shares = {j: (share_above_floor(bar[j], after[j], floor[j]) if floor and floor[j] is not None else 1.0 - after[j] / bar[j])
+              for j in _main_joints(recorded) if bar[j] > 0}
+    shares = {j: share for j, share in shares.items() if share is not None}
+    removed = sum(shares.values()) / len(shares) if shares else None
+    if removed is not None:
+        gap = "the identified model's gap" + (" above the session floor" if floor else "")
+        change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
+        gaps += f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in shares)}: {words_for(removed)} beyond it"
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
@@ -170,6 +175,27 @@ def _lead_words(result: dict, selected: list[str]) -> str:
     return "no effect"
 
 
+def _names(names: list[str]) -> str:
+    return f"{', '.join(names[:2])}{', ...' if len(names) > 2 else ''}"
+
+
+def _effects_words(result: dict, selected: list[str]) -> str:
+    """The selected effects in words, the lead first. With a baseline, the
+    findings and the model errors the runs share with it are told apart, and
+    the share is said to be theirs together (a payload found beside nine common
+    frictions did not remove most of the gap alone)."""
+    lead = _lead_words(result, selected)
+    roles = {e["name"]: e.get("role", "finding") for e in result.get("effects", [])}
+    findings = [n for n in selected[1:] if roles.get(n, "finding") == "finding"]
+    common = [n for n in selected[1:] if n not in findings]
+    if not common or roles.get(selected[0], "finding") != "finding":
+        others = selected[1:]
+        return lead + (f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({_names(others)})" if others else "")
+    also = f" and {len(findings)} more change{'s' if len(findings) > 1 else ''} ({_names(findings)})" if findings else ""
+    return (f"{len(selected)} effects together: {lead}, what the runs have and their baseline lacks{also}, and {len(common)} model "
+            f"error{'s' if len(common) > 1 else ''} the runs share with their baseline ({_names(common)})")
+
+
 def answer_sentence(result: dict) -> str:
     """The diagnosis in one sentence: the main effect (what, where, how big),
     how far the gap shrinks on the main joints (held-out runs when there are),
@@ -180,9 +206,7 @@ def answer_sentence(result: dict) -> str:
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
     selected = _in_answer_order(result)
-    lead = _lead_words(result, selected)
-    others = selected[1:]
-    more = f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({', '.join(others[:2])}{', ...' if len(others) > 2 else ''})" if others else ""
+    effects = _effects_words(result, selected) if selected else "no effect"
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {_unit(result, j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
@@ -200,12 +224,12 @@ def answer_sentence(result: dict) -> str:
     # the words below are against the paper's simulation, not the identified model: their subject says so
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \
         else "The gap"
-    if lead == "no effect":
+    if effects == "no effect":
         sentence = beyond + f"{gap} is not explained: no effect of the library was selected; {where}, {gaps}"
     elif explained["words"] == "not explained":
-        sentence = beyond + f"{gap} is {words}: the best effects, {lead}{more}, remove less than a fifth of it: {where}, {gaps}"
+        sentence = beyond + f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {where}, {gaps}"
     else:
-        sentence = beyond + f"{gap} is {words} by {lead}{more}: {where}, {gaps}"
+        sentence = beyond + f"{gap} is {words} by {effects}: {where}, {gaps}"
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
