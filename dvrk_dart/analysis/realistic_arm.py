@@ -25,6 +25,11 @@ SHOWN_JOINTS = JOINT_NAMES[:3]
 REGIMES_SHOWN = (REGIME_ALL, REGIME_NEAR_ZERO_VELOCITY, REGIME_HIGH_ACCELERATION)
 
 
+def _processing(run) -> str:
+    """The processing a replay read its measured run with (config.json's run_config)."""
+    return (run.config.get("run_config") or {}).get("processing") or "upstream"
+
+
 def _rank(dynamics: str) -> tuple[int, str]:
     return (DYNAMICS_ORDER.index(dynamics), dynamics) if dynamics in DYNAMICS_ORDER else (len(DYNAMICS_ORDER), dynamics)
 
@@ -47,9 +52,11 @@ def realistic_arm_section(analysis: Analysis) -> str:
     def row(label: str, run: str, quantity: str, regime: str = REGIME_ALL) -> list:
         return [text_cell(label), *(cell(run, quantity, j, regime) for j in SHOWN_JOINTS)]
 
-    measured = [row(f"{r.dynamics}: RMS(simulated - measured)", r.name, "rms_sim_vs_measured") for r in runs]
-    measured.append(row("the full identified model: RMS(model - measured) at the measured states", runs[0].name,
-                        "rms_model_full_vs_measured_at_measured_state"))
+    measured = [row(f"{r.dynamics}, {_processing(r)} processing: RMS(simulated - measured)", r.name, "rms_sim_vs_measured") for r in runs]
+    # the model in each processing's band: a periodic replay sits beside the model's periodic figure, not the upstream one
+    first_of = {_processing(r): r for r in reversed(runs)}
+    measured += [row(f"the full identified model, {processing} processing: RMS(model - measured) at the measured states", r.name,
+                     "rms_model_full_vs_measured_at_measured_state") for processing, r in sorted(first_of.items(), reverse=True)]
     identified = next((r for r in runs if r.dynamics == "identified"), None)
     regimes = [] if identified is None else [
         row(f"{regime}: {REGIME_DESCRIPTIONS.get(regime, regime)}", identified.name, "rms_sim_vs_model", regime) for regime in REGIMES_SHOWN]
