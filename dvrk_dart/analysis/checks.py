@@ -93,6 +93,9 @@ GOALS = ("smaller", "equal", "none")
 #: simulators: it is reported as "at round-off" rather than as a number
 MAX_MEANINGFUL_RATIO = 1e4
 
+#: the note of a compared value at round-off (ahead of the entry's own note)
+ROUND_OFF = "at round-off"
+
 COMPARISON_COLUMNS = [
     "published", "kind", "source", "where", "run", "quantity", "regime", "component", "goal", "note",
     "published_value", "our_value", "unit", "ratio_published_over_ours", "reproduced_to",
@@ -122,7 +125,7 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
                 if goal != "smaller":
                     ratio = math.nan
                 elif ratio > MAX_MEANINGFUL_RATIO:
-                    ratio, note = math.nan, "at round-off"
+                    ratio, note = math.nan, ROUND_OFF + (f"; {note}" if note else "")
                 rows.append({
                     "published": entry["id"],
                     "kind": entry.get("kind", KIND_ERROR),

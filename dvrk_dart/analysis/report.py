@@ -58,6 +58,7 @@ from dvrk_dart.analysis.tables import (
     KIND_ERROR,
     MAX_MEANINGFUL_RATIO,
     QUANTITY_DESCRIPTIONS,
+    ROUND_OFF,
     REGIME_ALL,
     REGIME_DESCRIPTIONS,
     STATUS_FAIL,
@@ -164,10 +165,12 @@ def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
     rows = [[text_cell(f"published ({entry['source']})"),
              *(num_cell(first.loc[c, "published_value"], published=entry["id"], component=c, field="published_value") for c in entry["components"])]]
     is_error = entry.get("kind", KIND_ERROR) == KIND_ERROR
-    better = total = 0
+    counts = {}  # per compared run: better, at round-off, compared
     for (run, quantity, regime, goal), group in rows_of_entry.groupby(["run", "quantity", "regime", "goal"], sort=False):
         group = group.set_index("component")
-        note = next((n for n in group.note if isinstance(n, str) and n and n != "at round-off"), "")
+        notes = [n.removeprefix(ROUND_OFF).removeprefix("; ") for n in group.note if isinstance(n, str)]
+        note = next((n for n in notes if n), "")
+        better, round_off, total = counts.setdefault(run, [0, 0, 0])
         label = (f"ours: {run}" + ("" if quantity == entry["quantity"] else f", {quantity}") + ("" if regime == REGIME_ALL else f" [{regime}]")
                  + (f" ({note})" if note else ""))
         ours, second = [], []
@@ -177,9 +180,9 @@ def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
             ours.append(num_cell(compared.our_value, **key, joint=c, field="our_value"))
             if goal == "equal":
                 second.append(num_cell(compared.reproduced_to, **key, field="reproduced_to"))
-            elif compared.note == "at round-off":
-                second.append(text_cell("at round-off", "better"))
-                better += 1
+            elif str(compared.note).startswith(ROUND_OFF):
+                second.append(text_cell(ROUND_OFF, "better"))
+                better, round_off = better + 1, round_off + 1
             else:
                 ratio = compared.ratio_published_over_ours
                 css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
@@ -187,15 +190,15 @@ def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
                 better += int(ratio > 1)
             if goal == "smaller":
                 total += int(math.isfinite(compared.our_value))
+        counts[run] = [better, round_off, total]
         rows.append([text_cell(label), *ours])
         if goal == "equal":
             rows.append([text_cell("reproduced to |ours - published|"), *second])
         elif goal == "smaller":
             rows.append([text_cell("published / ours"), *second])
-    verdict = (
-        f"ours better on {better} of {total} compared values" if is_error
-        else "an effect that must show, not an error: the ratio compares its size, neither side is better"
-    )
+    # each run on its own: an ideal tendon at round-off beside the paper's PID mirror is two answers, not one count
+    verdict = ("; ".join(f"{run}: better on {b} of {n}" + (f" ({r} at round-off)" if r else "") for run, (b, r, n) in counts.items() if n)
+               if is_error else "an effect that must show, not an error: the ratio compares its size, neither side is better")
     return {"where": entry["where"], "quantity": entry["quantity"], "verdict": verdict,
             "table": table(["", *_component_header(entry)], rows)}
 

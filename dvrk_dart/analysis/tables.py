@@ -32,6 +32,7 @@ from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysi
     KIND_EFFECT,
     KIND_ERROR,
     MAX_MEANINGFUL_RATIO,
+    ROUND_OFF,
     PUBLISHED_FILE,
     STATUS_FAIL,
     STATUS_MISSING,
