@@ -200,3 +200,18 @@ def test_j1_at_q0_is_not_determined_without_a_run_of_the_baselines_motion(arm):
     assert payload["gravity_efforts_at_q0"][0] is None and J1_OTHER_MOTION in payload["not_determined"]["gravity_efforts_at_q0"]
     j2 = payload["payload_at"]["gravity_efforts_at_q0"][1]
     assert j2 is not None and -0.3 < j2 < -0.1  # 105 g about 16.5 cm from the pitch shaft: about -0.17 N·m
+
+
+def test_a_verdict_on_a_mass_the_answer_calls_not_determined_is_its_intervals():
+    """validate's periodic 105 g: 0.111 kg (+6 %) passed 'within 20 %' beside an interval -0.173-0.394 kg that
+    the answer calls not determined; and J2's check passed on any shrink (0.213 -> 0.067 N·m, 1.9x its floor)."""
+    from dvrk_dart.diagnosis.checks.payload_checks import _j2_verdict, _mass_at_hand_verdict
+
+    undetermined = _mass_at_hand_verdict("m", {"mass_kg": 0.111, "mass_kg_interval": [-0.173, 0.394]}, 0.105, 0.2)
+    assert "not determined" in undetermined["check"] and undetermined["passed"]
+    assert not _mass_at_hand_verdict("m", {"mass_kg": 0.111, "mass_kg_interval": [-0.173, 0.09]}, 0.105, 0.2)["passed"]
+    assert not _mass_at_hand_verdict("m", {"mass_kg": 0.15, "mass_kg_interval": [0.12, 0.18]}, 0.105, 0.2)["passed"]
+    result = {"gap_before": {"train": [0.1, 0.213, 0.5]}, "gap_after": {"train": [0.1, 0.067, 0.1]}, "session_floor": [0.01, 0.035, 0.02]}
+    assert _j2_verdict(result, "t")["passed"] and "73% removed" in _j2_verdict(result, "t")["value"]
+    result["gap_after"]["train"][1] = 0.15  # shrunk, but less than half of what is above the floor
+    assert not _j2_verdict(result, "t")["passed"]
