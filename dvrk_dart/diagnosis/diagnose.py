@@ -361,7 +361,7 @@ def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
     """A payload-shaped fit without a baseline: the arm's own gravity against
     the parameters (its mass distribution: another arm, instrument or session),
     reported by its efforts, not as a mass that was attached."""
-    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), [model.effort_unit(j) for j in JOINT_NAMES]).lstrip(",")
+    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), [model.effort_unit(j) for j in JOINT_NAMES], every=True).lstrip(",")
     return {**fit,
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
                        "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "

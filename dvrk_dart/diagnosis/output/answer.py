@@ -66,12 +66,13 @@ def _size_words(entry: dict) -> str:
     return f", {size:.0%} of it" if unit == "1" else f", size {size:.3g} {unit}".rstrip()  # a share of an identified term
 
 
-def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None) -> str:
+def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None, every: bool = False) -> str:
     """', +0.25 N·m on q2 at q = 0': a payload's gravity effort at q = 0 on J2
     (where a payload shows most), else on the first of J1..J3 that has one
     (J2 not recorded or not determined); '' when none has. With `intervals`,
     only an effort whose interval excludes zero is a size; when none does, the
-    size is said to be not determined."""
+    size is said to be not determined. `every`: each of J1..J3's non-zero
+    efforts, J2 first (a gravity mismatch's J1 part is part of what it is)."""
     efforts = list(efforts or [])[:3]
     shown = [j for j in (1, 0, 2) if j < len(efforts) and efforts[j] is not None]
     if intervals is not None and any(interval is not None for interval in intervals[:3]):
@@ -80,8 +81,8 @@ def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list
             return ", size not determined: no gravity effort at q = 0 is told from zero"
     if not shown:
         return ""
-    j = shown[0]
-    return f", {efforts[j]:+.3g} {units[j]} on {JOINT_NAMES[j]} at q = 0"
+    shown = [j for j in shown if efforts[j] != 0.0] if every else shown[:1]
+    return (", " + ", ".join(f"{efforts[j]:+.3g} {units[j]} on {JOINT_NAMES[j]}" for j in shown) + " at q = 0") if shown else ""
 
 
 def _payload_size_words(payload: dict, units: list[str]) -> str:
@@ -166,7 +167,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
     if payload_first and payload:
         return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
-        size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"])
+        size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         return (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
                 "an attached mass not told apart without a baseline)")
     if selected:
