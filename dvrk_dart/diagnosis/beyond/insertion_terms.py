@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import scipy.optimize
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
@@ -132,8 +133,23 @@ def fit_insertion_terms(arm: Arm, train: list[ProcessedRun], terms: tuple[str, .
     S = np.vstack([_stroke_columns(s, knots) for s in train])
     y = np.concatenate(residuals if residuals is not None else [insertion_residual(arm, s) for s in train])
     ridge = np.hstack([np.zeros((len(knots), G.shape[1])), np.sqrt(STROKE_RIDGE_SAMPLES) * np.eye(len(knots))])
-    solution, *_ = np.linalg.lstsq(np.vstack([np.hstack([G, S]), ridge]), np.r_[y, np.zeros(len(knots))], rcond=None)
+    A, b = np.vstack([np.hstack([G, S]), ridge]), np.r_[y, np.zeros(len(knots))]
+    solution, *_ = np.linalg.lstsq(A, b, rcond=None)
+    # friction dissipates: J3's viscous correction may take the identified one down to zero, not below
+    lower = np.full(A.shape[1], -np.inf)
+    lower[OWN_FRICTION_NAMES.index("viscous")] = -identified_viscous(arm, INSERTION)
+    if np.any(solution < lower):
+        solution = scipy.optimize.lsq_linear(A, b, bounds=(lower, np.inf)).x
     return InsertionTerms(tuple(terms), solution[: G.shape[1]], knots, solution[G.shape[1]:])
+
+
+def identified_viscous(arm: Arm, joint: int) -> float:
+    """The identified model's viscous friction along `joint` (effort per unit speed, above the reversals)."""
+    at = np.zeros((2, N_JOINTS))
+    speed = np.zeros((2, N_JOINTS))
+    speed[:, joint] = (1.0, 2.0)
+    friction_efforts = arm.identified.predict(at, speed, np.zeros_like(at), ("friction",))[:, joint]
+    return float(friction_efforts[1] - friction_efforts[0])
 
 
 def insertion_gap(arm: Arm, fitted: InsertionTerms, state: ProcessedRun) -> float:
