@@ -83,7 +83,7 @@ REGIME_DESCRIPTIONS = {
     REGIME_NEAR_ZERO_VELOCITY: "samples where the joint's simulated |dq| < {rad} rad/s ({m} m/s for q3)".format(**NEAR_ZERO_VELOCITY),
     REGIME_HIGH_ACCELERATION: f"samples where the joint's simulated |ddq| is at or above its {HIGH_ACCELERATION_PERCENTILE:g}th percentile in the run",
     REGIME_FIRST_PERIOD: "replays only: upstream's test window, the arm's [processing] first_period_samples (the PSM's 1111 at 200 Hz, "
-                         "the first base period of its identification's excitations; not the period of a run of another design)",
+                         "1 / 0.18 Hz: the base frequency its identification assumed, not a run's own period, which the periodic processing fits)",
 }
 
 # ---------------------------------------------------------------- quantities
