@@ -350,6 +350,7 @@ def report_section(*datas: dict) -> tuple[str, str]:
         processing, ref = data["processing"]["processing"], data["reference"]
         parts.append({"processing": processing, "runs": data["config"]["runs"], "n_base": data["n_base"], "condition_number": fmt(data["condition_number"]),
                       "worst": fmt(worst_eigenvalue(data)), "published_worst": fmt(ref["pseudo_inertia_smallest_eigenvalue_kg_m2"]),
+                      "departure": data["consistent_departure"],
                       "tables": [(run, _holdout_table(run, own, ref["errors_first_period"].get(run), processing, data["effort_units"]))
                                  for run, own in data["errors"]["holdout"].items()]})
     return "Own identification vs the published parameters", render("sections/identification.html", parts=parts)
