@@ -13,6 +13,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.period import harmonic_design
 from dvrk_dart.io.periodic import analyse
 from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.signal import process_periodic
 from arms import PSM
 
 RATE_HZ = 200.0
@@ -167,3 +168,16 @@ def test_held_out_runs_do_not_choose_the_diagnosis_band():
     trained = choose_processing(["2018-test1"], None, PSM, held_out=["2018-test2"])
     assert (trained.name, trained.harmonics) == ("periodic", 32) and "not the held-out runs" in trained.why
     assert choose_processing(["2018-test1", "2018-test2"], None, PSM).harmonics == 29
+
+
+def test_a_moving_joint_with_a_dead_effort_channel_has_no_say_in_the_band(tmp_path, capsys):
+    """2018 test1 with tau3 replaced by 0.01 N of noise (q3 still moves): its cutoff sank to the design's 5
+    harmonics and set every joint's band (q2 0.2287 -> 0.1363 relative, no word). It is said, and left out."""
+    values = np.loadtxt(resolve_run("2018-test1"), delimiter=",")
+    values[:, 8] = np.random.default_rng(0).normal(0.0, 0.01, len(values))
+    path = tmp_path / "tau3_noise.csv"
+    np.savetxt(path, values, delimiter=",")
+    dead = process_periodic(load_run(path, PSM)).periodic
+    assert dead.silent[:3] == (False, False, True) and dead.harmonics == 32  # test1's own band: q1's 32
+    assert not any(process_periodic(load_run(resolve_run("2018-test1"), PSM)).periodic.silent)
+    assert "q3 moves but its efforts show nothing" in capsys.readouterr().err

@@ -82,6 +82,7 @@ def test_the_periodic_layer_on_random_designs(arm, design):
     assert analysis.kept == (0, len(state.t))  # a steady run keeps every sample (no transient found)
     cutoffs = np.array(analysis.joint_cutoffs)
     assert np.all(cutoffs[moving] >= harmonics), (cutoffs, harmonics, moving)
+    assert not any(analysis.silent), analysis.silent  # every moving joint of a DART run has its efforts: none is read as dead
     assert analysis.harmonics >= harmonics
     # what the projection leaves of the noise, against what the layer states
     error = rms(analysis.projector(tau) - analysis.projector(efforts))

@@ -43,6 +43,7 @@ import scipy.linalg
 import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.csv_run import say_once
 from dvrk_dart.io.transient import TRANSIENT_RATIO, WINDOW_PERIOD_FRACTION, steady_span
 from dvrk_dart.io.period import DESIGN_PERIOD_TOLERANCE, Period, design_harmonics, fit_period, harmonic_design, least_squares, moving_joints
 
@@ -111,6 +112,14 @@ def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _
     # a harmonic's power in DFT-line units over the span: span (a^2 + b^2) / 4
     power = np.vstack([np.zeros((1, x.shape[1])), span * (coefficients[1::2] ** 2 + coefficients[2::2] ** 2) / 4.0])
     return _Spectrum(power, noise, lines[noise_line].mean(axis=0))
+
+
+def silent_efforts(spectrum: _Spectrum) -> np.ndarray:
+    """(n,) bool: columns none of whose first `CUTOFF_RUN` harmonics stands `CUTOFF_SNR` times above its noise:
+    a moving joint's efforts always carry its motion's first harmonics (inertia, friction), so such a column
+    holds no effort of this motion (a channel not logged, or noise): it has no say in the band."""
+    ratio = spectrum.harmonic_power[1:CUTOFF_RUN + 1] / np.maximum(spectrum.noise_power[1:CUTOFF_RUN + 1], np.finfo(float).tiny)
+    return np.all(ratio < CUTOFF_SNR, axis=0)
 
 
 def joint_cutoffs(spectrum: _Spectrum) -> np.ndarray:
@@ -192,6 +201,8 @@ class PeriodicAnalysis:
     design_from: str = ""
     #: the run's samples analysed (start, stop): a start or end transient left out (`transient`)
     kept: tuple[int, int] = (0, 0)
+    #: moving joints whose efforts show nothing at the motion's first harmonics (`silent_efforts`): no say in the band
+    silent: tuple[bool, ...] = ()
 
     @property
     def measured(self) -> tuple[bool, ...]:
@@ -210,11 +221,13 @@ class PeriodicAnalysis:
             "harmonics": self.harmonics,
             "joint_cutoffs": per_joint(self.joint_cutoffs),
             "moving_joints": [bool(m) for m in self.moving],
+            "silent_efforts": [bool(x) for x in self.silent],
             "design_harmonics": self.design_harmonics,
             "design_from": self.design_from,
             "cutoff_rule": f"per joint: the last harmonic before {CUTOFF_RUN} consecutive harmonics of its efforts below "
                            f"{CUTOFF_SNR:g} x their local noise power; the band: the smallest of the moving, recorded joints', "
-                           "at least the design's harmonics",
+                           "at least the design's harmonics; a moving joint whose efforts are below that at its first "
+                           f"{CUTOFF_RUN} harmonics holds no effort of the motion (silent_efforts) and has no say",
             "noise_rms": per_joint(self.effort_noise.projected_rms.tolist()),
             "noise_per_sample_rms": per_joint(self.effort_noise.per_sample_rms.tolist()),
             "position_noise_per_sample_rms": per_joint(self.position_noise.per_sample_rms.tolist()),
@@ -254,7 +267,14 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     top = len(effort_spectrum.harmonic_power) - 1
     own = joint_cutoffs(effort_spectrum)
     cutoffs = np.where(measured, np.minimum(np.where(moving, np.maximum(own, floor), own), top), 0)
-    band = band_harmonics(cutoffs, moving, min(floor, top)) if harmonics is None else min(int(harmonics), top)
+    silent = measured & moving & silent_efforts(effort_spectrum)
+    if silent.all() or not (measured & moving).any():
+        silent[:] = False  # nothing else to decide: the run's own rules (and its errors) stand
+    if silent.any():
+        say_once([f"{where}: {', '.join(f'q{j + 1}' for j in np.flatnonzero(silent))} moves but its efforts show nothing at the "
+                  f"motion's first {CUTOFF_RUN} harmonics (a channel not logged, or noise): no say in the band; its figures "
+                  "compare the model with that channel"])
+    band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
     projector = Projector(t, period.frequency_hz, band)
     position_spectrum = _spectrum(t, q, period, rate_hz)
     return PeriodicAnalysis(
@@ -263,4 +283,5 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
         _noise(position_spectrum, band, len(t), period.whole_periods),
         projector, tuple(int(k) for k in cutoffs), tuple(bool(m) for m in moving), int(floor),
         "--excitation " + design.source if design is not None else "the positions", (steady.start, steady.stop),
+        tuple(bool(x) for x in silent),
     )
