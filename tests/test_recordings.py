@@ -11,6 +11,7 @@ import pytest
 
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import SHARED_ROOT, load_run, resolve_run
 from arms import PSM, PSM_ARM
 
@@ -181,6 +182,7 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
     (",t,q1,dq1,tau1", r"column 1 is empty \(an index column\? \(pandas"),  # to_csv's default index
     ("t,q1,dq1,tau1,", "column 5 is empty .a trailing comma"),
     ("t;q1;dq1;tau1", "separated by commas; this file's by ';'"),
+    ("t,time,q1,dq1,tau1", r"two time columns \(t, column 1; time, column 2\)"),  # the last one won, silently
 ])
 def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
     width = len(header.split(","))
@@ -251,6 +253,8 @@ def test_rate_and_a_time_column_must_agree(tmp_path, capsys):
     assert main(["model-errors", "--measured", str(path), "--rate", "100"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--rate 100" in err and "time column at 200 Hz" in err
+    # within 1 % it agrees, and the stamps set the rate (--rate 199 read the run 0.5 % slow)
+    assert load_run(path, PSM, BagTopics(rate_hz=199.0)).rate_hz == pytest.approx(200.0)
 
 
 def test_a_wrong_time_column_is_named_as_what_to_correct(tmp_path, capsys):

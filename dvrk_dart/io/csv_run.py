@@ -105,6 +105,9 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
             raise DvrkDartError(f"{path}: header column {index + 1} is empty ({why})")
         name = cell.strip()
         if name.lower() in TIME_NAMES:
+            if time_column is not None:
+                raise DvrkDartError(f"{path}: two time columns ({header[time_column].strip()}, column {time_column + 1}; {name}, "
+                                    f"column {index + 1}): keep one")
             time_column = index
             continue
         key = _header_key(name, dvrk_joints)
