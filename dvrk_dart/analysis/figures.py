@@ -180,11 +180,13 @@ def torque_figure(runs: list[LoadedRun], path: Path) -> None:
 
 
 def residual_figure(run: LoadedRun, path: Path) -> None:
-    """Measured - simulated per joint, next to measured - full model (the model's own floor)."""
+    """Measured - simulated per joint the run recorded (a joint it did not has no residual), next to
+    measured - full model (the model's own floor)."""
     record = run.record
     _, full = _model_efforts(run)
-    fig, axes = plt.subplots(len(JOINT_NAMES), 1, figsize=(12, 14), sharex=True, layout="constrained")
-    for j, ax in enumerate(axes):
+    recorded = [j for j, name in enumerate(JOINT_NAMES) if name in run.metrics.get("measured_joints", JOINT_NAMES)]
+    fig, axes = plt.subplots(len(recorded), 1, figsize=(12, 2 * len(recorded)), sharex=True, layout="constrained", squeeze=False)
+    for j, ax in zip(recorded, axes[:, 0]):
         residual_sim = record.effort_measured[:, j] - record.effort_sim[:, j]
         residual_model = record.effort_measured[:, j] - full[:, j]
         ax.plot(record.t, residual_sim, color=COLORS["sim"], lw=LINE_WIDTH, label="measured - simulated")
@@ -192,8 +194,8 @@ def residual_figure(run: LoadedRun, path: Path) -> None:
         _robust_ylim(ax, [residual_sim, residual_model])
         ax.axhline(0.0, color="grey", lw=0.5)
         ax.set_ylabel(f"residual {_joint_label(run, j)}")
-    axes[0].legend(loc="best", fontsize="small")
-    axes[-1].set_xlabel("time (s)")
+    axes[0, 0].legend(loc="best", fontsize="small")
+    axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(f"{run.name}: residual efforts")
     _save(fig, path)
 
