@@ -127,11 +127,16 @@ def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):
     test1 = load_run(resolve_run("2018-test1"), PSM)
     short = type(test1)(test1.path, test1.data.iloc[:2000].reset_index(drop=True), PSM)
     path = _write_header_csv(tmp_path / "q1_only.csv", short, ["q1", "dq1", "tau1"])
+    later = type(test1)(test1.path, test1.data.iloc[2000:4000].reset_index(drop=True), PSM)
+    held_out = _write_header_csv(tmp_path / "q1_q2.csv", later, ["q1", "dq1", "tau1", "q2", "dq2", "tau2"])  # q2 recorded there only
     out = tmp_path / "diagnosis"
-    assert main(["diagnose", "--measured", str(path), "--out", str(out), "--processing", "upstream"]) == 0
+    assert main(["diagnose", "--measured", str(path), "--holdout", str(held_out), "--out", str(out), "--processing", "upstream"]) == 0
     printed = capsys.readouterr().out
     result = json.loads((out / "diagnosis.json").read_text())
     assert result["gap_before"]["train"][1:] == [None] * 6 and result["gap_before"]["train"][0] > 0.1
+    # a joint the held-out run has and the training run not: said, not silently left (nor fitted blind and shown)
+    assert result["not_recorded_by"] == {"q2": ["q1_only"]} and "q2: not recorded by q1_only" in printed
+    printed = printed.replace("q2: not recorded by q1_only", "").replace(f"effect on q2; what the effects do to q2", "")
     fit = result["gravity_mismatch"] or result["payload"]
     if fit is not None:  # a payload-shaped fit: its efforts on q2..q7 are not given, with the reason
         assert fit["gravity_efforts_at_q0"][1:] == [None] * 6 and "q2: not recorded" in fit["not_determined"]["gravity_efforts_at_q0"]

@@ -144,7 +144,7 @@ def diagnose(
     period = (split_source[0][0], problem.before_residual(split_source[0][0]), split_source[1][0], floor)
     where_run = problem.train_runs[0]
     result = {**result, "where": _write_outputs(Path(out_dir), where_run, problem.before_residual(where_run), after.train_after[0], figures,
-                                                period, arm.model)}
+                                                period, arm.model, problem.recorded)}
     if write_json:
         write_json_atomic(Path(out_dir) / "diagnosis.json", result)
     return result
@@ -335,6 +335,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         sim_config=after.sim_config.to_dict(),
         not_in_simulation=after.not_in_simulation,
         recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
+        not_recorded_by=problem.not_recorded_by,
         gravity_mismatch=mismatch,
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
@@ -372,7 +373,7 @@ def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,
-                   model: PsmModel) -> dict:
+                   model: PsmModel, recorded: np.ndarray) -> dict:
     """where.csv and the figures of the residual (`before`, `after`: the run's gap before and after the effects);
     returns diagnosis.json's `where`."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -386,6 +387,6 @@ def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: 
         paths += plot_residuals(run.state, after, out_dir / "figures", model, "residual_after", run.name)
         period_run, period_before, period_after, floor = period
         paths.append(plot_period(period_run.state, period_before, period_after, floor, out_dir / "figures" / f"{PERIOD_FIGURE}.png", model,
-                                 period_run.name))
+                                 period_run.name, recorded))
         where["figures"] = [str(p.relative_to(out_dir)) for p in paths]
     return where

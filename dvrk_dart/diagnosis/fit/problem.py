@@ -76,6 +76,14 @@ class Problem:
         """(7,) bool: the joints every run recorded (the others have no weight and no figure)."""
         return recorded_joints([*self.train_runs, *self.holdout_runs, self.baseline_run, self.repeat_run])
 
+    @property
+    def not_recorded_by(self) -> dict[str, list[str]]:
+        """A joint some runs recorded and others not -> the runs that did not (each held where its log holds it in
+        its simulation): the diagnosis has no figure, weight or effect on it, and says why."""
+        runs = [r for r in (*self.train_runs, *self.holdout_runs, self.baseline_run, self.repeat_run) if r is not None]
+        return {name: [r.name for r in runs if not r.state.measured[j]] for j, name in enumerate(JOINT_NAMES)
+                if not self.recorded[j] and any(r.state.measured[j] for r in runs)}
+
     @cached_property
     def train_totals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The training Gram blocks summed over the folds (A, g, s): every candidate's training fraction reads them."""

@@ -215,6 +215,8 @@ class Diagnosis:
     not_in_simulation: list
     #: the joints every run recorded (the others carry no figure, weight or effect)
     recorded_joints: list
+    #: a joint some runs recorded and others not -> the runs that did not
+    not_recorded_by: dict
     #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
     gravity_mismatch: dict | None
     #: with a baseline, a payload-shaped fit whose intervals all hold zero: no payload is named

@@ -11,6 +11,9 @@ def print_diagnosis(result: dict) -> None:
     """What `dvrk-dart diagnose` prints of its result: the answer, the gaps, the effects, the payload."""
     print(answer_sentence(result))
     print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
+    for joint, runs in (result.get("not_recorded_by") or {}).items():
+        print(f"{joint}: not recorded by {', '.join(runs)} (held where its log holds it in its simulation): no figure, weight or "
+              f"effect on {joint}; what the effects do to {joint} is not checked")
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
             if values is not None:

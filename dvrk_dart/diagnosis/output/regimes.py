@@ -110,9 +110,11 @@ def plot_residuals(state: ProcessedRun, residual: np.ndarray, folder: Path | str
 PERIOD_FIGURE_JOINTS = 3
 
 
-def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path, model: PsmModel, run: str = "") -> Path:
+def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floor, path: Path, model: PsmModel, run: str = "",
+                recorded=None) -> Path:
     """The residual before and after the effects over the run's first period,
-    one panel per main joint, ± the session floor as a band (when measured)."""
+    one panel per main joint the diagnosis's runs all recorded (`recorded`, default the run's),
+    ± the session floor as a band (when measured)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -122,8 +124,10 @@ def plot_period(state: ProcessedRun, before: np.ndarray, after: np.ndarray, floo
 
     n = min(len(state), state.first_period_samples())
     t = state.t[:n] - state.t[0]
-    fig, axes = plt.subplots(PERIOD_FIGURE_JOINTS, 1, figsize=(11, 2.4 * PERIOD_FIGURE_JOINTS), sharex=True)
-    for j, ax in enumerate(axes):
+    shown = [j for j in range(PERIOD_FIGURE_JOINTS) if state.measured[j] and (recorded is None or recorded[j])] or [0]
+    fig, axes = plt.subplots(len(shown), 1, figsize=(11, 2.4 * len(shown)), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    for j, ax in zip(shown, axes):
         if floor is not None:
             ax.axhspan(-floor[j], floor[j], color="0.85", label="± session floor")
         ax.plot(t, before[:n, j], color="tab:red", lw=0.8, alpha=0.6, label="before")
