@@ -11,6 +11,9 @@ def print_diagnosis(result: dict) -> None:
     """What `dvrk-dart diagnose` prints of its result: the answer, the gaps, the effects, the payload."""
     print(answer_sentence(result))
     print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
+    for name, run in (result["processing"].get("runs") or {}).items():
+        if run.get("rate_note"):
+            print(f"note: {name}: {run['rate_note']}")
     for joint, runs in (result.get("not_recorded_by") or {}).items():
         print(f"{joint}: not recorded by {', '.join(runs)} (held where its log holds it in its simulation): no figure, weight or "
               f"effect on {joint}; what the effects do to {joint} is not checked")
