@@ -538,3 +538,16 @@ def test_a_diagnosis_gives_no_session_floor_on_a_joint_not_recorded(tmp_path):
         assert effect["explained_fraction_per_joint"]["cross_validated"][3:] == [None] * 4
     for candidate in result["payload_candidates"]:
         assert candidate["gravity_efforts_at_q0"][3:] == [None] * 4, candidate["gravity_efforts_at_q0"]
+
+
+def test_velocity_columns_in_another_unit_are_named_not_a_rate(tmp_path):
+    """dq1, dq2 in deg/s and dq3 in m/s: the tool offered '--rate 393.4' (a median of the joints' scales), which
+    read the run 2x fast. A rate scales every joint alike: the columns are named."""
+    test1 = load_run(resolve_run("2018-test1"), PSM)
+    path = _write_header_csv(tmp_path / "deg.csv", test1, _columns(1, 2, 3))
+    frame = pd.read_csv(path)
+    frame[["dq1", "dq2"]] = np.degrees(frame[["dq1", "dq2"]])
+    frame.to_csv(path, index=False)
+    with pytest.raises(DvrkDartError, match=r"\(dq1 57.3, dq2 57.3\) while dq3 agree.*not the rate \(deg/s\?") as error:
+        load_run(path, PSM)
+    assert "--rate" not in str(error.value)
