@@ -551,3 +551,17 @@ def test_velocity_columns_in_another_unit_are_named_not_a_rate(tmp_path):
     with pytest.raises(DvrkDartError, match=r"\(dq1 57.3, dq2 57.3\) while dq3 agree.*not the rate \(deg/s\?") as error:
         load_run(path, PSM)
     assert "--rate" not in str(error.value)
+
+
+def test_a_position_that_never_changes_beside_a_changing_effort_is_said(tmp_path, capsys):
+    """q3 and dq3 all zero, tau3 logged: q1's and q2's figures doubled (q3 = 0 in every joint's model) with no word."""
+    test1 = load_run(resolve_run("2018-test1"), PSM)
+    path = _write_header_csv(tmp_path / "q3_zero.csv", test1, _columns(1, 2, 3))
+    frame = pd.read_csv(path)
+    frame[["q3", "dq3"]] = 0.0
+    frame.to_csv(path, index=False)
+    capsys.readouterr()
+    load_run(path, PSM)
+    assert "q3's position is 0 for the whole run while its effort changes" in capsys.readouterr().err
+    load_run(resolve_run("2018-test1"), PSM)
+    assert "for the whole run" not in capsys.readouterr().err

@@ -38,7 +38,7 @@ from dvrk_dart.diagnosis.fit.result import (
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
-from dvrk_dart.diagnosis.fit.session_floor import card_repeat, gap_split, session_floor
+from dvrk_dart.diagnosis.fit.session_floor import card_repeat, constants_beyond_session, gap_split, session_floor
 from dvrk_dart.diagnosis.output.answer import effort_at_zero_words
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
@@ -138,6 +138,9 @@ def diagnose(
     carried = identified_terms_share(problem, selection, base_config)
     result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped,
                         carried).to_json()
+    differences = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE]
+    result["constants_beyond_session"] = constants_beyond_session(result["nuisance_offsets"], differences, problem.repeat_run,
+                                                                  problem.reference_run, result["units"])
     if out_dir is None:
         return result
     # the run the answer speaks of; before and after both without the nuisance constants the fit takes out

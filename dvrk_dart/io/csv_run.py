@@ -255,6 +255,20 @@ def joints_with_efforts(read: CsvValues, path: Path) -> tuple[tuple[str, ...], l
             [f"{path}: {said}: read as not recorded"] if said else [])
 
 
+def still_position_notes(values: np.ndarray, measured: tuple[str, ...], path: Path) -> list[str]:
+    """A recorded joint whose position holds one value for the whole run while its effort changes: held there
+    (a brake, a servo at rest), or a position the logger did not read. Every joint's model efforts use that value
+    (q3 left at 0 doubled q1's and q2's figures on a 2018 run), so it is said."""
+    notes = []
+    for name in measured:
+        j = JOINT_NAMES.index(name)
+        q, tau = values[:, j], values[:, 2 * N_JOINTS + j]
+        if np.ptp(q) == 0.0 and np.ptp(tau) > 0.0:
+            notes.append(f"{path}: {name}'s position is {q[0]:g} for the whole run while its effort changes: held there, or its "
+                         f"position not logged? every joint's model efforts use {name} = {q[0]:g}")
+    return notes
+
+
 def say_once(notes: list[str]) -> None:
     """Notes on stderr, each once per process (a command may read a file more than once)."""
     for note in notes:

@@ -16,7 +16,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.io.bags import BagTopics, is_bag, load_bag_run
-from dvrk_dart.io.csv_run import joints_with_efforts, read_csv_run, say_once
+from dvrk_dart.io.csv_run import joints_with_efforts, read_csv_run, say_once, still_position_notes
 from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers' names)
     CSV_COLUMNS,
     MANIFEST_FILE,
@@ -254,7 +254,7 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     check_rate(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path), source)
     velocity_notes = check_velocity_columns(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path))
     measured, effort_notes = joints_with_efforts(read, path)
-    say_once(velocity_notes + effort_notes)  # last: notes only for a file that loads
+    say_once(velocity_notes + effort_notes + still_position_notes(values, measured, path))  # last: notes only for a file that loads
     data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", np.arange(len(data)) / rate)
     return MeasuredRun(path=path, data=data, model=model, measured=measured)
