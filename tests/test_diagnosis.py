@@ -565,3 +565,20 @@ def test_a_mass_interval_holds_the_fit_between_grid_points():
     assert 0.502 < lo < 0.612 and hi == masses[-1]
     lo, hi = _interval_within(masses, np.array([0.5, 0.9, 1.0, 0.9, 0.5]), 0.95)  # both ends crossed, halfway in log mass
     assert lo == pytest.approx(np.sqrt(masses[1] * masses[2])) and hi == pytest.approx(np.sqrt(masses[2] * masses[3]))
+
+
+def test_a_constant_beyond_a_sessions_change_is_said(segment):
+    """A J2 load of +0.125 N·m against a baseline, with a repeat pair whose J2 constant moves 0.03 between
+    sessions: the nuisance offset took it out and the answer read 'no effect selected', with no word."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole
+    from dvrk_dart.diagnosis.fit.session_floor import constants_beyond_session
+
+    reference = DiagnosisRun("base", segment, segment.tau.copy())
+    moved = segment.tau.copy()
+    moved[:, 1] -= 0.03  # the session's constant change on q2
+    repeat = DiagnosisRun("repeat", segment, moved)
+    run = DiagnosisRun("loaded", segment, segment.tau.copy(), reference, role=RunRole.DIFFERENCE)
+    units = ["N·m"] * 7
+    said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, units)
+    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03), "unit": "N·m"}]
+    assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, units) == []  # within twice the session's
