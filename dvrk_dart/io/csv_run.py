@@ -260,6 +260,8 @@ def still_position_notes(values: np.ndarray, measured: tuple[str, ...], path: Pa
     (a brake, a servo at rest), or a position the logger did not read. Every joint's model efforts use that value
     (q3 left at 0 doubled q1's and q2's figures on a 2018 run), so it is said."""
     notes = []
+    if not any(np.ptp(values[:, JOINT_NAMES.index(name)]) > 0.0 for name in measured):
+        return notes  # a still arm: what it cannot be diagnosed for is said once, elsewhere
     for name in measured:
         j = JOINT_NAMES.index(name)
         q, tau = values[:, j], values[:, 2 * N_JOINTS + j]

@@ -22,10 +22,23 @@ import pandas as pd
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.csv_run import is_number
 from dvrk_dart.io.measured_run import sample_rate_hz
-from dvrk_dart.io.period import design_harmonics, fit_period, moving_joints
+from dvrk_dart.io.period import design_harmonics, fit_period, harmonic_design, least_squares, moving_joints
 
 #: a commanded log's rows: positions, velocities, accelerations of each joint
 QUANTITIES_PER_JOINT = 3
+
+
+#: the joints whose commanded positions are compared with a run's (the first ones: q1..q3, in the same
+#: coordinates in both files; the wrist's are coupled in the dVRK's), and how far their harmonics' amplitudes may
+#: differ (relative, over the design's harmonics) before the run is said not to have played the design
+CHECKED_JOINTS = 3
+AMPLITUDE_TOLERANCE = 0.3
+
+
+def harmonic_amplitudes(coefficients: np.ndarray, harmonics: int) -> np.ndarray:
+    """(harmonics, n) sqrt(a_k^2 + b_k^2) of `harmonic_design`'s coefficients (2K+1, n): phase-free, so a run
+    that starts elsewhere in the period has the commanded file's."""
+    return np.hypot(coefficients[1 : 2 * harmonics : 2], coefficients[2 : 2 * harmonics + 1 : 2])
 
 
 @dataclass(frozen=True)
@@ -33,6 +46,21 @@ class ExcitationDesign:
     period_s: float
     harmonics: int
     source: str
+    #: (harmonics, joints) the commanded positions' harmonic amplitudes of its first CHECKED_JOINTS joints
+    amplitudes: np.ndarray | None = None
+
+    def check_played(self, amplitudes: np.ndarray, moving: np.ndarray, where: str) -> None:
+        """The run's position amplitudes on the design's harmonics (same layout) against the commanded ones:
+        a joint swapped, held, or another trajectory with the same period is refused in one line."""
+        if self.amplitudes is None:
+            return
+        for j in range(min(self.amplitudes.shape[1], amplitudes.shape[1])):
+            commanded, run = self.amplitudes[:, j], amplitudes[:, j]
+            scale = max(np.linalg.norm(commanded), np.linalg.norm(run))
+            if scale > 0 and (moving[j] or np.linalg.norm(commanded) > 0) and np.linalg.norm(run - commanded) > AMPLITUDE_TOLERANCE * scale:
+                raise DvrkDartError(f"--excitation {self.source}: q{j + 1}'s harmonics in it are not the run's ({where}: "
+                                    f"{np.linalg.norm(run - commanded) / scale:.0%} apart, over {AMPLITUDE_TOLERANCE:.0%}): "
+                                    "the run did not play this excitation (another trajectory, or joints in another order)")
 
     def summary(self) -> dict:
         return {"period_s": self.period_s, "harmonics": self.harmonics, "from": self.source}
@@ -81,4 +109,7 @@ def read_design(path: str | Path) -> ExcitationDesign:
         raise DvrkDartError(f"--excitation {path}: no joint moves: not an excitation")
     rate = 1.0 / float(t[1] - t[0])
     period = fit_period(t - t[0], q[:, moving], rate, f"--excitation {path}")
-    return ExcitationDesign(period.period_s, design_harmonics(t - t[0], q[:, moving], period), str(path))
+    harmonics = design_harmonics(t - t[0], q[:, moving], period)
+    checked = q[:, :CHECKED_JOINTS]
+    coefficients = least_squares(harmonic_design(t - t[0], period.frequency_hz, harmonics), checked)
+    return ExcitationDesign(period.period_s, harmonics, str(path), harmonic_amplitudes(coefficients, harmonics))

@@ -44,6 +44,7 @@ import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.csv_run import say_once
+from dvrk_dart.io.excitation_design import harmonic_amplitudes
 from dvrk_dart.io.transient import TRANSIENT_RATIO, WINDOW_PERIOD_FRACTION, steady_span
 from dvrk_dart.io.period import DESIGN_PERIOD_TOLERANCE, Period, design_harmonics, fit_period, harmonic_design, least_squares, moving_joints
 
@@ -238,6 +239,11 @@ class PeriodicAnalysis:
         }
 
 
+def _position_amplitudes(t: np.ndarray, q: np.ndarray, period: Period, harmonics: int) -> np.ndarray:
+    """(harmonics, n) the run's position amplitudes on the design's first harmonics (excitation_design's layout)."""
+    return harmonic_amplitudes(least_squares(harmonic_design(t, period.frequency_hz, harmonics), q), harmonics)
+
+
 def band_harmonics(cutoffs: np.ndarray, deciding: np.ndarray, floor: int) -> int:
     """The run's band: the smallest cutoff of the `deciding` joints (moving and recorded), at least `floor`."""
     if not deciding.any():
@@ -268,7 +274,7 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     own = joint_cutoffs(effort_spectrum)
     cutoffs = np.where(measured, np.minimum(np.where(moving, np.maximum(own, floor), own), top), 0)
     silent = measured & moving & silent_efforts(effort_spectrum)
-    if silent.all() or not (measured & moving).any():
+    if silent[measured & moving].all():
         silent[:] = False  # nothing else to decide: the run's own rules (and its errors) stand
     if silent.any():
         say_once([f"{where}: {', '.join(f'q{j + 1}' for j in np.flatnonzero(silent))} moves but its efforts show nothing at the "
@@ -276,6 +282,8 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
                   "compare the model with that channel"])
     band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
     projector = Projector(t, period.frequency_hz, band)
+    if design is not None:
+        design.check_played(_position_amplitudes(t, q, period, design.harmonics), moving, where)
     position_spectrum = _spectrum(t, q, period, rate_hz)
     return PeriodicAnalysis(
         period, band, projector.series(q), projector.series(tau),
