@@ -188,6 +188,7 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
     ("t,q1,dq1,tau1,", "column 5 is empty .a trailing comma"),
     ("t;q1;dq1;tau1", "separated by commas; this file's by ';'"),
     ("t,time,q1,dq1,tau1", r"two time columns \(t, column 1; time, column 2\)"),  # the last one won, silently
+    ("time,outer_yaw,outer_pitch", "'outer_yaw' is a bare joint name: a trajectory .* give it as --excitation"),
 ])
 def test_bad_headers_are_refused_in_one_line(tmp_path, header, words):
     width = len(header.split(","))
@@ -581,3 +582,16 @@ def test_an_excitation_the_run_did_not_play_is_refused_though_its_period_matches
     line = _refusal(capsys, "model-errors", "--measured", str(TEST1), "--excitation", str(path))
     assert "q1's harmonics in it are not the run's" in line and "did not play this excitation" in line
     assert main(["model-errors", "--measured", str(TEST1), "--excitation", str(DATA_2018 / "psm1_fourier_test1_commanded.csv")]) == 0
+
+
+def test_space_separated_numbers_and_comment_lines(tmp_path):
+    """numpy.savetxt's default (spaces, no header) read as a header 'not a known name' (an exponent's e is a
+    letter); '#' comment lines were 'not a CSV file'."""
+    values = np.loadtxt(TEST1, delimiter=",") if TEST1.is_file() else np.loadtxt(resolve_run("two"), delimiter=",")
+    spaced = tmp_path / "spaced.txt"
+    np.savetxt(spaced, values)
+    with pytest.raises(DvrkDartError, match="separated by spaces or tabs; the layouts are comma-separated"):
+        load_run(spaced, PSM)
+    commented = tmp_path / "commented.csv"
+    np.savetxt(commented, values, delimiter=",", header="logged by hand", comments="# ")
+    assert load_run(commented, PSM).q.shape == (len(values), 7)

@@ -62,11 +62,17 @@ def _read_text(path: Path) -> pd.DataFrame:
     if not os.access(path, os.R_OK):
         raise DvrkDartError(f"{path}: not readable (permission denied)")
     try:
-        return pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False)
+        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False, comment="#")
     except pd.errors.EmptyDataError:
         raise DvrkDartError(f"{path}: file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]})") from None
+        more = " (a trailing comma, or a row with more cells than the first?)" if "Expected" in str(exc) else ""
+        raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]}){more}") from None
+    first = str(raw.iloc[0, 0]) if raw.shape[1] == 1 and len(raw) else ""
+    if len(first.split()) > 1 and all(is_number(cell) for cell in first.split()):  # numpy.savetxt's default
+        raise DvrkDartError(f"{path}: the columns are separated by spaces or tabs; the layouts are comma-separated "
+                            "(numpy.savetxt(..., delimiter=','))")
+    return raw
 
 
 def is_number(text) -> bool:
@@ -115,9 +121,13 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
             known = "t or time, q1..q7, dq1..dq7, tau1..tau7" + (
                 f", position|velocity|effort.<joint> (joints: {', '.join(dvrk_joints)})" if dvrk_joints else "")
             # a whole row in one cell: another separator (a name with a space, "t (ms)", is only a name)
-            separator = next((f" (the columns are separated by commas; this file's by '{c}')" for c in (";", "\t", " ")
-                              if c in name and len(header) == 1), "")
-            unit = " (give the time in seconds, under the name t)" if name.lower().split()[0] in TIME_NAMES else ""
+            separator = next((f" (the columns are separated by commas; this file's by {words})"
+                              for c, words in ((";", "';'"), ("\t", "tabs"), (" ", "spaces")) if c in name and len(header) == 1), "")
+            unit = " (give the time in seconds, under the name t)" if not separator and name.lower().split()[0] in TIME_NAMES else ""
+            if name.lower() in dvrk_joints:  # dvrk-dart excitation's CSV: time and bare joint names
+                raise DvrkDartError(f"{path}: header column {index + 1} '{name}' is a bare joint name: a trajectory (positions only, "
+                                    "as `dvrk-dart excitation` writes)? give it as --excitation; a measured run names "
+                                    "position.<joint>, velocity.<joint>, effort.<joint>")
             shown = name if len(name) <= 40 else name[:37] + "..."
             raise DvrkDartError(f"{path}: header column {index + 1} '{shown}' is not a known name ({known}){separator}{unit}")
         field, joint, dvrk = key
