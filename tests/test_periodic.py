@@ -181,3 +181,19 @@ def test_a_moving_joint_with_a_dead_effort_channel_has_no_say_in_the_band(tmp_pa
     assert dead.silent[:3] == (False, False, True) and dead.harmonics == 32  # test1's own band: q1's 32
     assert not any(process_periodic(load_run(resolve_run("2018-test1"), PSM)).periodic.silent)
     assert "q3 moves but its efforts show nothing" in capsys.readouterr().err
+
+
+def test_a_baseline_logged_at_another_rate_is_put_on_the_runs_rate(tmp_path):
+    """The same motion logged at 100 Hz as a baseline read as another motion: the default processing fell back
+    to upstream and a payload was named. A periodic run's series puts it on any rate, exactly in its band."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, with_baseline_motion
+
+    one = process_periodic(load_run(resolve_run("one"), PSM))
+    there_and_back = one.at_rate(100.0).at_rate(one.rate_hz)
+    assert len(one.at_rate(100.0)) == 3000 and np.abs(there_and_back.tau - one.tau[: len(there_and_back)]).max() < 1e-9
+    values = np.loadtxt(resolve_run("one"), delimiter=",")[::2]
+    slow = tmp_path / "one_100hz.csv"
+    np.savetxt(slow, np.c_[np.arange(len(values)) / 100.0, values], delimiter=",", comments="",
+               header=",".join(["t"] + [f"{f}{j}" for f in ("q", "dq", "tau") for j in range(1, 8)]))
+    chosen = with_baseline_motion(RunProcessing("periodic", 30), str(slow), ["one"], PSM)
+    assert chosen.name == "periodic", chosen.why

@@ -281,6 +281,9 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
                   f"motion's first {CUTOFF_RUN} harmonics (a channel not logged, or noise): no say in the band; its figures "
                   "compare the model with that channel"])
     band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
+    if harmonics is not None and band < floor:
+        say_once([f"{where}: {band} harmonics imposed, fewer than the excitation's design ({floor}, {'--excitation' if design else 'read from the positions'}): "
+                  "the band cuts the motion itself, and every figure with it"])
     projector = Projector(t, period.frequency_hz, band)
     if design is not None:
         design.check_played(_position_amplitudes(t, q, period, design.harmonics), moving, where)

@@ -101,6 +101,18 @@ class ProcessedRun:
         return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic, self.upstream_first_period,
                             self.measured)
 
+    def at_rate(self, rate_hz: float) -> "ProcessedRun":
+        """A periodic run on samples at `rate_hz` over the same span: its harmonic series evaluated there (exact in
+        its band), so a baseline or repeat logged at another rate is subtracted sample by sample."""
+        if self.periodic is None:
+            raise DvrkDartError("only a periodic run is put on another rate (its series); upstream's filtered samples are not")
+        elapsed = np.arange(int(np.floor((len(self) - 1) / self.rate_hz * rate_hz)) + 1) / rate_hz
+        analysis = self.periodic
+        projector = type(analysis.projector)(elapsed, analysis.projector.frequency_hz, analysis.projector.harmonics)
+        q, dq, ddq = (analysis.positions(elapsed, derivative) for derivative in range(3))
+        return ProcessedRun(self.t[0] + elapsed, q, dq, ddq, analysis.efforts(elapsed), replace(analysis, projector=projector),
+                            self.upstream_first_period, self.measured)
+
     def summary(self) -> dict:
         """What every output records of the processing."""
         if self.periodic is None:

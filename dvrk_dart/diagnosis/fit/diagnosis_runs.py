@@ -86,12 +86,11 @@ def with_baseline_motion(processing: RunProcessing, baseline, measured_list: lis
         return processing
     states = [s.state if isinstance(s, DiagnosisRun) else _load_state(s, model, processing)[1] for s in measured_list if not isinstance(s, tuple)]
     base = _load_state(baseline, model, processing)[1]
-    if any(motion_offset(state, base) is not None for state in states):
+    if any(motion_offset(state, on_rate(base, state.rate_hz)) is not None for state in states):
         return processing
     rates = sorted({f"{state.rate_hz:g}" for state in states if abs(state.rate_hz - base.rate_hz) > 1e-6 * base.rate_hz})
-    other_rate = (f"; the baseline is logged at {base.rate_hz:g} Hz, the runs at {', '.join(rates)} Hz: runs are matched sample by "
-                  "sample, so a baseline of the same motion at another rate reads as another motion (resample it to the runs' rate)"
-                  ) if rates else ""
+    other_rate = (f"; the baseline is logged at {base.rate_hz:g} Hz, the runs at {', '.join(rates)} Hz (put on their rate by its "
+                  "harmonic series, it still differs)") if rates else ""
     return RunProcessing(why=NO_BASELINE_MOTION + other_rate, topics=processing.topics)
 
 
@@ -217,13 +216,23 @@ def simulated_efforts(arm: Arm, state: ProcessedRun, simulate: Simulate | None, 
     return state.in_band(config_effort_by_formula(arm, config, state.q, state.dq, state.ddq))
 
 
+def on_rate(state: ProcessedRun, rate_hz: float | None) -> ProcessedRun:
+    """A periodic run put on `rate_hz` (its series, exact in its band) where it was logged at another rate;
+    otherwise as it is (upstream's filtered samples are not resampled: such runs stay another motion)."""
+    if rate_hz is None or state.periodic is None or abs(state.rate_hz - rate_hz) <= 1e-6 * rate_hz:
+        return state
+    return state.at_rate(rate_hz)
+
+
 def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: SimConfig = SimConfig(), baseline=None, name: str | None = None,
-                processing: RunProcessing = RunProcessing()) -> DiagnosisRun:
-    """A DiagnosisRun from a run name ('two'), a path, a ProcessedRun or a DiagnosisRun."""
+                processing: RunProcessing = RunProcessing(), rate_hz: float | None = None) -> DiagnosisRun:
+    """A DiagnosisRun from a run name ('two'), a path, a ProcessedRun or a DiagnosisRun (`rate_hz`: the rate a
+    baseline or repeat is put on, that of the runs it is subtracted from or compared with)."""
     if isinstance(spec, DiagnosisRun):
         run = spec
     else:
         label, state = _load_state(spec, arm.model, processing)
+        state = on_rate(state, rate_hz)
         run = DiagnosisRun(name or label, state, simulated_efforts(arm, state, simulate, base_config))
     if baseline is not None:
         base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)

@@ -223,20 +223,23 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     if processing is None:
         run_processing = with_baseline_motion(run_processing, baseline, measured_list, arm.model)
 
-    def as_run(spec, baseline=None):
+    def as_run(spec, baseline=None, rate_hz=None):
         if isinstance(spec, tuple):
             spec, baseline = spec
-        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing)
+        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing, rate_hz=rate_hz)
 
     if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
         simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], arm.model, run_processing)])
-    baseline_run = as_run(baseline) if baseline is not None else None
+    # a baseline and a repeat are subtracted from, or compared with, the runs sample by sample: on their rate
+    rate = next(iter(loaded_states(measured_list[:1], arm.model, run_processing)), None)
+    rate = rate.rate_hz if rate is not None else None
+    baseline_run = as_run(baseline, rate_hz=rate) if baseline is not None else None
     train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
     holdout_runs = [as_run(s) for s in (holdout or [])]
     if baseline_run is not None and any(r.role is RunRole.OTHER_MOTION for r in train_runs):  # the baseline is fitted with them
         train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role=RunRole.BASELINE))
-    repeat_run = as_run(repeat, baseline_run) if repeat is not None else None
+    repeat_run = as_run(repeat, baseline_run, rate) if repeat is not None else None
     offset_joints, offset_source = (session_offset_joints(arm.model, repeat_run, baseline_run or train_runs[0]) if nuisance
                                     else (None, None))
     # a baseline of the runs' own motion only: whatever differs may be any effect; runs of

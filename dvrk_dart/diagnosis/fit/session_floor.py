@@ -43,12 +43,22 @@ def session_floor(a: DiagnosisRun, b: DiagnosisRun, constant_joints: np.ndarray 
     """Per-joint RMS of one session's deviation, from two runs of the same
     motion (`constant_joints`: where a diagnosis fits each run's constant, the
     difference's mean is no part of the floor)."""
-    if not same_motion(a.state, b.state):
+    pair = paired_gaps(a, b)
+    if pair is None:
         raise DvrkDartError(f"--repeat {b.name}: not the same motion as {a.name} (a repeat is the same trajectory at the same speed)")
-    difference = a.gap - b.gap
+    difference = pair[0] - pair[1]
     if constant_joints is not None:
         difference = difference - np.asarray(constant_joints, dtype=float) * difference.mean(axis=0)
     return rms(difference) / math.sqrt(2.0)
+
+
+def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarray] | None:
+    """The two runs' gaps on their common samples where they record the same motion, else None (a repeat
+    logged at another rate and put on the runs' may be a sample shorter)."""
+    n = min(len(a.state), len(b.state))
+    if not same_motion(a.state.head(n), b.state.head(n)):
+        return None
+    return a.gap[:n], b.gap[:n]
 
 
 def mean_standard_error(residual: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -71,8 +81,9 @@ def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, referenc
     """(per-joint mask, where it comes from) of the joints whose constant effort
     moves between sessions: measured on `repeat` against `reference` (the same
     motion in another session), else the model card's [sessions], else all."""
-    if repeat is not None and same_motion(repeat.state, reference.state):
-        return moved_constants(repeat.gap - reference.gap, reference.state.rate_hz), f"measured: {repeat.name} vs {reference.name}"
+    pair = paired_gaps(repeat, reference) if repeat is not None else None
+    if pair is not None:
+        return moved_constants(pair[0] - pair[1], reference.state.rate_hz), f"measured: {repeat.name} vs {reference.name}"
     if model.session_offset_joints is not None:
         return np.isin(JOINT_NAMES, model.session_offset_joints), "model card [sessions]"
     return np.ones(len(JOINT_NAMES), dtype=bool), "all joints (no --repeat, no [sessions] in the model card)"
@@ -91,9 +102,10 @@ def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], rep
     Such a constant may be part of an effect (a load, a payload's mean gravity)
     that the offset took out: a J2 load of +0.125 N·m beside a session change
     of 0.03 was read 'no effect selected', with no word."""
-    if not offsets or repeat is None or not same_motion(repeat.state, reference.state):
+    pair = paired_gaps(repeat, reference) if offsets and repeat is not None else None
+    if pair is None:
         return []
-    session = np.abs((repeat.gap - reference.gap).mean(axis=0))
+    session = np.abs((pair[0] - pair[1]).mean(axis=0))
     return [{"run": run.name, "joint": joint, "offset": value, "session_change": float(session[j]), "unit": units[j]}
             for run in runs for j, joint in enumerate(JOINT_NAMES)
             if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0 and abs(value) > BEYOND_SESSION_FACTOR * session[j]]
