@@ -64,11 +64,39 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "samples": len(measured),
         "scored_on": _scored_on(processed, config.first_period),
         "unrecorded_joint_notes": unrecorded_joint_notes(arm.identified, processed, rms(predicted - measured)),
+        "coordinates_note": _coordinates_note(arm, processed, terms, relative_error(predicted, measured), config.first_period),
         "params": file_record(arm.params.source),
         "terms": config.terms,
         **processed.summary(),
         "chosen_because": why,
     }
+
+
+#: a file's coupled joints fit the model this many times better read as the dVRK's values: it is said
+COORDINATES_FACTOR = 2.0
+
+
+def _coordinates_note(arm: Arm, processed, terms, relative: np.ndarray, first_period: bool) -> str | None:
+    """Columns without names are the model's coordinates (upstream's logs); a log of the dVRK's own values (the
+    dVRK's Python API's 7-joint logs) read so misses the coupled wrist by 2-9x, silently. Where reading its coupled
+    columns as the dVRK's values fits the model COORDINATES_FACTOR times better, say so."""
+    from dvrk_dart.metrics import relative_error
+
+    motor_map = arm.model.motor_map
+    coupled = np.arange(len(relative))[motor_map.columns]
+    if not len(coupled) or not processed.measured[coupled].all():
+        return None
+    q, dq, ddq = (motor_map.positions_to_model(x) for x in (processed.q, processed.dq, processed.ddq))
+    with np.errstate(over="ignore", invalid="ignore"):
+        predicted, tau = processed.in_band(arm.identified.predict(q, dq, ddq, terms)), motor_map.efforts_to_model(processed.tau)
+    n = processed.first_period_samples() if first_period else len(tau)
+    alternative = relative_error(predicted[:n], tau[:n])[coupled]
+    if not np.mean(alternative) * COORDINATES_FACTOR < np.mean(relative[coupled]):
+        return None
+    joints = ", ".join(f"q{j + 1}" for j in coupled)
+    return (f"{joints}: read as the dVRK's joint values (through the coupling), the relative errors would be "
+            f"{' / '.join(f'{v:.3f}' for v in alternative)} instead of {' / '.join(f'{v:.3f}' for v in relative[coupled])}: "
+            "is this log in the dVRK's coordinates? give it a header with the dVRK's names (position.<joint>, ...)")
 
 
 def _band_notes(asked: int | None, result: dict) -> list[str]:
@@ -120,7 +148,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
             print(f"note: {result['rate_note']}")
         for note in _band_notes(args.harmonics, result):
             print(f"note: {note}")
-        for note in result["unrecorded_joint_notes"]:
+        for note in [*result["unrecorded_joint_notes"], *([result["coordinates_note"]] if result["coordinates_note"] else [])]:
             print(f"note: {note}")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'own cutoff':>10}  (its efforts' own harmonics; the band used is above)" if periodic else ""))

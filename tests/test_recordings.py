@@ -595,3 +595,17 @@ def test_space_separated_numbers_and_comment_lines(tmp_path):
     commented = tmp_path / "commented.csv"
     np.savetxt(commented, values, delimiter=",", header="logged by hand", comments="# ")
     assert load_run(commented, PSM).q.shape == (len(values), 7)
+
+
+def test_a_log_in_the_dvrk_coordinates_without_names_is_said(tmp_path, capsys):
+    """'two' with its wrist columns in the dVRK's values, 21 columns without a header (read as the model's
+    coordinates): q5..q7 read 0.63 / 0.46 / 2.01 instead of 0.22 / 0.22 / 0.24, with no hint."""
+    values = np.loadtxt(resolve_run("two"), delimiter=",")
+    motor_map = PSM.motor_map
+    values[:, :7], values[:, 7:14] = motor_map.positions_to_dvrk(values[:, :7]), motor_map.positions_to_dvrk(values[:, 7:14])
+    values[:, 14:] = motor_map.efforts_to_dvrk(values[:, 14:])
+    path = tmp_path / "two_dvrk.csv"
+    np.savetxt(path, values, delimiter=",")
+    result = cli_json(capsys, "model-errors", "--measured", str(path))
+    assert "read as the dVRK's joint values" in result["coordinates_note"] and "0.223 / 0.220 / 0.238" in result["coordinates_note"]
+    assert cli_json(capsys, "model-errors", "--measured", "two")["coordinates_note"] is None
