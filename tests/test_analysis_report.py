@@ -289,7 +289,7 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
     assert "<p id='diag'>found it</p>" in text and (out / "figures" / "extra" / "diag.png").is_file()
     # the verdicts' first lines count validate's other checks too, and name the failed ones
     assert "1 of 2</strong> other checks of the campaign passed" in text and "0.4208 vs 0.1912 N" in text.split("Thresholds")[0]
-    assert json.loads((out / "analysis" / "summary.json").read_text())["other_checks_failed"] == [
+    assert json.loads((out / "analysis" / "summary.json").read_text())["other_checks"]["failed"] == [
         "held-out q3 closer than the identified model: 0.4208 vs 0.1912 N"]
     before = text
     # a failing build leaves the previous report untouched

@@ -144,3 +144,10 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
                     "reproduced_to": abs(ours - value) if goal == "equal" else math.nan,
                 })
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+def other_checks(verdicts: list[dict] | None) -> dict:
+    """validate's verdicts beyond the check runs (diagnosis, contact), counted: passed, total, the failed ones."""
+    verdicts = verdicts or []
+    return {"passed": sum(bool(v["passed"]) for v in verdicts), "total": len(verdicts),
+            "failed": [f"{v['check']}: {v['value']}" for v in verdicts if not v["passed"]]}

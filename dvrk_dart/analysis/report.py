@@ -67,6 +67,7 @@ from dvrk_dart.analysis.tables import (
     Analysis,
     analyze,
     default_jobs,
+    other_checks,
     load_published,
     write_analysis,
 )
@@ -114,7 +115,6 @@ def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = N
     """The check runs' verdicts, and a line on validate's other verdicts
     (diagnosis, contact: `campaign_verdicts`) so the page's first count is every check's."""
     checks = analysis.checks
-    others = campaign_verdicts or []
     passed = int((checks.status == STATUS_PASS).sum())
     total = len(checks)
     ok = passed == total and total > 0
@@ -132,9 +132,7 @@ def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = N
                   missing=int((checks.status == STATUS_MISSING).sum()),
                   summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
                   detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
-                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped,
-                  others_passed=sum(bool(v["passed"]) for v in others), others_total=len(others),
-                  others_failed=[f"{v['check']}: {v['value']}" for v in others if not v["passed"]])
+                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped, others=other_checks(campaign_verdicts))
 
 
 def _closeness(row) -> float:

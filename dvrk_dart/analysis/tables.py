@@ -39,6 +39,7 @@ from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysi
     STATUS_PASS,
     compare_with_published,
     evaluate_checks,
+    other_checks,
     load_checks,
     load_published,
 )
@@ -365,16 +366,13 @@ def summary(analysis: Analysis, campaign_verdicts: list[dict] | None = None) -> 
     """summary.json: the runs, the verdicts (the check runs', and validate's
     others: `campaign_verdicts`) and the comparison, JSON-clean (NaN -> null)."""
     checks = analysis.checks
-    others = campaign_verdicts or []
     return {
         "runs_dir": str(analysis.runs_dir),
         "runs": [run_summary(r) for r in analysis.runs.values()],
         "unreadable_runs": analysis.failures,
         "checks_passed": int((checks.status == STATUS_PASS).sum()),
         "checks_total": len(checks),
-        "other_checks_passed": sum(bool(v["passed"]) for v in others),
-        "other_checks_total": len(others),
-        "other_checks_failed": [f"{v['check']}: {v['value']}" for v in others if not v["passed"]],
+        "other_checks": other_checks(campaign_verdicts),
         "checks": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in checks.to_dict("records")],
         "comparison": [{k: (_finite_or_none(v) if isinstance(v, float) else v) for k, v in row.items()} for row in analysis.comparison.to_dict("records")],
         "regimes": REGIME_DESCRIPTIONS,

@@ -277,7 +277,8 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     if silent[measured & moving].all():
         silent[:] = False  # nothing else to decide: the run's own rules (and its errors) stand
     if silent.any():
-        say_once([f"{where}: {', '.join(f'q{j + 1}' for j in np.flatnonzero(silent))} moves but its efforts show nothing at the "
+        names = [f"q{j + 1}" for j in np.flatnonzero(silent)]
+        say_once([f"{where}: {', '.join(names)} {'move' if len(names) > 1 else 'moves'} but {'their' if len(names) > 1 else 'its'} efforts show nothing at the "
                   f"motion's first {CUTOFF_RUN} harmonics (a channel not logged, or noise): no say in the band; its figures "
                   "compare the model with that channel"])
     band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
