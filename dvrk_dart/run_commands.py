@@ -99,8 +99,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
+    from dvrk_dart.io.outputs import check_output_folder
+
     recorded, said = _replay_processing(args)
     config = _run_config(args, "replay", args.mode, measured=args.measured)
+    if args.out:
+        check_output_folder(Path(args.out), "run")
     print(said)  # once the options are known good: an error is the only line
     try:
         return _run_and_write(config, Path(args.out) if args.out else None)
