@@ -266,16 +266,16 @@ def joints_with_efforts(read: CsvValues, path: Path) -> tuple[tuple[str, ...], l
 
 
 def still_position_notes(values: np.ndarray, measured: tuple[str, ...], path: Path) -> list[str]:
-    """A recorded joint whose position holds one value and whose velocity is zero for the whole run while its
-    effort changes: held there (a brake, a servo at rest), or a position the logger did not read. Every joint's
+    """A recorded joint whose position holds one value for the whole run while its effort changes (its velocity
+    column whatever it holds): held there (a brake, a servo at rest), or a position the logger did not read. Every joint's
     model efforts use that value (q3 left at 0 doubled q1's and q2's figures on a 2018 run), so it is said."""
     notes = []
     if not any(np.ptp(values[:, JOINT_NAMES.index(name)]) > 0.0 for name in measured):
         return notes  # a still arm: what it cannot be diagnosed for is said once, elsewhere
     for name in measured:
         j = JOINT_NAMES.index(name)
-        q, dq, tau = values[:, j], values[:, N_JOINTS + j], values[:, 2 * N_JOINTS + j]
-        if np.ptp(q) == 0.0 and not dq.any() and np.ptp(tau) > 0.0:
+        q, tau = values[:, j], values[:, 2 * N_JOINTS + j]
+        if np.ptp(q) == 0.0 and np.ptp(tau) > 0.0:
             notes.append(f"{path}: {name}'s position is {q[0]:g} for the whole run while its effort changes: held there, or its "
                          f"position not logged? every joint's model efforts use {name} = {q[0]:g}")
     return notes

@@ -49,17 +49,20 @@ class ExcitationDesign:
     #: (harmonics, joints) the commanded positions' harmonic amplitudes of its first CHECKED_JOINTS joints
     amplitudes: np.ndarray | None = None
 
-    def check_played(self, amplitudes: np.ndarray, moving: np.ndarray, where: str) -> None:
-        """The run's position amplitudes on the design's harmonics (same layout) against the commanded ones:
-        a joint swapped, held, or another trajectory with the same period is refused in one line."""
+    def check_played(self, amplitudes: np.ndarray, comparable: np.ndarray, where: str) -> None:
+        """The run's position amplitudes on the design's harmonics (same layout) against the commanded ones, on
+        the `comparable` joints (in the same coordinates in both: not a coupled one): a joint swapped, held, or
+        another trajectory with the same period is refused in one line. Phase-free: a mirrored joint passes."""
         if self.amplitudes is None:
             return
         for j in range(min(self.amplitudes.shape[1], amplitudes.shape[1])):
             commanded, run = self.amplitudes[:, j], amplitudes[:, j]
-            scale = max(np.linalg.norm(commanded), np.linalg.norm(run))
-            if scale > 0 and (moving[j] or np.linalg.norm(commanded) > 0) and np.linalg.norm(run - commanded) > AMPLITUDE_TOLERANCE * scale:
-                raise DvrkDartError(f"--excitation {self.source}: q{j + 1}'s harmonics in it are not the run's ({where}: "
-                                    f"{np.linalg.norm(run - commanded) / scale:.0%} apart, over {AMPLITUDE_TOLERANCE:.0%}): "
+            # against the geometric mean of the two sizes: a file twice the run's is as far as one half of it
+            apart, size = np.linalg.norm(run - commanded), np.sqrt(np.linalg.norm(commanded) * np.linalg.norm(run))
+            if comparable[j] and apart > AMPLITUDE_TOLERANCE * size:
+                how = (f"{apart / size:.0%} apart, over {AMPLITUDE_TOLERANCE:.0%}" if size > 1e-3 * apart
+                       else "it moves in one and is held in the other")
+                raise DvrkDartError(f"--excitation {self.source}: q{j + 1}'s harmonics in it are not the run's ({where}: {how}): "
                                     "the run did not play this excitation (another trajectory, or joints in another order)")
 
     def summary(self) -> dict:

@@ -115,11 +115,13 @@ def _spectrum(t: np.ndarray, x: np.ndarray, period: Period, rate_hz: float) -> _
     return _Spectrum(power, noise, lines[noise_line].mean(axis=0))
 
 
-def silent_efforts(spectrum: _Spectrum) -> np.ndarray:
-    """(n,) bool: columns none of whose first `CUTOFF_RUN` harmonics stands `CUTOFF_SNR` times above its noise:
-    a moving joint's efforts always carry its motion's first harmonics (inertia, friction), so such a column
-    holds no effort of this motion (a channel not logged, or noise): it has no say in the band."""
-    ratio = spectrum.harmonic_power[1:CUTOFF_RUN + 1] / np.maximum(spectrum.noise_power[1:CUTOFF_RUN + 1], np.finfo(float).tiny)
+def silent_efforts(spectrum: _Spectrum, harmonics: int) -> np.ndarray:
+    """(n,) bool: columns none of whose first `harmonics` (the design's: the motion's own) stands `CUTOFF_SNR`
+    times above its noise: a moving joint's efforts carry its motion's harmonics (inertia, friction), so such a
+    column holds no effort of this motion (a channel not logged, or noise): it has no say in the band. (The
+    first 3 alone were too few: "two"'s J1 sits mostly on its 4th-6th.)"""
+    top = max(1, harmonics) + 1
+    ratio = spectrum.harmonic_power[1:top] / np.maximum(spectrum.noise_power[1:top], np.finfo(float).tiny)
     return np.all(ratio < CUTOFF_SNR, axis=0)
 
 
@@ -227,8 +229,8 @@ class PeriodicAnalysis:
             "design_from": self.design_from,
             "cutoff_rule": f"per joint: the last harmonic before {CUTOFF_RUN} consecutive harmonics of its efforts below "
                            f"{CUTOFF_SNR:g} x their local noise power; the band: the smallest of the moving, recorded joints', "
-                           "at least the design's harmonics; a moving joint whose efforts are below that at its first "
-                           f"{CUTOFF_RUN} harmonics holds no effort of the motion (silent_efforts) and has no say",
+                           "at least the design's harmonics; a moving joint whose efforts are below that at every one of "
+                           "the design's harmonics holds no effort of the motion (silent_efforts) and has no say",
             "noise_rms": per_joint(self.effort_noise.projected_rms.tolist()),
             "noise_per_sample_rms": per_joint(self.effort_noise.per_sample_rms.tolist()),
             "position_noise_per_sample_rms": per_joint(self.position_noise.per_sample_rms.tolist()),
@@ -237,6 +239,28 @@ class PeriodicAnalysis:
             "transient_rule": f"a start or end window ({WINDOW_PERIOD_FRACTION:.3g} of a period) whose efforts differ from a period "
                               f"away over {TRANSIENT_RATIO:g} x the run's median window is left out",
         }
+
+
+def _say_lone_band(cutoffs: np.ndarray, deciding: np.ndarray, band: int, where: str) -> None:
+    """One joint whose cutoff is under half every other deciding joint's sets every joint's band: said (a weak
+    or noisy channel of the wrist cut "two"'s band from 35 to 6 harmonics, and q2's figure by half)."""
+    others = [(int(k), j) for j, k in enumerate(cutoffs) if deciding[j]]
+    if len(others) < 2:
+        return
+    (lowest, joint), rest = min(others), sorted(k for k, j in others)[1:]
+    if lowest == band and 2 * lowest < rest[0]:
+        say_once([f"{where}: the band ({band} harmonics) is q{joint + 1}'s own cutoff alone, the other moving joints' are "
+                  f"{rest[0]}-{rest[-1]}: its efforts sink into their noise early (a weak or noisy channel?) and cut every "
+                  "joint's figures there; --harmonics compares at another band"])
+
+
+def _say_silent(silent: np.ndarray, where: str) -> None:
+    if silent.any():
+        names = [f"q{j + 1}" for j in np.flatnonzero(silent)]
+        plural = len(names) > 1
+        say_once([f"{where}: {', '.join(names)} {'move' if plural else 'moves'} but {'their' if plural else 'its'} efforts show "
+                  "nothing at the motion's harmonics (a channel not logged, or noise): no say in the band (unless no joint has "
+                  f"more); {'their' if plural else 'its'} figures compare the model with that channel"])
 
 
 def _position_amplitudes(t: np.ndarray, q: np.ndarray, period: Period, harmonics: int) -> np.ndarray:
@@ -252,13 +276,15 @@ def band_harmonics(cutoffs: np.ndarray, deciding: np.ndarray, floor: int) -> int
 
 
 def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where: str, harmonics: int | None = None,
-            measured: np.ndarray | None = None, design=None) -> PeriodicAnalysis:
+            measured: np.ndarray | None = None, design=None, coupled: np.ndarray | None = None) -> PeriodicAnalysis:
     """The periodic layer on one run (raises a one-line DvrkDartError naming `where` if it is not periodic).
     `harmonics` imposes the band (runs compared with each other share the
     smaller one); `measured` (n,) bool: the joints the run recorded (default
-    all); `design`: an ExcitationDesign (the commanded period and harmonics) where it is known."""
+    all); `design`: an ExcitationDesign (the commanded period and harmonics) where it is known; `coupled`: the
+    joints whose dVRK values mix (a commanded file's may be either coordinates: not checked against the run)."""
     t = np.asarray(t, dtype=float) - float(t[0])
     measured = np.ones(q.shape[1], bool) if measured is None else np.asarray(measured, bool)
+    coupled = np.zeros(q.shape[1], bool) if coupled is None else np.asarray(coupled, bool)
     moving = moving_joints(q, measured)
     period = fit_period(t, q[:, moving], rate_hz, where)  # from the run itself: a design is checked against it, never imposed
     steady = steady_span(tau[:, measured], int(round(period.period_s * rate_hz)))
@@ -266,28 +292,29 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
         t, q, tau = t[steady] - t[steady.start], q[steady], tau[steady]
         period = fit_period(t, q[:, moving], rate_hz, where)
     if design is not None and abs(period.period_s / design.period_s - 1.0) > DESIGN_PERIOD_TOLERANCE:
+        ratio = design.period_s / period.period_s
+        rate = next((f" (its period {1 / r:g}x the run's: a rate read wrong? a commanded log without a time column is read at "
+                     "200 Hz, and a time column is in s)" for r in (0.001, 0.2, 0.5, 2.0, 5.0, 1000.0) if abs(ratio * r - 1.0) < 0.02), "")
         raise DvrkDartError(f"--excitation {design.source}: its period {design.period_s:.4f} s is not the run's ({where}: "
-                            f"{period.period_s:.4f} s fitted from it): the run did not play this excitation")
+                            f"{period.period_s:.4f} s fitted from it): the run did not play this excitation{rate}")
     floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)
     effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
     own = joint_cutoffs(effort_spectrum)
     cutoffs = np.where(measured, np.minimum(np.where(moving, np.maximum(own, floor), own), top), 0)
-    silent = measured & moving & silent_efforts(effort_spectrum)
+    silent = measured & moving & silent_efforts(effort_spectrum, min(floor, top))
+    _say_silent(silent, where)
     if silent[measured & moving].all():
-        silent[:] = False  # nothing else to decide: the run's own rules (and its errors) stand
-    if silent.any():
-        names = [f"q{j + 1}" for j in np.flatnonzero(silent)]
-        say_once([f"{where}: {', '.join(names)} {'move' if len(names) > 1 else 'moves'} but {'their' if len(names) > 1 else 'its'} efforts show nothing at the "
-                  f"motion's first {CUTOFF_RUN} harmonics (a channel not logged, or noise): no say in the band; its figures "
-                  "compare the model with that channel"])
+        silent[:] = False  # nothing else to decide the band: the run's own rules stand
     band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
+    if harmonics is None:
+        _say_lone_band(cutoffs, moving & ~silent, band, where)
     if harmonics is not None and band < floor:
         say_once([f"{where}: {band} harmonics imposed, fewer than the excitation's design ({floor}, {'--excitation' if design else 'read from the positions'}): "
                   "the band cuts the motion itself, and every figure with it"])
     projector = Projector(t, period.frequency_hz, band)
     if design is not None:
-        design.check_played(_position_amplitudes(t, q, period, design.harmonics), moving, where)
+        design.check_played(_position_amplitudes(t, q, period, design.harmonics), measured & ~coupled, where)
     position_spectrum = _spectrum(t, q, period, rate_hz)
     return PeriodicAnalysis(
         period, band, projector.series(q), projector.series(tau),

@@ -185,7 +185,8 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, desi
 def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> ProcessedRun:
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
     tau = run.tau - run.model.cable_efforts(run.q)  # what the identification removed before fitting
-    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design)
+    coupled = np.isin(np.arange(run.q.shape[1]), np.arange(run.q.shape[1])[run.model.motor_map.columns])
+    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design, coupled)
     kept = slice(*analysis.kept)  # without a start or end transient (io/transient.py)
     t = run.t[kept] - run.t[kept][0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
@@ -238,10 +239,13 @@ SAME_MOTION_VELOCITY_FRACTION = 0.1
 
 
 def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
-    """Whether two runs of one length follow the same motion sample by sample
+    """Whether two runs of one length follow the same motion sample by sample, on the joints both recorded
     (a baseline's gap can then be subtracted as it is)."""
     if len(a) != len(b):
         return False
-    position = float(np.sqrt(np.mean((a.q - b.q) ** 2)))
-    velocity = float(np.sqrt(np.mean((a.dq - b.dq) ** 2)) / max(np.sqrt(np.mean(b.dq**2)), 1e-12))
+    both = a.measured & b.measured  # a joint one log does not have is held there: it says nothing of the motion
+    if not both.any():
+        return False
+    position = float(np.sqrt(np.mean((a.q[:, both] - b.q[:, both]) ** 2)))
+    velocity = float(np.sqrt(np.mean((a.dq[:, both] - b.dq[:, both]) ** 2)) / max(np.sqrt(np.mean(b.dq[:, both] ** 2)), 1e-12))
     return position < SAME_MOTION_POSITION_RMS and velocity < SAME_MOTION_VELOCITY_FRACTION

@@ -266,7 +266,8 @@ def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
         return None
     # a's positions inside its margins against b's shifted by k (every shift stays inside b)
     shifts = np.arange(-limit, limit + 1)
-    errors = np.array([np.mean((a.q[limit:end] - b.q[limit + k : end + k]) ** 2) for k in shifts])
+    both = a.measured & b.measured  # the joints both logs have
+    errors = np.array([np.mean((a.q[limit:end, both] - b.q[limit + k : end + k, both]) ** 2) for k in shifts])
     # a periodic motion matches itself a period later too: of the best shifts of
     # each match (the local minima where the positions agree), the smallest
     # keeps the longest common span

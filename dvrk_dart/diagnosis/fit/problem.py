@@ -81,7 +81,7 @@ class Problem:
         """A joint some runs recorded and others not -> the runs that did not (each held where its log holds it in
         its simulation): the diagnosis has no figure, weight or effect on it, and says why."""
         runs = [r for r in (*self.train_runs, *self.holdout_runs, self.baseline_run, self.repeat_run) if r is not None]
-        return {name: [r.name for r in runs if not r.state.measured[j]] for j, name in enumerate(JOINT_NAMES)
+        return {name: list(dict.fromkeys(r.name for r in runs if not r.state.measured[j])) for j, name in enumerate(JOINT_NAMES)
                 if not self.recorded[j] and any(r.state.measured[j] for r in runs)}
 
     @cached_property
@@ -258,5 +258,6 @@ def _add_grams(problem: Problem) -> None:
     problem.holdout_columns = [problem.columns_of(r) for r in problem.holdout_runs]
     parts = [problem.grams_of(r, Phi, problem.folds) for r, Phi in zip(problem.train_runs, problem.train_columns)]
     problem.holdout_grams = [problem.grams_of(r, Phi, 1) for r, Phi in zip(problem.holdout_runs, problem.holdout_columns)]
-    problem.joint_weights = _joint_weights(np.vstack([r.residual for r in problem.train_runs])) * problem.recorded
+    # without the nuisance constants, as the fit: a session's constant on q2 lowered q2's weight and changed the selection
+    problem.joint_weights = _joint_weights(np.vstack([problem.before_residual(r) for r in problem.train_runs])) * problem.recorded
     problem.train_grams = Grams.concat([part.scaled(weight) for part, weight in zip(parts, _run_weights(parts))])
