@@ -197,3 +197,32 @@ def test_a_baseline_logged_at_another_rate_is_put_on_the_runs_rate(tmp_path):
                header=",".join(["t"] + [f"{f}{j}" for f in ("q", "dq", "tau") for j in range(1, 8)]))
     chosen = with_baseline_motion(RunProcessing("periodic", 30), str(slow), ["one"], PSM)
     assert chosen.name == "periodic", chosen.why
+
+
+def test_a_log_of_fewer_joints_follows_the_same_motion_on_those_it_has():
+    """one-no-weight logged on joints 1..4 only was 'not the same motion' as one-105g (the joints it lacks, held
+    at zero, were compared): a baseline of fewer joints fell back to another-motion mode and named a payload."""
+    from dataclasses import replace
+
+    from dvrk_dart.io.signal import same_motion
+
+    one = process_periodic(load_run(resolve_run("one"), PSM))
+    fewer = np.arange(7) < 4
+    partial = replace(one, q=np.where(fewer, one.q, 0.0), dq=np.where(fewer, one.dq, 0.0), measured=fewer)
+    assert same_motion(one, partial) and same_motion(partial, one)
+    two = process_periodic(load_run(resolve_run("two"), PSM))
+    n = min(len(one), len(two))
+    assert not same_motion(partial.head(n), two.head(n))
+
+
+def test_notes_on_a_weak_channel_that_alone_sets_the_band(tmp_path, capsys):
+    """two's tau4 swamped by noise: its own cutoff (6) set every joint's band (35 before), and q2's figure halved
+    with no word."""
+    values = np.loadtxt(resolve_run("two"), delimiter=",")
+    values[:, 17] += np.random.default_rng(1).normal(0.0, 0.02, len(values))
+    path = tmp_path / "tau4_noisy.csv"
+    np.savetxt(path, values, delimiter=",")
+    capsys.readouterr()
+    band = process_periodic(load_run(path, PSM)).periodic.harmonics
+    err = capsys.readouterr().err
+    assert band < 20 and f"the band ({band} harmonics) is q4's own cutoff alone" in err, err

@@ -15,7 +15,7 @@ def print_diagnosis(result: dict) -> None:
         if run.get("rate_note"):
             print(f"note: {name}: {run['rate_note']}")
     for joint, runs in (result.get("not_recorded_by") or {}).items():
-        print(f"{joint}: not recorded by {', '.join(runs)} (held where its log holds it in its simulation): no figure, weight or "
+        print(f"{joint}: not recorded by {', '.join(runs)} (its simulation holds it where the log does, at zero without a column): no figure, weight or "
               f"effect on {joint}; what the effects do to {joint} is not checked")
     for key in ("gap_before", "gap_after"):
         for split, values in (result.get(key) or {}).items():
