@@ -268,6 +268,31 @@ def _position_amplitudes(t: np.ndarray, q: np.ndarray, period: Period, harmonics
     return harmonic_amplitudes(least_squares(harmonic_design(t, period.frequency_hz, harmonics), q), harmonics)
 
 
+def _check_design_period(design, period: Period, where: str) -> None:
+    """A commanded file whose period is not the run's: refused, with a hint where it is a rate's multiple."""
+    if abs(period.period_s / design.period_s - 1.0) <= DESIGN_PERIOD_TOLERANCE:
+        return
+    ratio = design.period_s / period.period_s
+    rate = next((f" (its period {1 / r:g}x the run's: a rate read wrong? a commanded log without a time column is read at "
+                 "200 Hz, and a time column is in s)" for r in (0.001, 0.2, 0.5, 2.0, 5.0, 1000.0) if abs(ratio * r - 1.0) < 0.02), "")
+    raise DvrkDartError(f"--excitation {design.source}: its period {design.period_s:.4f} s is not the run's ({where}: "
+                        f"{period.period_s:.4f} s fitted from it): the run did not play this excitation{rate}")
+
+
+def _band(cutoffs: np.ndarray, deciding: np.ndarray, floor: int, top: int, harmonics: int | None, where: str) -> int:
+    """The run's band: `harmonics` where imposed (said when under the design's `floor`), else band_harmonics
+    of the deciding joints (said when one joint alone sets it low)."""
+    if harmonics is None:
+        band = band_harmonics(cutoffs, deciding, min(floor, top))
+        _say_lone_band(cutoffs, deciding, band, where)
+        return band
+    band = min(int(harmonics), top)
+    if band < floor:
+        say_once([f"{where}: {band} harmonics imposed, fewer than the excitation's design ({floor}): the band cuts the motion "
+                  "itself, and every figure with it"])
+    return band
+
+
 def band_harmonics(cutoffs: np.ndarray, deciding: np.ndarray, floor: int) -> int:
     """The run's band: the smallest cutoff of the `deciding` joints (moving and recorded), at least `floor`."""
     if not deciding.any():
@@ -291,12 +316,8 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     if steady.stop - steady.start < len(t):  # a transient left out, the period fitted again without it
         t, q, tau = t[steady] - t[steady.start], q[steady], tau[steady]
         period = fit_period(t, q[:, moving], rate_hz, where)
-    if design is not None and abs(period.period_s / design.period_s - 1.0) > DESIGN_PERIOD_TOLERANCE:
-        ratio = design.period_s / period.period_s
-        rate = next((f" (its period {1 / r:g}x the run's: a rate read wrong? a commanded log without a time column is read at "
-                     "200 Hz, and a time column is in s)" for r in (0.001, 0.2, 0.5, 2.0, 5.0, 1000.0) if abs(ratio * r - 1.0) < 0.02), "")
-        raise DvrkDartError(f"--excitation {design.source}: its period {design.period_s:.4f} s is not the run's ({where}: "
-                            f"{period.period_s:.4f} s fitted from it): the run did not play this excitation{rate}")
+    if design is not None:
+        _check_design_period(design, period, where)
     floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)
     effort_spectrum = _spectrum(t, tau, period, rate_hz)
     top = len(effort_spectrum.harmonic_power) - 1
@@ -306,12 +327,7 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     _say_silent(silent, where)
     if silent[measured & moving].all():
         silent[:] = False  # nothing else to decide the band: the run's own rules stand
-    band = band_harmonics(cutoffs, moving & ~silent, min(floor, top)) if harmonics is None else min(int(harmonics), top)
-    if harmonics is None:
-        _say_lone_band(cutoffs, moving & ~silent, band, where)
-    if harmonics is not None and band < floor:
-        say_once([f"{where}: {band} harmonics imposed, fewer than the excitation's design ({floor}, {'--excitation' if design else 'read from the positions'}): "
-                  "the band cuts the motion itself, and every figure with it"])
+    band = _band(cutoffs, moving & ~silent, floor, top, harmonics, where + ("" if design is None else f" (--excitation {design.source})"))
     projector = Projector(t, period.frequency_hz, band)
     if design is not None:
         design.check_played(_position_amplitudes(t, q, period, design.harmonics), measured & ~coupled, where)
