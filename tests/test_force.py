@@ -93,7 +93,7 @@ def test_the_mtm_handle_force(tmp_path):
 
 def test_force_with_an_excitation_is_periodic_says_so_and_records_the_file(tmp_path, capsys):
     """`--excitation` with `--processing upstream` ran and ignored the file; the file was not recorded."""
-    from test_recordings import DATA_2018
+    from recordings import DATA_2018
 
     excitation = str(DATA_2018 / "psm1_fourier_test2_commanded.csv")
     assert main(["force", "--measured", "2018-test2", "--excitation", excitation, "--processing", "upstream",
