@@ -143,13 +143,11 @@ def beyond_identified_sentence(result: dict) -> str:
     if removed is not None:
         gap = "the identified model's gap" + (" above the session floor" if floor else "")
         change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
-        each = ", ".join(f"{JOINT_NAMES[j]} {share:.0%}" for j, share in shares.items())
-        apart = {}
-        for j, share in shares.items():  # a joint whose own share earns other words than the average's, named
-            if words_for(share) != words_for(removed):
-                apart.setdefault(words_for(share).split()[0], []).append(JOINT_NAMES[j])
-        apart_words = "".join(f"; {words} on {', '.join(names)}" for words, names in apart.items())
-        gaps += f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in shares)} ({each}): {words_for(removed)} beyond it{apart_words}"
+        # a joint whose own share earns other words than the average's, named, as in the main sentence
+        apart = joints_apart({"words": words_for(removed), "by_joint": {JOINT_NAMES[j]: {"removed_share": share, "words": words_for(share)}
+                                                                        for j, share in shares.items()}})
+        gaps += (f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in shares)}: {words_for(removed)} beyond it"
+                 + (f" ({apart})" if apart else ""))
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
