@@ -191,9 +191,11 @@ def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_p
         frequency, standard_error = _fit_frequency(t, x, rate_hz, start_hz)
     except DvrkDartError as exc:
         raise DvrkDartError(f"{where}: {exc}") from None
-    # N samples span N sample intervals: a run of exactly two periods holds two whole ones
+    # N samples span N sample intervals: a run of exactly two periods holds two whole ones, and a fitted
+    # period longer by its standard error must not lose one (a run of 3 periods read as 2.9999991 of them):
+    # a period short of half a sample counts whole
     span_s = len(t) / rate_hz
-    whole = int(math.floor(span_s * frequency + 1e-9))
+    whole = int(math.floor((span_s + 0.5 / rate_hz) * frequency))
     if whole < MIN_PERIODS:
         raise DvrkDartError(f"{where}: {span_s * frequency:.2f} periods of {1 / frequency:.3f} s, at least {MIN_PERIODS} needed")
     # as many harmonics as a design may have: an 8-harmonic excitation is periodic too

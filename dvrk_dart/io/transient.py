@@ -41,12 +41,24 @@ def steady_span(efforts: np.ndarray, samples_per_period: int, min_periods: int =
     energy = np.mean(difference[:, varying] ** 2 / level[varying], axis=1)
     windows = len(energy) // window
     window_rms = np.sqrt(energy[: windows * window].reshape(windows, window).mean(axis=1))
-    transient = window_rms > TRANSIENT_RATIO * np.median(window_rms)
-    leading = int(np.argmin(transient)) if not transient.all() else windows
-    trailing = int(np.argmin(transient[::-1])) if not transient.all() else windows
+    limit = TRANSIENT_RATIO * np.median(window_rms)
+    leading, trailing = _outer_windows_above(window_rms, limit)
+    # a transient stands out of the run: an outer window no further off than one inside the run is the
+    # run's own unsteadiness (a simulation's chaotic Coulomb reversals), not the arm settling
+    inside = window_rms[leading:windows - trailing]
+    if inside.size:
+        leading, trailing = _outer_windows_above(window_rms, max(limit, inside.max()))
     # a start window holds the transient at its own samples; an end window at its samples a period later
     start = leading * window
     stop = total - trailing * window if trailing else total
     if stop - start < min_periods * n:
         return slice(0, total)
     return slice(start, stop)
+
+
+def _outer_windows_above(window_rms: np.ndarray, limit: float) -> tuple[int, int]:
+    """How many windows at the start and at the end are above `limit`."""
+    above = window_rms > limit
+    if above.all():
+        return len(above), len(above)
+    return int(np.argmin(above)), int(np.argmin(above[::-1]))
