@@ -246,6 +246,13 @@ def _weighted_inverse(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndar
     return inverse, A
 
 
+def _weights(variance: list[np.ndarray]) -> np.ndarray:
+    """1 / variance, and no weight where there is no variance: a joint the runs did not record
+    (its efforts zeros, no noise) has no say in the fit."""
+    v = np.concatenate([x.reshape(-1) for x in variance])
+    return np.where(v > 0.0, 1.0 / np.where(v > 0.0, v, 1.0), 0.0)
+
+
 def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, variance: list[np.ndarray] | None = None) -> PayloadFit:
     """Feasible GLS of the payload's parameters over the pairs (module docstring);
     `variance` (per pair, (R, 7)): fixed weights, not re-estimated."""
@@ -258,7 +265,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
     variance = variance if fixed else [p.noise.copy() for p in pairs]
     n_params = pairs[0].X.shape[-1]
     for _ in range(0 if fixed else FEASIBLE_GLS_ITERATIONS):
-        w = 1.0 / np.concatenate([v.reshape(-1) for v in variance])
+        w = _weights(variance)
         inverse, _ = _weighted_inverse(X, w)
         residual = y - X @ (inverse @ (X.T @ (w * y)))
         # each residual over sqrt(1 - its leverage): the fit took that share of
@@ -269,7 +276,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
         session = np.maximum(np.mean([beyond_noise(squared[b:e].reshape(p.y.shape), p.noise)
                                       for p, b, e in zip(pairs, bounds[:-1], bounds[1:])], axis=0), 0.0)
         variance = [session + p.noise for p in pairs]
-    w = 1.0 / np.concatenate([v.reshape(-1) for v in variance])
+    w = _weights(variance)
     inverse, A = _weighted_inverse(X, w)
     beta = inverse @ (X.T @ (w * y))
     covariance = inverse[:n_params, :n_params]

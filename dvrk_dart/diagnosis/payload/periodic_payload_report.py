@@ -56,13 +56,19 @@ def _pairs(pair_runs, differences, columns) -> list[Pair]:
     return [make_pair(run.name, run.state, run.baseline.state, run.residual, x, n) for run, x in built]
 
 
-def _common_variance(pairs: list[Pair], n_differences: int, offset_joints) -> list[np.ndarray]:
+def _common_variance(candidate_pairs: list[list[Pair]], n_differences: int, offset_joints) -> list[np.ndarray]:
     """One variance model to compare links by: the --repeat pair's session
-    scatter (no payload there) plus each pair's noise; without it, what no payload leaves."""
-    if len(pairs) > n_differences:
-        session = session_variance(pairs[-1], offset_joints)
-        return [session + p.noise for p in pairs]
-    return fit_payload([replace(p, X=np.zeros_like(p.X)) for p in pairs], offset_joints).variance
+    scatter (no payload there) plus each pair's noise; without it, what every
+    candidate's columns together leave (the largest model's, as Mallows' Cp
+    takes its variance). What no payload leaves counted the payload's own
+    efforts as scatter and left every link as good as another (a payload on
+    the insertion carriage was read on yaw)."""
+    first = candidate_pairs[0]
+    if len(first) > n_differences:
+        session = session_variance(first[-1], offset_joints)
+        return [session + p.noise for p in first]
+    union = [replace(pair, X=np.concatenate([pairs[i].X for pairs in candidate_pairs], axis=-1)) for i, pair in enumerate(first)]
+    return fit_payload(union, offset_joints).variance
 
 
 def link_costs(candidates: list, pair_runs, differences, features_of, offset_joints) -> np.ndarray:
@@ -70,7 +76,7 @@ def link_costs(candidates: list, pair_runs, differences, features_of, offset_joi
     under one variance model: the weighted residual plus log(rows) per
     parameter the efforts determine."""
     pairs = [_pairs(pair_runs, differences, lambda r, e=e: e.first_moment_columns(features_of(r))) for e in candidates]
-    common = _common_variance(pairs[0], len(differences), offset_joints)
+    common = _common_variance(pairs, len(differences), offset_joints)
     costs = []
     for candidate_pairs in pairs:
         fit = fit_payload(candidate_pairs, offset_joints, common)
