@@ -191,12 +191,19 @@ def excited_joints(runs: list[RunData], asked: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _load_runs(names: tuple[str, ...], regressor: Regressor, config: IdentificationConfig) -> tuple[list[RunData], str | None]:
-    """Every run through one processing (and the note of io/signal.process_all)."""
+    """Every run through one processing (and the note of io/signal.process_all). The --excitation is the
+    training runs' design: a held-out run, of another trajectory as a rule, is read on its own period."""
     from dvrk_dart.io.excitation_design import read_design
 
     paths = [resolve_run(name) for name in names]
+    measured = [load_run(path, regressor.model, config.topics) for path in paths]
     design = read_design(config.excitation) if config.excitation else None
-    processed, note = process_all([load_run(path, regressor.model, config.topics) for path in paths], config.processing, design)
+    if design is None:
+        processed, note = process_all(measured, config.processing)
+    else:
+        trained = len(config.runs)
+        processed, note = process_all(measured[:trained], config.processing, design)
+        processed += process_all(measured[trained:], "periodic")[0]
     runs = [RunData(str(name), path, p, p.in_band(regressor(p.q, p.dq, p.ddq))) for name, path, p in zip(names, paths, processed)]
     return runs, note
 
