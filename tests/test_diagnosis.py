@@ -579,6 +579,10 @@ def test_a_constant_beyond_a_sessions_change_is_said(segment):
     repeat = DiagnosisRun("repeat", segment, moved)
     run = DiagnosisRun("loaded", segment, segment.tau.copy(), reference, role=RunRole.DIFFERENCE)
     units = ["N·m"] * 7
-    said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, units)
-    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03), "unit": "N·m"}]
-    assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, units) == []  # within twice the session's
+    said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, PSM, units)
+    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03),
+                     "session_change_source": "the repeat pair", "unit": "N·m"}]
+    assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, PSM, units) == []  # within twice
+    # without a repeat run, the model card's: a J3 offset changed by 0.35 N (the card's sessions move it by 0.008)
+    said = constants_beyond_session({"loaded": {"q2": 0.05, "q3": 0.35}}, [run], None, reference, PSM, units)
+    assert [(c["joint"], c["session_change_source"]) for c in said] == [("q3", "the model card's repeat pair")]

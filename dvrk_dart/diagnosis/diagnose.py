@@ -39,7 +39,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import card_repeat, constants_beyond_session, gap_split, session_floor
-from dvrk_dart.diagnosis.output.answer import effort_at_zero_words
+from dvrk_dart.diagnosis.output.answer import effort_at_zero_words, offsets_words
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm
@@ -140,7 +140,7 @@ def diagnose(
                         carried).to_json()
     differences = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE]
     result["constants_beyond_session"] = constants_beyond_session(result["nuisance_offsets"], differences, problem.repeat_run,
-                                                                  problem.reference_run, result["units"])
+                                                                  problem.reference_run, problem.arm.model, result["units"])
     if out_dir is None:
         return result
     # the run the answer speaks of; before and after both without the nuisance constants the fit takes out
@@ -292,7 +292,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     offsets, recorded = problem.offset_joints, problem.recorded
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
-    payload_fits, mismatch = (fits, None) if problem.has_baseline else ([], gravity_mismatch_of(fits[0], problem.arm.model) if fits else None)
+    payload_fits, mismatch = (fits, None) if problem.has_baseline else (
+        [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried)) if fits else None)
     not_distinguished = None
     if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
         not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}
@@ -361,12 +362,25 @@ def payload_distinguished(fit: dict) -> bool:
     return mass is None or mass > 0.0
 
 
-def gravity_mismatch_of(fit: dict, model: PsmModel) -> dict:
+def offsets_left_out(arm, carried: dict | None) -> list[float] | None:
+    """The identified model's constant efforts (its offsets, N·m or N per joint) where the base simulation
+    leaves them out (`carried`: identified_terms_share's answer), else None."""
+    if not carried or "offset" not in carried.get("terms", ()):
+        return None
+    zero = np.zeros((1, len(JOINT_NAMES)))
+    return arm.identified.predict(zero, zero, zero, ("offset",))[0].tolist()
+
+
+def gravity_mismatch_of(fit: dict, model: PsmModel, left_out_offsets: list[float] | None = None) -> dict:
     """A payload-shaped fit without a baseline: the arm's own gravity against
     the parameters (its mass distribution: another arm, instrument or session),
-    reported by its efforts, not as a mass that was attached."""
-    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), [model.effort_unit(j) for j in JOINT_NAMES], every=True).lstrip(",")
-    return {**fit,
+    reported by its efforts, not as a mass that was attached. Beside each effort
+    at q = 0, the identified offset of that joint when the simulation leaves it
+    out: a constant the fit's effort at q = 0 is not told apart from."""
+    units = [model.effort_unit(j) for j in JOINT_NAMES]
+    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), units, every=True).lstrip(",")
+    size += offsets_words(fit.get("gravity_efforts_at_q0"), left_out_offsets, units)
+    return {**fit, "identified_offsets_left_out": left_out_offsets,
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
                        "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "
                        "two are not told apart; record a baseline to isolate a payload",

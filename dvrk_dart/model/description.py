@@ -104,6 +104,7 @@ class PsmModel:
     session_offset_joints: tuple[str, ...] | None = None  # joints whose constant effort moves between sessions ([sessions])
     #: two reference recordings of one motion in two sessions ([sessions] repeat_pair: manifest names)
     session_repeat_pair: tuple[str, ...] = ()
+    session_constant_change: tuple[float, ...] | None = None  # how far each joint's constant moved between the repeat pair's sessions
     #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
     controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()

@@ -123,6 +123,7 @@ def load_model(path: Path | str) -> PsmModel:
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
         session_repeat_pair=_session_repeat_pair(raw, path),
+        session_constant_change=_session_constant_change(raw, path),
         controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
         joint_words=str(raw.get("joint_words", "")),
@@ -231,3 +232,14 @@ def _session_offset_joints(raw: dict, path: Path) -> tuple[str, ...] | None:
     if unknown:
         raise DvrkDartError(f"{path}: [sessions] offset_joints: unknown joint(s) {', '.join(map(str, unknown))} (known: {', '.join(JOINT_NAMES)})")
     return names
+
+
+def _session_constant_change(raw: dict, path: Path) -> tuple[float, ...] | None:
+    """[sessions] constant_change: per joint (q1..q7), how much a joint's constant effort moved between the
+    repeat pair's sessions (N·m, N), or none."""
+    values = raw.get("sessions", {}).get("constant_change")
+    if values is None:
+        return None
+    if len(values) != len(JOINT_NAMES) or not all(isinstance(v, (int, float)) and v >= 0 for v in values):
+        raise DvrkDartError(f"{path}: [sessions] constant_change: {len(JOINT_NAMES)} non-negative numbers expected (q1..q7)")
+    return tuple(float(v) for v in values)

@@ -86,7 +86,7 @@ def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
         report = {"case": case["name"], "physics": case["physics"], "joint": JOINT_NAMES[j], "unit": arm.model.effort_unit(JOINT_NAMES[j]),
                   "injected_rms": float(rms(extra)[j]), "noise_rms": noise, "gap_before": before, "gap_after": after,
                   "closest_library_effect": selected[0] if selected else None, "selected": selected,
-                  "explained_share_of_gap": float(1.0 - after**2 / before**2) if before > 0 else 0.0, "left_over_above_noise": leftover}
+                  "explained_share_of_gap": float(1.0 - after / before) if before > 0 else 0.0, "left_over_above_noise": leftover}
         cases.append(report)
         verdicts.append({"check": f"out-of-library {case['name']}: not explained to within the noise (a leftover remains)",
                          "passed": bool(after**2 > LEFTOVER_ENERGY_RATIO * noise**2),

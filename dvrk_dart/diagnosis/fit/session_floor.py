@@ -95,18 +95,26 @@ BEYOND_SESSION_FACTOR = 2.0
 
 
 def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], repeat: DiagnosisRun | None,
-                             reference: DiagnosisRun, units: list[str]) -> list[dict]:
+                             reference: DiagnosisRun, model: PsmModel, units: list[str]) -> list[dict]:
     """The nuisance offsets of the runs minus their baseline (`runs`) that a
     session's change does not reach: the mean of `repeat` - `reference` (the
-    same motion in two sessions) on that joint, times BEYOND_SESSION_FACTOR.
-    Such a constant may be part of an effect (a load, a payload's mean gravity)
-    that the offset took out: a J2 load of +0.125 N·m beside a session change
-    of 0.03 was read 'no effect selected', with no word."""
-    pair = paired_gaps(repeat, reference) if offsets and repeat is not None else None
-    if pair is None:
+    same motion in two sessions) on that joint, else the model card's
+    `[sessions] constant_change`, times BEYOND_SESSION_FACTOR. Such a constant
+    may be part of an effect (a load, a payload's mean gravity) or a changed
+    offset that the nuisance term took out: a J2 load of +0.125 N·m beside a
+    session change of 0.03, and a J3 offset changed by 0.35 N, were read 'no
+    effect selected', with no word."""
+    if not offsets:
         return []
-    session = np.abs((pair[0] - pair[1]).mean(axis=0))
-    return [{"run": run.name, "joint": joint, "offset": value, "session_change": float(session[j]), "unit": units[j]}
+    pair = paired_gaps(repeat, reference) if repeat is not None else None
+    if pair is not None:
+        session, source = np.abs((pair[0] - pair[1]).mean(axis=0)), "the repeat pair"
+    elif model.session_constant_change is not None:
+        session, source = np.asarray(model.session_constant_change), "the model card's repeat pair"
+    else:
+        return []
+    return [{"run": run.name, "joint": joint, "offset": value, "session_change": float(session[j]), "session_change_source": source,
+             "unit": units[j]}
             for run in runs for j, joint in enumerate(JOINT_NAMES)
             if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0 and abs(value) > BEYOND_SESSION_FACTOR * session[j]]
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, share_above_floor, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -85,6 +87,18 @@ def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list
     return (", " + ", ".join(f"{efforts[j]:+.3g} {units[j]} on {JOINT_NAMES[j]}" for j in shown) + " at q = 0") if shown else ""
 
 
+def offsets_words(efforts: list | None, offsets: list | None, units: list[str]) -> str:
+    """'; the simulation leaves out the identified offsets (-0.3 N·m on q1), ...': beside a gravity
+    mismatch's efforts at q = 0 (J1..J3), the constant the identified model has there and the base
+    simulation lacks, which a fit's constant part takes as readily ('' where none)."""
+    efforts, offsets = list(efforts or [])[:3], list(offsets or [])
+    joints = [j for j in (1, 0, 2) if j < len(efforts) and j < len(offsets) and efforts[j] and offsets[j]]
+    if not joints:
+        return ""
+    listed = ", ".join(f"{offsets[j]:+.3g} {units[j]} on {JOINT_NAMES[j]}" for j in joints)
+    return f"; the simulation leaves out the identified offsets ({listed}), which a constant part of these efforts may be"
+
+
 def _payload_size_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
     when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
@@ -125,8 +139,14 @@ def beyond_identified_sentence(result: dict) -> str:
     recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
     acted = {JOINT_NAMES.index(j) for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
     acted |= set(range(ANSWER_JOINTS)) if combined else set()  # J3's terms and the pitch loads act on J1..J3
-    # worse where an effect acts (a joint nothing acts on keeps its figure) and the printed figures show it (0.033456 -> 0.033479 was "worse")
-    made_worse = {j for j in recorded if after[j] > bar[j] and f"{after[j]:.3g}" != f"{bar[j]:.3g}" and (j in acted or not result.get("effects"))}
+    floor = result.get("session_floor")
+    level = _held_out_level(result, floor)
+    # a joint where the identified model is already at the floor (or the noise) has nothing repeatable to remove
+    at_level = {j for j in recorded if level[j] is not None and bar[j] <= AT_FLOOR_RATIO * level[j]}
+    # worse where an effect acts (a joint nothing acts on keeps its figure) and the printed figures show it (0.033456 -> 0.033479
+    # was "worse"); at the floor, only beyond it (a tenth of the noise was "worse")
+    made_worse = {j for j in recorded if after[j] > bar[j] and f"{after[j]:.3g}" != f"{bar[j]:.3g}" and (j in acted or not result.get("effects"))
+                  and (j not in at_level or after[j] > AT_FLOOR_RATIO * level[j])}
     if result.get("diagnosis_base", "inertial") != "inertial" and not made_worse:
         return ""  # the answer's own figures are these: said once
     shown = sorted(set(_main_joints(recorded)) | made_worse)
@@ -134,10 +154,14 @@ def beyond_identified_sentence(result: dict) -> str:
     worse = [JOINT_NAMES[j] for j in shown if j in made_worse]
     if worse:
         gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
-    floor = result.get("session_floor")
     # the one rule (output/wording.py), against the identified model instead of the inertia alone: above the floor where there is one
     shares = {j: (share_above_floor(bar[j], after[j], floor[j]) if floor and floor[j] is not None else 1.0 - after[j] / bar[j])
-              for j in _main_joints(recorded) if bar[j] > 0}
+              for j in _main_joints(recorded) if bar[j] > 0 and j not in at_level}
+    at_main = [JOINT_NAMES[j] for j in _main_joints(recorded) if j in at_level]
+    if at_main:
+        level_words = "the session floor, where a session's change" if floor else "the noise, where the noise"
+        gaps += (f"; the identified model's gap is within {AT_FLOOR_RATIO:g}x {level_words} alone can leave it, on "
+                 f"{', '.join(at_main)}: no share counted there")
     shares = {j: share for j, share in shares.items() if share is not None}
     removed = sum(shares.values()) / len(shares) if shares else None
     if removed is not None:
@@ -151,6 +175,20 @@ def beyond_identified_sentence(result: dict) -> str:
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
+
+
+def _held_out_level(result: dict, floor: list | None) -> list:
+    """Per joint, what a gap on the held-out runs cannot go under: the session floor where one was measured,
+    else (periodic) the noise the projection leaves on them (their RMS over the runs); None where not known."""
+    if floor:
+        return list(floor)
+    runs = ((result.get("processing") or {}).get("runs") or {})
+    noise = [runs[name]["noise_rms"] for name in result.get("holdout_runs") or [] if (runs.get(name) or {}).get("noise_rms")]
+    if not noise:
+        return [None] * len(JOINT_NAMES)
+    rows = np.array([[np.nan if x is None else x for x in run] for run in noise], dtype=float)  # None: a joint not recorded
+    level = np.sqrt(np.mean(np.square(rows), axis=0))
+    return [None if np.isnan(x) else float(x) for x in level]
 
 
 def _in_answer_order(result: dict) -> list[str]:
@@ -172,6 +210,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
         return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
+        size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
         return (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
                 "an attached mass not told apart without a baseline)")
     if selected:
@@ -239,7 +278,7 @@ def answer_sentence(result: dict) -> str:
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
-    sentence += _identified_terms_clause(result)
+    sentence += _identified_terms_clause(result) + _constants_clause(result)
     floor = result.get("session_floor")
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
@@ -253,6 +292,18 @@ def answer_sentence(result: dict) -> str:
 CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified model already has and the simulation lacks"),
                  "partly explained": ("part of", "partly what the identified model already has"),
                  "not explained": ("little of", "beyond the identified model's terms")}
+
+
+def _constants_clause(result: dict) -> str:
+    """A constant of the runs against their baseline beyond a session's change (constants_beyond_session), which the
+    nuisance term took out of the gap (a J3 offset changed by 0.35 N read 'not explained', with no word)."""
+    beyond = result.get("constants_beyond_session") or []
+    if not beyond:
+        return ""
+    listed = ", ".join(f"{c['joint']} {c['offset']:+.3g} {c['unit']} in {c['run']}" for c in beyond)
+    return (f"; beyond a session's change (as {beyond[0].get('session_change_source', 'the repeat pair')} shows it), the runs' constant "
+            f"effort differs from their baseline's: {listed}, taken out as a session's offset: a changed offset or part of an "
+            "effect, not diagnosed")
 
 
 def _identified_terms_clause(result: dict) -> str:

@@ -51,9 +51,9 @@ def print_diagnosis(result: dict) -> None:
             print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {result['units'][JOINT_NAMES.index(j)]}" for j in joints if j in offsets))
     for c in result.get("constants_beyond_session") or []:
         print(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} (minus its baseline) as a session's "
-              f"offset, on top of the effects: {abs(c['offset']) / max(c['session_change'], 1e-12):.1f}x the constant change the repeat "
-              f"pair shows between sessions ({c['session_change']:.3f}); it may be part of an effect (a load, a payload's mean "
-              "gravity), not diagnosed")
+              f"offset, on top of the effects: {abs(c['offset']) / max(c['session_change'], 1e-12):.1f}x the constant change "
+              f"{c.get('session_change_source', 'the repeat pair')} shows between sessions ({c['session_change']:.3f}); it may be a "
+              "changed offset or part of an effect (a load, a payload's mean gravity), not diagnosed")
     for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
