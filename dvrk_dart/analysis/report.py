@@ -206,12 +206,13 @@ def figures_section(figures) -> str:
 
 
 def _units_of(metrics: pd.DataFrame, quantity: str, components: Sequence[str]) -> str:
-    """The unit of a table's values: one unit, or per component when they differ."""
-    units = metrics[metrics.quantity == quantity].groupby("joint").unit.first()
+    """The unit of a table's values: one unit, or per component when they differ (by
+    component, or by arm: the PSM's q3 is prismatic, the MTM's revolute)."""
+    units = metrics[metrics.quantity == quantity].groupby("joint").unit.agg(lambda u: " or ".join(sorted(map(unit_text, set(u)))))
     present = [c for c in components if c in units.index]
     if len({units[c] for c in present}) == 1:
-        return unit_text(units[present[0]])
-    return ", ".join(f"{c}: {unit_text(units[c])}" for c in present)
+        return units[present[0]]
+    return ", ".join(f"{c}: {units[c]}" for c in present)
 
 
 def per_run_section(analysis: Analysis) -> str:
@@ -362,7 +363,8 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         write_analysis(analysis, building / ANALYSIS_DIR, campaign_verdicts)
         figures = build_figures(analysis.runs, building, jobs=jobs)
         extras = _extra_items(extra_sections, building)
-        navigation = ["verdicts", "comparison", "realistic-arm", "figures", "results", *[f"extra-{i}" for i in range(len(extras))], "glossary", "provenance"]
+        navigation = [(name, name) for name in ("verdicts", "comparison", "realistic-arm", "figures", "results")]
+        navigation += [(f"extra-{i}", title) for i, (title, _) in enumerate(extras)] + [("glossary", "glossary"), ("provenance", "provenance")]
         sections = [verdict_section(analysis, campaign_verdicts), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
                     figures_section(figures), per_run_section(analysis)]
         page = render("validation_report.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
