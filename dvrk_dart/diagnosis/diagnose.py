@@ -39,7 +39,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import card_repeat, constants_beyond_session, gap_split, session_floor
-from dvrk_dart.diagnosis.output.answer import effort_at_zero_words, offsets_words
+from dvrk_dart.diagnosis.output.gravity_mismatch import gravity_mismatch_of, offsets_left_out
 from dvrk_dart.diagnosis.output.wording import explanation
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.arm import Arm
@@ -360,33 +360,6 @@ def payload_distinguished(fit: dict) -> bool:
     at = fit.get("payload_at") or {}
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
     return mass is None or mass > 0.0
-
-
-def offsets_left_out(arm, carried: dict | None) -> list[float] | None:
-    """The identified model's constant efforts (its offsets, N·m or N per joint) where the base simulation
-    leaves them out (`carried`: identified_terms_share's answer), else None."""
-    if not carried or "offset" not in carried.get("terms", ()):
-        return None
-    zero = np.zeros((1, len(JOINT_NAMES)))
-    return arm.identified.predict(zero, zero, zero, ("offset",))[0].tolist()
-
-
-def gravity_mismatch_of(fit: dict, model: PsmModel, left_out_offsets: list[float] | None = None) -> dict:
-    """A payload-shaped fit without a baseline: the arm's own gravity against
-    the parameters (its mass distribution: another arm, instrument or session),
-    reported by its efforts, not as a mass that was attached. Beside each effort
-    at q = 0, the identified offset of that joint when the simulation leaves it
-    out: a constant the fit's effort at q = 0 is not told apart from."""
-    units = [model.effort_unit(j) for j in JOINT_NAMES]
-    size = effort_at_zero_words(fit.get("gravity_efforts_at_q0"), units, every=True).lstrip(",")
-    size += offsets_words(fit.get("gravity_efforts_at_q0"), left_out_offsets, units)
-    return {**fit, "identified_offsets_left_out": left_out_offsets,
-            "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
-                       "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "
-                       "two are not told apart; record a baseline to isolate a payload",
-            "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
-                      + (f":{size}" if size else "")
-                      + "; without a baseline run the arm's mass distribution and an attached mass are not told apart."]}
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,

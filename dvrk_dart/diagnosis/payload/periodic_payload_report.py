@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
-from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, pitch_shaft_offsets, swamp
+from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, effort_not_determined, pitch_shaft_offsets, swamp
 from dvrk_dart.diagnosis.payload.periodic_payload import (
     INTERVAL_PROBABILITY,
     Pair,
@@ -35,6 +35,10 @@ PAYLOAD_TEST_LEVEL = 0.01
 #: links whose payloads explain the efforts within this BIC of the best are
 #: tied (Kass and Raftery 1995: beyond 10, "very strong" evidence)
 TIED_BIC = 10.0
+#: why a joint's gravity effort at q = 0 has no interval without a --repeat pair (the real null pair, two sessions
+#: without a weight, read q2's as +0.26 N·m, its interval [+0.14, +0.38] excluding zero)
+SESSION_SHAPE_NOT_COUNTED = ("sessions move this joint's constant (each run's offset takes it) and can change its gravity's shape (an offset "
+                             "of its zero); without a --repeat pair nothing measures that change, and the interval would not count it")
 SCALAR_QUANTITIES = {"mass_kg", "q1_gravity_slope_at_q0_nm_per_rad"}
 INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squares on the harmonics of the runs minus their baseline "
                    "(weights: measured noise plus the session scatter the fit leaves, per harmonic), HC2 standard errors with "
@@ -221,6 +225,9 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
         report["payload_at"], session_at = _at_position(arm, at, fit_with)
         report["position_m"] = at.position.tolist()
         session["mass_kg_at_position"] = session_at["mass_kg"]
+    if repeat is None:  # nothing measures a session's change of these joints' gravity shape: their intervals do not hold it
+        for j in np.flatnonzero(np.asarray(offset_joints)[:3]):
+            effort_not_determined(report, int(j), SESSION_SHAPE_NOT_COUNTED)
     if repeat is not None:
         # what the --repeat pair alone reads as this payload: a session change of its shape, counted in every interval
         report["session_change_as_payload"] = {key: session[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0",
