@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -53,3 +55,27 @@ TORQUE_TRANSIENT_S = 1.0
 
 #: the motion regime of whole-run values (the analysis's other regimes select samples)
 REGIME_ALL = "all"
+
+
+#: a joint's constant effort moves from session to session when two sessions'
+#: mean efforts differ by more than this many standard errors (~95 %)
+SESSION_OFFSET_STANDARD_ERRORS = 2.0
+#: blocks of a residual whose means are independent (the samples are correlated over ~0.05 s)
+MEAN_BLOCK_S = 1.0
+
+
+def mean_standard_error(residual: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Per joint, the standard error of a run's mean effort, from the spread of
+    its block means (the samples are correlated over ~0.05 s, blocks are not)."""
+    block = max(1, int(round(MEAN_BLOCK_S * rate_hz)))
+    n_blocks = max(2, len(residual) // block)
+    means = np.array([part.mean(axis=0) for part in np.array_split(residual, n_blocks)])
+    return means.std(axis=0, ddof=1) / math.sqrt(n_blocks)
+
+
+def moved_constants(difference: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Per joint, whether a session moves its constant effort: the mean
+    difference of two runs of the same motion in two sessions (their gaps, or
+    their residuals) is more than SESSION_OFFSET_STANDARD_ERRORS standard errors
+    from zero. The one rule of the diagnosis and of `session-floor`."""
+    return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)

@@ -29,7 +29,7 @@ import scipy.optimize
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import HarmonicSeries
 from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion, spanning_columns
-from dvrk_dart.metrics import per_measured_joint, rms
+from dvrk_dart.metrics import moved_constants, per_measured_joint, rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -132,7 +132,7 @@ def floor_table(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> dict:
     predicted = np.hypot(residual_noise(arm, a), residual_noise(arm, b))
     demeaned = rms(difference - difference.mean(axis=0))
     ratio = demeaned / np.maximum(predicted, np.finfo(float).tiny)
-    moved_constant = rms(difference) ** 2 - demeaned**2 > predicted**2
+    moved_constant = moved_constants(difference, a.rate_hz)
     result.update({
         "noise_predicted_rms": figures(predicted), "ratio_to_noise": figures(ratio),
         "noise_reason": "each run's effort noise (lines between harmonics) and its positions' noise through the model, in squares",

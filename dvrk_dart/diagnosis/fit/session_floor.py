@@ -26,17 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, sha256_of
-from dvrk_dart.metrics import rms
+from dvrk_dart.metrics import moved_constants, rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 
-#: a joint's constant effort moves from session to session when two sessions'
-#: mean efforts differ by more than this many standard errors (~95 %)
-SESSION_OFFSET_STANDARD_ERRORS = 2.0
 
 
 def session_floor(a: DiagnosisRun, b: DiagnosisRun, constant_joints: np.ndarray | None = None) -> np.ndarray:
@@ -59,22 +55,6 @@ def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarra
     if not same_motion(a.state.head(n), b.state.head(n)):
         return None
     return a.gap[:n], b.gap[:n]
-
-
-def mean_standard_error(residual: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Per joint, the standard error of a run's mean effort, from the spread of
-    its block means (the samples are correlated over ~0.05 s, blocks are not)."""
-    block = max(1, int(round(BLOCK_DURATION_S * rate_hz)))
-    n_blocks = max(2, len(residual) // block)
-    means = np.array([part.mean(axis=0) for part in np.array_split(residual, n_blocks)])
-    return means.std(axis=0, ddof=1) / math.sqrt(n_blocks)
-
-
-def moved_constants(difference: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Per joint, whether a session moves its constant effort: the mean gap
-    difference of two runs of the same motion in two sessions is more than
-    SESSION_OFFSET_STANDARD_ERRORS standard errors from zero."""
-    return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)
 
 
 def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, reference: DiagnosisRun) -> tuple[np.ndarray, str]:
