@@ -88,8 +88,10 @@ def contact_check(arm: Arm, run: ContactRun, model_efforts: np.ndarray, real_res
     gap = run.effort - model_efforts
     estimate = estimate_force(arm.model, run.q, gap)
     known = np.all(np.isfinite(estimate.force), axis=1)
+    touching = known & (np.linalg.norm(truth, axis=1) > 0)
     result = {"samples": int(len(run.t)), "in_contact_fraction": float(np.mean(np.linalg.norm(truth, axis=1) > 0)),
               "contact_force_rms_n": float(np.sqrt(np.mean(np.sum(truth[known] ** 2, axis=1)))),
+              "contact_force_in_contact_rms_n": float(np.sqrt(np.mean(np.sum(truth[touching] ** 2, axis=1)))) if touching.any() else None,
               "sim_to_sim_error_rms_n": float(np.sqrt(np.mean(np.sum((estimate.force[known] - truth[known]) ** 2, axis=1)))),
               "determined_fraction": float(known.mean())}
     if real_residual is not None:
@@ -97,4 +99,7 @@ def contact_check(arm: Arm, run: ContactRun, model_efforts: np.ndarray, real_res
         ok = np.all(np.isfinite(noisy.force), axis=1)
         result["with_real_residual_error_rms_n"] = float(np.sqrt(np.mean(np.sum((noisy.force[ok] - truth[ok]) ** 2, axis=1))))
         result["with_real_residual_error_per_axis_n"] = rms(noisy.force[ok] - truth[ok]).tolist()
+        during = ok & (np.linalg.norm(truth, axis=1) > 0)
+        result["with_real_residual_error_in_contact_rms_n"] = (
+            float(np.sqrt(np.mean(np.sum((noisy.force[during] - truth[during]) ** 2, axis=1)))) if during.any() else None)
     return result
