@@ -246,11 +246,11 @@ def _weighted_inverse(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndar
     return inverse, A
 
 
-def _weights(variance: list[np.ndarray]) -> np.ndarray:
-    """1 / variance, and no weight where there is no variance: a joint the runs did not record
-    (its efforts zeros, no noise) has no say in the fit."""
+def _weights(variance: list[np.ndarray], measured: np.ndarray) -> np.ndarray:
+    """1 / variance where the pairs measured something (`measured`: their noise is not nil), else no weight:
+    a joint the runs did not record (zeros, no noise) has no say in the fit, whatever scatter its rows seem to have."""
     v = np.concatenate([x.reshape(-1) for x in variance])
-    return np.where(v > 0.0, 1.0 / np.where(v > 0.0, v, 1.0), 0.0)
+    return np.where(measured & (v > 0.0), 1.0 / np.where(v > 0.0, v, 1.0), 0.0)
 
 
 def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, variance: list[np.ndarray] | None = None) -> PayloadFit:
@@ -264,8 +264,9 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
     fixed = variance is not None
     variance = variance if fixed else [p.noise.copy() for p in pairs]
     n_params = pairs[0].X.shape[-1]
+    measured = np.concatenate([p.noise.reshape(-1) > 0.0 for p in pairs])
     for _ in range(0 if fixed else FEASIBLE_GLS_ITERATIONS):
-        w = _weights(variance)
+        w = _weights(variance, measured)
         inverse, _ = _weighted_inverse(X, w)
         residual = y - X @ (inverse @ (X.T @ (w * y)))
         # each residual over sqrt(1 - its leverage): the fit took that share of
@@ -276,7 +277,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
         session = np.maximum(np.mean([beyond_noise(squared[b:e].reshape(p.y.shape), p.noise)
                                       for p, b, e in zip(pairs, bounds[:-1], bounds[1:])], axis=0), 0.0)
         variance = [session + p.noise for p in pairs]
-    w = _weights(variance)
+    w = _weights(variance, measured)
     inverse, A = _weighted_inverse(X, w)
     beta = inverse @ (X.T @ (w * y))
     covariance = inverse[:n_params, :n_params]
@@ -288,7 +289,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
     one_minus = np.clip(1.0 - np.diag(hat), 0.0, 1.0)
     scaled = np.where(one_minus > 1e-9, root_w * (y - X @ beta) / np.sqrt(np.maximum(one_minus, 1e-300)), np.nan)
     annihilator = np.eye(len(y)) - hat
-    return PayloadFit(beta[:n_params], covariance, estimable, variance, offsets, len(y),
+    return PayloadFit(beta[:n_params], covariance, estimable, variance, offsets, int(np.count_nonzero(w)),
                       influence, scaled, np.maximum(one_minus, 1e-300), annihilator**2,
                       float(np.sum(w * (y - X @ beta) ** 2)), int(np.linalg.matrix_rank(estimable)))
 
