@@ -4,7 +4,6 @@ with a summary: in free motion, the model's phantom force."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from dvrk_dart.io.signal import ProcessedRun, chosen_because, process, process_a
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.runs.config import DYNAMICS_CHOICES, RunConfig, recorded_processing, sim_config_for
+from dvrk_dart.runs.config import DYNAMICS_CHOICES, RunConfig, diagnosis_sim_config, recorded_processing, sim_config_for
 from dvrk_dart.sim.config import SimConfig
 
 
@@ -58,11 +57,7 @@ def model_config(dynamics: str) -> SimConfig:
     diagnosis's explicit terms need not be a physical DART damping)."""
     if dynamics in DYNAMICS_CHOICES:
         return sim_config_for(RunConfig("replay", "velocity", dynamics=dynamics))
-    try:
-        return SimConfig.from_dict(json.loads(Path(dynamics).read_text(encoding="utf-8"))["sim_config"])
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        why = str(exc) if isinstance(exc, ValueError) and str(exc).startswith("sim_config") else type(exc).__name__
-        raise DvrkDartError(f"--dynamics: {dynamics}: not a diagnosis.json or one_configuration.json ({why})") from None
+    return diagnosis_sim_config(Path(dynamics), physical=False)
 
 
 def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:

@@ -69,6 +69,17 @@ def test_force_refuses_a_bad_dynamics_file_in_one_line(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "bad.json" in err and not (tmp_path / "f").exists()
 
 
+def test_a_diagnosis_against_a_baseline_is_no_arm_to_estimate_a_force_with(tmp_path, capsys):
+    """A payload diagnosis (--baseline) simulates what the runs differ by, not the arm: its sim_config (the
+    inertia alone, the payload not in it) made the phantom force 3.5 N where the identified model's is 1.1 N."""
+    difference = tmp_path / "diagnosis.json"
+    difference.write_text(json.dumps({"baseline": "one-no-weight", "sim_config": {}}))
+    for command in ("force", "replay"):
+        assert main([command, "--measured", "two", "--dynamics", str(difference), "--out", str(tmp_path / command)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--baseline one-no-weight" in err and not (tmp_path / command).exists(), err
+
+
 def test_a_contact_in_dart_is_estimated_from_the_simulated_efforts(arm):
     """The sim-to-sim check: the instrument pressing 1 cm into a 500 N/m surface while
     replaying "two"; the estimate from DART's efforts with the model it was built from."""

@@ -60,10 +60,11 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
     from dvrk_dart.diagnosis.output.answer import _insertion_clause, beyond_identified_sentence
 
     coefficients = {"acceleration_along_motion_kg": 0.234, "pitch_load_sin_q2": 0.026, "pitch_load_cos_q2": 0.126,
-                    "offset": -0.133, "viscous": -1.204, "coulomb_sign": -0.471, "coulomb_dahl": 0.892}
+                    "offset": -0.3, "viscous": -1.204, "coulomb_sign": -0.471, "coulomb_dahl": 0.892}
+    own = {"offset": -0.133, "viscous": -1.1, "coulomb_sign": -0.4, "coulomb_dahl": 0.8}
     for simulated, carries in ((0.412, False), (0.081, True)):
         study = {"gap_holdout_simulated": simulated, "gap_holdout_terms": simulated, "gap_holdout_identified": 0.191,
-                 "gap_holdout_own_friction": 0.225, "repeatable_gap_removed_share": None, "coefficients": coefficients}
+                 "gap_holdout_own_friction": 0.225, "repeatable_gap_removed_share": None, "coefficients": coefficients, "own_friction_coefficients": own}
         clause, sentence = _insertion_clause({"insertion_terms": study}), insertion_sentence(study)
         assert (") carry to the held-out runs" in clause) == carries and ("do not carry" in clause) == (not carries), clause
         assert ("do not carry" in sentence) == (not carries), sentence
@@ -208,3 +209,14 @@ def test_the_page_names_the_joints_in_the_arms_own_words():
     result["joint_words"] = mtm.joint_words
     page = diagnosis_page(result, [], "mtm")
     assert "wrist roll" in page and "insertion" not in page and "insertion" in PSM.joint_words
+
+
+def test_a_constant_beyond_a_sessions_change_is_said_where_no_effect_accounts_for_it():
+    """A J3 offset changed by 0.35 N against a baseline read 'not explained', with no word; a payload's mean gravity
+    on q3 (the nuisance offset takes it too) is the payload's and stays out of the answer."""
+    result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
+    result["constants_beyond_session"] = [{"run": "O3_A", "joint": "q3", "offset": 0.346, "session_change": 0.0081,
+                                           "session_change_source": "the model card's repeat pair", "unit": "N"}]
+    assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
+    result["effects"][0]["joints"] = ["q2", "q3"]
+    assert "taken out as a session's offset" not in answer_sentence(result)

@@ -133,8 +133,11 @@ def sim_config_for(config: RunConfig) -> SimConfig:
     return replace(sim, dt_s=config.dt_s, counterweight=config.counterweight)
 
 
-def diagnosis_sim_config(path: Path) -> SimConfig:
-    """The SimConfig a diagnosis selected (its diagnosis.json `sim_config`)."""
+def diagnosis_sim_config(path: Path, physical: bool = True) -> SimConfig:
+    """The SimConfig a diagnosis selected (its diagnosis.json `sim_config`, or a one_configuration.json's);
+    `physical`: checked as DART physics (a replay), not only evaluated by formula. A diagnosis with --baseline
+    is refused: it fitted what the runs differ by from their baseline, and its sim_config is not the arm (a
+    payload diagnosis's made the force at the instrument three times the plain model's)."""
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -143,11 +146,15 @@ def diagnosis_sim_config(path: Path) -> SimConfig:
         raise DvrkDartError(f"--dynamics: {path}: not a diagnosis.json ({type(exc).__name__})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("sim_config"), dict):
         raise DvrkDartError(f"--dynamics: {path}: no 'sim_config' object (not written by dvrk-dart diagnose?)")
+    if raw.get("baseline"):
+        raise DvrkDartError(f"--dynamics: {path}: a diagnosis with --baseline {raw['baseline']}: it simulates what the runs differ by "
+                            "from their baseline, not the arm; use a diagnosis without --baseline (or its one_configuration.json)")
     try:
         config = SimConfig.from_dict(raw["sim_config"])
     except (TypeError, ValueError, KeyError) as exc:
         raise DvrkDartError(f"--dynamics: {path}: malformed sim_config ({exc})") from None
-    _check_physical(config, path)
+    if physical:
+        _check_physical(config, path)
     return config
 
 

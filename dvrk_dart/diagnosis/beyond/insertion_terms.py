@@ -195,14 +195,14 @@ def insertion_study(arm: Arm, train: list[ProcessedRun], holdout: list[Processed
     def fit(terms) -> InsertionTerms:
         return fit_insertion_terms(arm, train, terms)
 
-    fitted = fit(TERMS)
+    fitted, own = fit(TERMS), fit(())
     config = replace(IDENTIFIED_PHYSICS, extra=simulation_effects(arm, fitted))
     residuals = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "insertion terms: held-out replays")
     return {"gap_holdout_identified": float(rms(np.concatenate([insertion_residual(arm, s) for s in holdout]))),
-            "gap_holdout_own_friction": gap(fit(())), "gap_holdout_terms": gap(fitted),
+            "gap_holdout_own_friction": gap(own), "gap_holdout_terms": gap(fitted),
             "gap_holdout_simulated": float(rms(np.concatenate([r[:, INSERTION] for r in residuals]))),
             "gap_holdout_without": {term: gap(fit(tuple(t for t in TERMS if t != term))) for term in TERMS},
-            "coefficients": fitted.named_coefficients(),
+            "coefficients": fitted.named_coefficients(), "own_friction_coefficients": own.named_coefficients(),
             "stroke_coulomb_n": {"knots_m": fitted.knots.tolist(), "values": fitted.stroke_coulomb.tolist()},
             "sim_config": config.to_dict(),
             "method": "least squares on the periodic signals (diagnosis/beyond/insertion_terms.py); gap_holdout_simulated: "
@@ -245,8 +245,9 @@ def insertion_sentence(study: dict) -> str:
     carried = "" if study["gap_holdout_simulated"] < study["gap_holdout_identified"] else (
         ": they do not carry to the held-out runs, and what J3's gap is made of is not determined by these runs")
     if study["gap_holdout_terms"] >= study["gap_holdout_own_friction"]:  # the terms add nothing: J3's own friction is the finding
-        return (f"J3's own friction refitted on the training runs (on top of the identified: offset {c['offset']:+.3f} N, viscous "
-                f"{c['viscous']:+.3f} N/(m/s), Coulomb {c['coulomb_sign']:+.3f} N sharp and {c['coulomb_dahl']:+.3f} N pre-sliding) leaves J3 "
+        o = study["own_friction_coefficients"]  # fitted alone: beside the terms, q2's cosine load took part of the offset
+        return (f"J3's own friction refitted on the training runs (on top of the identified: offset {o['offset']:+.3f} N, viscous "
+                f"{o['viscous']:+.3f} N/(m/s), Coulomb {o['coulomb_sign']:+.3f} N sharp and {o['coulomb_dahl']:+.3f} N pre-sliding) leaves J3 "
                 f"at {study['gap_holdout_own_friction']:.3f} N on the held-out runs (identified model {study['gap_holdout_identified']:.3f} N); "
                 "terms along the stroke, in ddq3·sign(dq3) and in q2 add nothing to it there "
                 f"({study['gap_holdout_terms']:.3f} N with them, {study['gap_holdout_simulated']:.3f} N simulated in DART{removed}){carried}.")

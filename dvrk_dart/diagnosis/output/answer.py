@@ -296,8 +296,10 @@ CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified mod
 
 def _constants_clause(result: dict) -> str:
     """A constant of the runs against their baseline beyond a session's change (constants_beyond_session), which the
-    nuisance term took out of the gap (a J3 offset changed by 0.35 N read 'not explained', with no word)."""
-    beyond = result.get("constants_beyond_session") or []
+    nuisance term took out of the gap (a J3 offset changed by 0.35 N read 'not explained', with no word), on a joint
+    no selected effect acts on (a payload's mean gravity on q3 is the payload's: printed, not in the answer)."""
+    acted = {j for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
+    beyond = [c for c in result.get("constants_beyond_session") or [] if c["joint"] not in acted]
     if not beyond:
         return ""
     listed = ", ".join(f"{c['joint']} {c['offset']:+.3g} {c['unit']} in {c['run']}" for c in beyond)
