@@ -345,6 +345,12 @@ def _insertion_clause(result: dict) -> str:
         "; with the effects above and the loads the pitch angle sets on q1 and q2, in one simulation: "
         + ", ".join(f"{name} {gap:.3g} {_unit(result, name)}" for name, gap in zip(JOINT_NAMES[:3], combined["gap_holdout"])))
     left = f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N)"
+    if study.get("gap_holdout_terms", 0.0) >= study["gap_holdout_own_friction"]:  # the terms do no better than J3's friction alone
+        carried = "carries" if study["gap_holdout_own_friction"] < study["gap_holdout_identified"] else "does not carry"
+        return (f" J3's own friction refitted on the training runs {carried} to the held-out runs ({study['gap_holdout_own_friction']:.3g} N, "
+                f"identified model {study['gap_holdout_identified']:.3g} N); J3's terms (friction along the stroke, an effort in "
+                f"ddq3·sign(dq3), a load in q2) add nothing to it there: simulated with them, J3 is at {study['gap_holdout_simulated']:.3g} N"
+                f"{together}.")
     if study["gap_holdout_simulated"] >= study["gap_holdout_identified"]:  # fitted, but not what the held-out runs show
         return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) do not carry "
                 f"to the held-out runs: simulated, they leave J3 at {left}; what J3's gap is made of is not determined by these runs{together}.")
