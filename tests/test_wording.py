@@ -222,3 +222,16 @@ def test_a_constant_beyond_a_sessions_change_is_said_where_no_effect_accounts_fo
     assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
     result["effects"][0]["joints"] = ["q2", "q3"]
     assert "taken out as a session's offset" not in answer_sentence(result)
+
+
+def test_the_answer_says_where_the_simulated_payload_sits_when_the_harmonic_fit_chose_another_link():
+    """one-105g with --payload-at: the answer named a payload on intermediate while its figures simulated one on the
+    insertion carriage (the selection's), which the harmonic fit tells apart from intermediate."""
+    result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
+    result["selection"]["selected"] = ["payload_on_insertion_carriage"]
+    result["effects"] = [{"name": "payload_on_insertion_carriage", "kind": "payload", "joints": ["q2", "q3"], "selected": True}]
+    result["payload"] = {"link": "intermediate", "group": "parallelogram", "selection_link": "insertion_carriage", "tied_links": ["pitch"],
+                         "gravity_efforts_at_q0": [0.0, -0.17, 0.0]}
+    assert "the figures simulate it on insertion_carriage" in answer_sentence(result)
+    result["payload"]["tied_links"] = ["insertion_carriage"]
+    assert "the figures simulate it on" not in answer_sentence(result)

@@ -207,7 +207,11 @@ def _lead_words(result: dict, selected: list[str]) -> str:
     payload, mismatch = result.get("payload"), result.get("gravity_mismatch")
     payload_first = bool(selected) and selected[0].startswith("payload")
     if payload_first and payload:
-        return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])})"
+        # the harmonic fit's link, where the selection (whose effect the figures simulate) took another the fit tells apart
+        carried = payload.get("selection_link")
+        elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ())) else (
+            f"; the figures simulate it on {carried}, where the selection over time segments put it")
+        return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])}{elsewhere})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
