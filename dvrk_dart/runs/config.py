@@ -142,7 +142,7 @@ def diagnosis_sim_config(path: Path, physical: bool = True) -> SimConfig:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise DvrkDartError(f"--dynamics: {path}: diagnosis file not found") from None
-    except (UnicodeDecodeError, json.JSONDecodeError, IsADirectoryError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError, OSError) as exc:
         raise DvrkDartError(f"--dynamics: {path}: not a diagnosis.json ({type(exc).__name__})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("sim_config"), dict):
         raise DvrkDartError(f"--dynamics: {path}: no 'sim_config' object (not written by dvrk-dart diagnose?)")
