@@ -199,6 +199,23 @@ def test_what_the_identified_model_has_is_said_to_be_its_own(arm, segment, noise
     assert result["identified_terms"]["share"] < 0.2 and "beyond the identified model's terms" in answer_sentence(result), result["identified_terms"]
 
 
+def test_with_a_baseline_the_model_errors_shared_with_it_are_said_to_be_the_identified_models(arm, segment, noise_rms):
+    """A run of another motion fitted beside its baseline: the model errors the runs share with the baseline were
+    the identified friction and offsets the inertia-only simulation leaves out, named "model errors" with no word."""
+    from dvrk_dart.diagnosis.checks.synthetic import time_scaled
+    from dvrk_dart.model.identified import NON_INERTIAL_TERMS
+
+    def with_own_terms(state, seed):
+        own = arm.identified.predict(state.q, state.dq, state.ddq, NON_INERTIAL_TERMS)
+        return synthesize_measurement(arm, state, [], noise_rms, seed=seed, extra_effort=own)
+
+    baseline, other = with_own_terms(segment, 21), with_own_terms(time_scaled(segment, 0.5), 22)
+    result = diagnose(other, baseline, arm=arm, max_effects=4, figures=False, profile_payload_mass=False)
+    carried = result["identified_terms"]
+    assert carried["runs"] == "baseline" and carried["share"] > 0.8, carried
+    assert "of the model errors' efforts" in answer_sentence(result)
+
+
 def test_nothing_injected_selects_little(arm, segment, noise_rms):
     """On pure noise, no effect explains much held-out residual."""
     measured = synthesize_measurement(arm, segment, [], noise_rms, seed=7)

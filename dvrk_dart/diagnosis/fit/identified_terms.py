@@ -9,8 +9,10 @@ of the selected effects' efforts on the training runs that the identified
 model's non-inertial terms reproduce, per joint and over the joints the
 effects act on, in the diagnosis's one rule of words (output/wording.py's
 bounds). Only the terms the base simulation leaves out are compared (none on
-the identified base, `--dynamics identified`'s physics); not with a baseline
-(both runs carry the identified terms: their difference has none)."""
+the identified base, `--dynamics identified`'s physics). With a baseline, on
+the baseline run where it is fitted beside runs of another motion (its gap is
+its own: the efforts of the model errors the runs share with it), else none
+(a run minus its baseline has no identified terms left)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import itertools
 
 import numpy as np
 
+from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.model.identified import NON_INERTIAL_TERMS
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.sim.config import SimConfig, simulated_terms
@@ -30,10 +33,14 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
     best (1 - residual energy / energy), and their mean over the acted joints
     (N and N·m not added together); None where it does not apply."""
     left_out = tuple(term for term in NON_INERTIAL_TERMS if term not in simulated_terms(base_config))
-    if problem.has_baseline or not left_out or not selection.selected:
+    # with a baseline, the runs whose gap is their own and holds no finding: the baseline fitted beside runs of
+    # another motion (its common model errors were the identified friction, named "model errors" with no word)
+    runs = [(run, columns) for run, columns in zip(problem.train_runs, problem.train_columns)
+            if not problem.has_baseline or run.role is RunRole.BASELINE]
+    if not left_out or not selection.selected or not runs:
         return None
     found, terms = [], []
-    for run, columns in zip(problem.train_runs, problem.train_columns):
+    for run, columns in runs:
         state = run.state
         effort = columns @ selection.final.beta
         each = [state.in_band(problem.arm.identified.predict(state.q, state.dq, state.ddq, (term,))) for term in left_out]
@@ -55,7 +62,9 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
             by_joint[JOINT_NAMES[j]] = 1.0 - residual / energy
     if not by_joint:
         return None
-    return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "terms": list(left_out), "runs": "train",
+    return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "terms": list(left_out),
+            "runs": "baseline" if problem.has_baseline else "train",
             "definition": "per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
-                          "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on the training runs; "
+                          "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on `runs` (the training runs, or "
+                          "with a baseline the baseline run fitted beside runs of another motion); "
                           "`share`: their mean over the joints the selected effects act on (each joint in its own unit)"}

@@ -323,8 +323,10 @@ def _identified_terms_clause(result: dict) -> str:
 
     joints = ", ".join(f"{name} {percent(share)}" for name, share in carried["by_joint"].items())
     how, meaning = CARRIED_WORDS[words_for(carried["share"])]
+    whose, where = (("the model errors' efforts", "on the baseline run") if carried.get("runs") == "baseline"
+                    else ("these effects' efforts", "on the training runs"))
     return (f"; the identified model's own {', '.join(carried['terms']).replace('_', ' ')} terms, which the simulation leaves out, "
-            f"carry {how} these effects' efforts ({percent(carried['share'])} on the training runs: {joints}): {meaning}")
+            f"carry {how} {whose} ({percent(carried['share'])} {where}: {joints}): {meaning}")
 
 
 def _refit_clause(result: dict) -> str:
