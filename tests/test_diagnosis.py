@@ -34,13 +34,13 @@ from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
 from dvrk_dart.diagnosis.output.answer import answer_sentence, plain_name
 from dvrk_dart.diagnosis.output.regimes import residual_regimes
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
-from dvrk_dart.diagnosis.fit.session_floor import moved_constants
 from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process, zero_phase_lowpass
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.joints import JOINT_NAMES
 from arms import PSM
+from one_segment import FIRST_PERIOD_SAMPLES, noise_rms, segment  # noqa: F401 (fixtures)
 
 #: the size of a blindly recovered effect must be within this relative error
 SIZE_TOLERANCE = 0.20
@@ -56,19 +56,6 @@ MIN_JOINT_FRACTION_EXPLAINED = 0.2
 #: greedy steps allowed in the synthetic tests (the injected effect must come first)
 SYNTHETIC_MAX_EFFECTS = 2
 #: synthetic segment: two base periods of the excitation
-FIRST_PERIOD_SAMPLES = PSM.processing.first_period_samples
-SEGMENT_SAMPLES = 2 * FIRST_PERIOD_SAMPLES
-
-
-@pytest.fixture(scope="module")
-def segment():
-    return process(load_run(resolve_run("one"), PSM)).head(SEGMENT_SAMPLES)
-
-
-@pytest.fixture(scope="module")
-def noise_rms(arm, segment):
-    """RMS per joint of the real residual left by the full identified model."""
-    return rms(segment.tau - arm.identified.predict(segment.q, segment.dq, segment.ddq, "all"))
 
 
 #: diagnosis.json's top-level keys and those of each effect (docs/outputs.md)
@@ -468,22 +455,6 @@ def test_several_runs_report_their_nuisance_offsets(weight_pair):
     assert not any(name.startswith("offset_") for name in result["selection"]["selected"])
 
 
-def test_session_floor_splits_the_gap(arm, segment, noise_rms):
-    """Two 'sessions' differ by a constant and a slow drift on J2; the floor
-    estimated from them bounds what the fixed effects leave."""
-    drift = np.zeros_like(segment.tau)
-    drift[:, 1] = 0.05 * np.sin(np.linspace(0.0, 3.0, len(segment)))
-    a = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=21)
-    b = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=22, extra_effort=drift)
-    result = diagnose(a, arm=arm, figures=False, max_effects=2, repeat=b, profile_payload_mass=False)
-    floor = np.asarray(result["session_floor"])
-    expected = rms(drift + 0.0)[1]
-    assert floor[1] > expected / np.sqrt(2) * 0.8  # noise of both runs adds to the drift
-    for row in result["gap_split"]["joints"]:
-        total = row["explained"] ** 2 + row["session_to_session"] ** 2 + row["left_over"] ** 2
-        assert total == pytest.approx(max(row["before"], row["after"]) ** 2, rel=1e-6)
-
-
 def test_out_of_library_drift_is_not_claimed_explained(arm, segment, noise_rms):
     """An offset drifting in time is no library effect: a leftover above the noise remains
     (at least a tenth of the noise's energy on top of it, a physical margin, not the module's threshold)."""
@@ -499,16 +470,6 @@ def test_time_scaled_run_is_the_same_path(segment):
     k = 400
     assert np.allclose(half.q[2 * k], segment.q[k]) and np.allclose(half.dq[2 * k], 0.5 * segment.dq[k])
     assert np.allclose(half.ddq[2 * k], 0.25 * segment.ddq[k])
-
-
-def test_session_offset_joints_are_those_whose_mean_moves():
-    """A constant shift far above a mean's standard error marks the joint; noise alone does not."""
-    rng = np.random.default_rng(5)
-    difference = 0.02 * rng.standard_normal((6000, len(JOINT_NAMES)))
-    difference -= difference.mean(axis=0)  # no session moves the constants ...
-    difference[:, 1] += 0.07  # ... but J2's  # J2: sessions move its constant (upstream: +0.073 N·m, 10 standard errors)
-    moved = moved_constants(difference, sample_rate_hz())
-    assert moved[1] and not moved[0]
 
 
 def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noise_rms):
@@ -559,16 +520,6 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     assert "within 1.5x the session floor" in answer_sentence(result)
 
 
-def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
-    from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-    from dvrk_dart.diagnosis.output.wording import share_words
-
-    shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
-    assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")
-    # RMS-equivalents above the floor, as the answer's words weigh them (not squares: 0.97 here)
-    assert share_words(float(shares[1])) == f"{1 - ((0.1**2 - 0.05**2) / (0.3**2 - 0.05**2)) ** 0.5:.0%}" == "71%"
-
-
 def test_a_mass_interval_holds_the_fit_between_grid_points():
     """2018 test1's gravity mismatch: 0.612 kg fitted, profile grid points 0.502
     (score under the best by more than its spread) and 0.632 (within it): the
@@ -582,24 +533,3 @@ def test_a_mass_interval_holds_the_fit_between_grid_points():
     assert 0.502 < lo < 0.612 and hi == masses[-1]
     lo, hi = _interval_within(masses, np.array([0.5, 0.9, 1.0, 0.9, 0.5]), 0.95)  # both ends crossed, halfway in log mass
     assert lo == pytest.approx(np.sqrt(masses[1] * masses[2])) and hi == pytest.approx(np.sqrt(masses[2] * masses[3]))
-
-
-def test_a_constant_beyond_a_sessions_change_is_said(segment):
-    """A J2 load of +0.125 N·m against a baseline, with a repeat pair whose J2 constant moves 0.03 between
-    sessions: the nuisance offset took it out and the answer read 'no effect selected', with no word."""
-    from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole
-    from dvrk_dart.diagnosis.fit.session_floor import constants_beyond_session
-
-    reference = DiagnosisRun("base", segment, segment.tau.copy())
-    moved = segment.tau.copy()
-    moved[:, 1] -= 0.03  # the session's constant change on q2
-    repeat = DiagnosisRun("repeat", segment, moved)
-    run = DiagnosisRun("loaded", segment, segment.tau.copy(), reference, role=RunRole.DIFFERENCE)
-    units = ["N·m"] * 7
-    said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, PSM, units)
-    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03),
-                     "session_change_source": "the repeat pair", "unit": "N·m"}]
-    assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, PSM, units) == []  # within twice
-    # without a repeat run, the model card's: a J3 offset changed by 0.35 N (the card's sessions move it by 0.008)
-    said = constants_beyond_session({"loaded": {"q2": 0.05, "q3": 0.35}}, [run], None, reference, PSM, units)
-    assert [(c["joint"], c["session_change_source"]) for c in said] == [("q3", "the model card's repeat pair")]

@@ -1,0 +1,74 @@
+"""The session floor and what sessions change (diagnosis/fit/session_floor.py):
+the floor two sessions set and how it splits the gap, the joints whose constant
+moves, the share of the repeatable gap, and a constant beyond a session's
+change said where the nuisance offset took it."""
+
+import numpy as np
+import pytest
+
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.effects.joint_effects import JointFriction
+from dvrk_dart.diagnosis.fit.session_floor import moved_constants
+from dvrk_dart.io.reference_data import sample_rate_hz
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.joints import JOINT_NAMES
+from arms import PSM
+from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
+
+
+def test_session_floor_splits_the_gap(arm, segment, noise_rms):
+    """Two 'sessions' differ by a constant and a slow drift on J2; the floor
+    estimated from them bounds what the fixed effects leave."""
+    drift = np.zeros_like(segment.tau)
+    drift[:, 1] = 0.05 * np.sin(np.linspace(0.0, 3.0, len(segment)))
+    a = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=21)
+    b = synthesize_measurement(arm, segment, [(JointFriction(arm.model, "q2"), np.array([0.15, 0.2]))], noise_rms, seed=22, extra_effort=drift)
+    result = diagnose(a, arm=arm, figures=False, max_effects=2, repeat=b, profile_payload_mass=False)
+    floor = np.asarray(result["session_floor"])
+    expected = rms(drift + 0.0)[1]
+    assert floor[1] > expected / np.sqrt(2) * 0.8  # noise of both runs adds to the drift
+    for row in result["gap_split"]["joints"]:
+        total = row["explained"] ** 2 + row["session_to_session"] ** 2 + row["left_over"] ** 2
+        assert total == pytest.approx(max(row["before"], row["after"]) ** 2, rel=1e-6)
+
+
+def test_session_offset_joints_are_those_whose_mean_moves():
+    """A constant shift far above a mean's standard error marks the joint; noise alone does not."""
+    rng = np.random.default_rng(5)
+    difference = 0.02 * rng.standard_normal((6000, len(JOINT_NAMES)))
+    difference -= difference.mean(axis=0)  # no session moves the constants ...
+    difference[:, 1] += 0.07  # ... but J2's  # J2: sessions move its constant (upstream: +0.073 N·m, 10 standard errors)
+    moved = moved_constants(difference, sample_rate_hz())
+    assert moved[1] and not moved[0]
+
+
+def test_a_share_with_nothing_repeatable_to_remove_is_not_determined():
+    from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+    from dvrk_dart.diagnosis.output.wording import share_words
+
+    shares = repeatable_share([0.05, 0.3], [0.04, 0.1], [0.06, 0.05])  # J1's gap before is under the floor
+    assert share_words(float(shares[0])).startswith("not determined") and share_words(None).startswith("not determined")
+    # RMS-equivalents above the floor, as the answer's words weigh them (not squares: 0.97 here)
+    assert share_words(float(shares[1])) == f"{1 - ((0.1**2 - 0.05**2) / (0.3**2 - 0.05**2)) ** 0.5:.0%}" == "71%"
+
+
+def test_a_constant_beyond_a_sessions_change_is_said(segment):
+    """A J2 load of +0.125 N·m against a baseline, with a repeat pair whose J2 constant moves 0.03 between
+    sessions: the nuisance offset took it out and the answer read 'no effect selected', with no word."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole
+    from dvrk_dart.diagnosis.fit.session_floor import constants_beyond_session
+
+    reference = DiagnosisRun("base", segment, segment.tau.copy())
+    moved = segment.tau.copy()
+    moved[:, 1] -= 0.03  # the session's constant change on q2
+    repeat = DiagnosisRun("repeat", segment, moved)
+    run = DiagnosisRun("loaded", segment, segment.tau.copy(), reference, role=RunRole.DIFFERENCE)
+    units = ["N·m"] * 7
+    said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, PSM, units)
+    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03),
+                     "session_change_source": "the repeat pair", "unit": "N·m"}]
+    assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, PSM, units) == []  # within twice
+    # without a repeat run, the model card's: a J3 offset changed by 0.35 N (the card's sessions move it by 0.008)
+    said = constants_beyond_session({"loaded": {"q2": 0.05, "q3": 0.35}}, [run], None, reference, PSM, units)
+    assert [(c["joint"], c["session_change_source"]) for c in said] == [("q3", "the model card's repeat pair")]
