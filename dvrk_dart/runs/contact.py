@@ -88,18 +88,19 @@ def contact_check(arm: Arm, run: ContactRun, model_efforts: np.ndarray, real_res
     gap = run.effort - model_efforts
     estimate = estimate_force(arm.model, run.q, gap)
     known = np.all(np.isfinite(estimate.force), axis=1)
-    touching = known & (np.linalg.norm(truth, axis=1) > 0)
-    result = {"samples": int(len(run.t)), "in_contact_fraction": float(np.mean(np.linalg.norm(truth, axis=1) > 0)),
-              "contact_force_rms_n": float(np.sqrt(np.mean(np.sum(truth[known] ** 2, axis=1)))),
-              "contact_force_in_contact_rms_n": float(np.sqrt(np.mean(np.sum(truth[touching] ** 2, axis=1)))) if touching.any() else None,
-              "sim_to_sim_error_rms_n": float(np.sqrt(np.mean(np.sum((estimate.force[known] - truth[known]) ** 2, axis=1)))),
-              "determined_fraction": float(known.mean())}
+    in_contact = np.linalg.norm(truth, axis=1) > 0
+    result = {"samples": int(len(run.t)), "in_contact_fraction": float(np.mean(in_contact)),
+              "contact_force_rms_n": _norm_rms(truth, known), "contact_force_in_contact_rms_n": _norm_rms(truth, known & in_contact),
+              "sim_to_sim_error_rms_n": _norm_rms(estimate.force - truth, known), "determined_fraction": float(known.mean())}
     if real_residual is not None:
         noisy = estimate_force(arm.model, run.q, gap + real_residual)
         ok = np.all(np.isfinite(noisy.force), axis=1)
-        result["with_real_residual_error_rms_n"] = float(np.sqrt(np.mean(np.sum((noisy.force[ok] - truth[ok]) ** 2, axis=1))))
+        result["with_real_residual_error_rms_n"] = _norm_rms(noisy.force - truth, ok)
         result["with_real_residual_error_per_axis_n"] = rms(noisy.force[ok] - truth[ok]).tolist()
-        during = ok & (np.linalg.norm(truth, axis=1) > 0)
-        result["with_real_residual_error_in_contact_rms_n"] = (
-            float(np.sqrt(np.mean(np.sum((noisy.force[during] - truth[during]) ** 2, axis=1)))) if during.any() else None)
+        result["with_real_residual_error_in_contact_rms_n"] = _norm_rms(noisy.force - truth, ok & in_contact)
     return result
+
+
+def _norm_rms(force: np.ndarray, where: np.ndarray) -> float | None:
+    """RMS of a force's norm over the samples `where` (None where there are none)."""
+    return float(np.sqrt(np.mean(np.sum(force[where] ** 2, axis=1)))) if where.any() else None
