@@ -6,9 +6,9 @@ change said where the nuisance offset took it."""
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.diagnosis.diagnose import diagnose
-from dvrk_dart.diagnosis.effects.joint_effects import JointFriction
+from dvrk_dart.diagnosis.effects.joint_effects import JointFriction, JointOffset
 from dvrk_dart.diagnosis.fit.session_floor import moved_constants
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.metrics import rms
@@ -72,3 +72,19 @@ def test_a_constant_beyond_a_sessions_change_is_said(segment):
     # without a repeat run, the model card's: a J3 offset changed by 0.35 N (the card's sessions move it by 0.008)
     said = constants_beyond_session({"loaded": {"q2": 0.05, "q3": 0.35}}, [run], None, reference, PSM, units)
     assert [(c["joint"], c["session_change_source"]) for c in said] == [("q3", "the model card's repeat pair")]
+
+
+def test_two_runs_of_their_own_find_the_constant_every_session_shares(arm, segment, noise_rms):
+    """Two runs without a baseline (full and half speed): a per-run constant
+    only on the joints whose constant moves between sessions (model card:
+    q2..q4); J1's constant, the same in every session, is an effect, as on one
+    run. Every joint of both runs took its own constant before: offset_q1 was
+    not determined (it read -8.9e11 N·m) and the gap hid J1's constant."""
+    offset = [(JointOffset(arm.model, "q1"), np.array([-0.3]))]
+    runs = [synthesize_measurement(arm, state, offset, noise_rms, seed=seed) for state, seed in ((segment, 31), (time_scaled(segment, 0.5), 32))]
+    result = diagnose(runs, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
+    moving = result["nuisance_offset_joints"]["joints"]
+    assert "q1" not in moving and {"q2", "q3"} <= set(moving)
+    assert result["effects"][0]["name"] == "offset_q1"
+    assert result["effects"][0]["parameters"]["offset"] == pytest.approx(-0.3, abs=3 * noise_rms[0] / np.sqrt(len(segment)) + 0.01)
+    assert not {f"offset_{j}" for j in moving} & {e["name"] for e in result["effects"]}  # each run's own constant: nothing left to fit

@@ -16,6 +16,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.design import Design, Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.payload.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
+from dvrk_dart.diagnosis.effects.joint_effects import JointOffset
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     DiagnosisRun,
@@ -115,12 +116,14 @@ class Problem:
 
     def demean_of(self, run: DiagnosisRun) -> np.ndarray | None:
         """The joints with a nuisance constant: a run minus its baseline (same
-        motion) changes its constant with the session only; a run of another
-        motion keeps one on every joint (the mean of its motion-dependent
-        errors, e.g. friction's asymmetry, is its own)."""
+        motion), like a run of its own, changes its constant with the session
+        only (a constant the same in every session is an effect: J1's left-out
+        offset); a run fitted beside a baseline of another motion, and that
+        baseline, keep one on every joint (the mean of each motion's
+        dependent errors, e.g. friction's asymmetry, is its own)."""
         if not self.nuisance:
             return None
-        return self.offset_joints if run.role is RunRole.DIFFERENCE else np.ones(N_JOINTS, dtype=bool)
+        return np.ones(N_JOINTS, dtype=bool) if run.role in (RunRole.OTHER_MOTION, RunRole.BASELINE) else self.offset_joints
 
     def before_residual(self, run: DiagnosisRun) -> np.ndarray:
         """The run's gap before any effect, its nuisance constants taken out as
@@ -193,6 +196,16 @@ def recorded_joints(runs: list) -> np.ndarray:
     return np.all([r.state.measured for r in runs if r is not None], axis=0)
 
 
+def _without_nuisance_constants(effects: list[Effect], at_index: int | None, offset_joints: np.ndarray,
+                                runs: list) -> tuple[list[Effect], int | None]:
+    """The candidates without a constant offset on a joint where every training
+    run has its own nuisance constant: nothing is left to fit it (it read
+    -8.9e11 N·m, with no share, in diagnosis.json)."""
+    constant_per_run = offset_joints | np.all([r.role in (RunRole.OTHER_MOTION, RunRole.BASELINE) for r in runs])
+    kept = [e for i, e in enumerate(effects) if i == at_index or not (isinstance(e, JointOffset) and constant_per_run[e.joint_index])]
+    return kept, (None if at_index is None else kept.index(effects[at_index]))
+
+
 def _on_recorded_joints(effects: list[Effect], at_index: int | None, runs: list) -> tuple[list[Effect], int | None]:
     """The candidates that act on a joint every run recorded (one acting only on joints
     a run did not record has nothing to fit), and the index of the payload at a given position."""
@@ -246,6 +259,8 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     # other motions fitted with the baseline need the shared errors apart from the change
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
+    if nuisance:
+        effects, at_index = _without_nuisance_constants(effects, at_index, offset_joints, train_runs)
     problem = Problem(arm, effects, Design(effects, every_effect_a_change), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,
                       len(measured_list), at_index, nuisance, offset_joints, offset_source, folds, repeat_source)
     _add_grams(problem)

@@ -366,5 +366,5 @@ def _insertion_clause(result: dict) -> str:
 
 def offset_joints_sentence(offset_joints: dict) -> str:
     joints = ", ".join(offset_joints["joints"]) or "none"
-    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run minus its baseline "
-            "has a nuisance offset on these only; a run of another motion has one on every joint.")
+    return (f"Joints whose constant effort moves between sessions ({offset_joints['source']}): {joints}. A run of its own, or minus "
+            "its baseline, has a nuisance offset on these only; a run fitted beside a baseline of another motion has one on every joint.")
