@@ -437,6 +437,21 @@ def test_payload_efforts_scale_with_the_weight(weight_pair):
     assert light["gravity_efforts_at_q0"][1] is None and "q2: each run's offset" in light["not_determined"]["gravity_efforts_at_q0"]
 
 
+def test_a_hand_position_on_a_link_the_efforts_do_not_choose_is_said(arm, segment, noise_rms):
+    """205 g on the pitch link, --payload-at on the insertion carriage: the
+    mass there read as a plain mass before (the carriage fits the efforts
+    less well); it is flagged, and the answer names the link the efforts do not choose."""
+    key, position = hand_position_on_link(arm, HAND_PITCH)
+    noisy = dict(zip(("baseline", "run"), (synthesize_measurement(arm, segment, injected, noise_rms, seed=seed) for injected, seed in (
+        ([], 41), ([(PointPayload(arm.model, key), np.r_[0.205, position])], 42)))))
+    carriage = arm.model.link_by_name("insertion_carriage").key
+    result = diagnose(prepare_run(noisy["run"], arm, name="run"), baseline=prepare_run(noisy["baseline"], arm, name="no_weight"), arm=arm,
+                      figures=False, profile_payload_mass=False, payload_at=(carriage, np.array([0.0, 0.0, 0.05])))
+    payload = result["payload"]
+    assert payload["group"] == "parallelogram" and payload["payload_at"]["link_chosen_by_the_efforts"] is False
+    assert "insertion_carriage, a link the efforts do not choose" in answer_sentence(result)
+
+
 def test_payload_at_the_hand_position_gives_the_mass(weight_pair):
     for mass, result in weight_pair.items():
         at = result["payload"]["payload_at"]

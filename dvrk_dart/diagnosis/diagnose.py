@@ -18,7 +18,7 @@ from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import first_moment_report
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
-from dvrk_dart.diagnosis.payload.payload_report import describe_payload, effort_not_determined, mass_profile
+from dvrk_dart.diagnosis.payload.payload_report import describe_payload, effort_not_determined, flag_payload_at_link, mass_profile
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
@@ -132,6 +132,11 @@ def diagnose(
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
     for report in [*first_moments, *points]:
         _without_unrecorded_joints(report, problem.recorded)
+    if problem.at_index is not None:
+        at = problem.effects[problem.at_index]
+        same = next((e.equivalent_links for e in problem.effects if isinstance(e, FirstMomentPayload) and e.link_key == at.link_key), ())
+        for report in first_moments:
+            flag_payload_at_link(report, at.link_name, same)
     for report in first_moments:
         if problem.repeat_run is not None and problem.repeat_source != "--repeat":
             report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")

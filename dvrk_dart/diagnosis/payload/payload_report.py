@@ -52,6 +52,23 @@ def effort_not_determined(report: dict, joint: int, reason: str) -> None:
     reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
 
 
+def flag_payload_at_link(report: dict, at_link: str, same_efforts: tuple[str, ...]) -> None:
+    """Whether the hand position given with --payload-at (on `at_link`, whose
+    payloads give the efforts of those on `same_efforts` too) is on a link the
+    efforts choose: the chosen link, one tied with it, or one they cannot tell
+    from these. Its mass assumes a payload there; a position on another link
+    read as a mass with no word (a mass on a link the efforts fit worse)."""
+    at = report.get("payload_at")
+    if not at or not report.get("link"):
+        return
+    chosen = list(dict.fromkeys([report["link"], *(report.get("tied_links") or ()), *(report.get("equivalent_links") or ())]))
+    at["link_chosen_by_the_efforts"] = bool({at_link, *same_efforts}.intersection(chosen))
+    if not at["link_chosen_by_the_efforts"]:
+        report.setdefault("words", []).append(
+            f"The given position is on {at_link}, which the efforts do not choose (they choose {', '.join(chosen)}): its mass assumes a "
+            f"payload on {at_link}, which fits them less well.")
+
+
 #: masses tried when profiling a selected payload's mass (kg, geometric grid)
 PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
 
