@@ -96,3 +96,26 @@ def test_diagnose_cli_writes_the_contract(tmp_path):
     assert result["nuisance_offsets"] and result["session_floor"] is not None
     assert "gap split q2" in done.stdout and "nuisance offsets" in done.stdout
     assert (out / "diagnosis.html").is_file()
+
+
+def test_the_one_configuration_carries_the_training_sessions_constant(tmp_path):
+    """Two runs of their own, scored on a third session: each run's constant on
+    q2..q4 was taken out as a session's, and the one configuration carried none
+    (q4 of one and two scored on one-no-weight: 0.0058 N·m against the
+    identified model's 0.0017). It now carries the training runs' mean constant,
+    as a constant effort in DART."""
+    out = tmp_path / "diag"
+    one, two, held_out = (_first_seconds(name, 13.0, tmp_path) for name in ("one", "two", "one-no-weight"))  # two periods each
+    done = subprocess.run([sys.executable, "-m", "dvrk_dart.cli", "diagnose", "--measured", one, two, "--holdout", held_out,
+                           "--out", str(out)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    result = json.loads((out / "diagnosis.json").read_text())
+    combined = result["one_configuration"]
+    moving = result["nuisance_offset_joints"]["joints"]
+    assert set(combined["session_constants"]) == set(moving) and "q1" not in moving
+    for joint in moving:  # the replays' mean constant: the fit's, up to what the DART replay and the regressors differ by
+        fitted = np.mean([result["nuisance_offsets"][run][joint] for run in result["train_runs"]])
+        assert combined["session_constants"][joint] == pytest.approx(fitted, abs=0.02), (joint, combined["session_constants"], fitted)
+    q4 = JOINT_NAMES.index("q4")  # no other term acts on q4: its offset in DART is the constant carried
+    assert combined["sim_config"]["extra"]["offset"][q4] == pytest.approx(combined["session_constants"]["q4"], abs=1e-12)
+    assert combined["gap_holdout"][q4] <= 1.5 * result["identified_model_gap_holdout"][q4], (combined["gap_holdout"], result["identified_model_gap_holdout"])
