@@ -103,8 +103,9 @@ def _payload_size_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
     when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
     at = payload.get("payload_at") or {}
-    if at.get("link_chosen_by_the_efforts") is False and at.get("mass_kg") is not None:
-        return f", {at['mass_kg']:.3g} kg were it at the hand position, on {at['link']}, a link the efforts do not choose"
+    if at.get("link_chosen_by_the_efforts") is False:  # the fit's own size; the hand position's mass assumes another link
+        own = _payload_size_words({**payload, "payload_at": None}, units)
+        return f"{own}; the hand position is on {at['link']}, a link the efforts do not choose"
     if at.get("mass_kg") is not None:
         interval = at.get("mass_kg_interval")
         if interval is not None and not interval[0] > 0.0:  # a mass that may be none is no size

@@ -42,8 +42,11 @@ SESSION_SHAPE_NOT_COUNTED = ("sessions move this joint's constant (each run's of
 SCALAR_QUANTITIES = {"mass_kg", "q1_gravity_slope_at_q0_nm_per_rad"}
 INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squares on the harmonics of the runs minus their baseline "
                    "(weights: measured noise plus the session scatter the fit leaves, per harmonic), HC2 standard errors with "
-                   "Bell-McCaffrey degrees of freedom, plus the session change of the payload's shape that the --repeat pair reads "
-                   "(one degree of freedom); coverage shown on simulated pairs at the measured noise, session scatter and session change")
+                   "Bell-McCaffrey degrees of freedom")
+#: what the intervals add with a --repeat pair, and without one
+SESSION_CHANGE_COUNTED = ("plus the session change of the payload's shape that the --repeat pair reads (one degree of freedom); coverage "
+                          "shown on simulated pairs at the measured noise, session scatter and session change")
+SESSION_CHANGE_NOT_COUNTED = "no session change of the payload's shape: without a --repeat pair nothing measures it"
 MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
                  "mass is below the noise: give --payload-at LINK:x,y,z to turn the first moment into a mass")
 
@@ -218,7 +221,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
               "payload_p_value": p_value, "found": bool(p_value < PAYLOAD_TEST_LEVEL),
               "pairs": [r.name for r in pair_runs], "session_pair": repeat.name if repeat is not None else None,
               "left_out": [r.name for r in runs if r.role is RunRole.OTHER_MOTION],
-              "interval_method": INTERVAL_METHOD}
+              "interval_method": f"{INTERVAL_METHOD}, {SESSION_CHANGE_COUNTED if repeat is not None else SESSION_CHANGE_NOT_COUNTED}"}
     moment = report["first_moment_base_at_q0_kg_m"]
     report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
     if at is not None:
