@@ -521,7 +521,8 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
 
     friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
                 "units": {"coulomb": "N"}, "size": 0.5}
-    split = [{"before": b, "after": a, "session_floor": f} for b, a, f in ((0.33, 0.065, 0.05), (0.32, 0.106, 0.08), (0.65, 0.18, 0.05))]
+    split = [{"joint": j, "before": b, "after": a, "session_floor": f}
+             for j, b, a, f in (("q1", 0.33, 0.065, 0.05), ("q2", 0.32, 0.106, 0.08), ("q3", 0.65, 0.18, 0.05))]
     result = {"gap_before": {"train": [0.3, 0.3, 0.6], "holdout": [0.33, 0.32, 0.65]},
               "gap_after": {"train": [0.06, 0.09, 0.12], "holdout": [0.065, 0.106, 0.18]}, "effects": [friction],
               "selection": {"selected": ["friction_q3", "offset_q1"]}, "payload": None, "session_floor": [0.05, 0.08, 0.05],
@@ -532,7 +533,8 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     # q3: 1 - sqrt(0.18^2 - 0.05^2) / sqrt(0.65^2 - 0.05^2) of the gap above the floor removed (the words' measure)
     assert "q3 73% of that gap above the session floor" in sentence
     assert "over 1.5x the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]
-    result["session_floor"] = [0.06, 0.1, 0.15]
+    for row, floor in zip(split, (0.06, 0.1, 0.15)):  # the floor of the gaps split (gap_split's rows) is what "left" is read against
+        row["session_floor"] = floor
     assert "within 1.5x the session floor" in answer_sentence(result)
 
 

@@ -66,7 +66,7 @@ def test_a_constant_beyond_a_sessions_change_is_said(segment):
     run = DiagnosisRun("loaded", segment, segment.tau.copy(), reference, role=RunRole.DIFFERENCE)
     units = ["N·m"] * 7
     said = constants_beyond_session({"loaded": {"q2": 0.125, "q3": 0.0}}, [run], repeat, reference, PSM, units)
-    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "session_change": pytest.approx(0.03),
+    assert said == [{"run": "loaded", "joint": "q2", "offset": 0.125, "against": "the baseline", "expected": 0.0, "session_change": pytest.approx(0.03),
                      "session_change_source": "the repeat pair", "unit": "N·m"}]
     assert constants_beyond_session({"loaded": {"q2": 0.05}}, [run], repeat, reference, PSM, units) == []  # within twice
     # without a repeat run, the model card's: a J3 offset changed by 0.35 N (the card's sessions move it by 0.008)
@@ -88,3 +88,39 @@ def test_two_runs_of_their_own_find_the_constant_every_session_shares(arm, segme
     assert result["effects"][0]["name"] == "offset_q1"
     assert result["effects"][0]["parameters"]["offset"] == pytest.approx(-0.3, abs=3 * noise_rms[0] / np.sqrt(len(segment)) + 0.01)
     assert not {f"offset_{j}" for j in moving} & {e["name"] for e in result["effects"]}  # each run's own constant: nothing left to fit
+
+
+def test_a_run_minus_its_baseline_is_split_against_two_sessions_floor(arm, segment, noise_rms):
+    """A point mass exactly injected, against a baseline, with a --repeat of the
+    baseline's session: the run minus its baseline carries two sessions'
+    deviations, so its floor is sqrt(2) times one session's. Against one
+    session's (q3 0.0374 N left, floor 0.021: 1.8x) a synthetic point mass read
+    "an unmodelled effect remains there"."""
+    from dvrk_dart.diagnosis.output.answer import answer_sentence
+    from dvrk_dart.diagnosis.payload.payload import PointPayload
+
+    carriage = arm.model.link_by_name("insertion_carriage").key
+    mass = [(PointPayload(arm.model, carriage), np.r_[0.1, -0.02, -0.02, -0.0995])]
+    baseline, run, repeat = (synthesize_measurement(arm, segment, injected, noise_rms, seed=seed)
+                             for injected, seed in (([], 51), (mass, 52), ([], 53)))
+    result = diagnose(run, baseline=baseline, repeat=repeat, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
+    rows = {row["joint"]: row for row in result["gap_split"]["joints"]}
+    for j, joint in enumerate(JOINT_NAMES[:3]):
+        assert rows[joint]["session_floor"] == pytest.approx(np.sqrt(2.0) * result["session_floor"][j], rel=1e-9)
+        assert rows[joint]["after"] <= 1.5 * rows[joint]["session_floor"], rows[joint]  # the noise of two sessions, nothing more
+    assert "an unmodelled effect remains" not in answer_sentence(result)
+
+
+def test_two_runs_of_their_own_say_a_constant_beyond_a_sessions_change(arm, segment, noise_rms):
+    """Two runs of their own with J3's offset moved by +0.35 N (the model card's
+    sessions move it by 0.008): each run's constant on q3 is taken out as a
+    session's, and is now said, against the identified offset (it had no word)."""
+    from dvrk_dart.diagnosis.output.answer import answer_sentence
+
+    offset = [(JointOffset(arm.model, "q3"), np.array([0.35]))]
+    runs = [synthesize_measurement(arm, state, offset, noise_rms, seed=seed) for state, seed in ((segment, 61), (time_scaled(segment, 0.5), 62))]
+    result = diagnose(runs, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
+    beyond = [c for c in result["constants_beyond_session"] if c["joint"] == "q3"]
+    assert len(beyond) == 2 and all(c["against"] == "the identified offset" for c in beyond)
+    assert all(c["offset"] - c["expected"] == pytest.approx(0.35, abs=0.05) for c in beyond), beyond
+    assert "the runs' constant effort differs from the identified offset" in answer_sentence(result)

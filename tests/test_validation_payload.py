@@ -214,7 +214,8 @@ def test_a_verdict_on_a_mass_the_answer_calls_not_determined_is_its_intervals():
     assert "not determined" in undetermined["check"] and undetermined["passed"]
     assert not _mass_at_hand_verdict("m", {"mass_kg": 0.111, "mass_kg_interval": [-0.173, 0.09]}, 0.105, 0.2)["passed"]
     assert not _mass_at_hand_verdict("m", {"mass_kg": 0.15, "mass_kg_interval": [0.12, 0.18]}, 0.105, 0.2)["passed"]
-    result = {"gap_before": {"train": [0.1, 0.213, 0.5]}, "gap_after": {"train": [0.1, 0.067, 0.1]}, "session_floor": [0.01, 0.035, 0.02]}
+    result = {"gap_before": {"train": [0.1, 0.213, 0.5]}, "gap_after": {"train": [0.1, 0.067, 0.1]},
+              "gap_split": {"runs": "train", "joints": [{"joint": "q2", "session_floor": 0.035}]}}  # the floor of the gaps split
     assert _j2_verdict(result, "t")["passed"] and "73% removed" in _j2_verdict(result, "t")["value"]
     result["gap_after"]["train"][1] = 0.15  # shrunk, but less than half of what is above the floor
     assert not _j2_verdict(result, "t")["passed"]

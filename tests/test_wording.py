@@ -235,3 +235,14 @@ def test_the_answer_says_where_the_simulated_payload_sits_when_the_harmonic_fit_
     assert "the figures simulate it on insertion_carriage" in answer_sentence(result)
     result["payload"]["tied_links"] = ["insertion_carriage"]
     assert "the figures simulate it on" not in answer_sentence(result)
+
+
+def test_an_effect_on_the_joints_the_answer_speaks_of_leads_it():
+    """21-column runs with the wrist held: an offset of 0.024 N·m on q5 led the
+    answer, whose J1 offset (0.1 N·m, the injected change) came seventh. The
+    answer speaks of J1..J3: an effect acting there leads it."""
+    result = _result([0.3, 0.25, 0.6], [0.01, 0.25, 0.6], ["q5"])
+    result["effects"] = [{"name": "offset_q5", "kind": "offset", "joints": ["q5"], "selected": True, "parameters": {"offset": 0.024}},
+                         {"name": "offset_q1", "kind": "offset", "joints": ["q1"], "selected": True, "parameters": {"offset": -0.1}}]
+    result["selection"]["selected"] = ["offset_q5", "offset_q1"]
+    assert "(offset_q1" in answer_sentence(result).split(" with ")[0]

@@ -6,6 +6,7 @@ frozen result (`result.Diagnosis`, whose `to_json()` is diagnosis.json)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Sequence
 
@@ -126,7 +127,10 @@ def diagnose(
     nuisance_joints = problem.offset_joints if problem.nuisance else None  # the floor without the constants the fit takes out
     floor = session_floor(problem.reference_run, problem.repeat_run, nuisance_joints) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    split = gap_split(np.asarray(gaps([problem.before_residual(r) for r in split_source[0]])), np.asarray(gaps(split_source[1])), floor,
+    # a run minus its baseline carries two sessions' deviations: its gap's floor is sqrt(2) times one session's (a point mass
+    # exactly injected read "over 1.5x the session floor: an unmodelled effect remains" at 1.8x one session's)
+    split_floor = None if floor is None else floor * (math.sqrt(2.0) if all(r.role is RunRole.DIFFERENCE for r in split_source[0]) else 1.0)
+    split = gap_split(np.asarray(gaps([problem.before_residual(r) for r in split_source[0]])), np.asarray(gaps(split_source[1])), split_floor,
                       arm.model)
     split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
@@ -141,15 +145,18 @@ def diagnose(
         if problem.repeat_run is not None and problem.repeat_source != "--repeat":
             report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
     carried = identified_terms_share(problem, selection, base_config)
-    result = _diagnosis(problem, selection, after, entries, floor, split, first_moments, points, simulate is not None, dropped,
+    result = _diagnosis(problem, selection, after, entries, (floor, split_floor), split, first_moments, points, simulate is not None, dropped,
                         carried).to_json()
+    # runs minus their baseline, else runs of their own (against the identified offsets the simulation leaves out)
     differences = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE]
-    result["constants_beyond_session"] = constants_beyond_session(result["nuisance_offsets"], differences, problem.repeat_run,
-                                                                  problem.reference_run, problem.arm.model, result["units"])
+    own = [r for r in problem.train_runs if r.role is RunRole.RAW] if not problem.has_baseline else []
+    result["constants_beyond_session"] = constants_beyond_session(result["nuisance_offsets"], differences or own, problem.repeat_run,
+                                                                  problem.reference_run, problem.arm.model, result["units"],
+                                                                  offsets_left_out(problem.arm, carried))
     if out_dir is None:
         return result
     # the run the answer speaks of; before and after both without the nuisance constants the fit takes out
-    period = (split_source[0][0], problem.before_residual(split_source[0][0]), split_source[1][0], floor)
+    period = (split_source[0][0], problem.before_residual(split_source[0][0]), split_source[1][0], split_floor)
     where_run = problem.train_runs[0]
     result = {**result, "where": _write_outputs(Path(out_dir), where_run, problem.before_residual(where_run), after.train_after[0], figures,
                                                 period, arm.model, problem.recorded)}
@@ -291,10 +298,11 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
                      if j in recorded} for r, c in zip(runs, columns)}
 
 
-def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floor, split, first_moments: list[dict],
+def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floors, split, first_moments: list[dict],
                points: list[dict], simulated: bool, dropped: list[dict], carried: dict | None) -> Diagnosis:
     train_runs, holdout_runs = problem.train_runs, problem.holdout_runs
     offsets, recorded = problem.offset_joints, problem.recorded
+    floor, split_floor = floors  # one session's deviation; the floor of the gaps split (runs minus a baseline: two sessions')
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
     payload_fits, mismatch = (fits, None) if problem.has_baseline else (
@@ -318,7 +326,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         session_floor=per_measured_joint(floor, recorded) if floor is not None else None,  # none on a joint not recorded
         repeat=problem.repeat_run.name if problem.repeat_run is not None else None,
         repeat_source=problem.repeat_source,
-        gap_split={"runs": "holdout" if holdout_runs else "train", "joints": split},
+        gap_split={"runs": "holdout" if holdout_runs else "train", "joints": split},  # each row's session_floor: its gap's
         baseline=train_runs[0].baseline.name if train_runs[0].baseline is not None else None,
         train_runs=[r.name for r in train_runs],
         holdout_runs=[r.name for r in holdout_runs],
@@ -349,7 +357,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")],
-                                per_measured_joint(floor, recorded) if floor is not None else None),
+                                per_measured_joint(split_floor, recorded) if split_floor is not None else None),
         identified_terms=carried,
     )
 

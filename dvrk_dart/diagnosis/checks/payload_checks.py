@@ -131,7 +131,8 @@ def _mass_at_hand_verdict(check: str, at: dict, m_true: float, tol: float) -> di
 def _j2_verdict(result: dict, title: str) -> dict:
     """J2's gap on the training runs: most of it above the session floor removed, where a --repeat measured the floor."""
     before, after = result["gap_before"]["train"][1], result["gap_after"]["train"][1]
-    floor = (result.get("session_floor") or [None, None])[1]
+    split = result.get("gap_split") or {}  # the floor of these gaps (runs minus their baseline: two sessions')
+    floor = next((row.get("session_floor") for row in split.get("joints") or [] if row["joint"] == "q2"), None) if split.get("runs") == "train" else None
     if floor is None:
         return {"check": f"{title}: the diagnosis shrinks the J2 gap (training runs)", "passed": after < before,
                 "value": f"J2 {before:.3f} -> {after:.3f} N·m"}

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, same_motion
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, sha256_of
 from dvrk_dart.metrics import moved_constants, rms
@@ -75,16 +75,18 @@ BEYOND_SESSION_FACTOR = 2.0
 
 
 def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], repeat: DiagnosisRun | None,
-                             reference: DiagnosisRun, model: PsmModel, units: list[str]) -> list[dict]:
-    """The nuisance offsets of the runs minus their baseline (`runs`) that a
-    session's change does not reach: the mean of `repeat` - `reference` (the
-    same motion in two sessions) on that joint, else the model card's
-    `[sessions] constant_change`, times BEYOND_SESSION_FACTOR. Such a constant
-    may be part of an effect (a load, a payload's mean gravity) or a changed
-    offset that the nuisance term took out: a J2 load of +0.125 N·m beside a
-    session change of 0.03, and a J3 offset changed by 0.35 N, were read 'no
-    effect selected', with no word."""
-    if not offsets:
+                             reference: DiagnosisRun, model: PsmModel, units: list[str], expected: list[float] | None = None) -> list[dict]:
+    """The nuisance offsets of `runs` that a session's change does not reach:
+    the mean of `repeat` - `reference` (the same motion in two sessions) on
+    that joint, else the model card's `[sessions] constant_change`, times
+    BEYOND_SESSION_FACTOR. Runs minus their baseline are read against zero;
+    runs of their own against `expected` (the identified offsets the simulation
+    leaves out, else zero). Such a constant may be part of an effect (a load, a
+    payload's mean gravity) or a changed offset that the nuisance term took
+    out: a J2 load of +0.125 N·m beside a session change of 0.03, and a J3
+    offset changed by 0.35 N, were read 'no effect selected', with no word (two
+    runs of their own: 'J3's own friction refitted ... carries', no word)."""
+    if not offsets or not runs:
         return []
     pair = paired_gaps(repeat, reference) if repeat is not None else None
     if pair is not None:
@@ -93,10 +95,12 @@ def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], rep
         session, source = np.asarray(model.session_constant_change), "the model card's repeat pair"
     else:
         return []
-    return [{"run": run.name, "joint": joint, "offset": value, "session_change": float(session[j]), "session_change_source": source,
-             "unit": units[j]}
+    own = any(run.role is not RunRole.DIFFERENCE for run in runs)
+    against = np.asarray(expected if own and expected is not None else np.zeros(len(JOINT_NAMES)), dtype=float)
+    return [{"run": run.name, "joint": joint, "offset": value, "against": "the identified offset" if own else "the baseline",
+             "expected": float(against[j]), "session_change": float(session[j]), "session_change_source": source, "unit": units[j]}
             for run in runs for j, joint in enumerate(JOINT_NAMES)
-            if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0 and abs(value) > BEYOND_SESSION_FACTOR * session[j]]
+            if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0 and abs(value - against[j]) > BEYOND_SESSION_FACTOR * session[j]]
 
 
 def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, model: PsmModel) -> list[dict]:

@@ -197,9 +197,14 @@ def _held_out_level(result: dict, floor: list | None) -> list:
 def _in_answer_order(result: dict) -> list[str]:
     """The selected effects as the answer names them: with a baseline the findings (what the runs have and the
     baseline lacks) first, the model errors the runs share with it after (a friction on q7 led a payload study's
-    answer); a payload-shaped fit that is no payload is not named first."""
+    answer); within each, those acting on the joints the answer speaks of (J1..J3) first (an offset of 0.024 N·m on a
+    held wrist joint led an answer whose J1 offset of 0.1 N·m came seventh); a payload-shaped fit that is no payload is
+    not named first."""
     entries = {e["name"]: e for e in result.get("effects", [])}
-    selected = sorted(result["selection"]["selected"], key=lambda n: (entries.get(n) or {}).get("role", "finding") != "finding")
+    recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
+    spoken = {JOINT_NAMES[j] for j in _main_joints(recorded)}
+    selected = sorted(result["selection"]["selected"], key=lambda n: ((entries.get(n) or {}).get("role", "finding") != "finding",
+                                                                      not spoken.intersection((entries.get(n) or {}).get("joints", spoken))))
     if result.get("payload_not_distinguished"):
         selected = [n for n in selected if not n.startswith("payload")] or selected
     return selected
@@ -247,6 +252,14 @@ def _effects_words(result: dict, selected: list[str]) -> str:
             f"error{'s' if len(common) > 1 else ''} the runs share with their baseline ({_names(common)})")
 
 
+def _split_floors(result: dict) -> list | None:
+    """Per joint, the session floor of the gaps the answer speaks of (gap_split's
+    rows: a run minus its baseline carries two sessions'); None without a floor."""
+    rows = {row["joint"]: row.get("session_floor") for row in (result.get("gap_split") or {}).get("joints") or []}
+    floors = [rows.get(j) for j in JOINT_NAMES]
+    return floors if any(f is not None for f in floors) else None
+
+
 def answer_sentence(result: dict) -> str:
     """The diagnosis in one sentence: the main effect (what, where, how big),
     how far the gap shrinks on the main joints (held-out runs when there are),
@@ -262,7 +275,7 @@ def answer_sentence(result: dict) -> str:
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
-                                                          result.get("session_floor"))
+                                                          _split_floors(result))
     words, apart = explained["words"], joints_apart(explained)
     qualifiers = ["of the gap above the session floor"] if explained.get("above_session_floor") else []
     qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
@@ -286,10 +299,10 @@ def answer_sentence(result: dict) -> str:
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
     sentence += _identified_terms_clause(result) + _constants_clause(result)
-    floor = result.get("session_floor")
+    floor = _split_floors(result)
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
-    above = [j for j, a, f in zip(joints, after, floor) if a > AT_FLOOR_RATIO * f]
+    above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None and a > AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)]]
     return sentence + (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
                        if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
                        "change alone can leave it: no fixed effect is shown to remove more there.") + _refit_clause(result) + _insertion_clause(result)
@@ -304,14 +317,17 @@ CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified mod
 def _constants_clause(result: dict) -> str:
     """A constant of the runs against their baseline beyond a session's change (constants_beyond_session), which the
     nuisance term took out of the gap (a J3 offset changed by 0.35 N read 'not explained', with no word), on a joint
-    no selected effect acts on (a payload's mean gravity on q3 is the payload's: printed, not in the answer)."""
-    acted = {j for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
+    no selected effect with a constant part acts on (a payload's mean gravity on q3 is the payload's: printed, not in the
+    answer); friction reverses with the motion (two runs' J3 offset of +0.35 N beside J3's friction had no word)."""
+    acted = {j for e in result.get("effects", []) if e.get("selected") and e.get("kind") != "friction" for j in e.get("joints", ())}
     beyond = [c for c in result.get("constants_beyond_session") or [] if c["joint"] not in acted]
     if not beyond:
         return ""
     listed = ", ".join(f"{c['joint']} {c['offset']:+.3g} {c['unit']} in {c['run']}" for c in beyond)
+    whose = ("the identified offset ({})".format(", ".join(dict.fromkeys(f"{c['joint']} {c['expected']:+.3g} {c['unit']}" for c in beyond)))
+             if beyond[0].get("against") == "the identified offset" else "their baseline's")
     return (f"; beyond a session's change (as {beyond[0].get('session_change_source', 'the repeat pair')} shows it), the runs' constant "
-            f"effort differs from their baseline's: {listed}, taken out as a session's offset: a changed offset or part of an "
+            f"effort differs from {whose}: {listed}, taken out as a session's offset: a changed offset or part of an "
             "effect, not diagnosed")
 
 

@@ -50,8 +50,8 @@ def print_diagnosis(result: dict) -> None:
             joints = (result.get("nuisance_offset_joints") or {}).get("joints") or list(offsets)
             print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {result['units'][JOINT_NAMES.index(j)]}" for j in joints if j in offsets))
     for c in result.get("constants_beyond_session") or []:
-        print(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} (minus its baseline) as a session's "
-              f"offset, on top of the effects: {abs(c['offset']) / max(c['session_change'], 1e-12):.1f}x the constant change "
+        print(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} ({'against the identified offset ' + format(c['expected'], '+.3f') if c.get('against') == 'the identified offset' else 'minus its baseline'}) as a session's "
+              f"offset, on top of the effects: {abs(c['offset'] - c.get('expected', 0.0)) / max(c['session_change'], 1e-12):.1f}x the constant change "
               f"{c.get('session_change_source', 'the repeat pair')} shows between sessions ({c['session_change']:.3f}); it may be a "
               "changed offset or part of an effect (a load, a payload's mean gravity), not diagnosed")
     for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
