@@ -220,7 +220,9 @@ def test_a_constant_beyond_a_sessions_change_is_said_where_no_effect_accounts_fo
     result["constants_beyond_session"] = [{"run": "O3_A", "joint": "q3", "offset": 0.346, "session_change": 0.0081,
                                            "session_change_source": "the model card's repeat pair", "unit": "N"}]
     assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
-    result["effects"][0]["joints"] = ["q2", "q3"]
+    result["effects"][0]["joints"] = ["q2", "q3"]  # a friction reverses with the motion: it has no constant of its own
+    assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
+    result["effects"][0]["kind"] = "payload"
     assert "taken out as a session's offset" not in answer_sentence(result)
 
 

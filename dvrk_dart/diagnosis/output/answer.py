@@ -344,8 +344,11 @@ def _identified_terms_clause(result: dict) -> str:
     how, meaning = CARRIED_WORDS[words_for(carried["share"])]
     whose, where = (("the model errors' efforts", "on the baseline run") if carried.get("runs") == "baseline"
                     else ("these effects' efforts", "on the training runs"))
+    beyond = carried.get("beyond_rms") or {}
+    rest = (" (what they find beyond those terms, in RMS: " + ", ".join(f"{name} {rms:.2g} {result['units'][JOINT_NAMES.index(name)]}"
+                                                                       for name, rms in beyond.items()) + ")") if beyond else ""
     return (f"; the identified model's own {', '.join(carried['terms']).replace('_', ' ')} terms, which the simulation leaves out, "
-            f"carry {how} {whose} ({percent(carried['share'])} {where}: {joints}): {meaning}")
+            f"carry {how} {whose} ({percent(carried['share'])} {where}: {joints}): {meaning}{rest}")
 
 
 def _refit_clause(result: dict) -> str:
