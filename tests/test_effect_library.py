@@ -61,6 +61,9 @@ def test_envelopes_contain_the_dh_skeleton(arm):
             env = effect.envelope
             assert all(env.contains(p) for p in env.skeleton_points)
             assert np.all(env.upper - env.lower > 0.05), effect.name
+            # and the link's identified centre of mass: a change of the carriage's own mass (its centre 10 cm below its
+            # frame, outside the skeleton's box) was put on the tool roll (0.172 kg for +0.15 kg on the carriage)
+            assert env.contains(arm.params[effect.link_key].com), effect.name
 
 
 def test_effects_to_sim_config_maps_each_field(arm):

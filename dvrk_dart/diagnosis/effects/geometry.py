@@ -60,8 +60,9 @@ def _child_origins(model: PsmModel, key: int, T_key_to_link: np.ndarray, points:
                     _child_origins(model, child.key, T, points)
 
 
-def link_envelope(model: PsmModel, key: int, margin_m: float = ENVELOPE_MARGIN_M) -> LinkEnvelope:
-    """Bounding box of a link's DH skeleton, widened by `margin_m`.
+def link_envelope(model: PsmModel, key: int, margin_m: float = ENVELOPE_MARGIN_M, body_points=()) -> LinkEnvelope:
+    """Bounding box of a link's DH skeleton and `body_points` (link frame, m:
+    the identified centre of mass, where the link's own body is), widened by `margin_m`.
 
     The skeleton: the link's own joint origin, the origins of its children
     (prismatic children at both ends of their travel, fixed children with their
@@ -80,7 +81,7 @@ def link_envelope(model: PsmModel, key: int, margin_m: float = ENVELOPE_MARGIN_M
     zero = np.zeros(N_JOINTS)
     if link.joint_type == "revolute" and abs(float(link.a(zero))) < 1e-12:
         points.append(np.array([0.0, 0.0, -float(link.d(zero))]))
-    pts = np.array(points)
+    pts = np.array(points + [np.asarray(p, dtype=float) for p in body_points])
     return LinkEnvelope(key, pts.min(axis=0) - margin_m, pts.max(axis=0) + margin_m, pts)
 
 

@@ -83,10 +83,13 @@ def candidate_effects(
     if JOINT_NAMES[INSERTION] in arm.model.prismatic_coordinates:  # a load on the insertion set by the pitch (the PSM's; the MTM has no insertion)
         effects.append(AngleLoad(arm.model, JOINT_NAMES[INSERTION], JOINT_NAMES[PITCH]))
     equivalents = equivalent_payload_links(arm)
+    # where a mass on the link may sit: its skeleton and its identified centre of mass (the carriage's is 10 cm below its
+    # frame, outside the skeleton's box: a change of the carriage's own mass was put on the pitch links)
+    envelopes = {k: link_envelope(arm.model, k, payload_margin_m, [arm.params[k].com]) for k in payload_links(arm.model)}
     if payload_model == "point":
-        effects += [PointPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k]) for k in payload_links(arm.model)]
+        effects += [PointPayload(arm.model, k, envelopes[k], equivalent_keys=equivalents[k]) for k in payload_links(arm.model)]
     else:
-        effects += [FirstMomentPayload(arm.model, k, link_envelope(arm.model, k, payload_margin_m), equivalent_keys=equivalents[k],
+        effects += [FirstMomentPayload(arm.model, k, envelopes[k], equivalent_keys=equivalents[k],
                                        mass_seen=mass_seen_by_gravity(arm, k)) for k in payload_links(arm.model)]
     effects += [GravityTilt(arm), TimeShift()]
     if arm.model.counterweight_link is not None:  # an arm with a counterweight tendon (the PSM's)
