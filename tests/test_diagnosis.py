@@ -551,3 +551,15 @@ def test_a_mass_interval_holds_the_fit_between_grid_points():
     assert 0.502 < lo < 0.612 and hi == masses[-1]
     lo, hi = _interval_within(masses, np.array([0.5, 0.9, 1.0, 0.9, 0.5]), 0.95)  # both ends crossed, halfway in log mass
     assert lo == pytest.approx(np.sqrt(masses[1] * masses[2])) and hi == pytest.approx(np.sqrt(masses[2] * masses[3]))
+
+
+def test_a_friction_along_a_joint_has_its_knots_where_the_runs_are(arm, segment, noise_rms):
+    """Its knots spread over the model's joint range put J1's end knot at -1.6 rad
+    on runs within -0.55..0.95: fitted there, it read 9.2 N·m. They now span the training runs' range."""
+    result = diagnose(synthesize_measurement(arm, segment, [], noise_rms, seed=71), arm=arm, figures=False, max_effects=1,
+                      profile_payload_mass=False)
+    low, high = segment.q.min(axis=0), segment.q.max(axis=0)
+    for effect in (e for e in result["effects"] if e["name"].startswith("position_friction_")):
+        j = JOINT_NAMES.index(effect["joints"][0])
+        knots = [float(name.removeprefix("coulomb_at_")) for name in effect["parameters"] if name.startswith("coulomb_at_")]
+        assert knots[0] == pytest.approx(low[j], abs=5e-3 * (1 + abs(low[j]))) and knots[-1] == pytest.approx(high[j], abs=5e-3 * (1 + abs(high[j])))

@@ -116,6 +116,8 @@ def test_the_one_configuration_carries_the_training_sessions_constant(tmp_path):
     for joint in moving:  # the replays' mean constant: the fit's, up to what the DART replay and the regressors differ by
         fitted = np.mean([result["nuisance_offsets"][run][joint] for run in result["train_runs"]])
         assert combined["session_constants"][joint] == pytest.approx(fitted, abs=0.02), (joint, combined["session_constants"], fitted)
+    carried = result["identified_terms"]  # beside each joint's share, how far the effects' efforts are from the identified terms
+    assert set(carried["beyond_rms"]) == set(carried["by_joint"]) and all(0.0 <= v < 1.0 for v in carried["beyond_rms"].values())
     q4 = JOINT_NAMES.index("q4")  # no other term acts on q4: its offset in DART is the constant carried
     assert combined["sim_config"]["extra"]["offset"][q4] == pytest.approx(combined["session_constants"]["q4"], abs=1e-12)
     assert combined["gap_holdout"][q4] <= 1.5 * result["identified_model_gap_holdout"][q4], (combined["gap_holdout"], result["identified_model_gap_holdout"])

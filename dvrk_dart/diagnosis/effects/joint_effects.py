@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
@@ -135,7 +137,8 @@ class PositionFriction(Effect):
     """Coulomb friction that changes along the joint's range (a guide or a
     cable tighter at one end), reversing over a pre-sliding distance:
     sum_k Fc_k phi_k(q) z + Fv dq, phi_k the hat functions on knots spread
-    over the model's joint range (piecewise-linear Fc(q)).
+    over the model's joint range, or the training runs' (`over_span`)
+    (piecewise-linear Fc(q), constant beyond the end knots).
     Simulation: the simulator's explicit friction with Fc interpolated in q
     (SimConfig.extra.position_friction)."""
 
@@ -155,6 +158,16 @@ class PositionFriction(Effect):
     @property
     def family(self) -> str:
         return f"friction_{self.joints[0]}"
+
+    def over_span(self, low: float, high: float) -> PositionFriction:
+        """The same effect with its knots from `low` to `high` (the training runs'
+        range: a knot beyond the data is not determined, and J1's at -1.6 rad read
+        9.2 N·m on runs that stay within -0.55..0.95 rad)."""
+        other = copy.copy(self)
+        other.knots = np.linspace(low, high, POSITION_FRICTION_KNOTS)
+        coulomb = self.parameters[0]
+        other.parameters = (*(Parameter(f"coulomb_at_{x:.3g}", coulomb.unit, coulomb.lower) for x in other.knots), self.parameters[-1])
+        return other
 
     def columns(self, features):
         q, v = features.q[:, self.joint_index], features.dq[:, self.joint_index]

@@ -16,7 +16,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.design import Design, Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.payload.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
-from dvrk_dart.diagnosis.effects.joint_effects import JointOffset
+from dvrk_dart.diagnosis.effects.joint_effects import JointOffset, PositionFriction
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     DiagnosisRun,
@@ -196,6 +196,14 @@ def recorded_joints(runs: list) -> np.ndarray:
     return np.all([r.state.measured for r in runs if r is not None], axis=0)
 
 
+def _on_training_range(effect: Effect, runs: list) -> Effect:
+    """A friction that changes along a joint's range, its knots over the range the training runs cover."""
+    if not isinstance(effect, PositionFriction):
+        return effect
+    q = np.concatenate([r.state.q[:, effect.joint_index] for r in runs])
+    return effect.over_span(float(q.min()), float(q.max())) if q.max() > q.min() else effect
+
+
 def _without_nuisance_constants(effects: list[Effect], at_index: int | None, offset_joints: np.ndarray,
                                 runs: list) -> tuple[list[Effect], int | None]:
     """The candidates without a constant offset on a joint where every training
@@ -258,6 +266,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     # a baseline of the runs' own motion only: whatever differs may be any effect; runs of
     # other motions fitted with the baseline need the shared errors apart from the change
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
+    effects = [_on_training_range(e, train_runs) for e in effects]
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     if nuisance:
         effects, at_index = _without_nuisance_constants(effects, at_index, offset_joints, train_runs)

@@ -345,7 +345,7 @@ def _identified_terms_clause(result: dict) -> str:
     whose, where = (("the model errors' efforts", "on the baseline run") if carried.get("runs") == "baseline"
                     else ("these effects' efforts", "on the training runs"))
     beyond = carried.get("beyond_rms") or {}
-    rest = (" (what they find beyond those terms, in RMS: " + ", ".join(f"{name} {rms:.2g} {result['units'][JOINT_NAMES.index(name)]}"
+    rest = (" (the effects' efforts minus those terms, in RMS: " + ", ".join(f"{name} {rms:.2g} {result['units'][JOINT_NAMES.index(name)]}"
                                                                        for name, rms in beyond.items()) + ")") if beyond else ""
     return (f"; the identified model's own {', '.join(carried['terms']).replace('_', ' ')} terms, which the simulation leaves out, "
             f"carry {how} {whose} ({percent(carried['share'])} {where}: {joints}): {meaning}{rest}")
