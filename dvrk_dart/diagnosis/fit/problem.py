@@ -197,11 +197,11 @@ def recorded_joints(runs: list) -> np.ndarray:
 
 
 def _on_training_range(effect: Effect, runs: list) -> Effect:
-    """A friction that changes along a joint's range, its knots over the range the training runs cover."""
+    """A friction that changes along a joint's range, simulated as fitted within the range the training runs cover."""
     if not isinstance(effect, PositionFriction):
         return effect
     q = np.concatenate([r.state.q[:, effect.joint_index] for r in runs])
-    return effect.over_span(float(q.min()), float(q.max())) if q.max() > q.min() else effect
+    return effect.within(float(q.min()), float(q.max())) if q.max() > q.min() else effect
 
 
 def _without_nuisance_constants(effects: list[Effect], at_index: int | None, offset_joints: np.ndarray,
