@@ -127,23 +127,9 @@ def diagnose(
     nuisance_joints = problem.offset_joints if problem.nuisance else None  # the floor without the constants the fit takes out
     floor = session_floor(problem.reference_run, problem.repeat_run, nuisance_joints) if problem.repeat_run is not None else None
     split_source = (problem.holdout_runs, after.holdout_after) if problem.holdout_runs else (problem.train_runs, after.train_after)
-    # a run minus its baseline carries two sessions' deviations: its gap's floor is sqrt(2) times one session's (a point mass
-    # exactly injected read "over 1.5x the session floor: an unmodelled effect remains" at 1.8x one session's)
-    split_floor = None if floor is None else floor * (math.sqrt(2.0) if all(r.role is RunRole.DIFFERENCE for r in split_source[0]) else 1.0)
-    split = gap_split(np.asarray(gaps([problem.before_residual(r) for r in split_source[0]])), np.asarray(gaps(split_source[1])), split_floor,
-                      arm.model)
-    split = [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint the runs did not record
+    split_floor, split = _gap_split(problem, split_source, floor)
     first_moments, points = _payload_reports(problem, selection, profile_payload_mass)
-    for report in [*first_moments, *points]:
-        _without_unrecorded_joints(report, problem.recorded)
-    if problem.at_index is not None:
-        at = problem.effects[problem.at_index]
-        same = next((e.equivalent_links for e in problem.effects if isinstance(e, FirstMomentPayload) and e.link_key == at.link_key), ())
-        for report in first_moments:
-            flag_payload_at_link(report, at.link_name, same)
-    for report in first_moments:
-        if problem.repeat_run is not None and problem.repeat_source != "--repeat":
-            report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
+    _finish_payload_reports(problem, first_moments, points)
     carried = identified_terms_share(problem, selection, base_config)
     result = _diagnosis(problem, selection, after, entries, (floor, split_floor), split, first_moments, points, simulate is not None, dropped,
                         carried).to_json()
@@ -163,6 +149,31 @@ def diagnose(
     if write_json:
         write_json_atomic(Path(out_dir) / "diagnosis.json", result)
     return result
+
+
+def _gap_split(problem: Problem, split_source: tuple, floor: np.ndarray | None) -> tuple[np.ndarray | None, list[dict]]:
+    """The floor of the gaps the answer speaks of, and each recorded joint's gap split against it. A run minus its
+    baseline carries two sessions' deviations: its floor is sqrt(2) times one session's (a point mass exactly injected
+    read "over 1.5x the session floor: an unmodelled effect remains" at 1.8x one session's)."""
+    runs, after = split_source
+    split_floor = None if floor is None else floor * (math.sqrt(2.0) if all(r.role is RunRole.DIFFERENCE for r in runs) else 1.0)
+    split = gap_split(np.asarray(gaps([problem.before_residual(r) for r in runs])), np.asarray(gaps(after)), split_floor, problem.arm.model)
+    return split_floor, [row for row, recorded in zip(split, problem.recorded) if recorded]  # no row for a joint not recorded
+
+
+def _finish_payload_reports(problem: Problem, first_moments: list[dict], points: list[dict]) -> None:
+    """No figure on a joint the runs did not record; a hand position on a link the efforts do not choose flagged;
+    where the session change was read without --repeat, said."""
+    for report in [*first_moments, *points]:
+        _without_unrecorded_joints(report, problem.recorded)
+    if problem.at_index is not None:
+        at = problem.effects[problem.at_index]
+        same = next((e.equivalent_links for e in problem.effects if isinstance(e, FirstMomentPayload) and e.link_key == at.link_key), ())
+        for report in first_moments:
+            flag_payload_at_link(report, at.link_name, same)
+    for report in first_moments:
+        if problem.repeat_run is not None and problem.repeat_source != "--repeat":
+            report["words"].append(f"Without --repeat, the session change is read on {problem.repeat_run.name}, from {problem.repeat_source}.")
 
 
 def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | None, base_config: SimConfig):
