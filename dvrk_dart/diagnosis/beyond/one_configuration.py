@@ -46,9 +46,8 @@ def one_configuration(arm: Arm, effects: SimConfig, train: list[ProcessedRun], h
     runs' mean constant there, a new session's best guess (without it, q4 of
     one and two scored on one-no-weight was 0.0058 N·m, the identified model 0.0017)."""
     trained = replayed_residuals([(arm, effects, s) for s in train], executor, jobs, ray_address, "one configuration: training replays")
-    constants = np.zeros(N_JOINTS)
-    if session_joints is not None:
-        constants[session_joints] = np.mean([r.mean(axis=0) for r in trained], axis=0)[session_joints]
+    session_joints = np.zeros(N_JOINTS, bool) if session_joints is None else np.asarray(session_joints, bool)
+    constants = np.where(session_joints, np.mean([r.mean(axis=0) for r in trained], axis=0), 0.0)
     trained = [r - constants for r in trained]  # a constant effort adds to the replayed efforts sample by sample
     terms = insertion_terms.fit_insertion_terms(arm, train, insertion_terms.TERMS, [r[:, INSERTION] for r in trained])
     loads = pitch_load.fit_pitch_loads(train, trained)
@@ -58,8 +57,7 @@ def one_configuration(arm: Arm, effects: SimConfig, train: list[ProcessedRun], h
     held = replayed_residuals([(arm, config, s) for s in holdout], executor, jobs, ray_address, "one configuration: held-out replays")
     gap = gaps(held, np.all([s.measured for s in holdout], axis=0))
     return {"gap_holdout": gap, "insertion_terms": terms.named_coefficients(), "pitch_loads": loads.to_dict(),
-            "session_constants": {name: float(c) for name, c, on in zip(JOINT_NAMES, constants, session_joints if session_joints is not None
-                                                                         else np.zeros(N_JOINTS, bool)) if on},
+            "session_constants": {name: float(c) for name, c, on in zip(JOINT_NAMES, constants, session_joints) if on},
             "sim_config": config.to_dict(), "method": METHOD, "words": one_configuration_sentence(gap, arm.model)}
 
 

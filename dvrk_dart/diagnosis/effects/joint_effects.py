@@ -166,9 +166,9 @@ class PositionFriction(Effect):
     def within(self, low: float, high: float) -> PositionFriction:
         """The same effect (same knots, same fit) simulated with Fc held beyond
         [low, high], the training runs' range: J1's end knot at -1.6 rad, on runs
-        within -0.55..0.95 rad, read 9.2 N·m, which a held-out run reaching past
-        -0.55 rad met. (Knots over that range instead, a finer table, took
-        2018's J1 on test2 from 0.081 to 0.100 N·m.)"""
+        within -0.55..0.95 rad, read 9.2 N·m, which the simulation extrapolated
+        to any run reaching past -0.55 rad. (Knots over that range instead, a
+        finer table, took 2018's J1 on test2 from 0.081 to 0.100 N·m.)"""
         other = copy.copy(self)
         other.span = (float(low), float(high))
         return other
