@@ -19,7 +19,13 @@ from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import first_moment_report
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
-from dvrk_dart.diagnosis.payload.payload_report import describe_payload, effort_not_determined, flag_payload_at_link, mass_profile
+from dvrk_dart.diagnosis.payload.payload_report import (
+    describe_payload,
+    effort_not_determined,
+    flag_payload_at_link,
+    mass_profile,
+    without_unrecorded_joints,
+)
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
@@ -165,7 +171,7 @@ def _finish_payload_reports(problem: Problem, first_moments: list[dict], points:
     """No figure on a joint the runs did not record; a hand position on a link the efforts do not choose flagged;
     where the session change was read without --repeat, said."""
     for report in [*first_moments, *points]:
-        _without_unrecorded_joints(report, problem.recorded)
+        without_unrecorded_joints(report, problem.recorded)
     if problem.at_index is not None:
         at = problem.effects[problem.at_index]
         same = next((e.equivalent_links for e in problem.effects if isinstance(e, FirstMomentPayload) and e.link_key == at.link_key), ())
@@ -192,28 +198,6 @@ def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | No
 
 
 # ------------------------------------------------------------------- payloads
-#: why a payload's gravity effort is not given on a joint the runs did not record
-NOT_RECORDED = "not recorded by the runs: no figure on it"
-
-
-#: a payload report's J1 slope with q1 at q = 0 (diagnosis.json key)
-YAW_SLOPE = "q1_gravity_slope_at_q0_nm_per_rad"
-
-
-def _without_unrecorded_joints(report: dict, recorded: np.ndarray) -> None:
-    """A payload report's gravity efforts at q = 0 (and at the hand position's)
-    null, with the reason, on the joints the runs did not record; J1's slope
-    with q1 likewise where q1 was not recorded (its sentence goes too)."""
-    for part in (report, report.get("payload_at")):
-        if part and part.get("gravity_efforts_at_q0") is not None:
-            for j in np.flatnonzero(~recorded[:len(part["gravity_efforts_at_q0"])]):
-                effort_not_determined(part, int(j), NOT_RECORDED)
-    if not recorded[0] and report.get(YAW_SLOPE) is not None:
-        report[YAW_SLOPE] = report[f"{YAW_SLOPE}_interval"] = None
-        report.setdefault("not_determined", {})[YAW_SLOPE] = f"q1: {NOT_RECORDED}"
-        report["words"] = [w for w in report.get("words", []) if not w.startswith("J1's effort changes with q1")]
-
-
 def _session_fit(problem: Problem, selection: Selection):
     """fit(chosen effects) on the --repeat pair (two sessions without the
     weight): what the effects read from a session change alone; None without it."""
@@ -271,7 +255,7 @@ def _payload_candidates(problem: Problem, s: Selection) -> list[dict]:
 
     candidates = sorted(points, key=by_fraction) + sorted(moments, key=by_fraction)
     for candidate in candidates:
-        _without_unrecorded_joints(candidate, problem.recorded)
+        without_unrecorded_joints(candidate, problem.recorded)
     return candidates
 
 

@@ -52,6 +52,28 @@ def effort_not_determined(report: dict, joint: int, reason: str) -> None:
     reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
 
 
+#: why a payload's gravity effort is not given on a joint the runs did not record
+NOT_RECORDED = "not recorded by the runs: no figure on it"
+
+
+#: a payload report's J1 slope with q1 at q = 0 (diagnosis.json key)
+YAW_SLOPE = "q1_gravity_slope_at_q0_nm_per_rad"
+
+
+def without_unrecorded_joints(report: dict, recorded: np.ndarray) -> None:
+    """A payload report's gravity efforts at q = 0 (and at the hand position's)
+    null, with the reason, on the joints the runs did not record; J1's slope
+    with q1 likewise where q1 was not recorded (its sentence goes too)."""
+    for part in (report, report.get("payload_at")):
+        if part and part.get("gravity_efforts_at_q0") is not None:
+            for j in np.flatnonzero(~recorded[:len(part["gravity_efforts_at_q0"])]):
+                effort_not_determined(part, int(j), NOT_RECORDED)
+    if not recorded[0] and report.get(YAW_SLOPE) is not None:
+        report[YAW_SLOPE] = report[f"{YAW_SLOPE}_interval"] = None
+        report.setdefault("not_determined", {})[YAW_SLOPE] = f"q1: {NOT_RECORDED}"
+        report["words"] = [w for w in report.get("words", []) if not w.startswith("J1's effort changes with q1")]
+
+
 def flag_payload_at_link(report: dict, at_link: str, same_efforts: tuple[str, ...]) -> None:
     """Whether the hand position given with --payload-at (on `at_link`, whose
     payloads give the efforts of those on `same_efforts` too) is on a link the
