@@ -117,10 +117,26 @@ def test_two_runs_of_their_own_say_a_constant_beyond_a_sessions_change(arm, segm
     session's, and is now said, against the identified offset (it had no word)."""
     from dvrk_dart.diagnosis.output.answer import answer_sentence
 
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
+
     offset = [(JointOffset(arm.model, "q3"), np.array([0.35]))]
-    runs = [synthesize_measurement(arm, state, offset, noise_rms, seed=seed) for state, seed in ((segment, 61), (time_scaled(segment, 0.5), 62))]
+    runs = [prepare_run(synthesize_measurement(arm, state, offset, noise_rms, seed=seed), arm, name=name)
+            for state, seed, name in ((segment, 61, "a"), (time_scaled(segment, 0.5), 62, "b"))]
     result = diagnose(runs, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
     beyond = [c for c in result["constants_beyond_session"] if c["joint"] == "q3"]
     assert len(beyond) == 2 and all(c["against"] == "the identified offset" for c in beyond)
     assert all(c["offset"] - c["expected"] == pytest.approx(0.35, abs=0.05) for c in beyond), beyond
     assert "the runs' constant effort differs from the identified offset" in answer_sentence(result)
+
+
+def test_runs_of_their_own_whose_constants_scatter_say_nothing_beyond_their_scatter(arm, segment, noise_rms):
+    """Two runs of their own whose J3 constants differ by 0.04 N (+0.02 and
+    -0.02): each is over twice the card's session change (0.008), yet no more
+    than the runs' own scatter. 2019's "one" and "two" (+0.004 and -0.021 N) read
+    "beyond a session's change" on that card alone."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
+
+    runs = [prepare_run(synthesize_measurement(arm, state, [(JointOffset(arm.model, "q3"), np.array([offset]))], noise_rms, seed=seed),
+                        arm, name=name) for state, offset, seed, name in ((segment, 0.02, 63, "a"), (time_scaled(segment, 0.5), -0.02, 64, "b"))]
+    result = diagnose(runs, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
+    assert not [c for c in result["constants_beyond_session"] if c["joint"] == "q3"], result["constants_beyond_session"]

@@ -81,7 +81,9 @@ def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], rep
     that joint, else the model card's `[sessions] constant_change`, times
     BEYOND_SESSION_FACTOR. Runs minus their baseline are read against zero;
     runs of their own against `expected` (the identified offsets the simulation
-    leaves out, else zero). Such a constant may be part of an effect (a load, a
+    leaves out, else zero), their scale at least their constants' own spread
+    (2019's "one" and "two": q3 +0.004 and -0.021 N, which the card's 0.008
+    alone called a constant beyond a session's change). Such a constant may be part of an effect (a load, a
     payload's mean gravity) or a changed offset that the nuisance term took
     out: a J2 load of +0.125 N·m beside a session change of 0.03, and a J3
     offset changed by 0.35 N, were read 'no effect selected', with no word (two
@@ -97,6 +99,9 @@ def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], rep
         return []
     own = any(run.role is not RunRole.DIFFERENCE for run in runs)
     against = np.asarray(expected if own and expected is not None else np.zeros(len(JOINT_NAMES)), dtype=float)
+    if own:  # runs of their own differ by their motions' mean errors too: their constants' own spread is a change as well
+        table = np.array([[(offsets.get(run.name) or {}).get(joint, 0.0) for joint in JOINT_NAMES] for run in runs])
+        session, source = np.maximum(session, np.ptp(table, axis=0)), f"{source} (or the runs' own spread, where larger)"
     return [{"run": run.name, "joint": joint, "offset": value, "against": "the identified offset" if own else "the baseline",
              "expected": float(against[j]), "session_change": float(session[j]), "session_change_source": source, "unit": units[j]}
             for run in runs for j, joint in enumerate(JOINT_NAMES)
