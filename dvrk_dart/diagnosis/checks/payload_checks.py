@@ -21,7 +21,7 @@ import numpy as np
 from dvrk_dart.diagnosis.api import DiagnosisConfig, run_diagnosis
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-from dvrk_dart.diagnosis.output.answer import answer_sentence
+from dvrk_dart.diagnosis.output.answer import answer_sentence, split_floors
 from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.payload.identifiable import reference_first_moment
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
@@ -131,8 +131,8 @@ def _mass_at_hand_verdict(check: str, at: dict, m_true: float, tol: float) -> di
 def _j2_verdict(result: dict, title: str) -> dict:
     """J2's gap on the training runs: most of it above the session floor removed, where a --repeat measured the floor."""
     before, after = result["gap_before"]["train"][1], result["gap_after"]["train"][1]
-    split = result.get("gap_split") or {}  # the floor of these gaps (runs minus their baseline: two sessions')
-    floor = next((row.get("session_floor") for row in split.get("joints") or [] if row["joint"] == "q2"), None) if split.get("runs") == "train" else None
+    floors = split_floors(result) if (result.get("gap_split") or {}).get("runs") == "train" else None  # these gaps' own (two sessions')
+    floor = floors[1] if floors else None
     if floor is None:
         return {"check": f"{title}: the diagnosis shrinks the J2 gap (training runs)", "passed": after < before,
                 "value": f"J2 {before:.3f} -> {after:.3f} N·m"}

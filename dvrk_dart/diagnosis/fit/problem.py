@@ -42,6 +42,10 @@ from dvrk_dart.sim.config import SimConfig
 EFFORT_WEIGHT_FLOOR = 1e-3
 
 
+#: the roles whose runs take a nuisance constant on every joint (Problem.demean_of)
+CONSTANT_ON_EVERY_JOINT = (RunRole.OTHER_MOTION, RunRole.BASELINE)
+
+
 @dataclass
 class Problem:
     """Runs by role, effects, design and weights: what the selection fits."""
@@ -123,7 +127,7 @@ class Problem:
         dependent errors, e.g. friction's asymmetry, is its own)."""
         if not self.nuisance:
             return None
-        return np.ones(N_JOINTS, dtype=bool) if run.role in (RunRole.OTHER_MOTION, RunRole.BASELINE) else self.offset_joints
+        return np.ones(N_JOINTS, dtype=bool) if run.role in CONSTANT_ON_EVERY_JOINT else self.offset_joints
 
     def before_residual(self, run: DiagnosisRun) -> np.ndarray:
         """The run's gap before any effect, its nuisance constants taken out as
@@ -209,7 +213,7 @@ def _without_nuisance_constants(effects: list[Effect], at_index: int | None, off
     """The candidates without a constant offset on a joint where every training
     run has its own nuisance constant: nothing is left to fit it (it read
     -8.9e11 N·m, with no share, in diagnosis.json)."""
-    constant_per_run = offset_joints | np.all([r.role in (RunRole.OTHER_MOTION, RunRole.BASELINE) for r in runs])
+    constant_per_run = offset_joints | np.all([r.role in CONSTANT_ON_EVERY_JOINT for r in runs])
     kept = [e for i, e in enumerate(effects) if i == at_index or not (isinstance(e, JointOffset) and constant_per_run[e.joint_index])]
     return kept, (None if at_index is None else kept.index(effects[at_index]))
 

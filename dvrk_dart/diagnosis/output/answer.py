@@ -252,7 +252,7 @@ def _effects_words(result: dict, selected: list[str]) -> str:
             f"error{'s' if len(common) > 1 else ''} the runs share with their baseline ({_names(common)})")
 
 
-def _split_floors(result: dict) -> list | None:
+def split_floors(result: dict) -> list | None:
     """Per joint, the session floor of the gaps the answer speaks of (gap_split's
     rows: a run minus its baseline carries two sessions'); None without a floor."""
     rows = {row["joint"]: row.get("session_floor") for row in (result.get("gap_split") or {}).get("joints") or []}
@@ -275,7 +275,7 @@ def answer_sentence(result: dict) -> str:
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
-                                                          _split_floors(result))
+                                                          split_floors(result))
     words, apart = explained["words"], joints_apart(explained)
     qualifiers = ["of the gap above the session floor"] if explained.get("above_session_floor") else []
     qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
@@ -299,7 +299,7 @@ def answer_sentence(result: dict) -> str:
     if shares and any(s is not None for s in shares):
         sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
     sentence += _identified_terms_clause(result) + _constants_clause(result)
-    floor = _split_floors(result)
+    floor = split_floors(result)
     if floor is None:
         return sentence + "." + _refit_clause(result) + _insertion_clause(result)
     above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None and a > AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)]]
