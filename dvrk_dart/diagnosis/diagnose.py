@@ -27,6 +27,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     without_unrecorded_joints,
 )
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
+from dvrk_dart.diagnosis.payload.yaw_path_inertia import FIRST_MOMENT_PATH, RIGID_PATH, span_both_path_models
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
 from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
@@ -222,12 +223,15 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
     points = [describe_payload(effects[i], s.final.params[i], problem.arm, mass_profile(s.selector, s.selected, i) if profile_payload_mass else None)
               for i in s.selected if isinstance(effects[i], PointPayload)]
     selected_moments = [i for i in s.selected if isinstance(effects[i], FirstMomentPayload)]
+    at = effects[problem.at_index] if problem.at_index is not None else None
+    at_key = at.link_key if at is not None else None
     if problem.processing.name == "periodic" and problem.has_baseline:
         offsets = problem.offset_joints if problem.offset_joints is not None else np.zeros(N_JOINTS, bool)
-        at = effects[problem.at_index] if problem.at_index is not None else None
         candidates = [e for e in effects if isinstance(e, FirstMomentPayload)]
-        return [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
-                                        effects[i]) for i in selected_moments[:1]], points
+        reports = [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
+                                           effects[i]) for i in selected_moments[:1]]
+        span_both_path_models(problem, s.final.params, reports, at_key, RIGID_PATH)
+        return reports, points
     session_fit = _session_fit(problem, s)
     # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
     other_motion = not any(r.role is RunRole.DIFFERENCE for r in problem.train_runs)
@@ -240,6 +244,7 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
             report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
         elif report.get("payload_at"):
             effort_not_determined(report["payload_at"], 0, J1_OTHER_MOTION)
+    span_both_path_models(problem, s.final.params, reports, at_key, FIRST_MOMENT_PATH, selected_moments)
     return reports, points
 
 
