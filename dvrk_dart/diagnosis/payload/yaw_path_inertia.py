@@ -35,9 +35,8 @@ FIRST_MOMENT_PATH, RIGID_PATH = "first_moment", "rigid"
 
 def j1_targets(problem, params: dict) -> list[tuple[np.ndarray, np.ndarray, object]]:
     """Per training run whose J1 efforts carry the path (the runs minus their baseline, else the runs of their
-    own): its J1 gap with every selected effect but the payloads taken out, its features, the run."""
-    runs = ([r for r in problem.train_runs if r.role is RunRole.DIFFERENCE]
-            or [r for r in problem.train_runs if r.role is not RunRole.OTHER_MOTION])
+    own; none beside a baseline of another motion, where J1's figures are not determined): its J1 gap with every selected effect but the payloads taken out, its features, the run."""
+    runs = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE] or [r for r in problem.train_runs if r.role is RunRole.RAW]
     design = problem.design
     beta = np.zeros(design.n_columns)
     for i, p in params.items():
