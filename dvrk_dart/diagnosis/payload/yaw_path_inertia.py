@@ -33,9 +33,10 @@ J1_PATH_FIGURES = (("gravity_efforts_at_q0", YAW_PATH_JOINT), ("q1_gravity_slope
 FIRST_MOMENT_PATH, RIGID_PATH = "first_moment", "rigid"
 
 
-def j1_targets(problem, params: dict) -> list[tuple[np.ndarray, np.ndarray, object]]:
+def j1_targets(problem, params: dict) -> list[tuple]:
     """Per training run whose J1 efforts carry the path (the runs minus their baseline, else the runs of their
-    own; none beside a baseline of another motion, where J1's figures are not determined): its J1 gap with every selected effect but the payloads taken out, its features, the run."""
+    own; none beside a baseline of another motion, where J1's figures are not determined): its J1 gap with
+    every selected effect but the payloads taken out, its features, the run."""
     runs = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE] or [r for r in problem.train_runs if r.role is RunRole.RAW]
     design = problem.design
     beta = np.zeros(design.n_columns)
