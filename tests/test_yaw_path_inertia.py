@@ -9,7 +9,7 @@ from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
 from dvrk_dart.diagnosis.payload.payload import PointPayload, point_mass_parameters
-from dvrk_dart.diagnosis.payload.yaw_path_inertia import FIRST_MOMENT_PATH, rigid_path_shift, span_readings
+from dvrk_dart.diagnosis.payload.yaw_path_inertia import BARE_PATH, RIGID_PATH, path_readings, span_both_path_models, span_readings
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process
 from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
@@ -21,12 +21,11 @@ HAND_PITCH = {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_hori
 def test_a_reading_outside_an_interval_widens_it_and_one_inside_does_not():
     report = {"gravity_efforts_at_q0": [-0.035, 0.2], "gravity_efforts_at_q0_interval": [[-0.037, -0.033], [0.1, 0.3]],
               "q1_gravity_slope_at_q0_nm_per_rad": -0.2, "q1_gravity_slope_at_q0_nm_per_rad_interval": [-0.5, 0.1]}
-    grew = span_readings(report, {"a rigid path": {"gravity_efforts_at_q0": 0.030, "q1_gravity_slope_at_q0_nm_per_rad": 0.1}}, FIRST_MOMENT_PATH)
-    assert grew and report["gravity_efforts_at_q0_interval"][0] == pytest.approx([-0.037, -0.005])
+    grew = span_readings(report, {RIGID_PATH: {"gravity_efforts_at_q0": 0.030, "q1_gravity_slope_at_q0_nm_per_rad": 0.1}}, BARE_PATH)
+    assert grew == ["gravity_efforts_at_q0"] and report["gravity_efforts_at_q0_interval"][0] == pytest.approx([-0.037, -0.005])
     assert report["gravity_efforts_at_q0_interval"][1] == [0.1, 0.3]  # J2's is not a path's
     assert report["q1_gravity_slope_at_q0_nm_per_rad_interval"] == [-0.5, 0.1]  # -0.1 lies inside
-    assert not span_readings(report, {"a rigid path": {"gravity_efforts_at_q0": 0.001, "q1_gravity_slope_at_q0_nm_per_rad": 0.0}},
-                             FIRST_MOMENT_PATH)
+    assert not span_readings(report, {RIGID_PATH: {"gravity_efforts_at_q0": 0.001, "q1_gravity_slope_at_q0_nm_per_rad": 0.0}}, BARE_PATH)
 
 
 def test_the_first_moment_j1_interval_holds_a_point_in_the_pitch_plane(arm, segment, noise_rms):
@@ -61,5 +60,15 @@ def test_the_real_pitch_weight_reads_j1_differently_with_a_rigid_path(arm):
     weighted = weighted.head(n)
     features = TrajectoryFeatures(arm, weighted.q, weighted.dq, weighted.ddq, np.zeros_like(weighted.q), weighted.rate_hz)
     gap = weighted.tau[:, 0] - baseline.tau[:n, 0]
-    shift = rigid_path_shift(arm, key, [(gap, features, type("Run", (), {"state": weighted})())])
-    assert shift["gravity_efforts_at_q0"] == pytest.approx(0.036, abs=0.01)
+    readings = path_readings(arm, key, [(gap, features, type("Run", (), {"state": weighted})(), False)])
+    assert readings[BARE_PATH]["gravity_efforts_at_q0"] == pytest.approx(-0.043, abs=0.005)
+    assert readings[RIGID_PATH]["gravity_efforts_at_q0"] - readings[BARE_PATH]["gravity_efforts_at_q0"] == pytest.approx(0.036, abs=0.01)
+
+
+def test_a_j1_the_runs_did_not_record_gets_no_path_models():
+    """q1 not recorded: its figures are nulled later (`without_unrecorded_joints`); the path models were
+    read from the log's zeros and left a sentence on them before (review of the change)."""
+    report = {"link_key": 2, "gravity_efforts_at_q0": [0.01, 0.2], "gravity_efforts_at_q0_interval": [[0.0, 0.02], [0.1, 0.3]], "words": []}
+    problem = type("Problem", (), {"recorded": np.array([False] + [True] * 6)})()
+    span_both_path_models(problem, {}, [report], None, periodic=False, payloads=[0])
+    assert report["gravity_efforts_at_q0_interval"][0] == [0.0, 0.02] and report["words"] == [] and "yaw_path_models" not in report

@@ -27,7 +27,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     without_unrecorded_joints,
 )
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
-from dvrk_dart.diagnosis.payload.yaw_path_inertia import FIRST_MOMENT_PATH, RIGID_PATH, span_both_path_models
+from dvrk_dart.diagnosis.payload.yaw_path_inertia import span_both_path_models
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
 from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
@@ -230,7 +230,7 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
         candidates = [e for e in effects if isinstance(e, FirstMomentPayload)]
         reports = [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
                                            effects[i]) for i in selected_moments[:1]]
-        span_both_path_models(problem, s.final.params, reports, at_key, RIGID_PATH)
+        span_both_path_models(problem, s.final.params, reports, at_key, periodic=True)
         return reports, points
     session_fit = _session_fit(problem, s)
     # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
@@ -244,7 +244,7 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
             report["words"].append(_j1_constant_sentence(problem.offset_joints, problem.offset_joints_source))
         elif report.get("payload_at"):
             effort_not_determined(report["payload_at"], 0, J1_OTHER_MOTION)
-    span_both_path_models(problem, s.final.params, reports, at_key, FIRST_MOMENT_PATH, selected_moments)
+    span_both_path_models(problem, s.final.params, reports, at_key, periodic=False, payloads=selected_moments)
     return reports, points
 
 
