@@ -61,7 +61,7 @@ def j1_targets(problem, params: dict) -> list[tuple]:
 def _j1_gap(problem, run) -> np.ndarray:
     """A run's J1 gap; upstream, a run minus its baseline's measured efforts alone: the simulated difference of
     one motion is its two states' noise through the differentiated accelerations (0.059 N·m RMS on J1 for
-    one-105g), which a rigid path's inertia fits (it moved J1 at q = 0 by -0.027 N·m there, +0.036 without it)."""
+    one-105g), which a rigid path's inertia fits (it moved J1 at q = 0 by -0.027 N·m there, +0.030 without it)."""
     if run.role is RunRole.DIFFERENCE and run.state.periodic is None:
         return run.state.tau[:, YAW_PATH_JOINT] - run.baseline.state.tau[:, YAW_PATH_JOINT]
     return problem.before_residual(run)[:, YAW_PATH_JOINT]
