@@ -2,8 +2,11 @@
 
 Intervals are delete-one-fold jackknife intervals over the cross-validation
 folds (each fold's fit leaves out one contiguous time segment of every run):
-estimate +- z se, se^2 = (K-1)/K sum_k (theta_k - mean theta)^2, z for the
-central INTERVAL_QUANTILES of a normal law.
+estimate +- t se, se^2 = (K-1)/K sum_k (theta_k - mean theta)^2, t for the
+central INTERVAL_QUANTILES of Student's law with K - 1 degrees of freedom (the
+jackknife's own; a normal law's z, 1.645 against 2.132 for five folds: J1's
+effort at q = 0 at a hand position in the pitch plane, synthetic, upstream,
+105 and 205 g over six seeds, held the truth in 9 of 12 pairs, now 11 of 12).
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy.stats import norm
+from scipy.stats import t as student_t
 
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import (
@@ -56,8 +59,8 @@ def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
     if k < 2:
         return np.stack([np.asarray(full, float), np.asarray(full, float)])
     se = np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0))
-    z = norm.ppf(INTERVAL_QUANTILES[1])
-    return np.stack([full - z * se, full + z * se])
+    t = student_t.ppf(INTERVAL_QUANTILES[1], k - 1)
+    return np.stack([full - t * se, full + t * se])
 
 
 def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
