@@ -99,6 +99,20 @@ def test_parallelogram_weight(parallelogram):
         assert _holds_or_not_determined(payload, _hand_first_moment(out), axis), payload
 
 
+def test_the_periodic_hand_position_j1_interval_holds_the_upstream_model_reading(parallelogram):
+    """Periodic, the hand position's J1 path is a rigid body; its interval also
+    holds what the upstream model (the point's inertia as the geometry carries
+    it) reads on the same runs: about -0.035 N·m, the upstream diagnosis's own
+    -0.0348 (their intervals were [-0.026, +0.019] and [-0.037, -0.033] before)."""
+    result, _, _ = parallelogram
+    at = result["payload"]["payload_at"]
+    models = at["yaw_path_models"]
+    assert models["fitted"] == "a rigid path"
+    other = at["gravity_efforts_at_q0"][0] + models["other_readings_minus_fitted"]["the payload's inertia as a point mass's"]["gravity_efforts_at_q0"]
+    low, high = at["gravity_efforts_at_q0_interval"][0]
+    assert other == pytest.approx(-0.035, abs=0.01) and low <= other <= high, (other, low, high)
+
+
 @pytest.mark.parametrize("case", ["parallelogram", "insertion"])
 def test_every_payload_quantity_has_an_interval_or_a_reason(case, parallelogram, insertion):
     """The real 105 g diagnoses (periodic, baseline, --repeat, --payload-at):
