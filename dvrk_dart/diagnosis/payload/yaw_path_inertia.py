@@ -14,8 +14,9 @@ q = 0 at the hand position as -0.035 [-0.037, -0.033] and -0.003
 
 So each J1 figure's interval also holds what the other models read
 (`path_readings`: each fitted alone to the runs' J1 gaps, on the payload's
-link and on the links whose payloads fit as well, where the readings differ
-most), the figure moved by their difference from its own model's reading.
+link and on its equivalent and tied links, between which the readings differ
+as much as between the models), the figure moved by their difference from
+its own model's reading.
 The shifts compare fits on one target (the J1 gap less the other selected
 effects), not the diagnosis's own fit of it.
 """
