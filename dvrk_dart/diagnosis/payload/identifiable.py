@@ -7,16 +7,16 @@ central INTERVAL_QUANTILES of Student's law with K - 1 degrees of freedom (the
 jackknife's own; a normal law's z, 1.645 against 2.132 for five folds: J1's
 effort at q = 0 at a hand position in the pitch plane, synthetic, upstream,
 105 and 205 g over six seeds, held the truth in 9 of 12 pairs, now 11 of 12).
+With a --repeat pair, the session change it reads is counted as the periodic
+processing counts it (`with_session_change`: its whole reading, one degree of
+freedom), so both processings' intervals follow one rule.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
-from scipy.stats import t as student_t
-
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import (
     FIRST_MOMENT_COLUMNS,
@@ -37,9 +37,9 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     pitch_shaft_offsets,
     swamp,
 )
+from dvrk_dart.diagnosis.payload.periodic_payload import central_interval, with_session_change
 from dvrk_dart.diagnosis.fit.selection import (
     GAIN_FAILURE_QUANTILE,
-    INTERVAL_QUANTILES,
     Selector,
 )
 from dvrk_dart.io.reference_data import sample_rate_hz
@@ -48,19 +48,24 @@ from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: step of the central difference of J1's gravity effort in q1 (rad)
 YAW_SLOPE_STEP_RAD = 1e-4
-#: fit(chosen effects) -> their parameters, on two sessions of the run without the weight
-SessionFit = Callable[[list[int]], dict[int, np.ndarray]]
+#: fit(chosen effects) -> their parameters on two sessions of the run without the weight, read both ways
+#: (the second minus the first and the reverse: which came first is arbitrary, and a bounded parameter,
+#: a mass, reads one sign only)
+SessionFit = Callable[[list[int]], list[dict[int, np.ndarray]]]
+
+
+def jackknife_error(folds: np.ndarray) -> tuple[np.ndarray, float]:
+    """The jackknife standard error of the fold estimates (K, ...) and its degrees of freedom, K - 1."""
+    folds = np.asarray(folds, dtype=float)
+    k = len(folds)
+    if k < 2:
+        return np.zeros(folds.shape[1:]), 1.0
+    return np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0)), float(k - 1)
 
 
 def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
     """(2, ...) interval around `full` from the fold estimates (K, ...)."""
-    folds = np.asarray(folds, dtype=float)
-    k = len(folds)
-    if k < 2:
-        return np.stack([np.asarray(full, float), np.asarray(full, float)])
-    se = np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0))
-    t = student_t.ppf(INTERVAL_QUANTILES[1], k - 1)
-    return np.stack([full - t * se, full + t * se])
+    return central_interval(np.asarray(full, dtype=float), *jackknife_error(folds))
 
 
 def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
@@ -101,23 +106,16 @@ def _quantities(arm: Arm, effect: FirstMomentPayload, p: np.ndarray, gravity: np
             "q1_gravity_slope_at_q0_nm_per_rad": _yaw_slope(gravity, p[FIRST_MOMENT_COLUMNS:])}
 
 
-def _with_intervals(values: dict, folds: list[dict]) -> dict:
+def _with_intervals(values: dict, folds: list[dict], session: dict[str, np.ndarray]) -> dict:
+    """Each value with its jackknife interval over the folds, counting the
+    --repeat pair's reading of it where `session` has one."""
     out = {}
     for key, v in values.items():
-        interval = jackknife_interval(v, np.array([f[key] for f in folds]))
+        se, dof = jackknife_error(np.array([f[key] for f in folds]))
+        interval = with_session_change(v, se, dof, session[key])[0] if key in session else central_interval(v, se, dof)
         out[key] = v.tolist()
         out[f"{key}_interval"] = interval.T.tolist() if v.ndim else interval.tolist()
     return out
-
-
-def _widen(report: dict, key: str, spread) -> None:
-    """Add a spread to both sides of report[key]'s interval, in quadrature."""
-    value = np.asarray(report[key], dtype=float)
-    interval = np.asarray(report[f"{key}_interval"], dtype=float)
-    spread = np.abs(np.asarray(spread, dtype=float))
-    lo, hi = (interval[0], interval[1]) if interval.ndim == 1 else (interval[:, 0], interval[:, 1])
-    lo, hi = value - np.hypot(value - lo, spread), value + np.hypot(hi - value, spread)
-    report[f"{key}_interval"] = [float(lo), float(hi)] if interval.ndim == 1 else np.stack([lo, hi], axis=1).tolist()
 
 
 def _mass_unseen(arm: Arm, selector: Selector, index: int) -> bool:
@@ -144,10 +142,11 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
     return ties
 
 
-def _session_shares(read: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """One session's share (|reading| / sqrt(2), as `session_floor`) of what the
-    --repeat pair alone reads as each quantity."""
-    return {key: np.abs(v) / math.sqrt(2.0) for key, v in read.items()}
+def _session_change(readings: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """What the --repeat pair alone reads as each quantity, the larger of its
+    two orders: a session change, as large as a payload run's against its
+    baseline (two sessions too) can hold."""
+    return {key: np.max([np.abs(r[key]) for r in readings], axis=0) for key in readings[0]}
 
 
 def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tuple[int, dict]], effect: FirstMomentPayload) -> None:
@@ -175,19 +174,18 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     position (`at_index`, a PayloadAtPosition in the design), its mass.
 
     session_fit: the same effects fitted on two sessions of the run without the
-    weight (`--repeat` against the baseline): one session's share of what they
-    read there is added to every interval in quadrature (the time-segment folds
-    of one session cannot see it), and a quantity it reaches is not determined (`swamp`).
+    weight (`--repeat` against the baseline): what they read there is counted in
+    every interval (`with_session_change`; the time-segment folds of one session
+    cannot see it), and a quantity it reaches is not determined (`swamp`).
     efforts_not_determined: joint -> why its gravity effort at q = 0 is not determined."""
     effect: FirstMomentPayload = selector.design.effects[index]
     gravity = _gravity_at_zero(arm, effect.link_key)
     p = fit_params[index]
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
-    report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f]))
-    session = _session_shares(_quantities(arm, effect, session_fit(chosen)[index], gravity)) if session_fit is not None else {}
-    for key, spread in session.items():
-        _widen(report, key, spread)
+    session = _session_change([_quantities(arm, effect, read[index], gravity) for read in session_fit(chosen)]) if session_fit is not None else {}
+    report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f],
+                                  session))
     if session:
         report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
     if _mass_unseen(arm, selector, index):
@@ -266,8 +264,8 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
 
 def _at_position(arm: Arm, selector: Selector, chosen: list[int], index: int, at_index: int, session_fit: SessionFit | None) -> dict:
     """The selected payload as a point mass at the given position: its mass and
-    gravity efforts at q = 0, each with its jackknife interval widened by one
-    session's share of the --repeat pair's reading, or None where that swamps it."""
+    gravity efforts at q = 0, each with its jackknife interval counting the
+    --repeat pair's reading, or None where that swamps it."""
     at: PayloadAtPosition = selector.design.effects[at_index]
     at_set = [at_index if i == index else i for i in chosen]
     at_cv = selector.cross_validate(at_set)
@@ -276,11 +274,12 @@ def _at_position(arm: Arm, selector: Selector, chosen: list[int], index: int, at
     def quantities(q: np.ndarray) -> dict[str, np.ndarray]:
         return {"mass_kg": np.array(q[0]), "gravity_efforts_at_q0": _gravity_efforts(gravity, point_mass_parameters(q[0], at.position), q[1:])}
 
+    session = _session_change([quantities(read[at_index]) for read in session_fit(at_set)]) if session_fit is not None else {}
     report = {"link": at.link_name, "position_m": at.position.tolist(), "cross_validated_fraction": at_cv.fraction}
     report.update(_with_intervals(quantities(selector.fit_all(at_set).params[at_index]),
-                                  [quantities(f[at_index]) for f in at_cv.fold_params if at_index in f]))
-    if session_fit is not None:
-        for key, spread in _session_shares(quantities(session_fit(at_set)[at_index])).items():
-            _widen(report, key, spread)
-            swamp(report, key, spread, report.setdefault("not_determined", {}))
+                                  [quantities(f[at_index]) for f in at_cv.fold_params if at_index in f], session))
+    if session:
+        report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
+    for key, spread in session.items():
+        swamp(report, key, spread, report.setdefault("not_determined", {}))
     return report

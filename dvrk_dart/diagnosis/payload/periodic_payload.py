@@ -195,25 +195,34 @@ def central_interval(value: np.ndarray, se: np.ndarray, dof: np.ndarray) -> np.n
     return np.stack([value - t * se, value + t * se])
 
 
+def with_session_change(value: np.ndarray, se: np.ndarray, dof, read: np.ndarray, read_se=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(2, ...) interval of a value of standard error `se` (`dof` degrees of
+    freedom) that a session change leaves out, and the spread it counts for
+    it: the --repeat pair (two sessions, no payload) reads the change as
+    `read` (standard error `read_se`); its variance read^2 - read_se^2 (never
+    negative) is added to the value's; one pair knows it to one degree of
+    freedom, so the degrees of freedom are Satterthwaite's with read^2's
+    variance as a one-degree estimate's: wide where the session change dominates."""
+    session = np.maximum(read**2 - read_se**2, 0.0)
+    total = se**2 + session
+    dof = total**2 / np.maximum(se**4 / dof + read**4, 1e-300)
+    return central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), np.sqrt(session)
+
+
 def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None,
                           jacobian: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
     """Value, (2, ...) interval, the --repeat pair's reading of the linear
-    quantity `jacobian` @ p and the session spread the interval counts. `session_fit`: the same design fitted on the
-    --repeat pair alone (two sessions, no payload): what it reads, r, is a
-    session change of the payload's own shape (an offset of q2's zero, the
-    counterweight's cable), which the harmonic-by-harmonic session variance
-    does not count. Its variance r^2 - se(r)^2 (never negative) is added to
-    the fit's; one pair knows it to one degree of freedom, so the degrees of
-    freedom are Satterthwaite's with r^2's variance as a one-degree
-    estimate's: wide where the session change dominates."""
+    quantity `jacobian` @ p and the session spread the interval counts
+    (`with_session_change`). `session_fit`: the same design fitted on the
+    --repeat pair alone: what it reads is a session change of the payload's
+    own shape (an offset of q2's zero, the counterweight's cable), which the
+    harmonic-by-harmonic session variance does not count."""
     value, se, dof = fit.standard_error(jacobian)
     if session_fit is None:
         return value, central_interval(value, se, dof), None, None
     read, read_se, _ = session_fit.standard_error(jacobian)
-    session = np.maximum(read**2 - read_se**2, 0.0)
-    total = se**2 + session
-    dof = total**2 / np.maximum(se**4 / dof + read**4, 1e-300)
-    return value, central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), read, np.sqrt(session)
+    interval, spread = with_session_change(value, se, dof, read, read_se)
+    return value, interval, read, spread
 
 
 def _design(pairs: list[Pair], offset_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[slice]]:

@@ -1,0 +1,41 @@
+"""Upstream, a --repeat pair's session change counts in the hand position's
+intervals as in the periodic processing's (dvrk_dart/diagnosis/payload/identifiable.py)."""
+
+import numpy as np
+import pytest
+from scipy.stats import t as student_t
+
+from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
+from dvrk_dart.diagnosis.diagnose import diagnose
+from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
+from dvrk_dart.diagnosis.payload.payload import PointPayload
+from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
+
+#: the 105 g runs' hand placement on the pitch link (pipelines/withheld.toml [payload])
+HAND_PITCH = {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_horizontal_m": 0.165, "check_height_m": 0.020}
+
+
+def test_a_session_change_that_reads_as_a_lighter_weight_widens_the_mass_interval(arm, segment, noise_rms):
+    """The --repeat pair's session change reads as -30 g at the hand position;
+    the weighted run (105 g) carries a session change of its own, +25 g of the
+    same shape. The mass's bound (m >= 0) read the pair's change as 0 g: the
+    interval was the time folds' alone, 0.130 +- 0.002 kg, without the 0.105 kg
+    put in (the real 105 g on the insertion stage's base read 0.0935 kg in
+    [0.0927, 0.0943]). Read both ways, the change counts with one degree of
+    freedom: the interval holds the weight."""
+    key, position = hand_position_on_link(arm, HAND_PITCH)
+
+    def run(mass: float, name: str):  # one noise: the runs differ by the payload-shaped changes alone
+        payloads = [(PointPayload(arm.model, key), np.r_[mass, position])] if mass else []
+        return prepare_run(synthesize_measurement(arm, segment, payloads, noise_rms, seed=11), arm, name=name)
+
+    baseline, repeat, weighted = run(0.0, "no_weight"), run(-0.030, "repeat"), run(0.130, "weighted")
+    at = diagnose([weighted], baseline=baseline, repeat=repeat, arm=arm, figures=False, payload_at=(key, position),
+                  profile_payload_mass=False)["payload"]["payload_at"]
+    low, high = at["mass_kg_interval"]
+    assert at["mass_kg"] == pytest.approx(0.130, abs=0.005)
+    assert low <= 0.105 <= high, (low, high)
+    assert at["session_to_session"]["mass_kg"] == pytest.approx(0.030, abs=0.005)
+    # not wider than one degree of freedom makes it: t(0.95, 1) times the change, and the folds' share
+    assert high - at["mass_kg"] < 1.1 * student_t.ppf(0.95, 1) * 0.035
