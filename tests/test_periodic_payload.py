@@ -10,8 +10,8 @@ from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
+from dvrk_dart.diagnosis.payload.intervals import INTERVAL_PROBABILITY
 from dvrk_dart.diagnosis.payload.periodic_payload import (
-    INTERVAL_PROBABILITY,
     Pair,
     fit_payload,
     harmonic_coefficients,

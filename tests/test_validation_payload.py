@@ -193,8 +193,8 @@ def test_a_baseline_of_the_model_cards_repeat_pair_gets_the_other_as_its_repeat(
 
 
 def test_a_quantity_the_session_change_reaches_is_not_determined():
-    """swamp: a component whose size one session's share of the repeat pair's
-    reading reaches becomes null with the reason; the others keep their value."""
+    """swamp: a component whose size the repeat pair's reading reaches
+    becomes null with the reason; the others keep their value."""
     from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, swamp
 
     report = {"g": [-0.04, -0.11, 0.0], "g_interval": [[-0.09, -0.01], [-0.19, -0.03], [0.0, 0.0]], "m": 0.1, "m_interval": [0.08, 0.12]}

@@ -201,7 +201,7 @@ def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | No
 # ------------------------------------------------------------------- payloads
 def _session_fit(problem: Problem, selection: Selection):
     """fit(chosen effects) on the --repeat pair (two sessions without the
-    weight), both ways: what the effects read from a session change alone; None without it."""
+    weight): what the effects read from a session change alone; None without it."""
     repeat = problem.repeat_run
     if repeat is None or repeat.role is not RunRole.DIFFERENCE:
         return None
@@ -210,8 +210,8 @@ def _session_fit(problem: Problem, selection: Selection):
     w2 = problem.joint_weights
     A, g = np.einsum("bjpq,j->pq", session.A, w2), np.einsum("bjp,j->p", session.g, w2)
 
-    def fit(chosen: list[int]) -> list[dict[int, np.ndarray]]:
-        return [selection.selector.fitter.fit(chosen, A, sign * g, None, float((session.s @ w2).sum())).params for sign in (1.0, -1.0)]
+    def fit(chosen: list[int]) -> dict[int, np.ndarray]:
+        return selection.selector.fitter.fit(chosen, A, g, None, float((session.s @ w2).sum())).params
 
     return fit
 

@@ -243,7 +243,9 @@ class PayloadAtPosition(Effect):
         self.joints = joints_moving_link(model, key)
         envelope = link_envelope(model, key)
         reach = np.maximum(np.abs(envelope.lower), np.abs(envelope.upper))
-        self.parameters = (Parameter("mass_kg", "kg", 0.0, max_mass_kg),) + _yaw_path_parameters(max_mass_kg, reach)
+        # the mass a point there reads, of either sign (as the periodic fit's): a bound at zero read a session
+        # change towards a lighter weight as 0 g, in the --repeat pair's reading and in the time folds
+        self.parameters = (Parameter("mass_kg", "kg", -max_mass_kg, max_mass_kg),) + _yaw_path_parameters(max_mass_kg, reach)
 
     #: the mass is what is asked: no prior on it, nor on the yaw path (as the payload's)
     prior_scales = np.full(1 + FIRST_MOMENT_COLUMNS, np.inf)

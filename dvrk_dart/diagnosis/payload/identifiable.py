@@ -1,15 +1,10 @@
 """What the data determine of a selected payload, with cross-validated intervals.
 
 Intervals are delete-one-fold jackknife intervals over the cross-validation
-folds (each fold's fit leaves out one contiguous time segment of every run):
-estimate +- t se, se^2 = (K-1)/K sum_k (theta_k - mean theta)^2, t for the
-central INTERVAL_QUANTILES of Student's law with K - 1 degrees of freedom (the
-jackknife's own; a normal law's z, 1.645 against 2.132 for five folds: J1's
-effort at q = 0 at a hand position in the pitch plane, synthetic, upstream,
-105 and 205 g over six seeds, held the truth in 9 of 12 pairs, now 11 of 12).
-With a --repeat pair, the session change it reads is counted as the periodic
-processing counts it (`with_session_change`: its whole reading, one degree of
-freedom), so both processings' intervals follow one rule.
+folds (each fold's fit leaves out one contiguous time segment of every run),
+with Student's t of the folds' degrees of freedom (`intervals.jackknife_error`);
+with a --repeat pair, the session change it reads is counted as the periodic
+processing counts its own (`intervals.with_session_change`).
 """
 
 from __future__ import annotations
@@ -17,6 +12,7 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import (
     FIRST_MOMENT_COLUMNS,
@@ -37,7 +33,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     pitch_shaft_offsets,
     swamp,
 )
-from dvrk_dart.diagnosis.payload.periodic_payload import central_interval, with_session_change
+from dvrk_dart.diagnosis.payload.intervals import central_interval, jackknife_error, with_session_change
 from dvrk_dart.diagnosis.fit.selection import (
     GAIN_FAILURE_QUANTILE,
     Selector,
@@ -48,24 +44,8 @@ from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: step of the central difference of J1's gravity effort in q1 (rad)
 YAW_SLOPE_STEP_RAD = 1e-4
-#: fit(chosen effects) -> their parameters on two sessions of the run without the weight, read both ways
-#: (the second minus the first and the reverse: which came first is arbitrary, and a bounded parameter,
-#: a mass, reads one sign only)
-SessionFit = Callable[[list[int]], list[dict[int, np.ndarray]]]
-
-
-def jackknife_error(folds: np.ndarray) -> tuple[np.ndarray, float]:
-    """The jackknife standard error of the fold estimates (K, ...) and its degrees of freedom, K - 1."""
-    folds = np.asarray(folds, dtype=float)
-    k = len(folds)
-    if k < 2:
-        return np.zeros(folds.shape[1:]), 1.0
-    return np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0)), float(k - 1)
-
-
-def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
-    """(2, ...) interval around `full` from the fold estimates (K, ...)."""
-    return central_interval(np.asarray(full, dtype=float), *jackknife_error(folds))
+#: fit(chosen effects) -> their parameters, on two sessions of the run without the weight
+SessionFit = Callable[[list[int]], dict[int, np.ndarray]]
 
 
 def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
@@ -142,11 +122,9 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
     return ties
 
 
-def _session_change(readings: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """What the --repeat pair alone reads as each quantity, the larger of its
-    two orders: a session change, as large as a payload run's against its
-    baseline (two sessions too) can hold."""
-    return {key: np.max([np.abs(r[key]) for r in readings], axis=0) for key in readings[0]}
+def _session_change(read: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The size of what the --repeat pair alone reads as each quantity (per component)."""
+    return {key: np.abs(v) for key, v in read.items()}
 
 
 def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tuple[int, dict]], effect: FirstMomentPayload) -> None:
@@ -183,7 +161,9 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     p = fit_params[index]
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
-    session = _session_change([_quantities(arm, effect, read[index], gravity) for read in session_fit(chosen)]) if session_fit is not None else {}
+    session = _session_change(_quantities(arm, effect, session_fit(chosen)[index], gravity)) if session_fit is not None else {}
+    if _mass_unseen(arm, selector, index):
+        session.pop("mass_kg", None)  # the efforts do not see m here: any reading of it, the pair's too, is the prior's
     report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f],
                                   session))
     if session:
@@ -274,7 +254,7 @@ def _at_position(arm: Arm, selector: Selector, chosen: list[int], index: int, at
     def quantities(q: np.ndarray) -> dict[str, np.ndarray]:
         return {"mass_kg": np.array(q[0]), "gravity_efforts_at_q0": _gravity_efforts(gravity, point_mass_parameters(q[0], at.position), q[1:])}
 
-    session = _session_change([quantities(read[at_index]) for read in session_fit(at_set)]) if session_fit is not None else {}
+    session = _session_change(quantities(session_fit(at_set)[at_index])) if session_fit is not None else {}
     report = {"link": at.link_name, "position_m": at.position.tolist(), "cross_validated_fraction": at_cv.fraction}
     report.update(_with_intervals(quantities(selector.fit_all(at_set).params[at_index]),
                                   [quantities(f[at_index]) for f in at_cv.fold_params if at_index in f], session))

@@ -27,8 +27,8 @@ SWAMPED = ("a session change alone (the --repeat pair: the same motion in two se
 
 def swamp(report: dict, key: str, session_share, reasons: dict) -> None:
     """Each component of report[key] whose size the session change the repeat
-    pair reads (`session_share`: one session's spread) reaches is not
-    determined: None, its interval None, the reason in `reasons`."""
+    pair reads (`session_share`: the spread the interval counts for it) reaches
+    is not determined: None, its interval None, the reason in `reasons`."""
     values = report[key]
     scalar = not isinstance(values, list)
     values, intervals = ([values], [report[f"{key}_interval"]]) if scalar else (list(values), list(report[f"{key}_interval"]))

@@ -39,10 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import chi2
-from scipy.stats import t as student_t
 
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
+from dvrk_dart.diagnosis.payload.intervals import central_interval, with_session_change
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.signal import ProcessedRun
@@ -53,8 +53,6 @@ from dvrk_dart.model.joints import N_JOINTS
 VARIANCE_WINDOW_HARMONICS = 3
 #: re-estimations of the variance and refits (the estimate settles in two)
 FEASIBLE_GLS_ITERATIONS = 3
-#: the reported intervals' probability
-INTERVAL_PROBABILITY = 0.90
 #: a quantity is determined when the part of it outside what the efforts see
 #: is below this fraction (round-off of the normal equations)
 ESTIMABLE_TOLERANCE = 1e-6
@@ -187,26 +185,6 @@ class PayloadFit:
         """Value and (2, ...) central interval of the linear quantity `jacobian` @ p (`standard_error`)."""
         value, se, dof = self.standard_error(jacobian)
         return value, central_interval(value, se, dof)
-
-
-def central_interval(value: np.ndarray, se: np.ndarray, dof: np.ndarray) -> np.ndarray:
-    """(2, ...) the central Student-t interval of `INTERVAL_PROBABILITY`."""
-    t = student_t.ppf(0.5 + INTERVAL_PROBABILITY / 2.0, dof)
-    return np.stack([value - t * se, value + t * se])
-
-
-def with_session_change(value: np.ndarray, se: np.ndarray, dof, read: np.ndarray, read_se=0.0) -> tuple[np.ndarray, np.ndarray]:
-    """(2, ...) interval of a value of standard error `se` (`dof` degrees of
-    freedom) that a session change leaves out, and the spread it counts for
-    it: the --repeat pair (two sessions, no payload) reads the change as
-    `read` (standard error `read_se`); its variance read^2 - read_se^2 (never
-    negative) is added to the value's; one pair knows it to one degree of
-    freedom, so the degrees of freedom are Satterthwaite's with read^2's
-    variance as a one-degree estimate's: wide where the session change dominates."""
-    session = np.maximum(read**2 - read_se**2, 0.0)
-    total = se**2 + session
-    dof = total**2 / np.maximum(se**4 / dof + read**4, 1e-300)
-    return central_interval(value, np.sqrt(total), np.maximum(dof, 1.0)), np.sqrt(session)
 
 
 def interval_with_session(fit: PayloadFit, session_fit: PayloadFit | None,

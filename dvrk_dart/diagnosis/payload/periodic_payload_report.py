@@ -12,8 +12,8 @@ from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_C
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
 from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, effort_not_determined, pitch_shaft_offsets, swamp
+from dvrk_dart.diagnosis.payload.intervals import INTERVAL_PROBABILITY
 from dvrk_dart.diagnosis.payload.periodic_payload import (
-    INTERVAL_PROBABILITY,
     Pair,
     PayloadFit,
     fit_payload,
