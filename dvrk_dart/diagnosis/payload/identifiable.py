@@ -161,14 +161,15 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     p = fit_params[index]
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
+    mass_unseen = _mass_unseen(arm, selector, index)
     session = _session_change(_quantities(arm, effect, session_fit(chosen)[index], gravity)) if session_fit is not None else {}
-    if _mass_unseen(arm, selector, index):
+    if mass_unseen:
         session.pop("mass_kg", None)  # the efforts do not see m here: any reading of it, the pair's too, is the prior's
     report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f],
                                   session))
     if session:
         report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
-    if _mass_unseen(arm, selector, index):
+    if mass_unseen:
         report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
     ties = tied_payloads(selector, chosen, index)
     if ties:  # the link is not determined: every interval spans the tied links' estimates
