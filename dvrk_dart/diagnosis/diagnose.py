@@ -200,8 +200,9 @@ def _resimulated(problem: Problem, selection: Selection, simulate: Simulate | No
 
 # ------------------------------------------------------------------- payloads
 def _session_fit(problem: Problem, selection: Selection):
-    """fit(chosen effects) on the --repeat pair (two sessions without the
-    weight): what the effects read from a session change alone; None without it."""
+    """fit(chosen effects, reverse) on the --repeat pair (two sessions without the
+    weight; `reverse`: the first session minus the second): what the effects
+    read from a session change alone; None without it."""
     repeat = problem.repeat_run
     if repeat is None or repeat.role is not RunRole.DIFFERENCE:
         return None
@@ -210,8 +211,8 @@ def _session_fit(problem: Problem, selection: Selection):
     w2 = problem.joint_weights
     A, g = np.einsum("bjpq,j->pq", session.A, w2), np.einsum("bjp,j->p", session.g, w2)
 
-    def fit(chosen: list[int]) -> dict[int, np.ndarray]:
-        return selection.selector.fitter.fit(chosen, A, g, None, float((session.s @ w2).sum())).params
+    def fit(chosen: list[int], reverse: bool = False) -> dict[int, np.ndarray]:
+        return selection.selector.fitter.fit(chosen, A, -g if reverse else g, None, float((session.s @ w2).sum())).params
 
     return fit
 

@@ -44,8 +44,9 @@ from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: step of the central difference of J1's gravity effort in q1 (rad)
 YAW_SLOPE_STEP_RAD = 1e-4
-#: fit(chosen effects) -> their parameters, on two sessions of the run without the weight
-SessionFit = Callable[[list[int]], dict[int, np.ndarray]]
+#: fit(chosen effects, reverse) -> their parameters, on two sessions of the run without the weight
+#: (reverse: the first session minus the second)
+SessionFit = Callable[..., dict[int, np.ndarray]]
 
 
 def _gravity_at_zero(arm: Arm, link: int) -> np.ndarray:
@@ -127,6 +128,25 @@ def _session_change(read: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {key: np.abs(v) for key, v in read.items()}
 
 
+def _first_moment_session_change(arm: Arm, effect: FirstMomentPayload, session_fit: SessionFit, chosen: list[int], index: int,
+                                 gravity: np.ndarray, mass_unseen: bool) -> dict[str, np.ndarray]:
+    """What the --repeat pair reads as the first moment's quantities. A change
+    towards a lighter weight puts the mass on its bound (zero) and the change
+    in the first moment: where the efforts see the mass, its mirror is read in
+    the reverse order, where the mass is free (carriage, -20 g: 0 kg and
+    (0.0005, -0.0045, 0.0073) kg·m one way, 0.020 kg and its point's
+    (-0.0004, -0.0004, -0.0020) the other). Where they do not see it, the
+    reverse fit lands elsewhere (pitch link, -30 g: 0.583 kg), and any
+    reading of the mass is the prior's: none is counted."""
+    read = session_fit(chosen)[index]
+    if not mass_unseen and read[0] <= effect.lower[0] + 1e-9 * effect.upper[0]:  # on its bound, to the solver's round-off
+        read = session_fit(chosen, reverse=True)[index]
+    session = _session_change(_quantities(arm, effect, read, gravity))
+    if mass_unseen:
+        session.pop("mass_kg", None)
+    return session
+
+
 def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tuple[int, dict]], effect: FirstMomentPayload) -> None:
     """Every interval spans the tied links' estimates: the link is not determined."""
     others = [(selector.design.effects[j], q) for j, q in ties]
@@ -162,9 +182,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     report = effect.describe(p)
     report["first_moment_reference_link"] = arm.model.links[effect.reference_key].name
     mass_unseen = _mass_unseen(arm, selector, index)
-    session = _session_change(_quantities(arm, effect, session_fit(chosen)[index], gravity)) if session_fit is not None else {}
-    if mass_unseen:
-        session.pop("mass_kg", None)  # the efforts do not see m here: any reading of it, the pair's too, is the prior's
+    session = _first_moment_session_change(arm, effect, session_fit, chosen, index, gravity, mass_unseen) if session_fit is not None else {}
     report.update(_with_intervals(_quantities(arm, effect, p, gravity), [_quantities(arm, effect, f[index], gravity) for f in fold_params if index in f],
                                   session))
     if session:
