@@ -46,8 +46,3 @@ def jackknife_error(folds: np.ndarray) -> tuple[np.ndarray, float]:
     if k < 2:
         return np.zeros(folds.shape[1:]), 1.0
     return np.sqrt((k - 1) / k * np.sum((folds - folds.mean(0)) ** 2, axis=0)), float(k - 1)
-
-
-def jackknife_interval(full: np.ndarray, folds: np.ndarray) -> np.ndarray:
-    """(2, ...) interval around `full` from the fold estimates (K, ...)."""
-    return central_interval(np.asarray(full, dtype=float), *jackknife_error(folds))
