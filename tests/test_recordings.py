@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 
 from dvrk_dart.cli import main
+from dvrk_dart.io.csv_run import notes_kept, say_once
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from arms import PSM, PSM_ARM
 from recordings import TEST1, TEST2, DATA_2018, cli_json, columns_of, needs_2018, refusal, write_header_csv
@@ -343,3 +344,10 @@ def test_an_excitation_the_run_did_not_play_is_refused_though_its_period_matches
     assert main(["model-errors", "--measured", str(TEST1), "--excitation", str(DATA_2018 / "psm1_fourier_test1_commanded.csv")]) == 0
 
 
+
+
+def test_the_notes_of_a_stage_on_runs_it_made_go_to_its_output_not_the_terminal(capsys):
+    with notes_kept([]) as kept:
+        say_once(["a note only this test says"])
+    assert kept == ["a note only this test says"]
+    assert "a note only this test says" not in capsys.readouterr().err

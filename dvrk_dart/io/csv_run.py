@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import re
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +40,8 @@ HEADERLESS_JOINTS = {3 * N_JOINTS: JOINT_NAMES, 9: JOINT_NAMES[:3]}
 TIME_JITTER = 0.05
 #: the notes this process has printed (each once)
 _NOTES_SAID: set[str] = set()
+#: where notes go instead of stderr (`notes_kept`), innermost last
+_NOTE_SINKS: list[list[str]] = []
 #: fewer rows are no recording (the processing's own minimum is checked by the loader)
 MIN_TIME_ROWS = 3
 
@@ -284,9 +287,24 @@ def still_position_notes(values: np.ndarray, measured: tuple[str, ...], path: Pa
 def say_once(notes: list[str]) -> None:
     """Notes on stderr, each once per process (a command may read a file more than once)."""
     for note in notes:
-        if note not in _NOTES_SAID:
-            _NOTES_SAID.add(note)
+        if note in _NOTES_SAID:
+            continue
+        _NOTES_SAID.add(note)
+        if _NOTE_SINKS:
+            _NOTE_SINKS[-1].append(note)
+        else:
             print(f"dvrk-dart: note: {note}", file=sys.stderr)
+
+
+@contextmanager
+def notes_kept(into: list[str]):
+    """The notes said inside go into `into`, not stderr: for a stage that reads
+    runs it made itself (the blind suite), whose notes belong in its own output."""
+    _NOTE_SINKS.append(into)
+    try:
+        yield into
+    finally:
+        _NOTE_SINKS.pop()
 
 
 def _coupled_joints(motor_map) -> tuple[int, ...]:

@@ -27,6 +27,7 @@ from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, Simulate, loaded_states, simulated_efforts
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.csv_run import notes_kept
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.io.signal import ProcessedRun, process_periodic
 from dvrk_dart.metrics import rms
@@ -160,12 +161,13 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
     noise = measured_noise(spec, real, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), arm.model)
     cases = [c for c in spec["cases"] if c["name"] in spec.get("subset", [c["name"] for c in spec["cases"]])]
     outcomes = []
-    for case in cases:
-        runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
-        known: dict = {}
-        outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline, known)
-                     for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
-    summary = {"cases": outcomes, **{k: v.tolist() for k, v in noise.items()},
+    with notes_kept([]) as notes:  # on the suite's own runs: in blind_suite.json, not in make validate's log
+        for case in cases:
+            runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
+            known: dict = {}
+            outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline, known)
+                         for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
+    summary = {"cases": outcomes, "notes": notes, **{k: v.tolist() for k, v in noise.items()},
                "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out_dir / "blind_suite.json", summary)
