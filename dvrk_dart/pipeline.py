@@ -180,6 +180,7 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     configs = load_campaign(diagnosis_dir=diagnosis_dir, default_dynamics=dynamics)
     summary = _campaign([c for c in configs if not needs_diagnosis(c)], runs_dir, jobs, force, "campaign", executor, ray_address)
 
+    from dvrk_dart.analysis.checks import verdict_label
     from dvrk_dart.analysis.report import build_report
     from dvrk_dart.diagnosis.checks.validation import validation_section
 
@@ -206,7 +207,7 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     for (check, title), status in verdicts.items():
         print(f"  [{status.upper():4}] {title}")
     for verdict in others:
-        print(f"  [{'PASS' if verdict['passed'] else 'FAIL'}] {verdict['check']}: {verdict['value']}")
+        print(f"  [{verdict_label(verdict)}] {verdict['check']}: {verdict['value']}")
     print(f"report: {index.resolve()}")
     for name, error in summary["failures"].items():
         print(f"  failed run {name}: {error}")

@@ -283,12 +283,14 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
     diagnosis_figure = _copy(image, tmp_path / "diag.png")
     section = ("Diagnosis", "<p id='diag'>found it</p><img src='figures/extra/diag.png' alt='d'>", [diagnosis_figure])
     others = [{"check": "held-out q3 closer than the identified model", "passed": False, "value": "0.4208 vs 0.1912 N"},
-              {"check": "payload found", "passed": True, "value": "pitch"}]
+              {"check": "payload found", "passed": True, "value": "pitch"},
+              {"check": "mass from the data alone within 20% (reported as not determined)", "passed": True, "value": "not determined: m·c only"}]
     index = build_report(runs_dir, out, extra_sections=[section], campaign_verdicts=others)
     text = index.read_text()
     assert "<p id='diag'>found it</p>" in text and (out / "figures" / "extra" / "diag.png").is_file()
     # the verdicts' first lines count validate's other checks too, and name the failed ones
-    assert "1 of 2</strong> other checks of the campaign passed" in text and "0.4208 vs 0.1912 N" in text.split("Thresholds")[0]
+    assert "2 of 3</strong> other checks of the campaign passed (1 of them on a figure the diagnosis reports as not determined" in text
+    assert "0.4208 vs 0.1912 N" in text.split("Thresholds")[0]
     assert json.loads((out / "analysis" / "summary.json").read_text())["other_checks"]["failed"] == [
         "held-out q3 closer than the identified model: 0.4208 vs 0.1912 N"]
     before = text

@@ -57,6 +57,7 @@ def test_figures_are_rendered_from_the_validation_outputs(tmp_path, monkeypatch)
                                     "J2 {{ out: periodic/periodic.json : model_vs_measured_two.periodic[1] }}, "
                                     "{{ out: periodic/periodic.json : nothing }}", None, None, None)
     assert page == "J1..J3 0.0465 / 0.0957 / 0.134, J2 0.0957, not measured (run `make validate`)"
+    assert figures.on_page_markdown("{{ out: bench.json : diagnose_s }}", None, None, None) == "not measured (run `make bench`)"
 
 
 def test_every_output_key_is_documented(tmp_path):

@@ -135,3 +135,13 @@ def test_friction_dissipates_the_viscous_correction_stops_at_zero(arm, states):
     assert clipped.named_coefficients()["viscous"] == pytest.approx(-fv, abs=1e-9)
     inside = fit_insertion_terms(arm, [state], ("pitch_load",), residuals=[-0.5 * fv * v])
     assert inside.named_coefficients()["viscous"] == pytest.approx(-0.5 * fv, rel=1e-6)
+
+
+def test_the_answer_says_worse_where_j3s_terms_leave_more_than_j3s_own_friction():
+    """2018: J3's terms took the held-out gap from 0.220 N (J3's friction alone) to 0.414 N: "add nothing" understated it."""
+    from dvrk_dart.diagnosis.output.answer import _insertion_clause
+
+    study = {"gap_holdout_identified": 0.192, "gap_holdout_own_friction": 0.220, "gap_holdout_terms": 0.414, "gap_holdout_simulated": 0.414}
+    assert "make it worse there" in _insertion_clause({"insertion_terms": study})
+    level = {**study, "gap_holdout_terms": 0.220, "gap_holdout_simulated": 0.220}
+    assert "add nothing to it there" in _insertion_clause({"insertion_terms": level})

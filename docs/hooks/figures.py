@@ -8,7 +8,7 @@ rendered at build time; the images of `IMAGES` are copied from there. A list sho
 "a / b / c"; `KEY[i]` picks one entry. `{{ out-source }}` says which
 validation the figures come from (its date, from out/campaign.json). A figure
 that is not there (no validation yet) renders as "not measured (run `make
-validate`)": the site still builds.
+validate`)", or `make bench` for bench.json's: the site still builds.
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ from pathlib import Path
 FIGURE = re.compile(r"\{\{\s*out:\s*([^:}]+?)\s*:\s*([^}]+?)\s*\}\}")
 SOURCE = re.compile(r"\{\{\s*out-source\s*\}\}")
 MISSING = "not measured (run `make validate`)"
+#: files another make target writes than validate (file -> target)
+WRITTEN_BY = {"bench.json": "make bench"}
 #: images a page shows, taken from the validation's outputs at build time (site path -> path under out/)
 IMAGES = {"assets/repeatable_residual_one_period.png": "periodic/repeatable_residual_one_period.png"}
 #: a 1x1 grey PNG standing in for an image no validation has made yet
@@ -61,10 +63,12 @@ def render(value) -> str:
 
 def figure(file: str, key: str) -> str:
     path = _out_dir() / file
+    missing = MISSING.replace("make validate", WRITTEN_BY.get(file, "make validate"))
     try:
-        return render(_lookup(json.loads(path.read_text(encoding="utf-8")), key))
+        value = _lookup(json.loads(path.read_text(encoding="utf-8")), key)
     except (OSError, ValueError):
-        return MISSING
+        return missing
+    return missing if value is None else render(value)
 
 
 def source() -> str:

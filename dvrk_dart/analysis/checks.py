@@ -146,8 +146,22 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
 
 
+def on_not_determined(verdict: dict) -> bool:
+    """A verdict that passes because the diagnosis reports its figure as not determined (a check that allows it)."""
+    return bool(verdict["passed"]) and (str(verdict["value"]).startswith("not determined") or "reported as not determined" in verdict["check"])
+
+
+def verdict_label(verdict: dict) -> str:
+    """PASS, FAIL, or PASS (not determined): a pass on a figure not determined is not a figure within its tolerance."""
+    if not verdict["passed"]:
+        return "FAIL"
+    return "PASS (not determined)" if on_not_determined(verdict) else "PASS"
+
+
 def other_checks(verdicts: list[dict] | None) -> dict:
-    """validate's verdicts beyond the check runs (diagnosis, contact), counted: passed, total, the failed ones."""
+    """validate's verdicts beyond the check runs (diagnosis, contact), counted: passed, total, the failed ones,
+    and how many of the passed rest on a figure not determined."""
     verdicts = verdicts or []
     return {"passed": sum(bool(v["passed"]) for v in verdicts), "total": len(verdicts),
+            "not_determined": sum(on_not_determined(v) for v in verdicts),
             "failed": [f"{v['check']}: {v['value']}" for v in verdicts if not v["passed"]]}

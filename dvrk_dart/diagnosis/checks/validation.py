@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.analysis.checks import verdict_label
 from dvrk_dart.diagnosis.api import DiagnosisConfig, images_of, run_diagnosis, simulation_hook
 from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt
 from dvrk_dart.diagnosis.diagnose import diagnose
@@ -222,7 +223,7 @@ def report_section(out_dir: Path, verdicts: list[dict]) -> tuple[str, str, list[
     files: list[Path] = []
     staging = out_dir / "report_figures"
     staging.mkdir(parents=True, exist_ok=True)  # what else is there stays: the staged files are named, and overwritten, one by one
-    verdicts_table = table(["check", "result", "value"], [[text_cell(v["check"]), text_cell("PASS" if v["passed"] else "FAIL"), text_cell(v["value"])]
+    verdicts_table = table(["check", "result", "value"], [[text_cell(v["check"]), text_cell(verdict_label(v)), text_cell(v["value"])]
                                                           for v in verdicts], css="")
     diagnoses = []
     for name, title in (("payload", "withheld 105 g payload on the parallelogram, full and half speed together (baseline: the session's run without it)"),

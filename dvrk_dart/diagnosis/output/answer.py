@@ -261,10 +261,16 @@ def split_floors(result: dict) -> list | None:
 
 
 def answer_sentence(result: dict) -> str:
-    """The diagnosis in one sentence: the main effect (what, where, how big),
-    how far the gap shrinks on the main joints (held-out runs when there are),
-    the share of the repeatable gap removed, and what is left against the
-    session floor when a --repeat measured it."""
+    """The answer as one string (its paragraphs joined): for checks and tests that read its words."""
+    return " ".join(answer_paragraphs(result))
+
+
+def answer_paragraphs(result: dict) -> list[str]:
+    """The diagnosis's answer: with held-out runs, first what the simulation
+    shows beyond the identified model; then the main effect (what, where, how
+    big), how far the gap shrinks on the main joints (held-out runs when there
+    are), the share of the repeatable gap removed, and what is left against
+    the session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
     shown = _main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
@@ -289,11 +295,11 @@ def answer_sentence(result: dict) -> str:
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \
         else "The gap"
     if effects == "no effect":
-        sentence = beyond + f"{gap} is not explained: no effect of the library was selected; {where}, {gaps}"
+        sentence = f"{gap} is not explained: no effect of the library was selected; {where}, {gaps}"
     elif explained["words"] == "not explained":
-        sentence = beyond + f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {where}, {gaps}"
+        sentence = f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {where}, {gaps}"
     else:
-        sentence = beyond + f"{gap} is {words} by {effects}: {where}, {gaps}"
+        sentence = f"{gap} is {words} by {effects}: {where}, {gaps}"
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
@@ -301,11 +307,13 @@ def answer_sentence(result: dict) -> str:
     sentence += _identified_terms_clause(result) + _constants_clause(result)
     floor = split_floors(result)
     if floor is None:
-        return sentence + "." + _refit_clause(result) + _insertion_clause(result)
-    above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None and a > AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)]]
-    return sentence + (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
-                       if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
-                       "change alone can leave it: no fixed effect is shown to remove more there.") + _refit_clause(result) + _insertion_clause(result)
+        sentence += "."
+    else:
+        above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None and a > AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)]]
+        sentence += (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
+                     if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
+                     "change alone can leave it: no fixed effect is shown to remove more there.")
+    return [paragraph for paragraph in (beyond.strip(), sentence + _refit_clause(result) + _insertion_clause(result)) if paragraph]
 
 
 #: the one rule's words (output/wording.py) for the share of the found efforts the identified terms carry
@@ -375,9 +383,10 @@ def _insertion_clause(result: dict) -> str:
     left = f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N)"
     if study.get("gap_holdout_terms", 0.0) >= study["gap_holdout_own_friction"]:  # the terms do no better than J3's friction alone
         carried = "carries" if study["gap_holdout_own_friction"] < study["gap_holdout_identified"] else "does not carry"
+        worse = "make it worse" if study["gap_holdout_simulated"] > study["gap_holdout_own_friction"] else "add nothing to it"
         return (f" J3's own friction refitted on the training runs {carried} to the held-out runs ({study['gap_holdout_own_friction']:.3g} N, "
                 f"identified model {study['gap_holdout_identified']:.3g} N); J3's terms (friction along the stroke, an effort in "
-                f"ddq3·sign(dq3), a load in q2) add nothing to it there: simulated with them, J3 is at {study['gap_holdout_simulated']:.3g} N"
+                f"ddq3·sign(dq3), a load in q2) {worse} there: simulated with them, J3 is at {study['gap_holdout_simulated']:.3g} N"
                 f"{together}.")
     if study["gap_holdout_simulated"] >= study["gap_holdout_identified"]:  # fitted, but not what the held-out runs show
         return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) do not carry "

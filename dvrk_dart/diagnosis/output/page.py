@@ -14,7 +14,7 @@ from pathlib import Path
 
 from markupsafe import Markup
 
-from dvrk_dart.diagnosis.output.answer import ANSWER_JOINTS, _row_share, _unit, answer_sentence, offset_joints_sentence, plain_name
+from dvrk_dart.diagnosis.output.answer import ANSWER_JOINTS, _row_share, _unit, answer_paragraphs, offset_joints_sentence, plain_name
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.io.html import code_cell, fmt, render, table, text_cell
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -126,7 +126,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
     effects_table, parameters_table = _effects_tables(result, shown)
     payload_words, payload_table = _payload(result)
     offset_joints = result.get("nuisance_offset_joints")
-    return render("diagnosis/fragment.html", title=title, answer=answer_sentence(result), period_figures=period, period_figure=PERIOD_FIGURE,
+    return render("diagnosis/fragment.html", title=title, answer=answer_paragraphs(result), period_figures=period, period_figure=PERIOD_FIGURE,
                   floor_measured=result.get("session_floor") is not None,
                   gap_table=_gap_table(result), gap_after_source=str(result.get("gap_after_source", "")), refit=result.get("refit"),
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],

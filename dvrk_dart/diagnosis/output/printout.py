@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from dvrk_dart.diagnosis.output.answer import answer_sentence, offset_joints_sentence
+from dvrk_dart.diagnosis.output.answer import answer_paragraphs, offset_joints_sentence
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
 def print_diagnosis(result: dict) -> None:
     """What `dvrk-dart diagnose` prints of its result: the answer, the gaps, the effects, the payload."""
-    print(answer_sentence(result))
+    print("\n\n".join(answer_paragraphs(result)))
     print(f"processing: {result['processing']['processing']} ({result['processing'].get('chosen_because') or 'as given'})")
     for name, run in (result["processing"].get("runs") or {}).items():
         if run.get("rate_note"):
