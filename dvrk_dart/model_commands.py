@@ -208,7 +208,7 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
         print(json.dumps(table))
         return 0
     print(f"identified model's residual, {args.measured} vs {args.repeat} ({table['runs'][args.measured]['processing']} processing)")
-    print(f"{'joint':>6} {'rms diff':>9} {'demeaned':>9} {'noise':>9}  verdict")
+    print(f"{'joint':>6} {'unit':>4} {'rms diff':>9} {'demeaned':>9} {'noise':>9} {'one sess.':>9}  verdict")
     def cell(value) -> str:
         return f"{'-':>9}" if value is None else f"{value:9.4f}"
 
@@ -216,10 +216,12 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
     verdicts = table["verdict"] or [table["noise_reason"]] * len(JOINT_NAMES)
     for j, name in enumerate(JOINT_NAMES):
         if table["rms_difference"][j] is None:
-            print(f"{name:>6} {'-':>9} {'-':>9} {'-':>9}  not measured (a run did not record its effort)")
+            print(f"{name:>6} {'':>4} {'-':>9} {'-':>9} {'-':>9} {'-':>9}  not measured (a run did not record its effort)")
             continue
-        print(f"{name:>6} {cell(table['rms_difference'][j])} {cell(table['rms_difference_demeaned'][j])} {cell(noise[j])}  "
-              f"{arm.model.effort_unit(name)}: {verdicts[j]}")
+        print(f"{name:>6} {arm.model.effort_unit(name):>4} {cell(table['rms_difference'][j])} {cell(table['rms_difference_demeaned'][j])} "
+              f"{cell(noise[j])} {cell(table['one_session'][j])}  {verdicts[j]}")
+    print("one sess.: one session's deviation, rms diff / sqrt(2) (the difference carries two sessions'): the floor diagnose --repeat "
+          "uses, from the demeaned difference on joints whose constant it fits per run")
     return 0
 
 

@@ -66,6 +66,8 @@ def test_the_session_floor_of_trajectory_one(capsys):
     assert floor["verdict"][0].startswith("noise")
     assert "session effect" in floor["verdict"][1] and "constant moves" in floor["verdict"][1]
     assert floor["rms_difference_demeaned"][1] < 0.6 * floor["rms_difference"][1]
+    # the difference carries two sessions' deviations: one session's is what diagnose --repeat takes as its floor
+    assert floor["one_session"] == pytest.approx(list(np.array(floor["rms_difference"]) / np.sqrt(2.0)))
 
 
 def test_measured_noise_and_period_on_a_simulated_run(clean_two):

@@ -124,6 +124,8 @@ def floor_table(arm: Arm, a: ProcessedRun, b: ProcessedRun) -> dict:
         "joints": list(JOINT_NAMES), "units": [arm.model.effort_unit(j) for j in JOINT_NAMES],
         "rms_difference": figures(rms(difference)),
         "rms_difference_demeaned": figures(rms(difference - difference.mean(axis=0))),
+        # one session's deviation: the difference carries two (diagnose --repeat's floor; demeaned where it fits each run's constant)
+        "one_session": figures(rms(difference) / np.sqrt(2.0)),
         "noise_predicted_rms": None, "ratio_to_noise": None, "verdict": None,
         "noise_reason": "upstream processing measures no noise (use --processing periodic)",
     }
