@@ -200,7 +200,7 @@ def _validate(out_dir: Path, report_dir: Path, jobs: int, force: bool, dynamics:
     write_json_atomic(out_dir / "campaign.json", summary)
     others = [*json.loads((out_dir / "diagnosis" / "verdicts.json").read_text()), contact_verdict]
     index = build_report(runs_dir, report_dir, extra_sections=[section, datasets, contact, periodic, identification, uncertainty],
-                         campaign_verdicts=others)
+                         campaign_verdicts=others, every_check_run=True)
     checks = pd.read_csv(report_dir / "analysis" / "checks.csv")
     verdicts = checks.groupby(["check", "title"], sort=False)["status"].agg(lambda s: "pass" if (s == "pass").all() else "FAIL")
     print("verdicts:")

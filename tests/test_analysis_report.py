@@ -293,6 +293,11 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
     assert "0.4208 vs 0.1912 N" in text.split("Thresholds")[0]
     assert json.loads((out / "analysis" / "summary.json").read_text())["other_checks"]["failed"] == [
         "held-out q3 closer than the identified model: 0.4208 vs 0.1912 N"]
+    # a folder of some runs: the checks of runs not in it are counted apart, not listed as missing; validate's are missing
+    verdicts = text.split('id="verdicts"')[1].split("Thresholds")[0]
+    assert "Not checked here:" in verdicts and "missing" not in verdicts
+    whole = build_report(runs_dir, tmp_path / "campaign", every_check_run=True).read_text().split('id="verdicts"')[1].split("Thresholds")[0]
+    assert "Not checked here:" not in whole and "missing" in whole
     before = text
     # a failing build leaves the previous report untouched
     with pytest.raises(DvrkDartError):

@@ -111,10 +111,15 @@ def _verdict_row(check, label: str):
                text_cell(check.status.upper(), "status"), css=check.status)
 
 
-def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = None) -> str:
+def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = None, every_check_run: bool = False) -> str:
     """The check runs' verdicts, and a line on validate's other verdicts
-    (diagnosis, contact: `campaign_verdicts`) so the page's first count is every check's."""
+    (diagnosis, contact: `campaign_verdicts`) so the page's first count is every check's.
+    Unless `every_check_run` (validate: a check run it did not make is missing), the checks of
+    runs whose folder is not in the runs folder are counted apart, not listed as missing."""
     checks = analysis.checks
+    present = checks.run.isin([*analysis.runs, *analysis.failures])
+    absent = sorted(set(checks.run[~present])) if not every_check_run else []
+    checks = checks if every_check_run else checks[present]
     passed = int((checks.status == STATUS_PASS).sum())
     total = len(checks)
     ok = passed == total and total > 0
@@ -132,7 +137,8 @@ def verdict_section(analysis: Analysis, campaign_verdicts: list[dict] | None = N
                   missing=int((checks.status == STATUS_MISSING).sum()),
                   summary_table=table(["check", "worst run", "worst component", "value", "condition", "status"], summary_rows),
                   detail_table=table(["check", "run", "worst component", "value", "condition", "status"], detail_rows),
-                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped, others=other_checks(campaign_verdicts))
+                  unreadable=analysis.failures, left_out=analysis.left_out, stopped=stopped, others=other_checks(campaign_verdicts),
+                  absent=absent)
 
 
 def _closeness(row) -> float:
@@ -333,9 +339,10 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
 
 
 def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_sections=None, jobs: int | None = None,
-                 allow_unreadable: bool = True, campaign_verdicts: list[dict] | None = None) -> Path:
+                 allow_unreadable: bool = True, campaign_verdicts: list[dict] | None = None, every_check_run: bool = False) -> Path:
     """Analyse `runs_dir` and write the report folder `out_dir`; returns out_dir/index.html
-    (`campaign_verdicts`: validate's verdicts beyond the check runs, counted in the verdicts' summary).
+    (`campaign_verdicts`: validate's verdicts beyond the check runs, counted in the verdicts' summary;
+    `every_check_run`: the folder is a whole campaign, a check run not in it is missing, not apart).
     Run folders that cannot be read are listed in the report, or, unless
     `allow_unreadable`, refuse the report before anything is written."""
     from dvrk_dart.analysis.figures import build_figures
@@ -365,7 +372,7 @@ def build_report(runs_dir: str | os.PathLike, out_dir: str | os.PathLike, extra_
         extras = _extra_items(extra_sections, building)
         navigation = [(name, name) for name in ("verdicts", "comparison", "realistic-arm", "figures", "results")]
         navigation += [(f"extra-{i}", title) for i, (title, _) in enumerate(extras)] + [("glossary", "glossary"), ("provenance", "provenance")]
-        sections = [verdict_section(analysis, campaign_verdicts), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
+        sections = [verdict_section(analysis, campaign_verdicts, every_check_run), comparison_section(analysis, published), Markup(realistic_arm_section(analysis)),
                     figures_section(figures), per_run_section(analysis)]
         page = render("validation_report.html", title="dvrk_dart validation report", generated=datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
                       runs_dir=str(runs_dir), n_runs=len(analysis.runs), analysis_dir=ANALYSIS_DIR, data_files=REPORT_DATA_FILES,
