@@ -68,11 +68,11 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
         clause, sentence = _insertion_clause({"insertion_terms": study}), insertion_sentence(study)
         assert (") carry to the held-out runs" in clause) == carries, clause
         # 2018: the terms (0.41 N) do no better than J3's own friction refitted (0.225 N), which does not carry either (0.191 N)
-        assert ("J3's own friction refitted on the training runs does not carry" in clause and "add nothing" in clause) == (not carries), clause
+        assert ("J3's own friction refitted on the training runs does not carry" in clause and "make it worse" in clause) == (not carries), clause
         assert ("do not carry" in sentence) == (not carries), sentence
         # terms that do no better than J3's own friction refitted are not named as the gap's make-up: the friction is
         # (a synthetic arm's J3 offset changed by 0.35 N was worded as stroke bumps and a q2 load)
-        assert ("add nothing to it" in sentence and "offset -0.133 N" in sentence) == (not carries), sentence
+        assert ("make it worse" in sentence and "offset -0.133 N" in sentence) == (not carries), sentence
     result = {"identified_model_gap_holdout": [0.086, 0.144, 0.191], "units": ["N·m", "N·m", "N"],
               "one_configuration": {"gap_holdout": [0.066, 0.093, 0.412]}, "processing": {"processing": "periodic", "harmonics": 29}}
     assert "worse than the identified model on q3:" in beyond_identified_sentence(result)
@@ -248,3 +248,13 @@ def test_an_effect_on_the_joints_the_answer_speaks_of_leads_it():
                          {"name": "offset_q1", "kind": "offset", "joints": ["q1"], "selected": True, "parameters": {"offset": -0.1}}]
     result["selection"]["selected"] = ["offset_q5", "offset_q1"]
     assert "(offset_q1" in answer_sentence(result).split(" with ")[0]
+
+
+def test_a_residual_figure_says_its_joint_run_unit_and_stage():
+    from dvrk_dart.diagnosis.output.page import figure_caption
+
+    result = {"units": ["N·m", "N·m", "N", "N·m", "N·m", "N·m", "N·m"], "where": {"run": "2018-test1"}}
+    caption = figure_caption("residual_after_q3", result)
+    assert caption.startswith("q3:") and "(measured - simulated, N)" in caption and "on 2018-test1" in caption
+    assert "with the selected effects" in caption and "before" in figure_caption("residual_before_q1", result)
+    assert figure_caption("a_figure_of_its_own", result) == "a_figure_of_its_own"

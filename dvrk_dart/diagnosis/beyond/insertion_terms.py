@@ -44,7 +44,7 @@ import scipy.optimize
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
-from dvrk_dart.diagnosis.output.wording import share_words
+from dvrk_dart.diagnosis.output.wording import share_words, terms_beside_own_friction
 from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.metrics import rms
@@ -249,7 +249,7 @@ def insertion_sentence(study: dict) -> str:
         return (f"J3's own friction refitted on the training runs (on top of the identified: offset {o['offset']:+.3f} N, viscous "
                 f"{o['viscous']:+.3f} N/(m/s), Coulomb {o['coulomb_sign']:+.3f} N sharp and {o['coulomb_dahl']:+.3f} N pre-sliding) leaves J3 "
                 f"at {study['gap_holdout_own_friction']:.3f} N on the held-out runs (identified model {study['gap_holdout_identified']:.3f} N); "
-                "terms along the stroke, in ddq3·sign(dq3) and in q2 add nothing to it there "
+                f"terms along the stroke, in ddq3·sign(dq3) and in q2 {terms_beside_own_friction(study)} there "
                 f"({study['gap_holdout_terms']:.3f} N with them, {study['gap_holdout_simulated']:.3f} N simulated in DART{removed}){carried}.")
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
             f"({c['acceleration_along_motion_kg']:+.3f} kg: {less} effort than the model while speeding up, {more} while slowing down) and "

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, share_above_floor, words_for
+from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, share_above_floor, terms_beside_own_friction, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -383,10 +383,9 @@ def _insertion_clause(result: dict) -> str:
     left = f"{study['gap_holdout_simulated']:.3g} N on the held-out runs (identified model {study['gap_holdout_identified']:.3g} N)"
     if study.get("gap_holdout_terms", 0.0) >= study["gap_holdout_own_friction"]:  # the terms do no better than J3's friction alone
         carried = "carries" if study["gap_holdout_own_friction"] < study["gap_holdout_identified"] else "does not carry"
-        worse = "make it worse" if study["gap_holdout_simulated"] > study["gap_holdout_own_friction"] else "add nothing to it"
         return (f" J3's own friction refitted on the training runs {carried} to the held-out runs ({study['gap_holdout_own_friction']:.3g} N, "
                 f"identified model {study['gap_holdout_identified']:.3g} N); J3's terms (friction along the stroke, an effort in "
-                f"ddq3·sign(dq3), a load in q2) {worse} there: simulated with them, J3 is at {study['gap_holdout_simulated']:.3g} N"
+                f"ddq3·sign(dq3), a load in q2) {terms_beside_own_friction(study)} there: simulated with them, J3 is at {study['gap_holdout_simulated']:.3g} N"
                 f"{together}.")
     if study["gap_holdout_simulated"] >= study["gap_holdout_identified"]:  # fitted, but not what the held-out runs show
         return (f" J3's terms fitted on the training runs (friction along the stroke, an effort in ddq3·sign(dq3), a load in q2) do not carry "

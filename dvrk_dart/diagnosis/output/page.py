@@ -137,7 +137,18 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
                   nuisance_offsets=[(run, ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
                                     for run, offsets in (result.get("nuisance_offsets") or {}).items()],
                   band=_band(result), payload_words=payload_words, payload_table=payload_table,
-                  other_figures=[(s, Path(s).stem) for s in image_sources if s not in period])
+                  other_figures=[(s, figure_caption(Path(s).stem, result)) for s in image_sources if s not in period])
+
+
+def figure_caption(stem: str, result: dict) -> str:
+    """A residual figure's caption (`residual_before_q1`: the stage, the joint, the run, the unit), else its name."""
+    stage, _, joint = stem.rpartition("_")
+    if stage not in ("residual_before", "residual_after") or joint not in JOINT_NAMES:
+        return stem
+    when = "the simulation before the selected effects" if stage == "residual_before" else "the simulation with the selected effects"
+    run = ((result.get("where") or {}).get("run")) or "the training run"
+    return (f"{joint}: the residual (measured - simulated, {_unit(result, joint)}) on {run} against {joint}'s position, velocity and "
+            f"acceleration, {when}; colour: the velocity's sign.")
 
 
 def diagnosis_page(result: dict, image_sources: list[str], title: str) -> str:

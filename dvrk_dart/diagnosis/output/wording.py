@@ -75,3 +75,9 @@ def joints_apart(explained: dict) -> str:
 def share_words(share: float | None) -> str:
     """A repeatable_share in words: a percentage, or why there is none."""
     return "not determined (no repeatable gap above the session floor)" if share is None or math.isnan(share) else f"{share:.0%}"
+
+
+def terms_beside_own_friction(study: dict) -> str:
+    """J3's terms on the held-out runs against J3's own friction refitted alone (`insertion_terms`' study):
+    what the terms do to it where they do no better (2018: 0.220 N alone, 0.414 N with them was "add nothing")."""
+    return "make it worse" if study["gap_holdout_simulated"] > study["gap_holdout_own_friction"] else "add nothing to it"
