@@ -1,4 +1,4 @@
-"""The diagnosis in words: the answer in one sentence (the main effect, how far
+"""The diagnosis in words: the answer (beyond the identified model with held-out runs; the main effect, how far
 the gap shrinks, what is left against the session floor), effects by their
 plain names, and the clauses of the refit and of J3's terms. Everything reads
 a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""

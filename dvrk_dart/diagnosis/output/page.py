@@ -1,6 +1,6 @@
 """diagnosis.html: the diagnosis as a reader sees it, from the templates of
 dvrk_dart/templates/diagnosis/ in the report's page style (io/html.py): the
-answer in one sentence (answer.py), the residual over one period, the gaps
+answer in its paragraphs (answer.py), the residual over one period, the gaps
 before and after per joint, the ranked effects as bars of explained share,
 the gap split, the parameter band and the payload.
 
