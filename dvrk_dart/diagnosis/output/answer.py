@@ -123,6 +123,14 @@ def _row_share(split_row: dict) -> float | None:
     return share_above_floor(split_row["before"], split_row["after"], split_row["session_floor"])
 
 
+def _floor_source(result: dict) -> str:
+    """Where the session floor was read when no --repeat gave it (the model card's repeat pair)."""
+    source = result.get("repeat_source")
+    if source in (None, "--repeat") or result.get("repeat") is None:
+        return ""
+    return " of the model card's repeat pair (no --repeat)" if "model card" in source else f", read on {result['repeat']} (no --repeat)"
+
+
 def _main_joints(recorded: list[int]) -> list[int]:
     """The joints an answer speaks of among those the runs recorded: J1..J3, else the wrist's."""
     return [j for j in recorded if j < ANSWER_JOINTS] or recorded
@@ -283,7 +291,7 @@ def answer_paragraphs(result: dict) -> list[str]:
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
                                                           split_floors(result))
     words, apart = explained["words"], joints_apart(explained)
-    qualifiers = ["of the gap above the session floor"] if explained.get("above_session_floor") else []
+    qualifiers = [f"of the gap above the session floor{_floor_source(result)}"] if explained.get("above_session_floor") else []
     qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
     if qualifiers:
         words += f" ({'; '.join(qualifiers)})"
@@ -303,7 +311,8 @@ def answer_paragraphs(result: dict) -> list[str]:
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
-        sentence += "; removed: " + ", ".join(f"{j} {'—' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares)) + " of that gap above the session floor"
+        sentence += ("; removed: " + ", ".join(f"{j} {'— (nothing above its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
+                     + " of that gap above the session floor")
     sentence += _identified_terms_clause(result) + _constants_clause(result)
     floor = split_floors(result)
     if floor is None:
