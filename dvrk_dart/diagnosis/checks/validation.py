@@ -29,6 +29,7 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     JointStiffness,
 )
 from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
+from dvrk_dart.diagnosis.output.answer import AT_FLOOR_RATIO, joints_at_level
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
 from dvrk_dart.io.html import render, table, text_cell
 from dvrk_dart.diagnosis.output.wording import share_words
@@ -84,12 +85,21 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     # the bar: the full identified model on the held-out runs, in the same band (api.identified_model_gap)
     bar = np.asarray(result["identified_model_gap_holdout"], dtype=float)
     after = np.asarray(result["gap_after"]["holdout"], dtype=float)
-    share = result.get("repeatable_gap_explained_share")  # of the identified model's repeatable gap (api.run_diagnosis)
-    shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
+    shares = _share_texts(result, result.get("repeatable_gap_explained_share"))  # of the identified model's repeatable gap (api.run_diagnosis)
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
                  "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {arm.model.effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
     return result, verdicts + _refit_verdicts(result, spec) + _insertion_verdicts(result, spec)
+
+
+def _share_texts(result: dict, share: list | None) -> list[str]:
+    """J1..J3's share of the identified model's repeatable gap explained, as the answer counts it: none where
+    that gap is already within 1.5x the session floor (a clamp there read 100 %)."""
+    if share is None:
+        return [""] * 3
+    at_level = joints_at_level(result, result["identified_model_gap_holdout"])
+    return [f"; the identified model's gap within {AT_FLOOR_RATIO:g}x the session floor: no share counted" if j in at_level
+            else f"; {share_words(v)} of the identified model's repeatable gap explained" for j, v in enumerate(share[:3])]
 
 
 def _insertion_verdicts(result: dict, spec: dict) -> list[dict]:
@@ -114,8 +124,7 @@ def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
     if not combined:
         return []
     gap, bar = combined["gap_holdout"], result["identified_model_gap_holdout"]
-    share = combined.get("repeatable_gap_explained_share")
-    shares = [""] * 3 if share is None else [f"; {share_words(v)} of the identified model's repeatable gap explained" for v in share[:3]]
+    shares = _share_texts(result, combined.get("repeatable_gap_explained_share"))
     return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects, J3's terms and the pitch-angle loads) closer than the "
                       f"identified model on {j}", "passed": bool(gap[i] <= bar[i]),
              "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {result['units'][i]}{shares[i]}"}

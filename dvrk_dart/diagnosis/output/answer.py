@@ -152,8 +152,7 @@ def beyond_identified_sentence(result: dict) -> str:
     acted |= set(range(ANSWER_JOINTS)) if combined else set()  # J3's terms and the pitch loads act on J1..J3
     floor = result.get("session_floor")
     level = _held_out_level(result, floor)
-    # a joint where the identified model is already at the floor (or the noise) has nothing repeatable to remove
-    at_level = {j for j in recorded if level[j] is not None and bar[j] <= AT_FLOOR_RATIO * level[j]}
+    at_level = joints_at_level(result, bar) & set(recorded)
     # worse where an effect acts (a joint nothing acts on keeps its figure) and the printed figures show it (0.033456 -> 0.033479
     # was "worse"); at the floor, only beyond it (a tenth of the noise was "worse")
     made_worse = {j for j in recorded if after[j] > bar[j] and f"{after[j]:.3g}" != f"{bar[j]:.3g}" and (j in acted or not result.get("effects"))
@@ -186,6 +185,13 @@ def beyond_identified_sentence(result: dict) -> str:
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
+
+
+def joints_at_level(result: dict, bar: list) -> set[int]:
+    """The joints where the identified model's held-out gap (`bar`) is already within AT_FLOOR_RATIO of the
+    session floor (or, without one, the noise): nothing repeatable to remove there, no share counted."""
+    level = _held_out_level(result, result.get("session_floor"))
+    return {j for j, (b, x) in enumerate(zip(bar, level)) if b is not None and x is not None and b <= AT_FLOOR_RATIO * x}
 
 
 def _held_out_level(result: dict, floor: list | None) -> list:
