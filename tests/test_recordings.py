@@ -351,3 +351,19 @@ def test_the_notes_of_a_stage_on_runs_it_made_go_to_its_output_not_the_terminal(
         say_once(["a note only this test says"])
     assert kept == ["a note only this test says"]
     assert "a note only this test says" not in capsys.readouterr().err
+
+
+@needs_2018
+def test_a_diagnosis_opens_with_what_a_joint_the_log_left_out_may_have_put_there(tmp_path, capsys):
+    """q1 and q2 of 10 s of a 2018 run, q3 (which moved over its whole stroke) not recorded: held at 0 in the
+    simulation, it moves the model's q2 efforts more than q2's gap. The answer says so before any finding
+    (a fuzzed "two" without q3 was answered "a gravity mismatch on insertion_carriage" with nothing else)."""
+    test1 = load_run(resolve_run("2018-test1"), PSM)
+    short = type(test1)(test1.path, test1.data.iloc[:2000].reset_index(drop=True), PSM)
+    path = write_header_csv(tmp_path / "q1_q2.csv", short, columns_of(1, 2))
+    out = tmp_path / "diagnosis"
+    assert main(["diagnose", "--measured", str(path), "--out", str(out), "--processing", "upstream"]) == 0
+    printed = capsys.readouterr().out
+    notes = json.loads((out / "diagnosis.json").read_text())["unrecorded_joint_notes"]
+    assert notes and all(note.startswith("q1_q2: q3 is not recorded") for note in notes) and "q2 " in notes[0]
+    assert printed.startswith("First: q1_q2: q3 is not recorded")

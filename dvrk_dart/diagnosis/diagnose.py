@@ -353,7 +353,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         sim_config=after.sim_config.to_dict(),
         not_in_simulation=after.not_in_simulation,
         recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
-        not_recorded_by=problem.not_recorded_by,
+        not_recorded_by=problem.not_recorded_by, unrecorded_joint_notes=problem.unrecorded_joint_notes(),
         gravity_mismatch=mismatch,
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,

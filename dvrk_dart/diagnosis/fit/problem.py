@@ -30,6 +30,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
 )
 from dvrk_dart.diagnosis.fit.session_floor import session_offset_joints
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 from dvrk_dart.io.reference_data import distinct_inputs
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
@@ -88,6 +89,13 @@ class Problem:
         runs = [r for r in (*self.train_runs, *self.holdout_runs, self.baseline_run, self.repeat_run) if r is not None]
         return {name: list(dict.fromkeys(r.name for r in runs if not r.state.measured[j])) for j, name in enumerate(JOINT_NAMES)
                 if not self.recorded[j] and any(r.state.measured[j] for r in runs)}
+
+    def unrecorded_joint_notes(self) -> list[str]:
+        """Per training run of its own: a joint it did not record, held at 0 in its simulation, that moves the
+        model's efforts on a recorded joint by more than that joint's gap: the effects found there may stand
+        for it (a baseline of the same motion holds it alike, and the difference cancels it)."""
+        return [f"{run.name}: {note}" for run in self.train_runs if run.role is RunRole.RAW
+                for note in unrecorded_joint_notes(self.arm.identified, run.state, rms(self.before_residual(run)))]
 
     @cached_property
     def train_totals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

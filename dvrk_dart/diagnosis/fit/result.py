@@ -217,6 +217,8 @@ class Diagnosis:
     recorded_joints: list
     #: a joint some runs recorded and others not -> the runs that did not
     not_recorded_by: dict
+    #: a joint a run of its own did not record, held at 0, moving the model's efforts on recorded joints more than their gaps
+    unrecorded_joint_notes: list
     #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
     gravity_mismatch: dict | None
     #: with a baseline, a payload-shaped fit whose intervals all hold zero: no payload is named

@@ -328,7 +328,9 @@ def answer_paragraphs(result: dict) -> list[str]:
         sentence += (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
                      if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
                      "change alone can leave it: no fixed effect is shown to remove more there.")
-    return [paragraph for paragraph in (beyond.strip(), sentence + _refit_clause(result) + _insertion_clause(result)) if paragraph]
+    held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
+    caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
+    return [paragraph for paragraph in (caution, beyond.strip(), sentence + _refit_clause(result) + _insertion_clause(result)) if paragraph]
 
 
 #: the one rule's words (output/wording.py) for the share of the found efforts the identified terms carry
