@@ -73,6 +73,12 @@ def test_a_replay_says_what_a_joint_held_at_zero_costs_the_others(tmp_path, caps
     assert "held at 0 m" in note and "q1" in note
     metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert metrics["unrecorded_joint_notes"] == [note.removeprefix("note: ")]
+    # the log's measured trace: q3..q7 not measured (null), not zeros a viewer would draw as measured
+    from dvrk_dart.io.mcap_read import read_mcap
+
+    record = read_mcap(tmp_path / "r" / "run.mcap")
+    for values in (record.effort_measured, record.q_measured, record.dq_measured):
+        assert np.isfinite(values[:, :2]).all() and np.isnan(values[:, 2:]).all()
 
 
 def test_a_q1_only_log_is_diagnosed_with_figures_on_q1_only(tmp_path, capsys):

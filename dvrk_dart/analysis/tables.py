@@ -254,10 +254,11 @@ def _position_rows(loaded: LoadedRun, effort_rows: list[tuple]) -> list[tuple]:
     record, model = loaded.record, loaded.model
     rows: list[tuple] = []
     if record.q_measured is not None:
-        finite = np.all(np.isfinite(record.q) & np.isfinite(record.q_measured), axis=1)
-        if finite.sum() >= MIN_REGIME_SAMPLES:
-            for j, value in enumerate(rms(record.q[finite] - record.q_measured[finite])):
-                rows.append(_row(JOINT_NAMES[j], "rms_q_sim_vs_measured", REGIME_ALL, value, model.position_unit(JOINT_NAMES[j])))
+        for j, joint in enumerate(JOINT_NAMES):  # per joint: a joint the run did not log has no measured positions
+            finite = np.isfinite(record.q[:, j]) & np.isfinite(record.q_measured[:, j])
+            if finite.sum() >= MIN_REGIME_SAMPLES:
+                rows.append(_row(joint, "rms_q_sim_vs_measured", REGIME_ALL, rms(record.q[finite, j] - record.q_measured[finite, j]),
+                                 model.position_unit(joint)))
     at_measured = loaded.metrics.get("rms_model_vs_measured")
     if at_measured is not None:
         sim_vs_measured = {row[0]: row[3] for row in effort_rows if row[1] == "rms_sim_vs_measured" and row[2] == REGIME_ALL}

@@ -78,7 +78,7 @@ def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.Time
         tau, pos = model.effort_unit(joint), model.position_unit(joint)
         sources = {"sim": record.effort_sim, "model": model_total, "measured": record.effort_measured, "command": record.effort_command}
         for source, effort in sources.items():
-            if effort is not None:
+            if effort is not None and np.isfinite(effort[:, j]).any():  # a joint the measured run did not record: no series
                 _series(rec, f"efforts/{joint}/{source}", times, effort[:, j], f"{source} ({tau})", COLORS[source])
         for k, (term, effort) in enumerate(record.effort_model.items()):
             _series(rec, f"model_terms/{joint}/{term}", times, effort[:, j], f"{term} ({tau})", TERM_COLORS[k % len(TERM_COLORS)])
@@ -88,7 +88,7 @@ def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.Time
             "position_sim_minus_measured": (record.q, record.q_measured, pos),
         }
         for kind, (a, b, unit) in errors.items():
-            if b is not None:
+            if b is not None and np.isfinite(b[:, j]).any():
                 _series(rec, f"errors/{kind}/{joint}", times, a[:, j] - b[:, j], f"{joint} ({unit})", COLORS["error"])
 
 

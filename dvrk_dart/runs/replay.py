@@ -24,7 +24,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
-from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process
+from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process, spanning_columns
 from dvrk_dart.metrics import per_measured_joint, rms
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.description import PsmModel
@@ -175,6 +175,12 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         return np.column_stack([np.interp(t, t_meas, x[:, j]) for j in range(x.shape[1])]) if len(t) else np.zeros(shape)
 
     tau_meas, q_meas, dq_meas = (at_logged_times(x) for x in (processed.tau, processed.q, processed.dq))
+    # a joint the run did not record is logged as not measured (null in run.mcap, no trace in the viewers), not as zeros
+    recorded = np.asarray(processed.measured, dtype=bool)  # a joint the run did not record has no figure against the run
+    tau_meas[:, ~recorded] = np.nan
+    unlogged = ~(recorded | spanning_columns(processed.q))  # an effort not recorded, its positions may be
+    q_meas[:, unlogged] = np.nan
+    dq_meas[:, unlogged] = np.nan
     record = RunRecord(
         name=f"replay-{run_label(measured)}_{mode}_cw-{config.counterweight}",
         config={**config.to_dict(), "mode": mode, "measured": str(measured)},
@@ -194,7 +200,6 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
     in_window = t_meas <= duration + 1e-9
     full_model = identified.predict(processed.q[in_window], processed.dq[in_window], processed.ddq[in_window], TERMS)
     sim_terms = simulated_terms(config)
-    recorded = processed.measured  # a joint the run did not record has no figure against the run
     dynamic = mode != "kinematic" and len(t) > 0
     metrics = {
         "scenario": run_label(measured),
