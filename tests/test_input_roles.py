@@ -81,7 +81,14 @@ def test_a_baseline_one_sample_longer_is_still_the_same_motion(arm, tmp_path):
         # the shifted baseline lines up: its positions follow the run's to the recordings' own spread
         assert np.sqrt(np.mean((run.state.q - run.baseline.state.q) ** 2)) < 0.01
     other = prepare_run("one-105g", arm, baseline="two")
-    assert other.role == "other_motion"
+    assert other.role == "other_motion" and "Hz" not in other.baseline_source
+    # the same motion logged at 100 Hz: upstream does not resample it; read as another motion, and said why (it was silent)
+    half_rate = tmp_path / "baseline_100hz.csv"
+    table = np.column_stack([np.arange(len(values[::2])) / 100.0, values[::2]])
+    header = ",".join(["t"] + [f"{f}{j}" for f in ("q", "dq", "tau") for j in range(1, 8)])
+    np.savetxt(half_rate, table, delimiter=",", header=header, comments="")
+    slower = prepare_run("one-105g", arm, baseline=str(half_rate))
+    assert slower.role == "other_motion" and "logged at 100 Hz, the run at 200 Hz" in slower.baseline_source
 
 
 @pytest.mark.parametrize("position, words", [

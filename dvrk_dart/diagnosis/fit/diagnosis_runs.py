@@ -126,7 +126,7 @@ class DiagnosisRun:
     simulated: np.ndarray
     baseline: "DiagnosisRun | None" = None
     role: RunRole = RunRole.RAW
-    #: how a baseline of the same motion was put on the run's samples
+    #: how a baseline of the same motion was put on the run's samples (or why one at another rate is another motion)
     alignment: str | None = None
     #: the run's regressor features, made once (`features`)
     _features: TrajectoryFeatures | None = field(default=None, repr=False, compare=False)
@@ -156,8 +156,8 @@ class DiagnosisRun:
 
     @property
     def baseline_source(self) -> str | None:
-        difference = "subtracted sample by sample" + (f" ({self.alignment})" if self.alignment else "")
-        return {RunRole.DIFFERENCE: difference, RunRole.OTHER_MOTION: "fitted together with the baseline run (another motion)",
+        note = f" ({self.alignment})" if self.alignment else ""
+        return {RunRole.DIFFERENCE: "subtracted sample by sample" + note, RunRole.OTHER_MOTION: "fitted together with the baseline run (another motion)" + note,
                 RunRole.BASELINE: "the baseline itself (withheld effects absent)"}.get(self.role)
 
     def features(self, arm: Arm) -> TrajectoryFeatures:
@@ -238,11 +238,20 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
         base = baseline if isinstance(baseline, DiagnosisRun) else prepare_run(baseline, arm, simulate, base_config, processing=processing)
         offset = motion_offset(run.state, base.state)
         if offset is None:
-            return DiagnosisRun(run.name, run.state, run.simulated, None, role=RunRole.OTHER_MOTION)
+            return DiagnosisRun(run.name, run.state, run.simulated, None, role=RunRole.OTHER_MOTION, alignment=_other_rate(run.state, base))
         if offset == 0 and len(run) == len(base):
             return DiagnosisRun(run.name, run.state, run.simulated, base)
         return _on_common_span(run, base, offset)
     return run
+
+
+def _other_rate(state: ProcessedRun, base: DiagnosisRun) -> str | None:
+    """Why a baseline at another rate is fitted as another motion (upstream's filtered samples are not resampled)."""
+    if abs(state.rate_hz - base.state.rate_hz) <= 1e-6 * state.rate_hz:
+        return None
+    return (f"{base.name} is logged at {base.state.rate_hz:g} Hz, the run at {state.rate_hz:g} Hz: the upstream processing does not "
+            "resample a baseline, so one of the same motion at another rate is read as another motion; give it at the run's rate, or "
+            "--processing periodic (which puts it on the run's rate)")
 
 
 def _on_common_span(run: DiagnosisRun, base: DiagnosisRun, offset: int) -> DiagnosisRun:

@@ -14,6 +14,8 @@ def print_diagnosis(result: dict) -> None:
     for name, run in (result["processing"].get("runs") or {}).items():
         if run.get("rate_note"):
             print(f"note: {name}: {run['rate_note']}")
+    for name, source in (result.get("baseline_source") or {}).items():  # how each run met the baseline (another motion: why)
+        print(f"baseline of {name}: {source}")
     for joint, runs in (result.get("not_recorded_by") or {}).items():
         print(f"{joint}: not recorded by {', '.join(runs)} (its simulation holds it where the log does, at zero without a column): no figure, weight or "
               f"effect on {joint}; what the effects do to {joint} is not checked")
