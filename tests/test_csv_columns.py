@@ -24,6 +24,16 @@ def test_a_header_names_any_subset_of_joints(tmp_path):
     assert np.allclose(run.q[:, :2], half.q[:, :2]) and not run.q[:, 2:].any() and not run.tau[:, 2:].any()
 
 
+def test_a_time_column_of_unix_stamps_gives_the_rate_of_its_span(tmp_path):
+    """Stamps near 1.7e9 s are quantised to ~0.2 us: the median step moved the rate by 2e-5 (a period by 40 times
+    its stated error); the span over all rows does not."""
+    two = load_run(resolve_run("two"), PSM)
+    path = tmp_path / "unix_time.csv"
+    table = pd.DataFrame({"t": 1.7e9 + np.arange(len(two)) / 200.0, **{f"{f}1": v[:, 0] for f, v in (("q", two.q), ("dq", two.dq), ("tau", two.tau))}})
+    table.to_csv(path, index=False, float_format="%.17g")
+    assert abs(load_run(path, PSM).rate_hz / 200.0 - 1.0) < 1e-7
+
+
 def test_a_header_with_the_dvrk_joint_names(tmp_path):
     """position.<joint>/velocity.<joint>/effort.<joint>: the dVRK's coordinates, mapped to the model's."""
     import pandas as pd

@@ -199,7 +199,9 @@ def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
         raise DvrkDartError(f"{path}: time column, row {row}: a step of {step[uneven[0]]:.6g} s where the rows are "
                             f"{median:.6g} s apart (rows must be evenly spaced: resample first, or drop the time column "
                             "and give --rate)")
-    return 1.0 / median
+    # from the whole span, not one step: stamps far from zero (Unix time) are quantised to ~0.2 us, which moved
+    # the median step, and with it a run's period, by 40 times the period's stated error
+    return (len(t) - 1) / float(t[-1] - t[0])
 
 
 @dataclass(frozen=True)
