@@ -93,8 +93,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     """One scenario variant -> its output folder."""
     from dvrk_dart.runs.scenarios import load_scenario
 
-    mode = args.mode or load_scenario(args.scenario).modes[0]
-    return _run_and_write(_run_config(args, args.scenario, mode), Path(args.out))
+    spec = load_scenario(args.scenario)
+    config = _run_config(args, args.scenario, args.mode or spec.modes[0])
+    if spec.kind == "replay":  # every command says how it read a measured run
+        print(f"processing: {config.processing} (a scenario file's replay; dvrk-dart replay chooses it from the run, or takes --processing)")
+    return _run_and_write(config, Path(args.out))
 
 
 def cmd_replay(args: argparse.Namespace) -> int:

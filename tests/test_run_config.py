@@ -152,3 +152,18 @@ def test_model_errors_and_force_record_the_parameter_file(tmp_path, capsys):
     assert main(["force", "--measured", "two", "--processing", "upstream", "--params", str(heavy), "--out", str(tmp_path / "force")]) == 0
     assert str(heavy) in capsys.readouterr().out
     assert json.loads((tmp_path / "force" / "force.json").read_text())["params"]["sha256"] == sha256_of(heavy)
+
+
+def test_a_scenario_files_measured_file_is_read_beside_it_and_its_processing_said(tmp_path, capsys):
+    """A relative `measured = "../data/run.csv"` is the scenario file's, as --config's paths are (it was read from the
+    current folder), and the run says which processing it read it with (it said none)."""
+    from dvrk_dart.io.reference_data import resolve_run
+
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "run.csv").write_bytes(resolve_run("two").read_bytes())
+    (tmp_path / "scenarios").mkdir()
+    scenario = tmp_path / "scenarios" / "mine.toml"
+    scenario.write_text('kind = "replay"\nmeasured = "../data/run.csv"\nmodes = ["velocity"]\n')
+    assert main(["run", str(scenario), "--duration", "0.05", "--out", str(tmp_path / "out")]) == 0
+    assert capsys.readouterr().out.startswith("processing: upstream")
+    assert list(json.loads((tmp_path / "out" / "config.json").read_text())["inputs"]) == [str(tmp_path / "scenarios" / ".." / "data" / "run.csv")]

@@ -171,7 +171,10 @@ def load_scenario_file(path: Path) -> Scenario:
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
         duration = _duration(path, raw) if "duration_s" in raw else None
-        return Scenario(name, kind, modes, counterweights, duration, measured=raw["measured"], source=path, dynamics=dynamics,
+        measured = raw["measured"]
+        if Path(measured).suffix and not Path(measured).is_absolute():  # a file, relative to the scenario file (a run name has no suffix)
+            measured = str(path.parent / measured)
+        return Scenario(name, kind, modes, counterweights, duration, measured=measured, source=path, dynamics=dynamics,
                         arm_model=arm_model)
     duration = _duration(path, raw)
     start = _vector(path, raw, "start_pose", N_JOINTS)
