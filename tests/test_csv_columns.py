@@ -254,3 +254,11 @@ def test_a_log_in_the_dvrk_coordinates_without_names_is_said(tmp_path, capsys):
     result = cli_json(capsys, "model-errors", "--measured", str(path))
     assert "read as the dVRK's joint values" in result["coordinates_note"] and "0.223 / 0.220 / 0.238" in result["coordinates_note"]
     assert cli_json(capsys, "model-errors", "--measured", "two")["coordinates_note"] is None
+
+
+def test_a_trailing_comma_on_every_line_is_named(tmp_path):
+    lines = resolve_run("two").read_text().splitlines()[:300]
+    path = tmp_path / "trailing.csv"
+    path.write_text("".join(line.rstrip("\r") + ",\n" for line in lines))
+    with pytest.raises(DvrkDartError, match="a trailing comma"):
+        load_run(path, PSM)

@@ -222,6 +222,9 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
         layout = layout_from_header(list(raw.iloc[0]), path, dvrk_joints)
         raw = raw.iloc[1:].reset_index(drop=True)
     else:
+        if raw.shape[1] - 1 in HEADERLESS_JOINTS and raw.iloc[:, -1].isna().all():  # every line ends with a separator
+            raise DvrkDartError(f"{path}: {raw.shape[1]} columns without a header row, the last one empty on every row: "
+                                f"a trailing comma? ({raw.shape[1] - 1} columns is a known layout)")
         layout = headerless_layout(raw.shape[1], path, _coupled_joints(motor_map))
     names = [str(c) for c in range(raw.shape[1])]
     for (field, joint), index in layout.columns.items():
