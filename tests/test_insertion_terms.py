@@ -103,7 +103,7 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     from pathlib import Path
 
     from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
-    from dvrk_dart.diagnosis.output.answer import _insertion_clause
+    from dvrk_dart.diagnosis.output.clauses import insertion_clause
     from dvrk_dart.io.arm import load_arm
 
     periodic = {"processing": {"processing": "periodic", "harmonics": 30}, "session_floor": [0.011, 0.05, 0.028]}
@@ -111,7 +111,7 @@ def test_a_diagnosis_reports_the_terms_where_they_apply(arm):
     # the share of J3's gap above the floor (0.028 N) removed, in RMS-equivalents: 0.134 -> 0.081 N is about 42 %
     above = [np.sqrt(g**2 - 0.028**2) for g in (study["gap_holdout_identified"], study["gap_holdout_simulated"])]
     assert study["gap_holdout_simulated"] <= J3_TARGET_N and study["repeatable_gap_removed_share"] == pytest.approx(1 - above[1] / above[0])
-    assert "ddq3·sign(dq3)" in study["words"] and f"{study['gap_holdout_simulated']:.3g} N" in _insertion_clause({"insertion_terms": study})
+    assert "ddq3·sign(dq3)" in study["words"] and f"{study['gap_holdout_simulated']:.3g} N" in insertion_clause({"insertion_terms": study})
     assert insertion_applies(arm, periodic, ["one"], ["two"], None)
     mtm = load_arm(Path(__file__).parents[1] / "models" / "mtm" / "mtm.toml")
     assert not insertion_applies(mtm, periodic, ["mtm-one"], ["mtm-two"], None)
@@ -139,9 +139,9 @@ def test_friction_dissipates_the_viscous_correction_stops_at_zero(arm, states):
 
 def test_the_answer_says_worse_where_j3s_terms_leave_more_than_j3s_own_friction():
     """2018: J3's terms took the held-out gap from 0.220 N (J3's friction alone) to 0.414 N: "add nothing" understated it."""
-    from dvrk_dart.diagnosis.output.answer import _insertion_clause
+    from dvrk_dart.diagnosis.output.clauses import insertion_clause
 
     study = {"gap_holdout_identified": 0.192, "gap_holdout_own_friction": 0.220, "gap_holdout_terms": 0.414, "gap_holdout_simulated": 0.414}
-    assert "make it worse there" in _insertion_clause({"insertion_terms": study})
+    assert "make it worse there" in insertion_clause({"insertion_terms": study})
     level = {**study, "gap_holdout_terms": 0.220, "gap_holdout_simulated": 0.220}
-    assert "add nothing to it there" in _insertion_clause({"insertion_terms": level})
+    assert "add nothing to it there" in insertion_clause({"insertion_terms": level})

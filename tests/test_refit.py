@@ -55,11 +55,11 @@ def test_refit_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
 
 def test_the_answer_names_the_joints_whose_gap_the_refit_halves(refit):
     """The sentence at the top names a joint only where the refit at least halves its held-out gap in squares."""
-    from dvrk_dart.diagnosis.output.answer import _refit_clause
+    from dvrk_dart.diagnosis.output.clauses import refit_clause
 
     result, _ = refit
     units = [PSM.effort_unit(j) for j in JOINT_NAMES]
-    clause = _refit_clause({"refit": result, "units": units})
+    clause = refit_clause({"refit": result, "units": units})
     assert "q1" in clause and "q3" not in clause
     flat = {"refit": {**result, "gap_holdout_refit": result["gap_holdout_arm_params"]}, "units": units}
-    assert "does not halve" in _refit_clause(flat)
+    assert "does not halve" in refit_clause(flat)

@@ -57,7 +57,8 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
     carrying, never as what J3's gap is made of; the joints where the one
     configuration is worse are named."""
     from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_sentence
-    from dvrk_dart.diagnosis.output.answer import _insertion_clause, beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.clauses import insertion_clause
 
     coefficients = {"acceleration_along_motion_kg": 0.234, "pitch_load_sin_q2": 0.026, "pitch_load_cos_q2": 0.126,
                     "offset": -0.3, "viscous": -1.204, "coulomb_sign": -0.471, "coulomb_dahl": 0.892}
@@ -65,7 +66,7 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
     for simulated, carries in ((0.412, False), (0.081, True)):
         study = {"gap_holdout_simulated": simulated, "gap_holdout_terms": simulated, "gap_holdout_identified": 0.191,
                  "gap_holdout_own_friction": 0.225, "repeatable_gap_removed_share": None, "coefficients": coefficients, "own_friction_coefficients": own}
-        clause, sentence = _insertion_clause({"insertion_terms": study}), insertion_sentence(study)
+        clause, sentence = insertion_clause({"insertion_terms": study}), insertion_sentence(study)
         assert (") carry to the held-out runs" in clause) == carries, clause
         # 2018: the terms (0.41 N) do no better than J3's own friction refitted (0.225 N), which does not carry either (0.191 N)
         assert ("J3's own friction refitted on the training runs does not carry" in clause and "make it worse" in clause) == (not carries), clause

@@ -14,7 +14,8 @@ from pathlib import Path
 
 from markupsafe import Markup
 
-from dvrk_dart.diagnosis.output.answer import ANSWER_JOINTS, _row_share, _unit, answer_paragraphs, offset_joints_sentence, plain_name
+from dvrk_dart.diagnosis.output.answer import _row_share, answer_paragraphs, offset_joints_sentence, plain_name
+from dvrk_dart.diagnosis.output.clauses import ANSWER_JOINTS, effort_unit
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.io.html import code_cell, fmt, render, table, text_cell
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -41,7 +42,7 @@ def _gap_table(result: dict) -> Markup:
             values = (result.get(key) or {}).get(split)
             if values is not None:
                 rows.append([text_cell(f"{key.replace('gap_', '')}, {split}"), *(text_cell("not measured" if v is None else fmt(v)) for v in values)])
-    return table(["gap (RMS measured - simulated)", *(f"{j} ({_unit(result, j)})" for j in JOINT_NAMES)], rows, css="")
+    return table(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES)], rows, css="")
 
 
 def _shown_effects(result: dict) -> list[dict]:
@@ -82,7 +83,7 @@ def _band(result: dict) -> dict | None:
     band = result.get("parameter_band")
     if band is None:
         return None
-    rows = [[text_cell(f"{j} ({_unit(result, j)})"), text_cell(f"{band['measured_inside_band_fraction'][j]:.3f}"),
+    rows = [[text_cell(f"{j} ({effort_unit(result, j)})"), text_cell(f"{band['measured_inside_band_fraction'][j]:.3f}"),
              text_cell(f"{band['rms_measured_outside_band'][j]:.4f}"), text_cell("outside" if j in band["joints_outside_band"] else "inside")]
             for j in JOINT_NAMES[:3] if band["measured_inside_band_fraction"][j] is not None]
     return {"sentence": band_sentence(result), "rule": band["rule"], "parameters": str(band["parameters"]),
@@ -103,7 +104,7 @@ def _payload(result: dict) -> tuple[str, Markup | None]:
         return "", None
     if payload.get("words"):
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
-        efforts = table(["payload at q = 0", *(f"{j} ({_unit(result, j)})" for j in JOINT_NAMES[:3])],
+        efforts = table(["payload at q = 0", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES[:3])],
                         [[text_cell("gravity effort (interval)"), *(text_cell(_value_interval(v, i)) for v, i in zip(g[:3], gi[:3]))]], css="")
         return " ".join(payload["words"]), efforts
     text = (f"payload: {payload['mass_kg']:.3f} kg on {payload['link']} ({payload['group']}), "
@@ -147,7 +148,7 @@ def figure_caption(stem: str, result: dict) -> str:
         return stem
     when = "the simulation before the selected effects" if stage == "residual_before" else "the simulation with the selected effects"
     run = ((result.get("where") or {}).get("run")) or "the training run"
-    return (f"{joint}: the residual (measured - simulated, {_unit(result, joint)}) on {run} against {joint}'s position, velocity and "
+    return (f"{joint}: the residual (measured - simulated, {effort_unit(result, joint)}) on {run} against {joint}'s position, velocity and "
             f"acceleration, {when}; colour: the velocity's sign.")
 
 
