@@ -242,8 +242,12 @@ def test_report_numbers_equal_the_analysis_tables(report):
     for cell in cells:
         if cell["tag"] == "td" and not cell["code"] and looks_numeric(cell["text"]):
             assert "data-value" in cell["attrs"], cell
-    # every verdict and every published number is in the report
-    assert {(c["attrs"]["data-check"], c["attrs"]["data-run"]) for c in numeric if "data-check" in c["attrs"]} == set(checks.index)
+    # every verdict on a run of the folder and every published number is in the report (the checks of runs not in
+    # the folder are named in one line, not listed as missing: the analysis's checks.csv keeps them)
+    present = {r["run"] for r in summary["runs"]} | set(summary["unreadable_runs"] or {})
+    assert any(key[1] in present for key in checks.index)
+    assert {(c["attrs"]["data-check"], c["attrs"]["data-run"]) for c in numeric if "data-check" in c["attrs"]} == {
+        key for key in checks.index if key[1] in present}
     assert {(c["attrs"]["data-published"], c["attrs"]["data-component"]) for c in numeric if c["attrs"].get("data-field") == "published_value"} == set(
         zip(comparison.published, comparison.component)
     )
