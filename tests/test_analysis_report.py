@@ -288,7 +288,8 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
     section = ("Diagnosis", "<p id='diag'>found it</p><img src='figures/extra/diag.png' alt='d'>", [diagnosis_figure])
     others = [{"check": "held-out q3 closer than the identified model", "passed": False, "value": "0.4208 vs 0.1912 N"},
               {"check": "payload found", "passed": True, "value": "pitch"},
-              {"check": "mass from the data alone within 20% (reported as not determined)", "passed": True, "value": "not determined: m·c only"}]
+              {"check": "mass from the data alone within 20% (reported as not determined)", "passed": True, "value": "not determined: m·c only",
+               "not_determined": True}]
     index = build_report(runs_dir, out, extra_sections=[section], campaign_verdicts=others)
     text = index.read_text()
     assert "<p id='diag'>found it</p>" in text and (out / "figures" / "extra" / "diag.png").is_file()

@@ -147,8 +147,8 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
 
 
 def on_not_determined(verdict: dict) -> bool:
-    """A verdict that passes because the diagnosis reports its figure as not determined (a check that allows it)."""
-    return bool(verdict["passed"]) and (str(verdict["value"]).startswith("not determined") or "reported as not determined" in verdict["check"])
+    """A verdict that passes on a figure the diagnosis reports as not determined (a check that allows it says so: `not_determined`)."""
+    return bool(verdict["passed"]) and bool(verdict.get("not_determined"))
 
 
 def verdict_label(verdict: dict) -> str:

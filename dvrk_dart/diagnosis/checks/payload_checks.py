@@ -63,7 +63,7 @@ def _mass_verdict(payload: dict, m_true: float, tol: float, title: str) -> dict:
     check = f"{title}: mass from the data alone within {tol:.0%} of {m_true} kg"
     if payload["mass_kg"] is None:
         reason = payload.get("not_determined", {}).get("mass_kg", "")
-        return {"check": check + " (reported as not determined)", "passed": bool(reason), "value": f"not determined: {reason}"}
+        return {"check": check + " (reported as not determined)", "passed": bool(reason), "value": f"not determined: {reason}", "not_determined": True}
     lo, hi = payload["mass_kg_interval"]
     error = payload["mass_kg"] / m_true - 1.0
     return {"check": check + ("" if payload["mass_identified"] else " (reported as not identified)"),
@@ -97,7 +97,8 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
             check = f"{title}: hand placement's first moment {name} inside the reported interval"
             if intervals[axis] is None:  # reported as not determined, with the reason
                 reason = payload.get("not_determined", {}).get("first_moment_base_at_q0_kg_m", "")
-                verdicts.append({"check": check + " (or not determined)", "passed": bool(reason), "value": f"not determined: {reason}"})
+                verdicts.append({"check": check + " (or not determined)", "passed": bool(reason), "value": f"not determined: {reason}",
+                                 "not_determined": True})
                 continue
             verdicts.append({"check": check, "passed": _inside(hand_moment[axis], intervals[axis]),
                              "value": f"{hand_moment[axis]:+.4f} kg·m vs [{intervals[axis][0]:+.4f}, {intervals[axis][1]:+.4f}]"})
@@ -124,7 +125,7 @@ def _mass_at_hand_verdict(check: str, at: dict, m_true: float, tol: float) -> di
     value = f"{at['mass_kg']:.3f} kg ({error:+.0%}), interval {lo:.3f}-{hi:.3f} kg"
     if not lo > 0.0:
         return {"check": check + " (reported as not determined: its interval holds zero; the interval holds the weight)",
-                "passed": bool(lo <= m_true <= hi), "value": value}
+                "passed": bool(lo <= m_true <= hi), "value": value, "not_determined": True}
     return {"check": check, "passed": abs(error) <= tol, "value": value}
 
 
