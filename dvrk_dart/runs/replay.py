@@ -163,6 +163,15 @@ class ReplayDriver:
         return (sim.dq - dq_before) / self.dt, sim.last_effort
 
 
+def _not_recorded_as_nan(processed: ProcessedRun, tau: np.ndarray, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The measured columns as logged: a joint the run did not record is not measured (null in run.mcap, no
+    series in run.rrd), not zeros a viewer draws as measured; its positions stay where the log has them."""
+    recorded = np.asarray(processed.measured, dtype=bool)
+    unlogged = ~(recorded | spanning_columns(processed.q))
+    tau[:, ~recorded], q[:, unlogged], dq[:, unlogged] = np.nan, np.nan, np.nan
+    return tau, q, dq
+
+
 def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas, duration, wall) -> RunRecord:
     dt = config.dt_s
     t = np.asarray(log.steps, dtype=float) * dt
@@ -174,13 +183,8 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
     def at_logged_times(x: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(t, t_meas, x[:, j]) for j in range(x.shape[1])]) if len(t) else np.zeros(shape)
 
-    tau_meas, q_meas, dq_meas = (at_logged_times(x) for x in (processed.tau, processed.q, processed.dq))
-    # a joint the run did not record is logged as not measured (null in run.mcap, no trace in the viewers), not as zeros
+    tau_meas, q_meas, dq_meas = _not_recorded_as_nan(processed, *(at_logged_times(x) for x in (processed.tau, processed.q, processed.dq)))
     recorded = np.asarray(processed.measured, dtype=bool)  # a joint the run did not record has no figure against the run
-    tau_meas[:, ~recorded] = np.nan
-    unlogged = ~(recorded | spanning_columns(processed.q))  # an effort not recorded, its positions may be
-    q_meas[:, unlogged] = np.nan
-    dq_meas[:, unlogged] = np.nan
     record = RunRecord(
         name=f"replay-{run_label(measured)}_{mode}_cw-{config.counterweight}",
         config={**config.to_dict(), "mode": mode, "measured": str(measured)},
