@@ -88,7 +88,7 @@ def with_baseline_motion(processing: RunProcessing, baseline, measured_list: lis
     base = _load_state(baseline, model, processing)[1]
     if any(motion_offset(state, on_rate(base, state.rate_hz)) is not None for state in states):
         return processing
-    rates = sorted({f"{state.rate_hz:g}" for state in states if abs(state.rate_hz - base.rate_hz) > 1e-6 * base.rate_hz})
+    rates = sorted({f"{state.rate_hz:g}" for state in states if not same_rate(state.rate_hz, base.rate_hz)})
     other_rate = (f"; the baseline is logged at {base.rate_hz:g} Hz, the runs at {', '.join(rates)} Hz (put on their rate by its "
                   "harmonic series, it still differs)") if rates else ""
     return RunProcessing(why=NO_BASELINE_MOTION + other_rate, topics=processing.topics)
@@ -216,10 +216,15 @@ def simulated_efforts(arm: Arm, state: ProcessedRun, simulate: Simulate | None, 
     return state.in_band(config_effort_by_formula(arm, config, state.q, state.dq, state.ddq))
 
 
+def same_rate(a_hz: float, b_hz: float) -> bool:
+    """Two logs at one rate (to a millionth: rates read from time columns or manifests)."""
+    return abs(a_hz - b_hz) <= 1e-6 * a_hz
+
+
 def on_rate(state: ProcessedRun, rate_hz: float | None) -> ProcessedRun:
     """A periodic run put on `rate_hz` (its series, exact in its band) where it was logged at another rate;
     otherwise as it is (upstream's filtered samples are not resampled: such runs stay another motion)."""
-    if rate_hz is None or state.periodic is None or abs(state.rate_hz - rate_hz) <= 1e-6 * rate_hz:
+    if rate_hz is None or state.periodic is None or same_rate(state.rate_hz, rate_hz):
         return state
     return state.at_rate(rate_hz)
 
@@ -247,7 +252,7 @@ def prepare_run(spec, arm: Arm, simulate: Simulate | None = None, base_config: S
 
 def _other_rate(state: ProcessedRun, base: DiagnosisRun) -> str | None:
     """Why a baseline at another rate is fitted as another motion (upstream's filtered samples are not resampled)."""
-    if abs(state.rate_hz - base.state.rate_hz) <= 1e-6 * state.rate_hz:
+    if same_rate(state.rate_hz, base.state.rate_hz):
         return None
     return (f"{base.name} is logged at {base.state.rate_hz:g} Hz, the run at {state.rate_hz:g} Hz: the upstream processing does not "
             "resample a baseline, so one of the same motion at another rate is read as another motion; give it at the run's rate, or "
@@ -267,7 +272,7 @@ def _on_common_span(run: DiagnosisRun, base: DiagnosisRun, offset: int) -> Diagn
 def motion_offset(a: ProcessedRun, b: ProcessedRun) -> int | None:
     """The shift (samples) that puts b on a's samples when both record the same
     motion (decided from the positions over their common span), else None."""
-    if abs(a.rate_hz - b.rate_hz) > 1e-6 * a.rate_hz:
+    if not same_rate(a.rate_hz, b.rate_hz):
         return None
     limit = int(min(len(a), len(b)) * MAX_START_OFFSET_SHARE)
     end = min(len(a), len(b)) - limit

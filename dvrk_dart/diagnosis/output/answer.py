@@ -117,11 +117,9 @@ def _row_share(split_row: dict) -> float | None:
 
 
 def _floor_source(result: dict) -> str:
-    """Where the session floor was read when no --repeat gave it (the model card's repeat pair)."""
-    source = result.get("repeat_source")
-    if source in (None, "--repeat") or result.get("repeat") is None:
-        return ""
-    return " of the model card's repeat pair (no --repeat)" if "model card" in source else f", read on {result['repeat']} (no --repeat)"
+    """Where the session floor was read when no --repeat gave it: a repeat without the option is the model card's pair
+    (`session_floor.card_repeat`)."""
+    return "" if result.get("repeat") is None or result.get("repeat_source") == "--repeat" else " of the model card's repeat pair (no --repeat)"
 
 
 def _main_joints(recorded: list[int]) -> list[int]:
