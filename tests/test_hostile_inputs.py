@@ -439,3 +439,20 @@ def test_a_previous_folder_left_aside_is_cleaned_only_when_nothing_of_the_users_
     with building_folder(target, "run") as folder:
         (folder / "a.txt").write_text("new")
     assert not empty.exists() and (kept / "mine.txt").read_text() == "the user's"
+
+
+def test_a_repeat_of_another_rate_is_refused_before_any_replay(tmp_path, capsys, monkeypatch):
+    """Upstream processing does not resample: the repeat at half the rate is another motion, said before 30 s of replays."""
+    import dvrk_dart.diagnosis.api as api
+
+    def no_replay(*_, **__):
+        raise AssertionError("a replay ran before the repeat was checked")
+
+    monkeypatch.setattr(api, "simulation_hook", lambda *_, **__: no_replay)
+    values = np.loadtxt(resolve_run("one-no-weight"), delimiter=",")[::2]
+    path = tmp_path / "half.csv"
+    names = [f"{kind}{j}" for kind in ("q", "dq", "tau") for j in range(1, 8)]
+    np.savetxt(path, np.column_stack([np.arange(len(values)) / 100.0, values]), delimiter=",", header=",".join(["t", *names]), comments="")
+    code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--repeat", path, "--processing", "upstream", "--out", tmp_path / "d")
+    assert code == 2 and len(lines) == 1 and "--repeat half: not the same motion as one" in lines[0], lines
+    assert not (tmp_path / "d").exists()

@@ -28,7 +28,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     loaded_states,
     prepare_run,
 )
-from dvrk_dart.diagnosis.fit.session_floor import session_offset_joints
+from dvrk_dart.diagnosis.fit.session_floor import check_repeat_motion, session_offset_joints
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 from dvrk_dart.io.reference_data import distinct_inputs
@@ -261,11 +261,12 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
             spec, baseline = spec
         return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing, rate_hz=rate_hz)
 
-    if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
-        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], arm.model, run_processing)])
     # a baseline and a repeat are subtracted from, or compared with, the runs sample by sample: on their rate
     rate = next(iter(loaded_states(measured_list[:1], arm.model, run_processing)), None)
     rate = rate.rate_hz if rate is not None else None
+    check_repeat_motion(baseline if baseline is not None else measured_list[0], repeat, arm.model, run_processing, rate)
+    if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
+        simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], arm.model, run_processing)])
     baseline_run = as_run(baseline, rate_hz=rate) if baseline is not None else None
     train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]

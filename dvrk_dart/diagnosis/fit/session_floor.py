@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, same_motion
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, on_rate, same_motion
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, sha256_of
+from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import moved_constants, rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -41,11 +41,25 @@ def session_floor(a: DiagnosisRun, b: DiagnosisRun, constant_joints: np.ndarray 
     difference's mean is no part of the floor)."""
     pair = paired_gaps(a, b)
     if pair is None:
-        raise DvrkDartError(f"--repeat {b.name}: not the same motion as {a.name} (a repeat is the same trajectory at the same speed)")
+        raise DvrkDartError(_not_a_repeat(a.name, b.name))
     difference = pair[0] - pair[1]
     if constant_joints is not None:
         difference = difference - np.asarray(constant_joints, dtype=float) * difference.mean(axis=0)
     return rms(difference) / math.sqrt(2.0)
+
+
+def _not_a_repeat(reference: str, repeat: str) -> str:
+    return f"--repeat {repeat}: not the same motion as {reference} (a repeat is the same trajectory at the same speed)"
+
+
+def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProcessing, rate_hz: float | None) -> None:
+    """--repeat records the reference run's motion (checked on the processed runs, before any replay)."""
+    if repeat is None or isinstance(repeat, (tuple, DiagnosisRun)) or isinstance(reference, (tuple, DiagnosisRun)):
+        return
+    a, b = (on_rate(state, rate_hz) for state in loaded_states([reference, repeat], model, processing))
+    n = min(len(a), len(b))
+    if not same_motion(a.head(n), b.head(n)):
+        raise DvrkDartError(_not_a_repeat(run_label(reference), run_label(repeat)))
 
 
 def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarray] | None:
