@@ -125,13 +125,13 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """The diagnosis folder is built beside --out and replaces it whole at the end."""
-    from dvrk_dart.diagnosis.api import DiagnosisConfig, run_diagnosis
+    from dvrk_dart.diagnosis.api import DiagnosisConfig, files_written, run_diagnosis
     from dvrk_dart.diagnosis.output.printout import print_diagnosis
     from dvrk_dart.io.outputs import building_folder, check_output_folder
 
     config = DiagnosisConfig(args.measured, args.baseline, args.train, args.holdout, args.repeat, args.payload_at, args.parameter_band,
                              args.refit, args.processing, args.executor, args.jobs, args.ray_address, topics=reading_options(args))
-    check_output_folder(args.out, "diagnosis")
+    check_output_folder(args.out, "diagnosis", writes=files_written(config))
     with building_folder(args.out, "diagnosis") as folder:
         print_diagnosis(run_diagnosis(command_arm(args), config, folder))
     print(f"written {Path(args.out) / 'diagnosis.json'}")

@@ -456,3 +456,21 @@ def test_a_repeat_of_another_rate_is_refused_before_any_replay(tmp_path, capsys,
     code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--repeat", path, "--processing", "upstream", "--out", tmp_path / "d")
     assert code == 2 and len(lines) == 1 and "--repeat half: not the same motion as one" in lines[0], lines
     assert not (tmp_path / "d").exists()
+
+
+def test_a_file_of_yours_where_the_diagnosis_writes_is_refused_before_any_replay(tmp_path, capsys, monkeypatch):
+    import dvrk_dart.diagnosis.api as api
+    from dvrk_dart.io.outputs import write_marker
+
+    def no_replay(*_, **__):
+        raise AssertionError("a replay ran before the folder was checked")
+
+    monkeypatch.setattr(api, "simulation_hook", lambda *_, **__: no_replay)
+    out = tmp_path / "d"
+    out.mkdir()
+    write_marker(out, "diagnosis")
+    (out / "refit").mkdir()
+    (out / "refit" / "params.json").write_text("{}")
+    code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--holdout", "two", "--refit", "--out", out)
+    assert code == 2 and len(lines) == 1 and "refit/params.json is a file of yours" in lines[0], lines
+    assert (out / "refit" / "params.json").read_text() == "{}"

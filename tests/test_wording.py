@@ -32,6 +32,16 @@ def test_only_the_joints_the_effects_act_on_count():
     assert answer_sentence(result).startswith("The gap is not explained")
 
 
+def test_a_joint_with_no_gap_to_explain_does_not_count():
+    """A held wrist a simulated run models exactly (gap 5e-12 before, 4e-7 after) is not a joint the effects failed on."""
+    gap_before = {"train": [0.116, 0.066, 0.275, 5e-12, 0.0, 0.0, 0.0], "holdout": None}
+    gap_after = {"train": [0.018, 0.015, 0.110, 4e-7, 0.0, 0.0, 0.0], "holdout": None}
+    entries = [{"name": "payload_on_tool_roll", "joints": ["q1", "q2", "q3", "q4"], "selected": True}]
+    explained = explanation(gap_before, gap_after, JOINTS, entries)
+    assert explained["joints"] == ["q1", "q2", "q3"] and explained["words"] == "mostly explained"
+    assert explained["removed_share"] == pytest.approx((0.116 - 0.018) / 0.116 / 3 + (0.066 - 0.015) / 0.066 / 3 + (0.275 - 0.110) / 0.275 / 3)
+
+
 def test_the_answer_says_what_the_json_says():
     for after, words in (([0.3, 0.1, 0.6], "mostly explained"), ([0.3, 0.17, 0.6], "partly explained")):
         result = _result([0.3, 0.25, 0.6], after, ["q2"])

@@ -18,9 +18,10 @@ from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insert
 from dvrk_dart.diagnosis.beyond.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
 from dvrk_dart.diagnosis.output.page import diagnosis_page
 from dvrk_dart.diagnosis.payload.parameter_band import apply_band, band_run, load_band
-from dvrk_dart.diagnosis.beyond.refit import check_refit_inputs, refit_check
+from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, check_refit_inputs, refit_check
 from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.identification.outputs import IDENTIFICATION_FILES
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
@@ -121,6 +122,12 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path,
 def images_of(folder: Path) -> list[Path]:
     """The diagnosis figures (not those of the replay logs)."""
     return sorted(p for p in folder.rglob("*") if p.suffix in IMAGE_SUFFIXES and not any(part.startswith("replay_") for part in p.parts))
+
+
+def files_written(config: DiagnosisConfig) -> list[str]:
+    """The files of fixed names a diagnosis with `config` writes (relative to its folder)."""
+    names = ["diagnosis.json", "diagnosis.html", "where.csv", ONE_CONFIGURATION_FILE]
+    return names + ([f"{REFIT_FOLDER}/{name}" for name in IDENTIFICATION_FILES] if config.refit else [])
 
 
 def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:

@@ -23,7 +23,7 @@ import signal
 import stat
 import threading
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,9 +120,10 @@ def check_writable_folder(path: str | os.PathLike, option: str = "--out") -> Pat
     return path
 
 
-def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out") -> Path:
+def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out", writes: Iterable[str] = ()) -> Path:
     """The folder `path` can receive a `kind` folder (replacing only one the tool
-    made): raise a one-line error otherwise. Checks only: call it before any work."""
+    made; `writes`: files it will write, relative, which no file of the user's
+    may hold): raise a one-line error otherwise. Checks only: call it before any work."""
     path = check_writable_folder(path, option)
     if path.is_symlink():
         raise DvrkDartError(f"{option}: {path} is a symbolic link: give the folder it points to, or a new name")
@@ -140,6 +141,10 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     edited = _edited_files(path) if path.is_dir() else []
     if edited:  # the new output may write that file: say so now, not after the work
         raise DvrkDartError(f"{option}: {path / edited[0]} was written by dvrk-dart and changed since: move it, then run again")
+    marker = read_marker(path) if path.is_dir() else None
+    users = [name for name in writes if (path / name).exists() and (marker is None or not marker.owns(path, name))]
+    if users:  # found at the end, it would cost the whole work
+        raise DvrkDartError(f"{option}: {path / users[0]} is a file of yours and the new output writes that file: move it, then run again")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise DvrkDartError(f"{option}: {path.absolute().parent} is not writable")
     return path
