@@ -155,6 +155,19 @@ def test_with_a_baseline_the_finding_leads_and_a_mass_that_may_be_none_is_no_siz
     assert "0.044 kg at the hand position" in answer_sentence(result)
 
 
+def test_links_the_runs_do_not_tell_apart_lead_together():
+    """With the wrist held the tool moves with the insertion carriage: the lead named tool_roll alone while the
+    payload paragraph said insertion_carriage explains the efforts as well."""
+    result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.1], ["q2"])
+    result["effects"] = [{"name": "payload_on_tool_roll", "kind": "payload", "joints": ["q1", "q2", "q3"], "selected": True}]
+    result["selection"]["selected"] = ["payload_on_tool_roll"]
+    result["payload"] = {"link": "tool_roll", "group": "tool", "mass_identified": True, "mass_kg": 0.198,
+                         "tied_links": ["insertion_carriage"], "tied_groups": ["insertion", "tool"]}
+    sentence = answer_sentence(result)
+    assert ("a payload on tool_roll or insertion_carriage: the runs do not tell these links apart (insertion or tool, 0.198 kg)"
+            in sentence), sentence
+
+
 def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_an_effect_acts():
     """The MTM (effects on the identified arm): q6, which no effect acts on, was called 'worse than the
     identified model' for the formula's 0.00424 against DART's 0.00434; q2 was worse and better at once."""

@@ -224,16 +224,25 @@ def _lead_words(result: dict, selected: list[str]) -> str:
         carried = payload.get("selection_link")
         elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ())) else (
             f"; the figures simulate it on {carried}, where the selection over time segments put it")
-        return f"a payload on {payload['link']} ({payload['group']}{_payload_size_words(payload, result['units'])}{elsewhere})"
+        return f"a payload on {_links_words(payload)}{_payload_size_words(payload, result['units'])}{elsewhere})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
-        return (f"a gravity mismatch on {mismatch['link']} ({mismatch['group']}{size}: the arm's mass distribution against the parameters, "
+        return (f"a gravity mismatch on {_links_words(mismatch)}{size}: the arm's mass distribution against the parameters, "
                 "an attached mass not told apart without a baseline)")
     if selected:
         first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), {"name": selected[0]})
         return f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
     return "no effect"
+
+
+def _links_words(report: dict) -> str:
+    """'link (group' of a payload-shaped fit, with the links it ties with (the runs do not tell them apart)."""
+    tied = report.get("tied_links") or []
+    if not tied:
+        return f"{report['link']} ({report['group']}"
+    groups = " or ".join(report.get("tied_groups") or [report["group"]])
+    return f"{' or '.join([report['link'], *tied])}: the runs do not tell these links apart ({groups}"
 
 
 def _names(names: list[str]) -> str:

@@ -151,6 +151,7 @@ def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tupl
     """Every interval spans the tied links' estimates: the link is not determined."""
     others = [(selector.design.effects[j], q) for j, q in ties]
     report["tied_links"] = [e.link_name for e, _ in others]
+    report["tied_groups"] = sorted({e.group for e, _ in [(effect, None), *others]})
     if any(_mass_unseen(arm, selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
         report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
     for e, q in others:
