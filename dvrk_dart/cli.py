@@ -143,7 +143,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from dvrk_dart.identification.identify import IdentificationConfig
     from dvrk_dart.identification.outputs import identify_into_folder
     from dvrk_dart.identification.regressor import FrictionLaw
-    from dvrk_dart.io.reference_data import run_label
+    from dvrk_dart.io.reference_data import distinct_labels
 
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
@@ -164,15 +164,16 @@ def cmd_identify(args: argparse.Namespace) -> int:
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {extent['runs']} run(s), "
           f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
     print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m, N for a prismatic joint; fitted: {' '.join(data['fitted_joints'])})")
+    reference = data.get("reference") or {}
+    labels = distinct_labels([*(name for runs in data["errors"].values() for name in runs), *(reference.get("errors_first_period") or {})])
     for kind, runs in data["errors"].items():
         for name, spans in runs.items():
             for span, e in spans.items():
-                label = f"{run_label(name)} {span.replace('_run', '')}"
+                label = f"{labels[name]} {span.replace('_run', '')}"
                 fitted = [v if j in data["fitted_joints"] else None for j, v in zip(JOINT_NAMES, e["rms"])]  # no figure on a joint not fitted
                 print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in fitted) + f"   {kind}")
-    reference = data.get("reference") or {}
     for name, e in (reference.get("errors_first_period") or {}).items():
-        label = f"{run_label(name)} first_period"
+        label = f"{labels[name]} first_period"
         print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
               + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
     for line in data["warnings"]:

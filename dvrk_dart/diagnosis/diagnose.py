@@ -16,7 +16,7 @@ import pandas as pd
 from dvrk_dart.diagnosis.fit.design import Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
-from dvrk_dart.diagnosis.payload.identifiable import first_moment_report
+from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, with_point_ties
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import (
@@ -221,7 +221,8 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
     """The selected first-moment payloads' reports (on the harmonics of the runs
     minus their baseline with periodic processing) and the point payloads'."""
     effects = problem.effects
-    points = [describe_payload(effects[i], s.final.params[i], problem.arm, mass_profile(s.selector, s.selected, i) if profile_payload_mass else None)
+    points = [with_point_ties(describe_payload(effects[i], s.final.params[i], problem.arm, mass_profile(s.selector, s.selected, i)
+                                               if profile_payload_mass else None), s.selector, s.selected, i)
               for i in s.selected if isinstance(effects[i], PointPayload)]
     selected_moments = [i for i in s.selected if isinstance(effects[i], FirstMomentPayload)]
     at = effects[problem.at_index] if problem.at_index is not None else None

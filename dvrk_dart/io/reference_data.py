@@ -182,6 +182,21 @@ def run_label(name_or_path: str | Path) -> str:
     return text if text in RUNS else Path(text).stem
 
 
+def distinct_labels(specs) -> dict[str, str]:
+    """run_label of each run (name or path, by its text), with as many of its
+    folders as tell two files of one name apart (a/run.csv, b/run.csv: a/run, b/run)."""
+    texts = list(dict.fromkeys(str(s) for s in specs))
+    parts = {t: (t,) if t in RUNS else (*Path(t).parent.parts, Path(t).stem) for t in texts}
+    depth = dict.fromkeys(texts, 1)
+    while True:
+        labels = {t: "/".join(parts[t][-depth[t]:]) for t in texts}
+        clashes = [t for t in texts if list(labels.values()).count(labels[t]) > 1 and depth[t] < len(parts[t])]
+        if not clashes:
+            return labels
+        for t in clashes:
+            depth[t] += 1
+
+
 #: two recordings whose positions agree to this on a whole window are one
 #: recording (rad, m): two sessions differ by the encoders' noise, 1e-4 and
 #: more; a copy with noise added below a tenth of that is still the same recording

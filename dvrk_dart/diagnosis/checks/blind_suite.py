@@ -75,8 +75,16 @@ def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: 
 
 
 def _write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict, rng: np.random.Generator) -> Path:
+    """The run as a measured CSV: the 21 columns where the suite's real run records every joint, else a header
+    naming the joints it records (a 3-joint design's wrist, simulated without noise, is no measured joint)."""
     q = state.q + rng.standard_normal(state.q.shape) * noise["position"]
-    np.savetxt(path, np.hstack([q, state.dq, efforts + rng.standard_normal(efforts.shape) * noise["effort"]]), delimiter=",")
+    columns = np.hstack([q, state.dq, efforts + rng.standard_normal(efforts.shape) * noise["effort"]])
+    if state.measured.all():
+        np.savetxt(path, columns, delimiter=",")
+        return path
+    kept = np.tile(state.measured, 3)
+    names = [f"{kind}{j + 1}" for kind in ("q", "dq", "tau") for j in range(N_JOINTS)]
+    np.savetxt(path, columns[:, kept], delimiter=",", header=",".join(np.array(names)[kept]), comments="")
     return path
 
 

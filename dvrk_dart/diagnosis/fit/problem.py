@@ -31,7 +31,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
 from dvrk_dart.diagnosis.fit.session_floor import check_repeat_motion, session_offset_joints
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
-from dvrk_dart.io.reference_data import distinct_inputs
+from dvrk_dart.io.reference_data import distinct_inputs, distinct_labels
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
@@ -256,10 +256,13 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     if processing is None:
         run_processing = with_baseline_motion(run_processing, baseline, measured_list, arm.model)
 
+    labels = distinct_labels(s for s in _flat(all_specs) if isinstance(s, (str, Path)))  # a/run.csv and b/run.csv: a/run, b/run
+
     def as_run(spec, baseline=None, rate_hz=None):
         if isinstance(spec, tuple):
             spec, baseline = spec
-        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, processing=run_processing, rate_hz=rate_hz)
+        return prepare_run(spec, arm, simulate, base_config, baseline=baseline, name=labels.get(str(spec)), processing=run_processing,
+                           rate_hz=rate_hz)
 
     # a baseline and a repeat are subtracted from, or compared with, the runs sample by sample: on their rate
     rate = next(iter(loaded_states(measured_list[:1], arm.model, run_processing)), None)
@@ -287,6 +290,11 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
                       len(measured_list), at_index, nuisance, offset_joints, offset_source, folds, repeat_source)
     _add_grams(problem)
     return problem
+
+
+def _flat(specs) -> list:
+    """Run specs with (run, baseline) pairs opened."""
+    return [x for spec in specs for x in (spec if isinstance(spec, tuple) else (spec,))]
 
 
 def _add_grams(problem: Problem) -> None:

@@ -36,5 +36,6 @@ def gravity_mismatch_of(fit: dict, model: PsmModel, left_out_offsets: list[float
                        "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "
                        "two are not told apart; record a baseline to isolate a payload",
             "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
+                      + (f" or on {', '.join(fit['tied_links'])}, which the runs do not tell apart" if fit.get("tied_links") else "")
                       + (f":{size}" if size else "")
                       + "; without a baseline run the arm's mass distribution and an attached mass are not told apart."]}

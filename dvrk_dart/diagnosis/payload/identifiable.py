@@ -105,7 +105,7 @@ def _mass_unseen(arm: Arm, selector: Selector, index: int) -> bool:
 
 
 def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tuple[int, dict]]:
-    """Other links' first-moment payloads that explain the held-out residual
+    """Other links' payloads of the selected one's kind (first moment, point) that explain the held-out residual
     not significantly worse than the selected one (bootstrap, as the selection
     decides), each swapped in for it: (index, its quantities with intervals
     are built by the caller from these fits). The efforts cannot tell these
@@ -114,13 +114,23 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
     reference = selector.bootstrap_fractions(current.after)
     ties = []
     for j, effect in enumerate(selector.design.effects):
-        if j == index or not isinstance(effect, FirstMomentPayload) or j in chosen:
+        if j == index or type(effect) is not type(selector.design.effects[index]) or j in chosen:
             continue
         swapped = [j if i == index else i for i in chosen]
         trial = selector.cross_validate(swapped)
         if np.mean(reference - selector.bootstrap_fractions(trial.after) <= 0.0) > GAIN_FAILURE_QUANTILE:
             ties.append((j, selector.fit_all(swapped).params[j]))
     return ties
+
+
+def with_point_ties(report: dict, selector: Selector, chosen: list[int], index: int) -> dict:
+    """A point payload's report with the links whose point payloads explain the efforts as well (a held wrist: a
+    mass on tool_roll and one on insertion_carriage give the same efforts): the link is not determined."""
+    others = [selector.design.effects[j] for j, _ in tied_payloads(selector, chosen, index)]
+    if others:
+        report["tied_links"] = [e.link_name for e in others]
+        report["tied_groups"] = sorted({e.group for e in [selector.design.effects[index], *others]})
+    return report
 
 
 def _session_change(read: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
