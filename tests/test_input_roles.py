@@ -101,3 +101,15 @@ def test_a_payload_position_gravity_cannot_use_is_refused(tmp_path, capsys, posi
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0], err
     assert not out.exists()
+
+
+@settings(max_examples=50, deadline=None)
+@given(paths=st.lists(st.lists(st.sampled_from(["a", "b", "run", "x.y"]), min_size=1, max_size=4).map(lambda p: "/".join(p) + ".csv"),
+                      min_size=1, max_size=5, unique=True))
+def test_two_runs_get_two_labels_whatever_their_folders(paths):
+    """a/run.csv and b/run.csv were both 'run' in diagnosis.json (one processing record for both) and in identify's table."""
+    from dvrk_dart.io.reference_data import distinct_labels
+
+    labels = distinct_labels([*paths, *(p[:-4] for p in paths[:1]), "two"])  # a bag folder beside its CSV
+    assert len(set(labels.values())) == len(labels) and labels["two"] == "two"
+    assert all(os.path.basename(path).startswith(label.rsplit("/", 1)[-1]) for path, label in labels.items())

@@ -188,9 +188,9 @@ def distinct_labels(specs) -> dict[str, str]:
     texts = list(dict.fromkeys(str(s) for s in specs))
     parts = {t: (t,) if t in RUNS else (*Path(t).parent.parts, Path(t).stem) for t in texts}
     depth = dict.fromkeys(texts, 1)
-    while True:
-        labels = {t: "/".join(parts[t][-depth[t]:]) for t in texts}
-        clashes = [t for t in texts if list(labels.values()).count(labels[t]) > 1 and depth[t] < len(parts[t])]
+    while True:  # past every folder, the text itself (a/run.csv beside a bag a/run)
+        labels = {t: "/".join(parts[t][-depth[t]:]) if depth[t] <= len(parts[t]) else t for t in texts}
+        clashes = [t for t in texts if list(labels.values()).count(labels[t]) > 1 and depth[t] <= len(parts[t])]
         if not clashes:
             return labels
         for t in clashes:
