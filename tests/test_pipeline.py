@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from dvrk_dart.analysis.tables import load_checks
+from dvrk_dart.analysis.checks import load_checks
 from dvrk_dart.io.mcap_read import read_mcap
 from dvrk_dart.runs.config import RunConfig
 from dvrk_dart.runs.runner import run

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from dvrk_dart.analysis.tables import load_checks
+from dvrk_dart.analysis.checks import load_checks
 from dvrk_dart.cli import main
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve

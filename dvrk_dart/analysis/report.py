@@ -51,24 +51,17 @@ from dvrk_dart.io.html import (
     unit_text,
 )
 from dvrk_dart.analysis.run_folders import CONFIG_FILE
+from dvrk_dart.analysis.checks import KIND_ERROR, MAX_MEANINGFUL_RATIO, ROUND_OFF, STATUS_FAIL, STATUS_MISSING, STATUS_PASS, load_published, other_checks
 from dvrk_dart.analysis.tables import (
     ALL_COMPONENTS,
     CARTESIAN_ORIENTATION_AXES,
     CARTESIAN_POSITION_AXES,
-    KIND_ERROR,
-    MAX_MEANINGFUL_RATIO,
     QUANTITY_DESCRIPTIONS,
-    ROUND_OFF,
     REGIME_ALL,
     REGIME_DESCRIPTIONS,
-    STATUS_FAIL,
-    STATUS_MISSING,
-    STATUS_PASS,
     Analysis,
     analyze,
     default_jobs,
-    other_checks,
-    load_published,
     write_analysis,
 )
 from dvrk_dart.errors import DvrkDartError

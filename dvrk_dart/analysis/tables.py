@@ -25,23 +25,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dvrk_dart.analysis.checks import (  # noqa: F401  (re-exported: the analysis API)
-    CHECK_COLUMNS,
+from dvrk_dart.analysis.checks import (
     CHECKS_FILE,
-    COMPARISON_COLUMNS,
-    KIND_EFFECT,
-    KIND_ERROR,
-    MAX_MEANINGFUL_RATIO,
-    ROUND_OFF,
     PUBLISHED_FILE,
-    STATUS_FAIL,
-    STATUS_MISSING,
     STATUS_PASS,
     compare_with_published,
     evaluate_checks,
-    other_checks,
     load_checks,
     load_published,
+    other_checks,
 )
 from dvrk_dart.analysis.run_folders import METRICS_FILE, RUN_LOG, LoadedRun, discover_runs, load_run_folder
 from dvrk_dart.errors import DvrkDartError
