@@ -6,6 +6,7 @@ and the runs' Gram blocks the selection works on."""
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -15,7 +16,8 @@ import numpy as np
 
 from dvrk_dart.diagnosis.fit.design import Design, Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
-from dvrk_dart.diagnosis.payload.first_moment import PayloadAtPosition, check_mass_determinable, parse_payload_at
+from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload, PayloadAtPosition, check_mass_determinable, parse_payload_at
+from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.effects.joint_effects import JointOffset, PositionFriction
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
@@ -35,6 +37,7 @@ from dvrk_dart.io.reference_data import distinct_inputs, distinct_labels
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.io.signal import spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
@@ -203,6 +206,24 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
     return effects + [PayloadAtPosition(arm.model, key, position)], len(effects)
 
 
+def _one_body_on_these_runs(arm: Arm, effects: list[Effect], runs: list) -> list[Effect]:
+    """The payload candidates labelled with the links these runs do not move apart from theirs (the joints between
+    held in every run: a 3-joint log's wrist moves the tool with the insertion carriage), as the parallelogram's
+    links are for any motion: the efforts cannot tell them apart. Labels only: each link keeps its own fit."""
+    q = np.vstack([r.state.q for r in runs if r is not None])
+    held = {j: float(q[0, j]) for j in np.flatnonzero(~spanning_columns(q))}
+    if not held:
+        return effects
+    equivalents = equivalent_payload_links(arm, held, recorded_joints(runs))
+    relabelled = []
+    for effect in effects:
+        if isinstance(effect, (PointPayload, FirstMomentPayload)):
+            effect = copy.copy(effect)
+            effect.equivalent_links = tuple(arm.model.links[k].name for k in equivalents[effect.link_key] if k != effect.link_key)
+        relabelled.append(effect)
+    return relabelled
+
+
 def recorded_joints(runs: list) -> np.ndarray:
     """(7,) bool: the joints every run recorded (None: a role without a run)."""
     return np.all([r.state.measured for r in runs if r is not None], axis=0)
@@ -284,6 +305,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
     effects = [_on_training_range(e, train_runs) for e in effects]
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
+    effects = _one_body_on_these_runs(arm, effects, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     if nuisance:
         effects, at_index = _without_nuisance_constants(effects, at_index, offset_joints, train_runs)
     problem = Problem(arm, effects, Design(effects, every_effect_a_change), run_processing, inputs, train_runs, holdout_runs, baseline_run, repeat_run,

@@ -237,12 +237,15 @@ def _lead_words(result: dict, selected: list[str]) -> str:
 
 
 def _links_words(report: dict) -> str:
-    """'link (group' of a payload-shaped fit, with the links it ties with (the runs do not tell them apart)."""
-    tied = report.get("tied_links") or []
-    if not tied:
+    """'link (group' of a payload-shaped fit, with the links the runs do not tell from it in other groups: one body
+    with it on these runs (a held wrist moves the tool with the insertion carriage), or tied with it."""
+    groups = dict(zip(report.get("equivalent_links") or (), report.get("equivalent_link_groups") or ()))
+    others = [name for name, group in groups.items() if group != report["group"]]
+    others += [name for name in report.get("tied_links") or () if name not in others]
+    if not others:
         return f"{report['link']} ({report['group']}"
-    groups = " or ".join(report.get("tied_groups") or [report["group"]])
-    return f"{' or '.join([report['link'], *tied])}: the runs do not tell these links apart ({groups}"
+    in_groups = " or ".join(sorted({report["group"], *(groups[name] for name in others if name in groups), *(report.get("tied_groups") or ())}))
+    return f"{' or '.join([report['link'], *others])}: the runs do not tell these links apart ({in_groups}"
 
 
 def _names(names: list[str]) -> str:

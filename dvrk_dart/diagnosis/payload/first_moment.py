@@ -221,7 +221,9 @@ class FirstMomentPayload(Effect):
 
     def describe(self, p):
         return {"mass_kg": float(p[0]), "link": self.link_name, "link_key": self.link_key, "group": self.group,
-                "equivalent_links": list(self.equivalent_links), "first_moment_link_kg_m": [float(x) for x in p[1:4]],
+                "equivalent_links": list(self.equivalent_links),
+                "equivalent_link_groups": [self.model.link_by_name(name).group for name in self.equivalent_links],
+                "first_moment_link_kg_m": [float(x) for x in p[1:4]],
                 "first_moment_base_at_q0_kg_m": self.first_moment_base_at_zero(p).tolist(),
                 "yaw_path_mass_and_first_moment_link": [float(x) for x in p[4:8]]}
 

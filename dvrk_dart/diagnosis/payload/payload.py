@@ -122,6 +122,7 @@ class PointPayload(Effect):
             "link_key": self.link_key,
             "group": self.group,
             "equivalent_links": list(self.equivalent_links),
+            "equivalent_link_groups": [self.model.link_by_name(name).group for name in self.equivalent_links],
             "position_m": [float(x) for x in p[1:4]],
             "position_base_at_q0_m": self.position_base_at_zero(p).tolist(),
             "envelope_m": {"lower": self.envelope.lower.tolist(), "upper": self.envelope.upper.tolist()},
@@ -153,12 +154,15 @@ def _column_space(Y: np.ndarray) -> np.ndarray:
     return U[:, sv > sv[0] * RANK_CUT]
 
 
-def equivalent_payload_links(arm: Arm) -> dict[int, tuple[int, ...]]:
+def equivalent_payload_links(arm: Arm, held: dict[int, float] | None = None, recorded: np.ndarray | None = None) -> dict[int, tuple[int, ...]]:
     """For each payload link, the payload links (itself included) on which a
     body produces exactly the efforts some body on it produces: no effort
     measurement can tell them apart. E.g. the pitch link and the parallelogram
     links turning with q2 about pivots that only translate along the yaw axis
     relative to it: same kinetic energy, same potential up to a constant.
+    On given runs (`held`: joint index -> the position every run holds it at;
+    `recorded`: the joints whose efforts they measure) more links can be one
+    body: a 3-joint log's held wrist moves the tool with the insertion carriage.
 
     Decided numerically, not by name: the body regressors of both links over
     random states must span the same space."""
@@ -166,9 +170,12 @@ def equivalent_payload_links(arm: Arm) -> dict[int, tuple[int, ...]]:
     rng = np.random.default_rng(EQUIVALENCE_SEED)
     q = rng.uniform(model.joint_lower, model.joint_upper, size=(EQUIVALENCE_STATES, N_JOINTS))
     dq, ddq = rng.standard_normal((2, EQUIVALENCE_STATES, N_JOINTS))
+    for j, position in (held or {}).items():
+        q[:, j], dq[:, j], ddq[:, j] = position, 0.0, 0.0
     features = TrajectoryFeatures(arm, q, dq, ddq, np.zeros_like(q), 1.0)
     links = payload_links(model)
-    regressors = {k: features.body_regressor[:, :, features.body_columns(k)].reshape(-1, BODY_PARAMETERS) for k in links}
+    rows = np.ones(N_JOINTS, bool) if recorded is None else np.asarray(recorded, bool)
+    regressors = {k: features.body_regressor[:, rows][:, :, features.body_columns(k)].reshape(-1, BODY_PARAMETERS) for k in links}
     spaces = {k: _column_space(Y) for k, Y in regressors.items()}
 
     def inside(Y: np.ndarray, U: np.ndarray) -> bool:

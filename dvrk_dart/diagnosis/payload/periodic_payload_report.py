@@ -212,7 +212,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     p_value = fit.p_value(signature)
     groups = sorted({e.group for e in [effect, *tied_effects]})
     report = {"link": effect.link_name, "link_key": effect.link_key, "group": effect.group, "equivalent_links": list(effect.equivalent_links),
-              "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
+              "equivalent_link_groups": [arm.model.link_by_name(name).group for name in effect.equivalent_links], "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
               "link_bic": dict(zip((e.link_name for e in candidates), costs.tolist())),
               "selection_link": selected.link_name if selected is not None else None,
               **quantities, "not_determined": reasons,
