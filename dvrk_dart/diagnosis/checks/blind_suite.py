@@ -127,7 +127,7 @@ def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunPr
     return rms(residual)
 
 
-def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float, model: PsmModel) -> dict:
+def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) -> dict:
     """The top finding against the injected class and joint, the gap it leaves against the noise."""
     top = result["effects"][0] if result.get("effects") else {"name": None, "family": "", "parameters": {}}
     joint = JOINT_NAMES.index(case["joint"])
@@ -138,9 +138,8 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float, mo
         named = result["explanation"]["words"] == "not explained" or bool(gap_ok)
     elif expected.startswith("payload:"):  # a payload on a link group, or on one the answer names as not told apart
         # from it: equivalent on these runs (a held wrist moves the tool with the insertion carriage) or tied
-        fit = result.get("payload") or result.get("gravity_mismatch") or {}
-        links = [top["parameters"].get("link"), *(top["parameters"].get("equivalent_links") or ()), *(fit.get("tied_links") or ())]
-        groups = {model.link_by_name(name).group for name in links if name}
+        fit, found = result.get("payload") or result.get("gravity_mismatch") or {}, top["parameters"]
+        groups = {found.get("group"), *(found.get("equivalent_link_groups") or ()), *(fit.get("tied_groups") or ())}
         named = top.get("kind") in ("payload", "payload_at_position", "gravity_mismatch") and expected.split(":", 1)[1] in groups
     else:
         named = top["family"] == expected
@@ -158,7 +157,7 @@ def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, p
                       figures=False, profile_payload_mass=False, processing=processing)
     used = RunProcessing(processing, result["processing"].get("harmonics"))
     floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), known)
-    verdict = judge_case(case, result, floor, spec["gap_tolerance"], arm.model)
+    verdict = judge_case(case, result, floor, spec["gap_tolerance"])
     return {"case": case["name"], "processing": processing, "baseline": with_baseline, **verdict,
             "words": (result.get("explanation") or {}).get("words")}
 
