@@ -187,12 +187,13 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
 
 def suite_verdicts(spec: dict, outcomes: list[dict]) -> list[dict]:
     """A verdict per diagnosis (the class first, the gap closed), and the size for the upstream runs without a baseline."""
-    verdicts = [{"check": f"blind {o['case']} ({o['processing']}, {'with' if o['baseline'] else 'without'} a baseline): "
+    design = f" on the {spec['label']}" if spec.get("label") else ""
+    verdicts = [{"check": f"blind {o['case']}{design} ({o['processing']}, {'with' if o['baseline'] else 'without'} a baseline): "
                           f"the injected class on {o['joint']} first, its gap within {spec['gap_tolerance']:g}x the noise",
                  "passed": o["named"] and o["gap_within_noise"],
                  "value": f"top = {o['top_effect']}; {o['joint']} {o['gap_after']:.4g} vs {o['floor']:.4g} with the true physics"}
                 for o in outcomes]
-    verdicts += [{"check": f"blind {o['case']} ({o['processing']}, without a baseline): its size within {spec['size_tolerance']:.0%}",
+    verdicts += [{"check": f"blind {o['case']}{design} ({o['processing']}, without a baseline): its size within {spec['size_tolerance']:.0%}",
                   "passed": o["size_error"] is not None and o["size_error"] <= spec["size_tolerance"],
                   "value": "not named" if o["size_error"] is None else f"size error {o['size_error']:.1%}"}
                  for o in outcomes if not o["baseline"] and o["processing"] == "upstream" and "size" in _case(spec, o["case"])]

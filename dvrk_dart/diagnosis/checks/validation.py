@@ -186,10 +186,12 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 
 #: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
 #: they run side by side, each in its own process
-WITHHELD_STEPS = ("blind_suite_periodic", "blind_suite_upstream", "payload", "mtm_holdout", "holdout", "holdout_2018", "synthetic",
-                  "payload_speeds", "insertion", "null_pair", "out_of_library")
-#: the blind effect suite runs as one step per processing (side by side)
-BLIND_SUITE_STEPS = {"blind_suite_upstream": "upstream", "blind_suite_periodic": "periodic"}
+WITHHELD_STEPS = ("blind_suite_periodic", "blind_suite_upstream", "payload", "blind_suite_2018", "mtm_holdout", "holdout", "holdout_2018",
+                  "synthetic", "payload_speeds", "insertion", "null_pair", "out_of_library")
+#: the blind effect suite runs as one step per processing (side by side), and on another design (its own table
+#: of pipelines/withheld.toml on top of [blind_suite])
+BLIND_SUITE_STEPS = {"blind_suite_upstream": {"processings": ["upstream"]}, "blind_suite_periodic": {"processings": ["periodic"]},
+                     "blind_suite_2018": {}}
 
 
 def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], float]:
@@ -201,7 +203,7 @@ def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], flo
     start = time.perf_counter()
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
     tables = tomllib.loads(WITHHELD_FILE.read_text())
-    spec = {**tables["blind_suite"], "processings": [BLIND_SUITE_STEPS[name]]} if name in BLIND_SUITE_STEPS else tables[name]
+    spec = {**tables["blind_suite"], **tables.get(name, {}), **BLIND_SUITE_STEPS[name]} if name in BLIND_SUITE_STEPS else tables[name]
     _, found = step(load_arm(resolve_arm_model(spec.get("arm_model", "psm"))), spec, out_dir / name, **extra)
     return found, time.perf_counter() - start
 
