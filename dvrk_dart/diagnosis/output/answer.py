@@ -241,7 +241,7 @@ def _links_words(report: dict) -> str:
     with it on these runs (a held wrist moves the tool with the insertion carriage), or tied with it."""
     groups = dict(zip(report.get("equivalent_links") or (), report.get("equivalent_link_groups") or ()))
     others = [name for name, group in groups.items() if group != report["group"]]
-    others += [name for name in report.get("tied_links") or () if name not in others]
+    others += [name for name in report.get("tied_links") or () if name not in groups]
     if not others:
         return f"{report['link']} ({report['group']}"
     in_groups = " or ".join(sorted({report["group"], *(groups[name] for name in others if name in groups), *(report.get("tied_groups") or ())}))

@@ -126,10 +126,11 @@ def tied_payloads(selector: Selector, chosen: list[int], index: int) -> list[tup
 def with_point_ties(report: dict, selector: Selector, chosen: list[int], index: int) -> dict:
     """A point payload's report with the links whose point payloads explain the efforts as well (a held wrist: a
     mass on tool_roll and one on insertion_carriage give the same efforts): the link is not determined."""
-    others = [selector.design.effects[j] for j, _ in tied_payloads(selector, chosen, index)]
-    if others:
+    effect = selector.design.effects[index]
+    others = [e for e in (selector.design.effects[j] for j, _ in tied_payloads(selector, chosen, index)) if e.link_name not in effect.equivalent_links]
+    if others:  # (an equivalent link is the same hypothesis, not a tie)
         report["tied_links"] = [e.link_name for e in others]
-        report["tied_groups"] = sorted({e.group for e in [selector.design.effects[index], *others]})
+        report["tied_groups"] = sorted({e.group for e in [effect, *others]})
     return report
 
 
