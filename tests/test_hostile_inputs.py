@@ -472,5 +472,19 @@ def test_a_file_of_yours_where_the_diagnosis_writes_is_refused_before_any_replay
     (out / "refit").mkdir()
     (out / "refit" / "params.json").write_text("{}")
     code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--holdout", "two", "--refit", "--out", out)
-    assert code == 2 and len(lines) == 1 and "refit/params.json is a file of yours" in lines[0], lines
+    assert code == 2 and len(lines) == 1 and "refit/params.json is yours" in lines[0], lines
     assert (out / "refit" / "params.json").read_text() == "{}"
+
+
+def test_a_file_of_yours_named_as_a_folder_the_diagnosis_writes_is_refused_up_front(tmp_path, capsys, monkeypatch):
+    import dvrk_dart.diagnosis.api as api
+    from dvrk_dart.io.outputs import write_marker
+
+    monkeypatch.setattr(api, "simulation_hook", lambda *_, **__: None)
+    out = tmp_path / "d"
+    out.mkdir()
+    write_marker(out, "diagnosis")
+    (out / "refit").write_text("my notes")
+    code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--holdout", "two", "--refit", "--out", out)
+    assert code == 2 and len(lines) == 1 and "d/refit is yours" in lines[0], lines
+    assert (out / "refit").read_text() == "my notes"

@@ -40,6 +40,8 @@ def test_a_joint_with_no_gap_to_explain_does_not_count():
     explained = explanation(gap_before, gap_after, JOINTS, entries)
     assert explained["joints"] == ["q1", "q2", "q3"] and explained["words"] == "mostly explained"
     assert explained["removed_share"] == pytest.approx((0.116 - 0.018) / 0.116 / 3 + (0.066 - 0.015) / 0.066 / 3 + (0.275 - 0.110) / 0.275 / 3)
+    gap_after["train"][3] = 0.01  # a gap the effects make there is no round-off: it counts
+    assert explanation(gap_before, gap_after, JOINTS, entries)["joints"] == ["q1", "q2", "q3", "q4"]
 
 
 def test_the_answer_says_what_the_json_says():

@@ -21,7 +21,7 @@ from dvrk_dart.diagnosis.payload.parameter_band import apply_band, band_run, loa
 from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, check_refit_inputs, refit_check
 from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.identification.outputs import IDENTIFICATION_FILES
+from dvrk_dart.identification.outputs import FOLDER_ENTRIES
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
 from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
@@ -127,7 +127,7 @@ def images_of(folder: Path) -> list[Path]:
 def files_written(config: DiagnosisConfig) -> list[str]:
     """The files of fixed names a diagnosis with `config` writes (relative to its folder)."""
     names = ["diagnosis.json", "diagnosis.html", "where.csv", ONE_CONFIGURATION_FILE]
-    return names + ([f"{REFIT_FOLDER}/{name}" for name in IDENTIFICATION_FILES] if config.refit else [])
+    return names + ([f"{REFIT_FOLDER}/{name}" for name in FOLDER_ENTRIES] if config.refit else [])
 
 
 def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:

@@ -57,11 +57,9 @@ PARAMS_FILE = "params.json"
 COVARIANCE_FILE = "params_covariance.json"
 SUMMARY_FILE = "identification.json"
 HTML_FILE = "identification.html"
-#: what an identification writes in its folder
-IDENTIFICATION_FILES = (PARAMS_FILE, COVARIANCE_FILE, SUMMARY_FILE, HTML_FILE)
 COVARIANCE_FORMAT = "dvrk-dart-params-covariance/1"
-#: what an identification folder is made of (io/outputs.py KNOWN_ENTRIES)
-FOLDER_ENTRIES = {PARAMS_FILE, COVARIANCE_FILE, SUMMARY_FILE, HTML_FILE}
+#: what an identification writes in its folder
+FOLDER_ENTRIES = (PARAMS_FILE, COVARIANCE_FILE, SUMMARY_FILE, HTML_FILE)
 
 
 def parameter_units(result: IdentificationResult) -> list[str]:
@@ -335,7 +333,7 @@ def identify_into_folder(config: IdentificationConfig, out: str | Path) -> tuple
     """The folder is checked before any work, built beside `out` and swapped in whole."""
     from dvrk_dart.io.outputs import building_folder, check_output_folder
 
-    check_output_folder(out, "identification", writes=IDENTIFICATION_FILES)
+    check_output_folder(out, "identification", writes=FOLDER_ENTRIES)
     result = identify(config)
     with building_folder(out, "identification") as folder:
         data = write_outputs(result, folder)

@@ -141,10 +141,9 @@ def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out
     edited = _edited_files(path) if path.is_dir() else []
     if edited:  # the new output may write that file: say so now, not after the work
         raise DvrkDartError(f"{option}: {path / edited[0]} was written by dvrk-dart and changed since: move it, then run again")
-    marker = read_marker(path) if path.is_dir() else None
-    users = [name for name in writes if (path / name).exists() and (marker is None or not marker.owns(path, name))]
-    if users:  # found at the end, it would cost the whole work
-        raise DvrkDartError(f"{option}: {path / users[0]} is a file of yours and the new output writes that file: move it, then run again")
+    in_the_way = [found for found in (_users_path(path, name) for name in writes) if found] if path.is_dir() else []
+    if in_the_way:  # found at the end, it would cost the whole work
+        raise DvrkDartError(f"{option}: {path / in_the_way[0]} is yours and the new output may write there: move it, then run again")
     if path.is_dir() and not os.access(path.absolute().parent, os.W_OK | os.X_OK):
         raise DvrkDartError(f"{option}: {path.absolute().parent} is not writable")
     return path
@@ -203,6 +202,17 @@ def _edited_files(folder: Path) -> list[str]:
     if marker is None:
         return []
     return [relative for relative in marker.files if (folder / relative).exists() and not marker.owns(folder, relative)]
+
+
+def _users_path(folder: Path, relative: str) -> str | None:
+    """The first path to `relative` (a parent folder, or the file) that something of the user's holds, else None."""
+    marker = read_marker(folder)
+    parts = Path(relative).parts
+    for k in range(1, len(parts) + 1):
+        sub = Path(*parts[:k])
+        if (folder / sub).is_symlink() or ((folder / sub).exists() and (k == len(parts) or not (folder / sub).is_dir())):
+            return None if marker is not None and marker.owns(folder, str(sub)) else str(sub)
+    return None
 
 
 def replaceable(path: Path, kind: str) -> bool:

@@ -138,7 +138,9 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
         named = result["explanation"]["words"] == "not explained" or bool(gap_ok)
     elif expected.startswith("payload:"):  # a payload on a link group, or on one the answer names as not told apart
         # from it: equivalent on these runs (a held wrist moves the tool with the insertion carriage) or tied
-        fit, found = result.get("payload") or result.get("gravity_mismatch") or {}, top["parameters"]
+        found = top["parameters"]
+        reports = [*(result.get("payloads") or ()), result.get("gravity_mismatch") or {}]
+        fit = next((r for r in reports if r.get("link") == found.get("link")), {})  # the top effect's own report
         groups = {found.get("group"), *(found.get("equivalent_link_groups") or ()), *(fit.get("tied_groups") or ())}
         named = top.get("kind") in ("payload", "payload_at_position", "gravity_mismatch") and expected.split(":", 1)[1] in groups
     else:

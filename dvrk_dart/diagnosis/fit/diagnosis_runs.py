@@ -58,8 +58,8 @@ def choose_processing(specs, processing: str | None, model: PsmModel, topics: Ba
     that band, never choose it."""
     if processing == "upstream":
         return RunProcessing(topics=topics)
-    fitted = [Path(resolve_run(s)) for s in _flat(specs) if isinstance(s, (str, Path))]
-    scored = [Path(resolve_run(s)) for s in _flat(held_out) if isinstance(s, (str, Path))]
+    fitted = [Path(resolve_run(s)) for s in flat_specs(specs) if isinstance(s, (str, Path))]
+    scored = [Path(resolve_run(s)) for s in flat_specs(held_out) if isinstance(s, (str, Path))]
     if not fitted + scored and processing is None:
         return RunProcessing(why="no measured file among the runs", topics=topics)
     try:
@@ -99,10 +99,11 @@ def processing_of(result: dict, topics: BagTopics = BagTopics()) -> RunProcessin
     return RunProcessing(result["processing"]["processing"], result["processing"].get("harmonics"), topics=topics)
 
 
-def _flat(specs) -> list:
+def flat_specs(specs) -> list:
+    """Run specs with (run, baseline) pairs and lists opened, None left out."""
     out = []
     for spec in specs:
-        out += _flat(spec) if isinstance(spec, (tuple, list)) else [spec] if spec is not None else []
+        out += flat_specs(spec) if isinstance(spec, (tuple, list)) else [spec] if spec is not None else []
     return out
 
 

@@ -26,6 +26,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     RunRole,
     Simulate,
     choose_processing,
+    flat_specs,
     with_baseline_motion,
     loaded_states,
     prepare_run,
@@ -207,9 +208,10 @@ def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payl
 
 
 def _one_body_on_these_runs(arm: Arm, effects: list[Effect], runs: list) -> list[Effect]:
-    """The payload candidates labelled with the links these runs do not move apart from theirs (the joints between
-    held in every run: a 3-joint log's wrist moves the tool with the insertion carriage), as the parallelogram's
-    links are for any motion: the efforts cannot tell them apart. Labels only: each link keeps its own fit."""
+    """The payload candidates with the links these runs do not move apart from theirs as equivalent links (the
+    joints between held in every run: a 3-joint log's wrist moves the tool with the insertion carriage), as the
+    parallelogram's links are for any motion: the efforts cannot tell them apart. They become one family: at
+    most one of them is selected, the member by its penalised cost (payload_report.choose_within_families)."""
     q = np.vstack([r.state.q for r in runs if r is not None])
     held = {j: float(q[0, j]) for j in np.flatnonzero(~spanning_columns(q))}
     if not held:
@@ -277,18 +279,19 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     if processing is None:
         run_processing = with_baseline_motion(run_processing, baseline, measured_list, arm.model)
 
-    labels = distinct_labels(s for s in _flat(all_specs) if isinstance(s, (str, Path)))  # a/run.csv and b/run.csv: a/run, b/run
+    labels = distinct_labels(s for s in flat_specs(all_specs) if isinstance(s, (str, Path)))  # a/run.csv and b/run.csv: a/run, b/run
 
     def as_run(spec, baseline=None, rate_hz=None):
-        if isinstance(spec, tuple):
+        if isinstance(spec, tuple):  # (run, its own baseline)
             spec, baseline = spec
+            baseline = as_run(baseline) if isinstance(baseline, (str, Path)) else baseline
         return prepare_run(spec, arm, simulate, base_config, baseline=baseline, name=labels.get(str(spec)), processing=run_processing,
                            rate_hz=rate_hz)
 
     # a baseline and a repeat are subtracted from, or compared with, the runs sample by sample: on their rate
     rate = next(iter(loaded_states(measured_list[:1], arm.model, run_processing)), None)
     rate = rate.rate_hz if rate is not None else None
-    check_repeat_motion(baseline if baseline is not None else measured_list[0], repeat, arm.model, run_processing, rate)
+    check_repeat_motion(baseline if baseline is not None else measured_list[0], repeat, arm.model, run_processing, rate, baseline is not None)
     if hasattr(simulate, "prefetch"):  # the replays before the effects, side by side
         simulate.prefetch([(base_config, state) for state in loaded_states(all_specs[:-1], arm.model, run_processing)])
     baseline_run = as_run(baseline, rate_hz=rate) if baseline is not None else None
@@ -312,11 +315,6 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
                       len(measured_list), at_index, nuisance, offset_joints, offset_source, folds, repeat_source)
     _add_grams(problem)
     return problem
-
-
-def _flat(specs) -> list:
-    """Run specs with (run, baseline) pairs opened."""
-    return [x for spec in specs for x in (spec if isinstance(spec, tuple) else (spec,))]
 
 
 def _add_grams(problem: Problem) -> None:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, on_rate, same_motion
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import moved_constants, rms
@@ -52,13 +52,14 @@ def _not_a_repeat(reference: str, repeat: str) -> str:
     return f"--repeat {repeat}: not the same motion as {reference} (a repeat is the same trajectory at the same speed)"
 
 
-def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProcessing, rate_hz: float | None) -> None:
-    """--repeat records the reference run's motion (checked on the processed runs, before any replay)."""
-    if repeat is None or isinstance(repeat, (tuple, DiagnosisRun)) or isinstance(reference, (tuple, DiagnosisRun)):
+def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProcessing, rate_hz: float | None, aligned: bool) -> None:
+    """--repeat records the reference run's motion (checked on the processed runs, before any replay; `aligned`:
+    the repeat is put on the reference's samples, a baseline's, so it may start elsewhere)."""
+    if not all(isinstance(spec, (str, Path)) for spec in (reference, repeat)):
         return
     a, b = (on_rate(state, rate_hz) for state in loaded_states([reference, repeat], model, processing))
     n = min(len(a), len(b))
-    if not same_motion(a.head(n), b.head(n)):
+    if not (motion_offset(a, b) is not None if aligned else same_motion(a.head(n), b.head(n))):
         raise DvrkDartError(_not_a_repeat(run_label(reference), run_label(repeat)))
 
 

@@ -222,13 +222,13 @@ def _lead_words(result: dict, selected: list[str]) -> str:
     if payload_first and payload:
         # the harmonic fit's link, where the selection (whose effect the figures simulate) took another the fit tells apart
         carried = payload.get("selection_link")
-        elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ())) else (
+        elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ()), *(payload.get("equivalent_links") or ())) else (
             f"; the figures simulate it on {carried}, where the selection over time segments put it")
-        return f"a payload on {_links_words(payload)}{_payload_size_words(payload, result['units'])}{elsewhere})"
+        return f"a payload on {links_words(payload)}{_payload_size_words(payload, result['units'])}{elsewhere})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
-        return (f"a gravity mismatch on {_links_words(mismatch)}{size}: the arm's mass distribution against the parameters, "
+        return (f"a gravity mismatch on {links_words(mismatch)}{size}: the arm's mass distribution against the parameters, "
                 "an attached mass not told apart without a baseline)")
     if selected:
         first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), {"name": selected[0]})
@@ -236,7 +236,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
     return "no effect"
 
 
-def _links_words(report: dict) -> str:
+def links_words(report: dict) -> str:
     """'link (group' of a payload-shaped fit, with the links the runs do not tell from it in other groups: one body
     with it on these runs (a held wrist moves the tool with the insertion carriage), or tied with it."""
     groups = dict(zip(report.get("equivalent_links") or (), report.get("equivalent_link_groups") or ()))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.diagnosis.output.answer import effort_at_zero_words, offsets_words
+from dvrk_dart.diagnosis.output.answer import effort_at_zero_words, links_words, offsets_words
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -35,7 +35,6 @@ def gravity_mismatch_of(fit: dict, model: PsmModel, left_out_offsets: list[float
             "meaning": "without a baseline run (the same motion without an attached mass), a payload-shaped fit is this arm's "
                        "gravity (mass distribution) against the parameters, an attached mass included if there is one: the "
                        "two are not told apart; record a baseline to isolate a payload",
-            "words": [f"The arm's gravity differs from the parameters' like a mass on {fit.get('link')} ({fit.get('group')})"
-                      + (f" or on {', '.join(fit['tied_links'])}, which the runs do not tell apart" if fit.get("tied_links") else "")
+            "words": [f"The arm's gravity differs from the parameters' like a mass on {links_words(fit)})"
                       + (f":{size}" if size else "")
                       + "; without a baseline run the arm's mass distribution and an attached mass are not told apart."]}
