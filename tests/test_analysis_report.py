@@ -22,7 +22,7 @@ from report_runs import (
 )
 
 from dvrk_dart.analysis import tables as an
-from dvrk_dart.analysis import checks
+from dvrk_dart.analysis.checks import MAX_MEANINGFUL_RATIO, STATUS_MISSING
 from dvrk_dart.analysis.report import RATIO_DIGITS, SHOWN_DIGITS, build_report
 from dvrk_dart.errors import DvrkDartError
 
@@ -158,7 +158,7 @@ def test_real_runs_verdicts_and_metrics_json_agree(analysis):
     assert checks[("velocity-sim-vs-model-with-counterweight", "rectilinear_velocity_cw-on")] == an.STATUS_PASS
     assert checks[("velocity-no-counterweight-shows-on-J3", "rectilinear_velocity_cw-off")] == an.STATUS_PASS
     # runs of the check list absent from the folder are reported, not skipped
-    assert checks[("kinematic-tracking-position", "spiral_kinematic_cw-on")] == checks.STATUS_MISSING
+    assert checks[("kinematic-tracking-position", "spiral_kinematic_cw-on")] == STATUS_MISSING
     assert set(checks.loc["loop-closure"].index) == set(result.runs)
     # the kinematic run has no efforts (NaN in the log): no effort rows, tracking rows present
     kin = result.metrics[result.metrics.run == "rectilinear_kinematic_cw-on"]
@@ -327,9 +327,9 @@ def _copy(source: Path, target: Path) -> Path:
 def test_no_ratio_in_the_report_compares_with_round_off(report):
     """Ratios above MAX_MEANINGFUL_RATIO compare a physical error with round-off: none is shown."""
     comparison = pd.read_csv(report.parent / "analysis" / "comparison.csv")
-    assert (comparison.ratio_published_over_ours.dropna() <= checks.MAX_MEANINGFUL_RATIO).all()
+    assert (comparison.ratio_published_over_ours.dropna() <= MAX_MEANINGFUL_RATIO).all()
     ratios = [float(c["attrs"]["data-value"]) for c in parse(report).cells if c["attrs"].get("data-field") == "ratio_published_over_ours"]
-    assert ratios and max(r for r in ratios if math.isfinite(r)) <= checks.MAX_MEANINGFUL_RATIO
+    assert ratios and max(r for r in ratios if math.isfinite(r)) <= MAX_MEANINGFUL_RATIO
     # the paper's Sect. IV-A tracking ran with its dynamic engine disabled: our kinematic run is its like, at round-off
     tracking = comparison[comparison.published == "paper-rectilinear-position"]
     kinematic = tracking[tracking.run == "rectilinear_kinematic_cw-on"]
