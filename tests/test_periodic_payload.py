@@ -199,3 +199,24 @@ def test_estimates_scale_with_the_weight(arm, pairs, placement, speed):
     per_pair = masses[:, 1] / masses[:, 0] / expected
     band = per_pair * np.sqrt(np.sum((half_widths / masses) ** 2, axis=1))
     assert np.mean(np.abs(per_pair - 1.0) <= band) >= INTERVAL_PROBABILITY - 0.05 - 0.06, (per_pair, band)
+
+
+def test_a_joint_measured_at_round_off_has_no_weight():
+    """A simulated run's held wrist: noise of 1e-31 against 1e-4 N·m² took weights of 1e30 and set the payload
+    to whatever fits q4's round-off (a 0.2 kg carriage payload read as 'no payload stands out, p = 0.8')."""
+    from dvrk_dart.diagnosis.payload.periodic_payload import Pair, fit_payload
+
+    rng = np.random.default_rng(3)
+    rows, truth = 21, np.array([1.0, 2.0])
+    X = rng.standard_normal((rows, 7, 2))
+    X[:, 4:] = 0.0
+    noise = np.zeros((rows, 7))
+    noise[:, :3] = 1e-4
+    y = X @ truth + rng.standard_normal((rows, 7)) * np.sqrt(noise)
+    y[:, 3] += 1e-9 * rng.standard_normal(rows)  # q4: the model's efforts to within round-off, not the payload's
+    not_recorded = noise.copy()
+    at_round_off = noise.copy()
+    at_round_off[:, 3] = 1e-31
+    reference = fit_payload([Pair("run", y, X, not_recorded)]).params
+    assert np.allclose(fit_payload([Pair("run", y, X, at_round_off)]).params, reference, rtol=1e-9, atol=1e-12)
+    assert np.allclose(reference, truth, atol=0.02)

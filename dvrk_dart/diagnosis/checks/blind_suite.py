@@ -28,7 +28,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import RunProcessing, Simulate, load
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.csv_run import notes_kept
-from dvrk_dart.io.reference_data import load_run, resolve_run
+from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import ProcessedRun, process_periodic
 from dvrk_dart.metrics import rms
 from dvrk_dart.model.description import PsmModel
@@ -75,16 +75,17 @@ def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: 
 
 
 def _write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict, rng: np.random.Generator) -> Path:
-    """The run as a measured CSV: the 21 columns where the suite's real run records every joint, else a header
-    naming the joints it records (a 3-joint design's wrist, simulated without noise, is no measured joint)."""
+    """The run as a measured CSV: the 21 columns where the suite's real run records every joint at the default
+    rate, else a header naming the joints it records and a time column (a 3-joint design's wrist, simulated
+    without noise, is no measured joint; a run logged at 100 Hz read at 200 Hz is refused)."""
     q = state.q + rng.standard_normal(state.q.shape) * noise["position"]
     columns = np.hstack([q, state.dq, efforts + rng.standard_normal(efforts.shape) * noise["effort"]])
-    if state.measured.all():
+    if state.measured.all() and abs(state.rate_hz - sample_rate_hz()) <= 1e-6 * state.rate_hz:
         np.savetxt(path, columns, delimiter=",")
         return path
-    kept = np.tile(state.measured, 3)
-    names = [f"{kind}{j + 1}" for kind in ("q", "dq", "tau") for j in range(N_JOINTS)]
-    np.savetxt(path, columns[:, kept], delimiter=",", header=",".join(np.array(names)[kept]), comments="")
+    kept = np.r_[True, np.tile(state.measured, 3)]
+    names = np.array(["t", *(f"{kind}{j + 1}" for kind in ("q", "dq", "tau") for j in range(N_JOINTS))])
+    np.savetxt(path, np.column_stack([state.t - state.t[0], columns])[:, kept], delimiter=",", header=",".join(names[kept]), comments="")
     return path
 
 

@@ -233,6 +233,17 @@ def _weighted_inverse(X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndar
     return inverse, A
 
 
+#: a joint whose noise variance is below this fraction of the noisiest joint's measured nothing: round-off (a
+#: simulated run's held wrist, 1e-31 against 1e-7 N·m² on q1..q3, took weights of 1e30 and hid a 0.2 kg payload)
+ROUND_OFF_VARIANCE = 1e-12
+
+
+def _measured(pair: Pair) -> np.ndarray:
+    """(R, 7) the coefficients the pair measured: noise above round-off on its joint (a joint not recorded: zeros)."""
+    per_joint = pair.noise.max(axis=0)
+    return (pair.noise > 0.0) & (per_joint > ROUND_OFF_VARIANCE * per_joint.max())
+
+
 def _weights(variance: list[np.ndarray], measured: np.ndarray) -> np.ndarray:
     """1 / variance where the pairs measured something (`measured`: their noise is not nil), else no weight:
     a joint the runs did not record (zeros, no noise) has no say in the fit, whatever scatter its rows seem to have."""
@@ -251,7 +262,7 @@ def fit_payload(pairs: list[Pair], offset_joints: np.ndarray | None = None, vari
     fixed = variance is not None
     variance = variance if fixed else [p.noise.copy() for p in pairs]
     n_params = pairs[0].X.shape[-1]
-    measured = np.concatenate([p.noise.reshape(-1) > 0.0 for p in pairs])
+    measured = np.concatenate([_measured(p).reshape(-1) for p in pairs])
     for _ in range(0 if fixed else FEASIBLE_GLS_ITERATIONS):
         w = _weights(variance, measured)
         inverse, _ = _weighted_inverse(X, w)
