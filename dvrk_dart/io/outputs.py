@@ -122,7 +122,7 @@ def check_writable_folder(path: str | os.PathLike, option: str = "--out") -> Pat
 
 def check_output_folder(path: str | os.PathLike, kind: str, option: str = "--out", writes: Iterable[str] = ()) -> Path:
     """The folder `path` can receive a `kind` folder (replacing only one the tool
-    made; `writes`: files it will write, relative, which no file of the user's
+    made; `writes`: files it may write, relative, which no file of the user's
     may hold): raise a one-line error otherwise. Checks only: call it before any work."""
     path = check_writable_folder(path, option)
     if path.is_symlink():
