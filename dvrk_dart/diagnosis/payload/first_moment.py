@@ -50,7 +50,7 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
-from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, point_mass_parameters, point_mass_parameters_jacobian
+from dvrk_dart.diagnosis.payload.payload import PAYLOAD_MAX_MASS_KG, equivalents_of, point_mass_parameters, point_mass_parameters_jacobian
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
@@ -221,8 +221,7 @@ class FirstMomentPayload(Effect):
 
     def describe(self, p):
         return {"mass_kg": float(p[0]), "link": self.link_name, "link_key": self.link_key, "group": self.group,
-                "equivalent_links": list(self.equivalent_links),
-                "equivalent_link_groups": [self.model.link_by_name(name).group for name in self.equivalent_links],
+                **equivalents_of(self.model, self.equivalent_links),
                 "first_moment_link_kg_m": [float(x) for x in p[1:4]],
                 "first_moment_base_at_q0_kg_m": self.first_moment_base_at_zero(p).tolist(),
                 "yaw_path_mass_and_first_moment_link": [float(x) for x in p[4:8]]}

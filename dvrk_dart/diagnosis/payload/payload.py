@@ -121,13 +121,17 @@ class PointPayload(Effect):
             "link": self.link_name,
             "link_key": self.link_key,
             "group": self.group,
-            "equivalent_links": list(self.equivalent_links),
-            "equivalent_link_groups": [self.model.link_by_name(name).group for name in self.equivalent_links],
+            **equivalents_of(self.model, self.equivalent_links),
             "position_m": [float(x) for x in p[1:4]],
             "position_base_at_q0_m": self.position_base_at_zero(p).tolist(),
             "envelope_m": {"lower": self.envelope.lower.tolist(), "upper": self.envelope.upper.tolist()},
             "at_envelope_boundary": self.envelope.on_boundary(p[1:4]),
         }
+
+
+def equivalents_of(model: PsmModel, equivalent_links) -> dict:
+    """A payload report's equivalent links with their groups (the answer names those of other groups)."""
+    return {"equivalent_links": list(equivalent_links), "equivalent_link_groups": [model.link_by_name(n).group for n in equivalent_links]}
 
 
 def payload_links(model: PsmModel) -> list[int]:

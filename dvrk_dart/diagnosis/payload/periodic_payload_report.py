@@ -10,7 +10,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-from dvrk_dart.diagnosis.payload.payload import mass_seen_by_gravity, point_mass_parameters
+from dvrk_dart.diagnosis.payload.payload import equivalents_of, mass_seen_by_gravity, point_mass_parameters
 from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, effort_not_determined, pitch_shaft_offsets, swamp
 from dvrk_dart.diagnosis.payload.intervals import INTERVAL_PROBABILITY
 from dvrk_dart.diagnosis.payload.periodic_payload import (
@@ -211,8 +211,7 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     signature = np.vstack([maps[k][fit.determined(maps[k])] for k in ("first_moment_base_at_q0_kg_m", "q1_gravity_slope_at_q0_nm_per_rad")])
     p_value = fit.p_value(signature)
     groups = sorted({e.group for e in [effect, *tied_effects]})
-    report = {"link": effect.link_name, "link_key": effect.link_key, "group": effect.group, "equivalent_links": list(effect.equivalent_links),
-              "equivalent_link_groups": [arm.model.link_by_name(name).group for name in effect.equivalent_links], "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
+    report = {"link": effect.link_name, "link_key": effect.link_key, "group": effect.group, **equivalents_of(arm.model, effect.equivalent_links), "tied_links": [e.link_name for e in tied_effects], "group_determined": len(groups) == 1, "tied_groups": groups,
               "link_bic": dict(zip((e.link_name for e in candidates), costs.tolist())),
               "selection_link": selected.link_name if selected is not None else None,
               **quantities, "not_determined": reasons,
