@@ -140,3 +140,20 @@ def test_runs_of_their_own_whose_constants_scatter_say_nothing_beyond_their_scat
                         arm, name=name) for state, offset, seed, name in ((segment, 0.02, 63, "a"), (time_scaled(segment, 0.5), -0.02, 64, "b"))]
     result = diagnose(runs, arm=arm, figures=False, max_effects=2, profile_payload_mass=False)
     assert not [c for c in result["constants_beyond_session"] if c["joint"] == "q3"], result["constants_beyond_session"]
+
+
+def test_a_repeat_that_starts_elsewhere_in_the_motion_is_paired_on_the_same_samples():
+    """A repeat put on a baseline's samples may start later in the motion: its floor against the
+    run it copies is zero (it was no pair, and the session's change came from the model card)."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun
+    from dvrk_dart.diagnosis.fit.session_floor import paired_gaps, session_floor
+    from dvrk_dart.io.reference_data import load_run, resolve_run
+    from dvrk_dart.io.signal import process
+
+    state = process(load_run(resolve_run("one-no-weight"), PSM))
+    reference = DiagnosisRun("reference", state, np.zeros_like(state.tau))
+    late = state.window(499, len(state) - 499)
+    repeat = DiagnosisRun("repeat", late, np.zeros_like(late.tau))
+    a, b = paired_gaps(reference, repeat)
+    assert len(a) == len(late) and np.array_equal(a, reference.gap[499:]) and np.array_equal(b, repeat.gap)
+    assert np.all(session_floor(reference, repeat) == 0.0)

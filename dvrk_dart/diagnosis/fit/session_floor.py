@@ -65,11 +65,17 @@ def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProce
 
 def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarray] | None:
     """The two runs' gaps on their common samples where they record the same motion, else None (a repeat
-    logged at another rate and put on the runs' may be a sample shorter)."""
+    logged at another rate and put on the runs' may be a sample shorter; one put on a baseline's samples may
+    start elsewhere in the motion: it is shifted as the baseline was)."""
     n = min(len(a.state), len(b.state))
-    if not same_motion(a.state.head(n), b.state.head(n)):
+    if same_motion(a.state.head(n), b.state.head(n)):
+        return a.gap[:n], b.gap[:n]
+    offset = motion_offset(a.state, b.state)
+    if offset is None:
         return None
-    return a.gap[:n], b.gap[:n]
+    start_a, start_b = max(0, -offset), max(0, offset)
+    n = min(len(a) - start_a, len(b) - start_b)
+    return a.gap[start_a : start_a + n], b.gap[start_b : start_b + n]
 
 
 def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, reference: DiagnosisRun) -> tuple[np.ndarray, str]:
