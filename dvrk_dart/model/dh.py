@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class DHFrame:
     d: LinearExpr
     theta: LinearExpr
 
-    @property
+    @cached_property  # read at every simulation step (sim/effects.py): the frame does not change
     def joint_type(self) -> str:
         if self.theta.depends_on_q and self.d.depends_on_q:
             raise DvrkDartError("a link cannot have both theta and d depend on q")
@@ -60,7 +61,7 @@ class DHFrame:
             return "prismatic"
         return "fixed"
 
-    @property
+    @cached_property
     def variable(self) -> LinearExpr | None:
         """The link's own joint variable (theta or d), None for a fixed frame."""
         return {"revolute": self.theta, "prismatic": self.d, "fixed": None}[self.joint_type]

@@ -107,6 +107,11 @@ class Problem:
         grams = self.train_grams
         return grams.A.sum(0), grams.g.sum(0), grams.s.sum(0)
 
+    @cached_property
+    def holdout_totals(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Each held-out run's Gram blocks summed (A, g, s): every candidate's held-out fraction reads them."""
+        return [(h.A.sum(0), h.g.sum(0), h.s.sum(0)) for h in self.holdout_grams]
+
     @property
     def has_baseline(self) -> bool:
         return self.baseline_run is not None

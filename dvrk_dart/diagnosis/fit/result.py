@@ -66,8 +66,8 @@ def train_fraction(problem: Problem, beta: np.ndarray) -> float:
 def holdout_fraction(problem: Problem, beta: np.ndarray) -> float | None:
     if not problem.holdout_grams:
         return None
-    errors = np.sum([sse(beta, h.A.sum(0), h.g.sum(0), h.s.sum(0)) for h in problem.holdout_grams], axis=0)
-    return weighted_fraction(errors, np.sum([h.s.sum(0) for h in problem.holdout_grams], axis=0), problem.joint_weights)
+    errors = np.sum([sse(beta, A, g, s) for A, g, s in problem.holdout_totals], axis=0)
+    return weighted_fraction(errors, np.sum([s for _, _, s in problem.holdout_totals], axis=0), problem.joint_weights)
 
 
 def effect_entries(problem: Problem, selection: Selection) -> list[dict]:
