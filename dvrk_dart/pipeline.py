@@ -4,6 +4,7 @@ diagnosis with its withheld-effect validations, in one command."""
 from __future__ import annotations
 
 import json
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -167,9 +168,11 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     check_shared_folder(out_dir, VALIDATION_KIND)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
+    start = time.perf_counter()
     try:
         return _validate(out_dir, report_dir, jobs, force, dynamics, executor, ray_address)
     finally:  # what this run wrote is the tool's, even when a stage failed: the next run may replace it
+        print(f"validate: {time.perf_counter() - start:.0f} s")
         write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
 
 
