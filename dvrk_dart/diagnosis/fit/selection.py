@@ -21,7 +21,9 @@ Selection (`diagnose`):
   with a block bootstrap over the held-out blocks for its uncertainty. In the
   periodic processing every period is a copy, so a fold's noise is fitted in
   the other folds: the score then also pays the noise each fitted parameter
-  absorbs, twice (Mallows' Cp, from the periodic layer's measured noise). The
+  absorbs, twice (Mallows' Cp, from the periodic layer's measured noise; a
+  nonlinear effect pays what its columns' span absorbs, as far as its fit
+  reaches). The
   folds stay: with copies weighted twice against once they still test how the
   fit moves under model error, which noise alone does not show (measured: a
   pure Cp score let richer effects in that did not carry to the held-out
@@ -121,26 +123,31 @@ class Selector:
 
     def optimism(self, chosen: list[int], params: dict[int, np.ndarray]) -> np.ndarray:
         """(n_blocks, 7) twice the noise energy the chosen effects' fitted
-        parameters absorb: their seen parameters, each the mean of its
-        columns' share; a nonlinear effect's columns are the efforts per unit
-        of each parameter at `params` (a tied second moment moves with the
-        mass and first moment: its columns alone would dilute their share)."""
+        parameters absorb: a linear effect's seen parameters, each the mean of
+        its columns' share; a nonlinear effect, the noise its columns' span
+        absorbs (the fit reaches about as far: a first-moment payload's tied
+        inertia, small masses far out, took 2.7x the noise its parameters'
+        local directions absorb on a joint carrying noise only)."""
         total = np.zeros_like(self.train.s)
         for i in chosen:
             sl, e = self.design.slices[i], self.design.effects[i]
-            shares = self.noise_share[sl] if e.linear else self._parameter_shares(sl, e.coefficients_jacobian(params[i]))
+            if not e.linear:
+                total += 2.0 * self._span_absorbed(sl)
+                continue
+            shares = self.noise_share[sl]
             live = [k for k in range(len(shares)) if shares[k].any()]
             if live:
                 total += 2.0 * e.n_seen_parameters * shares[live].mean(0)
         return total
 
-    def _parameter_shares(self, sl: slice, jacobian: np.ndarray) -> np.ndarray:
-        """(n_parameters, n_blocks, 7) the noise share of each parameter's effort direction (columns @ jacobian)."""
+    def _span_absorbed(self, sl: slice) -> np.ndarray:
+        """(n_blocks, 7) the noise energy a weighted least-squares fit on the columns `sl` absorbs, per block and joint
+        (train.s units): noise_bj w2_j tr(G^+ A_bj), G = sum w2_j A_bj (the weighted hat matrix's trace, split)."""
         A = self.train.A[:, :, sl, sl]
-        energy = np.einsum("pk,bjpq,qk->kbj", jacobian, A, jacobian)  # x^T A x per block, joint, parameter
-        den = np.einsum("kbj,j->k", energy, self.w2)
-        share = energy * self.train.noise[None] * self.w2[None, None, :]
-        return np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
+        G = np.einsum("bjpq,j->pq", A, self.w2)
+        inverse = np.linalg.pinv(G, rcond=1e-10, hermitian=True)
+        leverage = np.einsum("pq,bjqp->bj", inverse, A)
+        return self.train.noise * self.w2[None, :] * leverage
 
     def fit_all(self, chosen, warm=None) -> Fit:
         return self.fitter.fit(chosen, self.A_total, self.g_total, warm, self.energy_total)
