@@ -142,18 +142,19 @@ def test_runs_of_their_own_whose_constants_scatter_say_nothing_beyond_their_scat
     assert not [c for c in result["constants_beyond_session"] if c["joint"] == "q3"], result["constants_beyond_session"]
 
 
-def test_a_repeat_that_starts_elsewhere_in_the_motion_is_paired_on_the_same_samples():
-    """A repeat put on a baseline's samples may start later in the motion: its floor against the
-    run it copies is zero (it was no pair, and the session's change came from the model card)."""
-    from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun
+def test_a_repeat_that_starts_elsewhere_in_the_motion_is_paired_as_it_was_aligned(arm):
+    """A repeat put on a baseline's samples may start later in the motion (here a quarter of a 6 s stretch
+    that does not repeat itself): it is paired with the baseline as it was aligned, and its floor against
+    the run it copies is zero (it was no pair: the floor failed, the session's change came from the card)."""
+    from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole, prepare_run
     from dvrk_dart.diagnosis.fit.session_floor import paired_gaps, session_floor
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import process
 
     state = process(load_run(resolve_run("one-no-weight"), PSM))
-    reference = DiagnosisRun("reference", state, np.zeros_like(state.tau))
-    late = state.window(499, len(state) - 499)
-    repeat = DiagnosisRun("repeat", late, np.zeros_like(late.tau))
+    reference = prepare_run(state.window(0, 1200), arm, name="reference")
+    repeat = prepare_run(state.window(290, 1200), arm, baseline=reference, name="repeat")
+    assert repeat.role is RunRole.DIFFERENCE and len(repeat) == 1200 - 290
     a, b = paired_gaps(reference, repeat)
-    assert len(a) == len(late) and np.array_equal(a, reference.gap[499:]) and np.array_equal(b, repeat.gap)
-    assert np.all(session_floor(reference, repeat) == 0.0)
+    assert np.array_equal(a, reference.gap[290:]) and np.array_equal(b, repeat.gap)
+    assert np.all(session_floor(reference, repeat) < 1e-9)

@@ -121,7 +121,7 @@ class Selector:
             share = np.einsum("bjp,bj,j->pbj", diag, train.noise, w2)  # in train.s units
             self.noise_share = np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
 
-    def optimism(self, chosen: list[int], params: dict[int, np.ndarray]) -> np.ndarray:
+    def optimism(self, chosen: list[int]) -> np.ndarray:
         """(n_blocks, 7) twice the noise energy the chosen effects' fitted
         parameters absorb: a linear effect's seen parameters, each the mean of
         its columns' share; a nonlinear effect, the noise its columns' span
@@ -145,7 +145,10 @@ class Selector:
         (train.s units): noise_bj w2_j tr(G^+ A_bj), G = sum w2_j A_bj (the weighted hat matrix's trace, split)."""
         A = self.train.A[:, :, sl, sl]
         G = np.einsum("bjpq,j->pq", A, self.w2)
-        inverse = np.linalg.pinv(G, rcond=1e-10, hermitian=True)
+        # on unit columns: the trace is the same, and which near-collinear directions count is not set by the units
+        scale = np.sqrt(np.diag(G))
+        scale = np.where(scale > 0, scale, 1.0)
+        inverse = np.linalg.pinv(G / np.outer(scale, scale), rcond=1e-10, hermitian=True) / np.outer(scale, scale)
         leverage = np.einsum("pq,bjqp->bj", inverse, A)
         return self.train.noise * self.w2[None, :] * leverage
 
@@ -169,7 +172,7 @@ class Selector:
             after[held] = sse(fit.beta, self.train.A, self.train.g, self.train.s)[held]
             fold_params.append(fit.params)
         if self.penalised:  # the folds' copies in the other folds: the noise fitted is not held out, its optimism added
-            after = after + self.optimism(chosen, fold_params[0])
+            after = after + self.optimism(chosen)
         return CvResult(after, weighted_fraction(after, self.train.s, self.w2), fold_params)
 
     def bootstrap_fractions(self, after: np.ndarray) -> np.ndarray:

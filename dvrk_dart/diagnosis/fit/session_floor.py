@@ -65,8 +65,11 @@ def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProce
 
 def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarray] | None:
     """The two runs' gaps on their common samples where they record the same motion, else None (a repeat
-    logged at another rate and put on the runs' may be a sample shorter; one put on a baseline's samples may
-    start elsewhere in the motion: it is shifted as the baseline was)."""
+    logged at another rate and put on the runs' may be a sample shorter; one put on a baseline's samples,
+    which may start elsewhere in the motion, is paired as it was aligned)."""
+    for run, other, swap in ((b, a, False), (a, b, True)):  # a repeat already put on the other's samples as its baseline
+        if run.role is RunRole.DIFFERENCE and run.baseline.name == other.name:
+            return (run.gap, run.baseline.gap) if swap else (run.baseline.gap, run.gap)
     n = min(len(a.state), len(b.state))
     if same_motion(a.state.head(n), b.state.head(n)):
         return a.gap[:n], b.gap[:n]
