@@ -112,6 +112,7 @@ class Selector:
         n = len(train.s)
         self.resamples = rng.integers(0, n, size=(BOOTSTRAP_RESAMPLES, n))
         self.penalised = train.noise is not None
+        self._span_noise: dict[int, np.ndarray] = {}
         if self.penalised:
             # periodic processing: every period a copy, so a time fold is no held-out data. The score is the
             # in-sample fraction less the optimism (Mallows' Cp): 2 x the noise energy each fitted parameter
@@ -132,7 +133,7 @@ class Selector:
         for i in chosen:
             sl, e = self.design.slices[i], self.design.effects[i]
             if not e.linear:
-                total += 2.0 * self._span_absorbed(sl)
+                total += 2.0 * self._span_absorbed(i)
                 continue
             shares = self.noise_share[sl]
             live = [k for k in range(len(shares)) if shares[k].any()]
@@ -140,9 +141,15 @@ class Selector:
                 total += 2.0 * e.n_seen_parameters * shares[live].mean(0)
         return total
 
-    def _span_absorbed(self, sl: slice) -> np.ndarray:
-        """(n_blocks, 7) the noise energy a weighted least-squares fit on the columns `sl` absorbs, per block and joint
-        (train.s units): noise_bj w2_j tr(G^+ A_bj), G = sum w2_j A_bj (the weighted hat matrix's trace, split)."""
+    def _span_absorbed(self, i: int) -> np.ndarray:
+        """(n_blocks, 7) the noise energy a weighted least-squares fit on effect i's columns absorbs, per block and joint
+        (train.s units): noise_bj w2_j tr(G^+ A_bj), G = sum w2_j A_bj (the weighted hat matrix's trace, split);
+        made once per effect (every candidate set it is in reads it)."""
+        if i not in self._span_noise:
+            self._span_noise[i] = self._span_noise_of(self.design.slices[i])
+        return self._span_noise[i]
+
+    def _span_noise_of(self, sl: slice) -> np.ndarray:
         A = self.train.A[:, :, sl, sl]
         G = np.einsum("bjpq,j->pq", A, self.w2)
         # on unit columns: the trace is the same, and which near-collinear directions count is not set by the units
