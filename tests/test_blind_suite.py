@@ -1,7 +1,8 @@
 """The blind effect suite's fixed subset (make validate runs all of it, both
 processings, without and with a baseline): one case per effect family, each
-in one variant, on two periods of "one" (two cases on the 2018 arm's
-design, one on the half-speed motion of the 105 g run) made in DART with the effect as physics and the measured noise. The top finding must be the injected class
+in one variant, on two periods of "one" (two cases on the 2018 arm's design,
+one on the half-speed motion of the 105 g run) made in DART with the effect
+as physics and the measured noise. The top finding must be the injected class
 on its joint, and the joint's gap after within 1.5x what the true physics
 leaves (the issue's tolerance, not the project's)."""
 

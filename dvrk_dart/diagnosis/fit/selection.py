@@ -127,8 +127,8 @@ class Selector:
         parameters absorb: a linear effect's seen parameters, each the mean of
         its columns' share; a nonlinear effect, the noise its columns' span
         absorbs (the fit reaches about as far: a first-moment payload's tied
-        inertia, small masses far out, took 2.7x the noise its parameters'
-        local directions absorb on a joint carrying noise only)."""
+        inertia, small masses far out, took 2.7 to 4 times the noise its
+        parameters' local directions absorb on joints carrying noise only)."""
         total = np.zeros_like(self.train.s)
         for i in chosen:
             sl, e = self.design.slices[i], self.design.effects[i]

@@ -71,14 +71,9 @@ def paired_gaps(a: DiagnosisRun, b: DiagnosisRun) -> tuple[np.ndarray, np.ndarra
         if run.role is RunRole.DIFFERENCE and run.baseline.name == other.name:
             return (run.gap, run.baseline.gap) if swap else (run.baseline.gap, run.gap)
     n = min(len(a.state), len(b.state))
-    if same_motion(a.state.head(n), b.state.head(n)):
-        return a.gap[:n], b.gap[:n]
-    offset = motion_offset(a.state, b.state)
-    if offset is None:
+    if not same_motion(a.state.head(n), b.state.head(n)):
         return None
-    start_a, start_b = max(0, -offset), max(0, offset)
-    n = min(len(a) - start_a, len(b) - start_b)
-    return a.gap[start_a : start_a + n], b.gap[start_b : start_b + n]
+    return a.gap[:n], b.gap[:n]
 
 
 def session_offset_joints(model: PsmModel, repeat: DiagnosisRun | None, reference: DiagnosisRun) -> tuple[np.ndarray, str]:
