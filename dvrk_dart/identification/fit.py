@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -251,7 +252,9 @@ def fit_consistent(
     constraints.append(theta[friction] >= 0.0)
     problem = cp.Problem(cp.Minimize(data_term + prior_term), constraints)
     try:
-        problem.solve(solver=solver)
+        with warnings.catch_warnings():  # an inaccurate solve is said by its status (identification.json, the error)
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=solver)
     except cp.error.SolverError as exc:
         raise DvrkDartError(f"identification: the convex program failed ({solver}: {exc})") from None
     if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or x.value is None:

@@ -47,7 +47,7 @@ from dvrk_dart.identification.identify import (
 )
 from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
-from dvrk_dart.io.provenance import software_versions
+from dvrk_dart.io.provenance import sha256_of, software_versions
 from dvrk_dart.io.reference_data import input_record, resolve
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
@@ -98,6 +98,15 @@ def reference_theta(result: IdentificationResult) -> tuple[np.ndarray, str, floa
     layout = result.regressor.layout
     worst = min(float(np.linalg.eigvalsh(pseudo_inertia(p.mass, p.com, p.inertia_com))[0]) for k, p in params.links.items() if k in layout.inertial_links)
     return standard_vector(params, layout), str(path), worst
+
+
+def _input_files(result: IdentificationResult, reference: tuple | None) -> dict[str, dict]:
+    """The files besides the runs the identification read (the arm's model card, the bounds, the prior's and
+    the published parameters): path and sha256."""
+    files = {"model_file": result.model.source, "bounds_file": result.bounds.source,
+             "prior_file": result.prior_source if Path(result.prior_source).is_file() else None,
+             "reference_params_file": reference[1] if reference else None}
+    return {key: {"path": str(path), "sha256": sha256_of(Path(path))} for key, path in files.items() if path is not None}
 
 
 def _run_entry(run: RunData, result: IdentificationResult) -> dict:
@@ -170,6 +179,7 @@ def summary(result: IdentificationResult) -> dict:
             "prior": result.prior_source, "seed": cfg.seed, "solver": cfg.solver, "model_file": str(result.model.source),
         },
         "runs": {"train": [_run_entry(r, result) for r in result.train], "holdout": [_run_entry(r, result) for r in result.holdout]},
+        "input_files": _input_files(result, reference),
         "versions": software_versions(),
         "processing": _processing(result),
         "presliding": {
@@ -321,7 +331,10 @@ def write_outputs(result: IdentificationResult, folder: Path) -> dict:
         load_parameters(folder / PARAMS_FILE, result.model)
     except DvrkDartError as exc:  # name what the user asked for, not the folder being built
         message = str(exc).replace(str(folder / PARAMS_FILE), f"the identified {PARAMS_FILE}")
-        raise DvrkDartError(f"identify: {message} (check --bounds and --prior)") from None
+        fit = result.consistent
+        hint = (f"the {fit.solver} solver ended '{fit.status}': try the default --solver" if fit.status != "optimal"
+                else "check --bounds and --prior")
+        raise DvrkDartError(f"identify: {message} ({hint})") from None
     data = summary(result)
     write_json_atomic(folder / COVARIANCE_FILE, covariance_document(result))
     write_text_atomic(folder / SUMMARY_FILE, json_text(data))

@@ -17,7 +17,7 @@ from dvrk_dart.errors import raise_if_interrupted
 def _jsonable(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
     if isinstance(value, Path):
         return str(value)

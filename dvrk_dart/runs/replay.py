@@ -221,6 +221,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "unrecorded_joint_notes": unrecorded_joint_notes(identified, processed, rms(full_model - processed.tau[in_window])),
         "measured_samples": int(in_window.sum()),  # the model's figure's; the log's stop a step short of the last
         "rms_q_sim_vs_measured": per_measured_joint(rms(q - q_meas), recorded) if len(t) else None,
+        "tracking_notes": not_following_notes(q, q_meas, recorded) if len(t) else [],
         "closure_residual_max_m": float(np.max(record.closure_residual_m, initial=0.0)),
         "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
         "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(t) else 0.0,
@@ -233,6 +234,24 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         metrics["error"] = str(log.error)
     record.metrics = metrics
     return record
+
+
+#: a replayed joint whose position error's RMS passes this share of its measured motion's (about its mean) does not
+#: follow the motion: its simulated efforts are another motion's (a torque-mode wrist held by friction the gains
+#: do not overcome: 1.7 rad off a +-1 rad motion, its efforts 200 times the measured)
+NOT_FOLLOWING_SHARE = 0.25
+
+
+def not_following_notes(q: np.ndarray, q_measured: np.ndarray, recorded: np.ndarray) -> list[str]:
+    """A note naming the recorded joints whose simulated motion does not follow the measured one."""
+    error, motion = rms(q - q_measured), rms(q_measured - q_measured.mean(axis=0))
+    lost = [j for j in range(len(error)) if recorded[j] and motion[j] > 0 and error[j] > NOT_FOLLOWING_SHARE * motion[j]]
+    if not lost:
+        return []
+    return [f"{', '.join(JOINT_NAMES[j] for j in lost)}: the simulation does not follow the measured motion (position error RMS "
+            f"{', '.join(f'{error[j]:.3g}' for j in lost)} against the motion's {', '.join(f'{motion[j]:.3g}' for j in lost)}, "
+            f"rad or m): "
+            f"their simulated efforts are not the measured motion's"]
 
 
 def in_band_at_samples(processed: ProcessedRun, t: np.ndarray, x: np.ndarray) -> np.ndarray:

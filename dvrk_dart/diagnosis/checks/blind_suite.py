@@ -168,7 +168,7 @@ def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, p
 def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate | None = None) -> tuple[dict, list[dict]]:
     """Every case of `spec` in every processing of `spec["processings"]`,
     without and with a baseline (`spec["baselines"]`, default both;
-    `spec["subset"]`: the case names to run only)."""
+    `spec["subset"]`: the case names to run only; `spec["seed_offset"]`: another noise draw)."""
     simulate = simulate or BatchSimulate(arm, "local", 1)
     real = process_periodic(load_run(resolve_run(spec["run"]), arm.model))
     motion = suite_motion(spec, real)
@@ -177,7 +177,8 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
     outcomes = []
     with notes_kept([]) as notes:  # on the suite's own runs: in blind_suite.json, not in make validate's log
         for case in cases:
-            runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", zlib.crc32(case["name"].encode()))  # a case's runs whatever runs beside it
+            seed = zlib.crc32(case["name"].encode()) + spec.get("seed_offset", 0)  # a case's runs whatever runs beside it
+            runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", seed)
             known: dict = {}
             outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline, known)
                          for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
