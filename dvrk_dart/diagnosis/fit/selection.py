@@ -305,12 +305,9 @@ class Selector:
 
     def _payload_joints_earned(self, selected: list[int], best: int, trials: dict[int, CvResult], current: CvResult) -> int:
         """Occam's rule for a payload's joints (periodic): a payload that moves joints a rival payload of another
-        family does not (a link past the yaw joint against the yaw link) is kept only if what it fits on those
-        joints is beyond their noise: a chi-square test of the energy it absorbs there against the noise of as many
-        directions as its columns span there, at BEYOND_NOISE_LEVEL divided over the candidates that move those
-        joints (the best of a dozen links fits their noise better than one link does: the yaw payload of the
-        half-speed design was read on a parallelogram link from 62 % of q2's noise in 3 of its 12 directions).
-        Else the best-scoring rival is the step's choice."""
+        family does not (a parallelogram link against the yaw link) is kept only if its fit there is beyond their
+        noise (`_noise_statistic`, at BEYOND_NOISE_LEVEL over the payload families that move them: the best of
+        nine caught 62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice."""
         effect = self.design.effects[best]
         if effect.kind != "payload":
             return best
@@ -329,10 +326,8 @@ class Selector:
 
     def _beyond_noise(self, selected: list[int], added: list[int], competing: int) -> bool:
         """Periodic: whether the step's in-sample fit removes more than the noise of the directions its columns
-        span (a chi-square test at BEYOND_NOISE_LEVEL over the candidates that competed for the step). The
-        score's charge (Mallows' Cp) counts one candidate's average catch; the best of sixty catches more: a time
-        shift took 27 % of q3's noise with one direction and bent a payload's fit (blind parallelogram payload,
-        another noise draw). Upstream: no measure of the noise, True."""
+        span, at BEYOND_NOISE_LEVEL over the candidates that competed (Cp charges one candidate's average catch; a
+        time shift, the best of sixty, took 27 % of q3's noise with one direction). Upstream (no noise): True."""
         if not self.penalised:
             return True
         removed = self._absorbed(selected + added) - self._absorbed(selected)
