@@ -306,8 +306,8 @@ class Selector:
     def _payload_joints_earned(self, selected: list[int], best: int, trials: dict[int, CvResult], current: CvResult) -> int:
         """Occam's rule for a payload's joints (periodic): a payload that moves joints a rival payload of another
         family does not (a parallelogram link against the yaw link) is kept only if its fit there is beyond their
-        noise (`_noise_statistic`, at BEYOND_NOISE_LEVEL over the payload families that move them: the best of
-        nine caught 62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice."""
+        noise (`_noise_statistic`, at BEYOND_NOISE_LEVEL over the candidates that competed: the step's best caught
+        62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice."""
         effect = self.design.effects[best]
         if effect.kind != "payload":
             return best
@@ -315,12 +315,11 @@ class Selector:
         payloads = [i for i in trials if self.design.effects[i].kind == "payload"]
         rivals = [i for i in payloads if self.design.effects[i].family != effect.family and joints(i) < joints(best)
                   and trials[i].fraction - current.fraction >= MIN_HELDOUT_GAIN]
-        competing = len({self.design.effects[i].family for i in payloads if joints(i) >= joints(best)})
         absorbed_by_best = self._absorbed(selected + [best]) if rivals else None
         for rival in sorted(rivals, key=lambda i: -trials[i].fraction):
             extra = sorted(joints(best) - joints(rival))
             statistic, degrees = self._noise_statistic([best], absorbed_by_best - self._absorbed(selected + [rival]), extra)
-            if degrees > 0 and statistic < chi2.isf(BEYOND_NOISE_LEVEL / competing, degrees):
+            if degrees > 0 and statistic < chi2.isf(BEYOND_NOISE_LEVEL / len(trials), degrees):
                 return rival
         return best
 
