@@ -63,11 +63,10 @@ def _print_effort_table(metrics: dict, dynamics: str | None, model) -> None:
 
 
 def _run_and_write(config, out: Path | None) -> int:
-    from dvrk_dart.io.outputs import check_output_folder
-    from dvrk_dart.runs.campaign import code_fingerprint, config_name, inputs_fingerprint, write_run_folder
+    from dvrk_dart.runs.campaign import code_fingerprint, inputs_fingerprint, write_run_folder
     from dvrk_dart.runs.runner import arm_of_run, run
 
-    out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
+    out_dir = _output_folder(config, out)
     arm = arm_of_run(config)
     record = run(config, arm)
     metrics = record.metrics
@@ -89,6 +88,35 @@ def _run_and_write(config, out: Path | None) -> int:
     return 0
 
 
+def _output_folder(config, out: Path | None) -> Path:
+    """--out, else out/runs/<the run's name>, checked (no work done yet)."""
+    from dvrk_dart.io.outputs import check_output_folder
+    from dvrk_dart.runs.campaign import config_name
+
+    out_dir = check_output_folder(out or Path("out") / "runs" / config_name(config), "run")
+    if out is None:
+        _check_default_folder_input(out_dir, config)
+    return out_dir
+
+
+def _check_default_folder_input(out_dir: Path, config) -> None:
+    """A default run folder is named after the measured file's name: one that holds the run of another file of
+    that name (another folder's x.csv) is not replaced silently."""
+    import json
+
+    from dvrk_dart.io.reference_data import resolve_run
+
+    if config.measured is None or not (out_dir / "config.json").is_file():
+        return
+    try:
+        before = [Path(entry["path"]) for entry in json.loads((out_dir / "config.json").read_text())["inputs"].values()]
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return  # not a replay's record: replaced as any run folder the tool made
+    now = resolve_run(config.measured).resolve()
+    if before and all(path.resolve() != now for path in before):
+        raise DvrkDartError(f"{out_dir} holds the replay of {before[0]}, another file than {now}: give --out")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """One scenario variant -> its output folder."""
     from dvrk_dart.runs.scenarios import load_scenario
@@ -102,12 +130,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay of a measured run (the paper's Sect. IV-B excitation test)."""
-    from dvrk_dart.io.outputs import check_output_folder
-
     recorded, said = _replay_processing(args)
     config = _run_config(args, "replay", args.mode, measured=args.measured)
-    if args.out:
-        check_output_folder(Path(args.out), "run")
+    _output_folder(config, Path(args.out) if args.out else None)
     print(said)  # once the options are known good: an error is the only line
     try:
         return _run_and_write(config, Path(args.out) if args.out else None)

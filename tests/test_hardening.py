@@ -112,6 +112,21 @@ def test_a_failed_rerun_leaves_the_previous_run_folder_intact(tmp_path, capsys, 
     assert [p.name for p in tmp_path.iterdir()] == ["run"]
 
 
+def test_a_default_replay_folder_of_another_file_of_the_same_name_is_kept(tmp_path, capsys, monkeypatch):
+    """out/runs/<name> is named after the file's name: another folder's x.csv does not replace its replay."""
+    monkeypatch.chdir(tmp_path)
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        measured_csv(tmp_path / folder, "x.csv", rows=600)
+    assert cli(capsys, "replay", "--measured", "a/x.csv", "--duration", "0.5")[0] == 0
+    (out,) = (tmp_path / "out" / "runs").iterdir()
+    before = tree_digest(out)
+    code, lines = cli(capsys, "replay", "--measured", "b/x.csv", "--duration", "0.5")
+    assert_one_line_error(code, lines, "a/x.csv", "give --out")
+    assert capsys.readouterr().out == "" and tree_digest(out) == before
+    assert cli(capsys, "replay", "--measured", "a/x.csv", "--duration", "0.5")[0] == 0  # its own file: replaced
+
+
 # ---------------------------------------------------------------- 3. a divergence at the first step
 
 
