@@ -322,4 +322,4 @@ def check_mass_determinable(arm, key: int, position: np.ndarray, text: str) -> N
 
 
 def _body_link_names(model) -> str:
-    return ", ".join(link.name for link in model.links.values() if link.inertia)
+    return ", ".join(link.name for link in model.links.values() if link.body and link.joint_type != "fixed")  # as _moving_body_link
