@@ -250,8 +250,7 @@ def not_following_notes(q: np.ndarray, q_measured: np.ndarray, recorded: np.ndar
         return []
     return [f"{', '.join(JOINT_NAMES[j] for j in lost)}: the simulation does not follow the measured motion (position error RMS "
             f"{', '.join(f'{error[j]:.3g}' for j in lost)} against the motion's {', '.join(f'{motion[j]:.3g}' for j in lost)}, "
-            f"rad or m): "
-            f"their simulated efforts are not the measured motion's"]
+            f"rad or m): their simulated efforts are not the measured motion's"]
 
 
 def in_band_at_samples(processed: ProcessedRun, t: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -269,7 +269,7 @@ class Selector:
             if not admissible:
                 break
             scored_best = self._parsimonious(admissible, current)
-            best = self._payload_joints_earned(selected, scored_best, admissible, current) if self.penalised else scored_best
+            best = self._payload_joints_earned(selected, scored_best, admissible, current)
             added, trial, instead_of = [best], trials[best], None if best == scored_best else self.design.effects[scored_best].name
             rival = self._offset_rival(selected, best, families, current)
             if rival is not None:
@@ -307,9 +307,9 @@ class Selector:
         """Occam's rule for a payload's joints (periodic): a payload that moves joints a rival payload of another
         family does not (a parallelogram link against the yaw link) is kept only if its fit there is beyond their
         noise (`_noise_statistic`, at BEYOND_NOISE_LEVEL over the candidates that competed: the step's best caught
-        62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice."""
+        62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice. Upstream: `best`."""
         effect = self.design.effects[best]
-        if effect.kind != "payload":
+        if not self.penalised or effect.kind != "payload":
             return best
         joints = lambda i: {JOINT_NAMES.index(j) for j in self.design.effects[i].joints}
         payloads = [i for i in trials if self.design.effects[i].kind == "payload"]
