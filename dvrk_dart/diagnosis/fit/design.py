@@ -18,6 +18,10 @@ from dvrk_dart.model.joints import N_JOINTS
 #: block length for the folds and the bootstrap (s): much longer than the
 #: filtered signals' correlation time (~0.05 s), short enough for ~28 blocks a run
 BLOCK_DURATION_S = 1.0
+#: a longer run's blocks lengthen to keep this many: the folds and the bootstrap
+#: need tens of blocks, and each holds 7 P^2 numbers (7 MB on the PSM), which
+#: grew a diagnosis by 21 MB per second of recording (6.3 GB for 207 s)
+MAX_BLOCKS_PER_RUN = 64
 #: Occam prior of a payload: a mass m costs this fraction of the training
 #: residual energy per kg^2. Far below what a real payload explains (0.1 kg:
 #: 1e-4), it only chooses among explanations the data cannot tell apart: on a
@@ -108,34 +112,40 @@ class Grams:
         (Frisch-Waugh-Lovell: the same fit as with the run's own offsets as free
         parameters)."""
         Phi = design.columns(features) if Phi is None else Phi  # (N, 7, P)
-        if demean is not None:
+        P = design.n_columns
+        column_means = np.zeros((N_JOINTS, P))
+        if demean is not None:  # block by block below: a demeaned copy of every column costs as much as the columns
             mask = np.asarray(demean, dtype=float)
-            Phi = Phi - mask[None, :, None] * Phi.mean(axis=0)
+            column_means = mask[:, None] * Phi.mean(axis=0)
             residual = residual - mask * residual.mean(axis=0)
         block = max(1, int(round(BLOCK_DURATION_S * features.sample_rate_hz)))
-        n_blocks = max(1, len(residual) // block)
+        n_blocks = min(MAX_BLOCKS_PER_RUN, max(1, len(residual) // block))
         edges = np.linspace(0, len(residual), n_blocks + 1).astype(int)
-        P = design.n_columns
         A = np.empty((n_blocks, N_JOINTS, P, P))
         g = np.empty((n_blocks, N_JOINTS, P))
         s = np.empty((n_blocks, N_JOINTS))
         for b in range(n_blocks):
             sl = slice(edges[b], edges[b + 1])
-            X = Phi[sl].transpose(1, 0, 2)  # (7, n, P)
+            X = (Phi[sl] - column_means if demean is not None else Phi[sl]).transpose(1, 0, 2)  # (7, n, P)
             A[b] = np.matmul(X.transpose(0, 2, 1), X)
             g[b] = np.einsum("jnp,nj->jp", X, residual[sl])
             s[b] = np.sum(residual[sl] ** 2, axis=0)
         fold = (np.arange(n_blocks) * min(folds, n_blocks)) // n_blocks
         return Grams(A, g, s, np.diff(edges), fold)
 
-    def scaled(self, weight: np.ndarray) -> "Grams":
-        """The normal equations with joint j's rows weighted by weight[j] (squared residual units)."""
+    def scale_in_place(self, weight: np.ndarray) -> None:
+        """Joint j's rows weighted by weight[j] (squared residual units), in place: a copy of A is A's size again."""
         w = np.asarray(weight, dtype=float)
-        return Grams(self.A * w[None, :, None, None], self.g * w[None, :, None], self.s * w[None, :], self.n, self.fold,
-                     None if self.noise is None else self.noise * w[None, :])
+        self.A *= w[None, :, None, None]
+        self.g *= w[None, :, None]
+        self.s *= w[None, :]
+        if self.noise is not None:
+            self.noise *= w[None, :]
 
     @staticmethod
     def concat(parts: list["Grams"]) -> "Grams":
+        if len(parts) == 1:
+            return parts[0]
         noise = None if any(p.noise is None for p in parts) else np.concatenate([p.noise for p in parts])
         return Grams(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("A", "g", "s", "n", "fold")), noise)
 

@@ -330,4 +330,6 @@ def _add_grams(problem: Problem) -> None:
     problem.holdout_grams = [problem.grams_of(r, Phi, 1) for r, Phi in zip(problem.holdout_runs, problem.holdout_columns)]
     # without the nuisance constants, as the fit: a session's constant on q2 lowered q2's weight and changed the selection
     problem.joint_weights = _joint_weights(np.vstack([problem.before_residual(r) for r in problem.train_runs])) * problem.recorded
-    problem.train_grams = Grams.concat([part.scaled(weight) for part, weight in zip(parts, _run_weights(parts))])
+    for part, weight in zip(parts, _run_weights(parts)):
+        part.scale_in_place(weight)
+    problem.train_grams = Grams.concat(parts)

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
+from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, MAX_BLOCKS_PER_RUN, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
 from dvrk_dart.diagnosis.fit.problem import Problem
@@ -40,7 +40,7 @@ class Selection:
         return (f"greedy forward selection on {len(self.selector.folds)}-fold contiguous time-segment cross-validation of the training "
                 f"runs, weighted least squares (joint weight 1/RMS before), bounded to physical ranges; stop when the held-out gain < "
                 f"{MIN_HELDOUT_GAIN} or not positive with probability {1 - GAIN_FAILURE_QUANTILE:.2f} (block bootstrap, "
-                f"{BLOCK_DURATION_S} s blocks, {BOOTSTRAP_RESAMPLES} resamples); a payload's link among its equivalent links "
+                f"{BLOCK_DURATION_S} s blocks, at most {MAX_BLOCKS_PER_RUN} a run, {BOOTSTRAP_RESAMPLES} resamples); a payload's link among its equivalent links "
                 f"(identical efforts) by the penalised training cost")
 
 

@@ -10,7 +10,8 @@ cancels the day-to-day effects and isolates the withheld one).
 Selection (`diagnose`):
 - every candidate effect of `effects.candidate_effects` is a regressor
   Y(q, dq, ddq) beta(p) with physical bounds on p;
-- the training residual is cut into blocks of BLOCK_DURATION_S; per block and
+- the training residual is cut into blocks of BLOCK_DURATION_S (longer in a
+  run of over MAX_BLOCKS_PER_RUN of them); per block and
   joint the Gram matrices Y^T Y, Y^T r, r^T r of all candidates are stored, so
   any fit and any held-out error is a small matrix computation;
 - a fit minimises the weighted squared residual over the joints (weight
