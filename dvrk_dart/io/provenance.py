@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.metadata
+import os
 import platform
 import subprocess
 from pathlib import Path
@@ -68,5 +69,6 @@ def sha256_of(path: Path) -> str:
 
 
 def file_record(path: Path) -> dict[str, str]:
-    """A file an output rests on (the identified parameters, ...): its path and content hash."""
-    return {"path": str(path), "sha256": sha256_of(path)}
+    """A file an output rests on (the identified parameters, ...): its path (absolute: a path relative to where the
+    command ran names no file later) and content hash."""
+    return {"path": os.path.abspath(path), "sha256": sha256_of(path)}

@@ -29,7 +29,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     manifest,
     sample_rate_hz,
 )
-from dvrk_dart.io.provenance import sha256_of  # noqa: F401  (re-exported)
+from dvrk_dart.io.provenance import file_record, sha256_of  # noqa: F401  (sha256_of re-exported)
 from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, spanning_columns
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
@@ -79,9 +79,9 @@ def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | N
 
 def input_record(path: str | Path, model: PsmModel, topics: BagTopics = BagTopics()) -> dict:
     """What an output records of a measured-run file of `model`'s arm it used:
-    path, sha256 and the options that selected its data (a bag's topics, a CSV's rate)."""
+    `file_record` and the options that selected its data (a bag's topics, a CSV's rate)."""
     path = Path(path)
-    entry = {"path": str(path), "sha256": sha256_of(path)}
+    entry = file_record(path)
     if is_bag(path):
         entry["bag_topics"] = topics.record(model.dvrk_topics)
     else:
