@@ -140,12 +140,25 @@ def physical_inertia(inertia: np.ndarray, margin: float = INERTIA_MARGIN_KG_M2) 
     return vectors @ np.diag([a, b, c]) @ vectors.T
 
 
-def body_inertia(link: Link, params: IdentifiedParameters) -> tuple[float, np.ndarray, np.ndarray]:
-    """(mass, com in the link frame, inertia about the com in link axes) used in DART."""
+def body_inertia(link: Link, params: IdentifiedParameters, scale: float = 1.0) -> tuple[float, np.ndarray, np.ndarray]:
+    """(mass, com in the link frame, inertia about the com in link axes) used in DART; `scale` multiplies
+    the mass and the inertia (`JointEffects.link_mass_scale`: a link lighter or heavier than identified)."""
     p = params[link.key]
     if p.mass <= 0.0:
         return NEGLIGIBLE_MASS_KG, np.zeros(3), NEGLIGIBLE_INERTIA_KG_M2 * np.eye(3)
-    return p.mass, p.com.copy(), physical_inertia(p.inertia_com)
+    return scale * p.mass, p.com.copy(), scale * physical_inertia(p.inertia_com)
+
+
+def _mass_scales(config: SimConfig, model: PsmModel) -> dict[int, float]:
+    """Per link key, the factor of `JointEffects.link_mass_scale` (its entries' errors added)."""
+    scales: dict[int, float] = {}
+    for key, error in config.extra.link_mass_scale:
+        if int(key) not in model.links:
+            raise DvrkDartError(f"sim_config.extra.link_mass_scale: link {int(key)} is not a link of the model")
+        scales[int(key)] = scales.get(int(key), 1.0) + float(error)
+    if any(scale <= 0.0 for scale in scales.values()):
+        raise DvrkDartError(f"sim_config.extra.link_mass_scale: a link's mass scaled to zero or below ({scales})")
+    return scales
 
 
 def _isometry(T: np.ndarray) -> dart.math.Isometry3:
@@ -245,6 +258,7 @@ def _tree(skel, model: PsmModel, params: IdentifiedParameters, config: SimConfig
     fixed_frames: dict[int, tuple[int, np.ndarray]] = {}
     # where a link frame sits: (key of the DART body it rides on, 0 = base; offset)
     anchor: dict[int, tuple[int, np.ndarray]] = {0: (0, np.eye(4))}
+    mass_scales = _mass_scales(config, model)
     zero = np.zeros(N_JOINTS)
     moving: list[Link] = []
     for link in model.links.values():
@@ -261,7 +275,7 @@ def _tree(skel, model: PsmModel, params: IdentifiedParameters, config: SimConfig
             fixed_frames[link.key] = (parent_body, placement)
             continue
         joint, body = _joint_and_body(skel, bodies.get(parent_body), link, placement)
-        mass, com, inertia = body_inertia(link, params)
+        mass, com, inertia = body_inertia(link, params, mass_scales.get(link.key, 1.0))
         body.setInertia(dart.dynamics.Inertia(mass, com, inertia))
         bodies[link.key] = body
         joints[link.key] = joint

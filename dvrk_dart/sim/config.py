@@ -53,6 +53,10 @@ class JointEffects:
     # kg m^2, either sign): effort value·sign(dq)·ddq, more or less inertia
     # while speeding up than while slowing down (J3's, diagnosis/beyond/insertion_terms.py)
     directional_armature: tuple[float, ...] = (0.0,) * 7
+    # a link lighter or heavier than identified: (link key, error) entries, its
+    # mass and inertia about its centre of mass times (1 + error), the centre of
+    # mass where it is (every effort of the body scales with it)
+    link_mass_scale: tuple[tuple[float, ...], ...] = ()
     # an effort on one coordinate set by another's angle: (target index,
     # source index, c_sin, c_cos) -> c_sin sin(q_source) + c_cos cos(q_source)
     angle_load: tuple[tuple[float, ...], ...] = ()

@@ -1,4 +1,4 @@
-"""Effects of the whole arm or of the measurement: base tilt, time shift, counterweight transmission."""
+"""Effects of the whole arm or of the measurement: base tilt, time shift, counterweight transmission, a link's own mass."""
 
 from __future__ import annotations
 
@@ -19,6 +19,8 @@ TIME_SHIFT_LIMIT_S = 0.05
 COUNTERWEIGHT_SCALE_LIMIT = 0.5
 #: a tension-proportional tendon loss beyond 50 % is not a transmission
 COUNTERWEIGHT_LOSS_LIMIT = 0.5
+#: a link's own mass off the identified one by more than 50 % is another arm, not an error of its model
+MASS_SCALE_LIMIT = 0.5
 
 
 def gravity_tilt_directions(gravity: np.ndarray) -> np.ndarray:
@@ -100,3 +102,36 @@ class CounterweightTransmission(Effect):
 
     def sim_contribution(self, p):
         return None  # SimConfig's tendon is ideal (or the paper's PID)
+
+
+def prismatic_bodies(arm: Arm) -> list[int]:
+    """The links with mass that only prismatic coordinates move (the PSM's insertion carriage and counterweight):
+    along a prismatic joint gravity and inertia see the mass alone, which a payload can only raise, so an arm
+    lighter there than identified has no other candidate (on a revolute joint a payload beyond the axis lowers
+    a link's gravity)."""
+    prismatic = {JOINT_NAMES.index(j) for j in arm.model.prismatic_coordinates}
+    return [key for key, link in arm.model.links.items()
+            if link.body and arm.params[key].mass > 0.0 and link.variable is not None
+            and set(np.flatnonzero(link.variable.coeffs)) <= prismatic]
+
+
+class LinkMassScale(Effect):
+    """A link lighter or heavier than identified: its mass and inertia times
+    (1 + error), its centre of mass where it is, so every effort of the body
+    scales (simulated: the DART body's inertia, `JointEffects.link_mass_scale`).
+    The arm's own: with a baseline of the same motion it is no candidate (a
+    session does not change a link's mass; a payload does)."""
+
+    kind = "mass_scale"
+    parameters = (Parameter("mass_error", "1", -MASS_SCALE_LIMIT, MASS_SCALE_LIMIT),)
+
+    def __init__(self, arm: Arm, key: int):
+        self.link_key = key
+        self.name = f"mass_scale_{arm.model.links[key].name}"
+        self.joints = tuple(j for j in JOINT_NAMES if j in joints_moving_link(arm.model, key))
+
+    def columns(self, features):
+        return features.body_effort(self.link_key)[:, :, None]
+
+    def sim_contribution(self, p):
+        return SimContribution(link_mass_scale=((float(self.link_key), float(p[0])),))

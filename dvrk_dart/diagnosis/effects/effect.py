@@ -56,6 +56,7 @@ class SimContribution:
     link_friction: tuple[tuple[float, ...], ...] = ()
     position_friction: tuple[tuple[float, ...], ...] = ()
     angle_load: tuple[tuple[float, ...], ...] = ()
+    link_mass_scale: tuple[tuple[float, ...], ...] = ()
     payloads: tuple[Payload, ...] = ()
     gravity_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
 

@@ -90,10 +90,12 @@ class TrajectoryFeatures:
             return np.zeros_like(self.reference_effort)
         return np.gradient(self.reference_effort, 1.0 / self.sample_rate_hz, axis=0)
 
+    def body_effort(self, key: int) -> np.ndarray:
+        """(N, 7) efforts due to one link's body alone (its identified inertia)."""
+        j = self._pin_joint_of_link[key]
+        return self.body_regressor[:, :, self.body_columns(key)] @ self.arm.identified.pin_model.inertias[j].toDynamicParameters()
+
     @cached_property
     def counterweight_effort(self) -> np.ndarray:
         """(N, 7) efforts due to the counterweight body alone (identified inertia)."""
-        im = self.arm.identified
-        key = self.arm.model.counterweight_link
-        j = self._pin_joint_of_link[key]
-        return self.body_regressor[:, :, self.body_columns(key)] @ im.pin_model.inertias[j].toDynamicParameters()
+        return self.body_effort(self.arm.model.counterweight_link)

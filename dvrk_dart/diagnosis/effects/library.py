@@ -10,7 +10,9 @@ import pinocchio as pin
 from dvrk_dart.diagnosis.effects.arm_effects import (
     CounterweightTransmission,
     GravityTilt,
+    LinkMassScale,
     TimeShift,
+    prismatic_bodies,
 )
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
@@ -94,6 +96,7 @@ def candidate_effects(
     effects += [GravityTilt(arm), TimeShift()]
     if arm.model.counterweight_link is not None:  # an arm with a counterweight tendon (the PSM's)
         effects.append(CounterweightTransmission(arm))
+    effects += [LinkMassScale(arm, key) for key in prismatic_bodies(arm)]
     return effects
 
 
@@ -109,7 +112,7 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         for name in ("coulomb", "viscous", "offset", "stiffness", "armature", "coulomb_reversal_velocity", "coulomb_presliding")
     }
     payloads = list(base.payloads)
-    link_friction, position_friction, angle_load = list(extra.link_friction), list(extra.position_friction), list(extra.angle_load)
+    entries = {name: list(getattr(extra, name)) for name in ("link_friction", "position_friction", "angle_load", "link_mass_scale")}
     tilt = np.array(base.gravity_tilt_rad, dtype=float)
     for effect, p in selected:
         contribution = effect.sim_contribution(np.asarray(p, dtype=float))
@@ -118,12 +121,11 @@ def effects_to_sim_config(selected: list[tuple[Effect, np.ndarray]], base: SimCo
         for name in fields:
             fields[name] += getattr(contribution, name)
         payloads += list(contribution.payloads)
-        link_friction += list(contribution.link_friction)
-        position_friction += list(contribution.position_friction)
-        angle_load += list(contribution.angle_load)
+        for name, values in entries.items():
+            values += list(getattr(contribution, name))
         tilt += contribution.gravity_tilt_rad
-    new_extra = replace(extra, **{name: tuple(float(v) for v in values) for name, values in fields.items()}, link_friction=tuple(link_friction),
-                        position_friction=tuple(position_friction), angle_load=tuple(angle_load))
+    new_extra = replace(extra, **{name: tuple(float(v) for v in values) for name, values in fields.items()},
+                        **{name: tuple(values) for name, values in entries.items()})
     return replace(base, extra=new_extra, payloads=tuple(payloads), gravity_tilt_rad=(float(tilt[0]), float(tilt[1])))
 
 
@@ -182,6 +184,8 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
         half = len(values) // 2
         coulomb = np.interp(features.q[:, j], values[:half], values[half:])
         total[:, j] += coulomb * friction.reversal(features.q[:, j], features.dq[:, j], distance)
+    for key, error in x.link_mass_scale:  # the body's efforts scale with it (nominal gravity: no tilt with it)
+        total = total + error * features.body_effort(int(key))
     for payload in config.payloads:
         params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))
         total = total + features.body_regressor[:, :, features.body_columns(payload.link)] @ params

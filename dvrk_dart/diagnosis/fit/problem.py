@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.design import Design, Grams
+from dvrk_dart.diagnosis.effects.arm_effects import LinkMassScale
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload, PayloadAtPosition, check_mass_determinable, parse_payload_at
 from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
@@ -244,6 +245,12 @@ def _on_training_range(effect: Effect, runs: list) -> Effect:
     return effect.within(float(q.min()), float(q.max())) if q.max() > q.min() else effect
 
 
+def _without_kind(effects: list[Effect], at_index: int | None, kind: str) -> tuple[list[Effect], int | None]:
+    """The candidates but those of one kind (a link's own mass, where only what the runs changed is sought)."""
+    kept = [e for i, e in enumerate(effects) if i == at_index or e.kind != kind]
+    return kept, (None if at_index is None else kept.index(effects[at_index]))
+
+
 def _without_nuisance_constants(effects: list[Effect], at_index: int | None, offset_joints: np.ndarray,
                                 runs: list) -> tuple[list[Effect], int | None]:
     """The candidates without a constant offset on a joint where every training
@@ -311,6 +318,8 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     # a baseline of the runs' own motion only: whatever differs may be any effect; runs of
     # other motions fitted with the baseline need the shared errors apart from the change
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
+    if every_effect_a_change:
+        effects, at_index = _without_kind(effects, at_index, LinkMassScale.kind)
     effects = [_on_training_range(e, train_runs) for e in effects]
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     effects = _one_body_on_these_runs(arm, effects, [*train_runs, *holdout_runs, baseline_run, repeat_run])

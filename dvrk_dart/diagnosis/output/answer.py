@@ -50,6 +50,8 @@ def plain_name(entry: dict) -> str:
     if kind in ("payload", "payload_at_position", "gravity_mismatch"):
         link = name.split("_on_")[-1].split("_at_")[-1]
         return f"a payload on the {link} link" if kind != "gravity_mismatch" else f"a gravity mismatch on the {link} link (mass distribution)"
+    if kind == "mass_scale":
+        return f"the {name.removeprefix('mass_scale_')} link's own mass and inertia off the identified ones"
     return _KIND_WORDS.get(kind, name).format(joints=joints)
 
 
