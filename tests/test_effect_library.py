@@ -119,3 +119,29 @@ def test_a_payload_on_the_yaw_link_has_its_inertia_in_j1(arm, segment):
     step = 1e-7 * np.eye(len(p))
     numeric = np.stack([(effect.coefficients(p + d) - effect.coefficients(p - d)) / 2e-7 for d in step], axis=1)
     np.testing.assert_allclose(effect.coefficients_jacobian(p), numeric, atol=1e-6)
+
+
+def test_a_lighter_carriage_is_simulated_as_its_regressor_says(arm, segment):
+    """A link's own mass scaled (the candidates: the bodies only prismatic coordinates move) is the DART body's
+    inertia scaled: the velocity replay's efforts change by the error times the body's own efforts."""
+    from dvrk_dart.diagnosis.effects.arm_effects import LinkMassScale, prismatic_bodies
+    from dvrk_dart.io.arm import load_arm
+    from dvrk_dart.model.description import resolve_arm_model
+    from dvrk_dart.runs.replay import simulate_efforts
+
+    assert [arm.model.links[k].name for k in prismatic_bodies(arm)] == ["insertion_carriage", "counterweight"]
+    assert prismatic_bodies(load_arm(resolve_arm_model("mtm"))) == []  # no prismatic joint
+    state = segment.head(200)
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, np.zeros_like(state.q), sample_rate_hz())
+    effect = LinkMassScale(arm, 8)
+    config = effects_to_sim_config([(effect, np.array([-0.3]))])
+    assert config.extra.link_mass_scale == ((8.0, -0.3),)
+    change = simulate_efforts(arm, config, state) - simulate_efforts(arm, SimConfig(), state)
+    expected = -0.3 * effect.columns(features)[:, :, 0]
+    assert np.abs(expected[:, 2]).max() > 0.5  # N on J3: the carriage's gravity and inertia
+    np.testing.assert_allclose(change, expected, atol=2e-3)
+    from dvrk_dart.errors import DvrkDartError
+
+    for wrong in (((8.0, -1.0),), ((99.0, 0.1),)):  # no mass left; not a link of the arm
+        with pytest.raises(DvrkDartError, match="link_mass_scale"):
+            simulate_efforts(arm, SimConfig(extra=JointEffects(link_mass_scale=wrong)), state)

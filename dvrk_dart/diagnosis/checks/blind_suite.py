@@ -167,7 +167,7 @@ def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, p
 
 def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate | None = None) -> tuple[dict, list[dict]]:
     """Every case of `spec` in every processing of `spec["processings"]`,
-    without and with a baseline (`spec["baselines"]`, default both;
+    without and with a baseline (the case's or `spec["baselines"]`, default both;
     `spec["subset"]`: the case names to run only; `spec["seed_offset"]`: another noise draw)."""
     simulate = simulate or BatchSimulate(arm, "local", 1)
     real = process_periodic(load_run(resolve_run(spec["run"]), arm.model))
@@ -181,7 +181,7 @@ def validate_blind_suite(arm: Arm, spec: dict, out_dir: Path, simulate: Simulate
             runs = case_runs(arm, motion, simulate, case, noise, out_dir / "runs", seed)
             known: dict = {}
             outcomes += [run_case(arm, spec, case, runs, simulate, processing, with_baseline, known)
-                         for processing in spec["processings"] for with_baseline in spec.get("baselines", (False, True))]
+                         for processing in spec["processings"] for with_baseline in case.get("baselines", spec.get("baselines", (False, True)))]
     summary = {"cases": outcomes, "notes": notes, **{k: v.tolist() for k, v in noise.items()},
                "generator": "DART replay with the effect as physics + the measured noise; the baseline in another session"}
     out_dir.mkdir(parents=True, exist_ok=True)
