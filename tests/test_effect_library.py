@@ -2,6 +2,8 @@
 each effect's efforts by regressor equal what its SimConfig makes (evaluated
 by formula, Pinocchio bodies for payloads), on a real measured state."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -140,8 +142,13 @@ def test_a_lighter_carriage_is_simulated_as_its_regressor_says(arm, segment):
     expected = -0.3 * effect.columns(features)[:, :, 0]
     assert np.abs(expected[:, 2]).max() > 0.5  # N on J3: the carriage's gravity and inertia
     np.testing.assert_allclose(change, expected, atol=2e-3)
+    tilted = SimConfig(gravity_tilt_rad=(0.05, 0.03))  # the formula's stand-in for DART tilts the scaled body's gravity too
+    config = replace(tilted, extra=config.extra)
+    by_formula = config_effort_by_formula(arm, config, state.q, state.dq, state.ddq) - config_effort_by_formula(arm, tilted, state.q, state.dq, state.ddq)
+    np.testing.assert_allclose(simulate_efforts(arm, config, state) - simulate_efforts(arm, tilted, state), by_formula, atol=2e-3)
     from dvrk_dart.errors import DvrkDartError
 
-    for wrong in (((8.0, -1.0),), ((99.0, 0.1),)):  # no mass left; not a link of the arm
-        with pytest.raises(DvrkDartError, match="link_mass_scale"):
-            simulate_efforts(arm, SimConfig(extra=JointEffects(link_mass_scale=wrong)), state)
+    for wrong, counterweight in [(((8.0, -1.0),), "on"), (((99.0, 0.1),), "on"), (((8.0,),), "on"), (((9.0, 0.1),), "off")]:
+        with pytest.raises(DvrkDartError, match="link_mass_scale"):  # no mass left; not a link; no error; no counterweight
+            simulate_efforts(arm, SimConfig(counterweight=counterweight, extra=JointEffects(link_mass_scale=wrong)), state)
+    assert "mass_scale_counterweight" not in {e.name for e in candidate_effects(arm, base=SimConfig(counterweight="pid"))}

@@ -99,6 +99,15 @@ def test_the_pitch_angle_load_in_words():
     assert plain_name({"name": "angle_load_q3_by_q2", "kind": "load", "joints": ["q3"]}).startswith("a load on q3 set by q2's angle")
 
 
+def test_a_link_lighter_than_identified_in_words():
+    from dvrk_dart.diagnosis.output.answer import _size_words, plain_name
+
+    entry = {"name": "mass_scale_insertion_carriage", "kind": "mass_scale", "joints": ["q1", "q2", "q3"], "size": -0.14,
+             "units": {"mass_error": "1"}}
+    assert plain_name(entry) == "the insertion_carriage link's own mass and inertia off the identified ones"
+    assert _size_words(entry) == ", 14% lighter"
+
+
 def test_a_joint_below_the_average_words_is_named():
     """2018's held-out shares (75 %, 69 %, 37 %) average to 'mostly', but q3's own
     share is 'partly': the answer and diagnosis.json say so for q3."""

@@ -47,7 +47,7 @@ from dvrk_dart.identification.identify import (
 )
 from dvrk_dart.identification.regressor import body_of, params_json, standard_vector
 from dvrk_dart.io.atomic import json_text, write_json_atomic, write_text_atomic
-from dvrk_dart.io.provenance import sha256_of, software_versions
+from dvrk_dart.io.provenance import file_record, software_versions
 from dvrk_dart.io.reference_data import input_record, resolve
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES
 from dvrk_dart.model.parameters import load_parameters
@@ -106,7 +106,7 @@ def _input_files(result: IdentificationResult, reference: tuple | None) -> dict[
     files = {"model_file": result.model.source, "bounds_file": result.bounds.source,
              "prior_file": result.prior_source if Path(result.prior_source).is_file() else None,
              "reference_params_file": reference[1] if reference else None}
-    return {key: {"path": str(path), "sha256": sha256_of(Path(path))} for key, path in files.items() if path is not None}
+    return {key: file_record(Path(path)) for key, path in files.items() if path is not None}
 
 
 def _run_entry(run: RunData, result: IdentificationResult) -> dict:

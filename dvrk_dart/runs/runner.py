@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
+from dvrk_dart.io.provenance import file_record
 from dvrk_dart.io.reference_data import resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import TORQUE_TRANSIENT_S, rms
 from dvrk_dart.io.arm import Arm, load_arm
@@ -168,7 +169,7 @@ def inputs_used(config: RunConfig, scenario: Scenario, model: PsmModel) -> dict[
     if scenario.measured:
         inputs[str(scenario.measured)] = input_record(resolve_run(scenario.measured), model, config.topics)
     if config.dynamics.endswith(".json"):
-        inputs[config.dynamics] = {"path": str(Path(config.dynamics)), "sha256": sha256_of(Path(config.dynamics))}
+        inputs[config.dynamics] = file_record(Path(config.dynamics))
     return inputs
 
 

@@ -152,9 +152,12 @@ def body_inertia(link: Link, params: IdentifiedParameters, scale: float = 1.0) -
 def _mass_scales(config: SimConfig, model: PsmModel) -> dict[int, float]:
     """Per link key, the factor of `JointEffects.link_mass_scale` (its entries' errors added)."""
     scales: dict[int, float] = {}
-    for key, error in config.extra.link_mass_scale:
-        if int(key) not in model.links:
-            raise DvrkDartError(f"sim_config.extra.link_mass_scale: link {int(key)} is not a link of the model")
+    for entry in config.extra.link_mass_scale:
+        if len(entry) != 2 or int(entry[0]) not in model.links:
+            raise DvrkDartError(f"sim_config.extra.link_mass_scale: {list(entry)} is not [a link of the model, an error]")
+        if int(entry[0]) == model.counterweight_link and config.counterweight == "off":
+            raise DvrkDartError("sim_config.extra.link_mass_scale: the counterweight's mass scaled with the counterweight off")
+        key, error = entry
         scales[int(key)] = scales.get(int(key), 1.0) + float(error)
     if any(scale <= 0.0 for scale in scales.values()):
         raise DvrkDartError(f"sim_config.extra.link_mass_scale: a link's mass scaled to zero or below ({scales})")

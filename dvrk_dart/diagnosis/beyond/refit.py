@@ -30,7 +30,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.identify import IdentificationConfig, identify
 from dvrk_dart.identification.outputs import PARAMS_FILE, write_outputs
-from dvrk_dart.io.provenance import sha256_of
+from dvrk_dart.io.provenance import file_record, sha256_of
 from dvrk_dart.io.reference_data import resolve_run
 from dvrk_dart.io.arm import Arm, load_arm
 from dvrk_dart.io.bags import BagTopics
@@ -79,7 +79,7 @@ def refit_check(arm: Arm, train, holdout, result: dict, out_dir: Path, executor:
     share = None if floor is None else repeatable_share(published, refit, floor).tolist()
     return {
         "params": {"path": f"{REFIT_FOLDER}/{PARAMS_FILE}", "sha256": sha256_of(folder / PARAMS_FILE)},
-        "prior": {"path": str(arm.params.source), "sha256": sha256_of(arm.params.source)},
+        "prior": file_record(arm.params.source),
         "training_runs": [str(s) for s in train], "holdout_runs": list(result.get("holdout_runs") or []),
         "processing": processing["processing"],
         "simulated_source": "DART replay of each held-out run, every identified term as physics",

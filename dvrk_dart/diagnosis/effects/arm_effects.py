@@ -127,11 +127,18 @@ class LinkMassScale(Effect):
 
     def __init__(self, arm: Arm, key: int):
         self.link_key = key
+        self.is_counterweight = key == arm.model.counterweight_link
         self.name = f"mass_scale_{arm.model.links[key].name}"
         self.joints = tuple(j for j in JOINT_NAMES if j in joints_moving_link(arm.model, key))
 
     def columns(self, features):
         return features.body_effort(self.link_key)[:, :, None]
+
+    @property
+    def family(self) -> str:
+        """The counterweight's: one with the tendon's transmission error, whose force scale has the same J3
+        column (the counterweight's own efforts); they differ only by its small J1 and J2 efforts."""
+        return CounterweightTransmission.name if self.is_counterweight else self.name
 
     def sim_contribution(self, p):
         return SimContribution(link_mass_scale=((float(self.link_key), float(p[0])),))

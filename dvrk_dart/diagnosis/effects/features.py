@@ -90,10 +90,13 @@ class TrajectoryFeatures:
             return np.zeros_like(self.reference_effort)
         return np.gradient(self.reference_effort, 1.0 / self.sample_rate_hz, axis=0)
 
+    def identified_body_parameters(self, key: int) -> np.ndarray:
+        """The 10 dynamic parameters of one link's body in the identified model."""
+        return self.arm.identified.pin_model.inertias[self._pin_joint_of_link[key]].toDynamicParameters()
+
     def body_effort(self, key: int) -> np.ndarray:
         """(N, 7) efforts due to one link's body alone (its identified inertia)."""
-        j = self._pin_joint_of_link[key]
-        return self.body_regressor[:, :, self.body_columns(key)] @ self.arm.identified.pin_model.inertias[j].toDynamicParameters()
+        return self.body_regressor[:, :, self.body_columns(key)] @ self.identified_body_parameters(key)
 
     @cached_property
     def counterweight_effort(self) -> np.ndarray:

@@ -45,7 +45,7 @@ from dvrk_dart.model import friction
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
-from dvrk_dart.sim.config import Payload, SimConfig, position_load_effort, position_load_table, simulated_terms
+from dvrk_dart.sim.config import SimConfig, position_load_effort, position_load_table, simulated_terms
 
 #: the joints whose friction may change along their range (the arm joints: a
 #: guide or a capstan; the wrist's cables run over pulleys at fixed radius)
@@ -96,7 +96,8 @@ def candidate_effects(
     effects += [GravityTilt(arm), TimeShift()]
     if arm.model.counterweight_link is not None:  # an arm with a counterweight tendon (the PSM's)
         effects.append(CounterweightTransmission(arm))
-    effects += [LinkMassScale(arm, key) for key in prismatic_bodies(arm)]
+    effects += [LinkMassScale(arm, key) for key in prismatic_bodies(arm)  # the counterweight's reaches J3 by the ideal tendon
+                if key != arm.model.counterweight_link or base.counterweight == "on"]
     return effects
 
 
@@ -184,13 +185,15 @@ def config_effort_by_formula(arm: Arm, config: SimConfig, q: np.ndarray, dq: np.
         half = len(values) // 2
         coulomb = np.interp(features.q[:, j], values[:half], values[half:])
         total[:, j] += coulomb * friction.reversal(features.q[:, j], features.dq[:, j], distance)
-    for key, error in x.link_mass_scale:  # the body's efforts scale with it (nominal gravity: no tilt with it)
+    for key, error in x.link_mass_scale:  # the body's efforts scale with it
         total = total + error * features.body_effort(int(key))
+        if np.any(tilt != 0.0):
+            total = total + _body_gravity_correction(arm, features, int(key), error * features.identified_body_parameters(int(key)), tilt)
     for payload in config.payloads:
         params = point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m))
         total = total + features.body_regressor[:, :, features.body_columns(payload.link)] @ params
         if np.any(tilt != 0.0):  # the body regressor carries the nominal gravity
-            total = total + _payload_gravity_correction(arm, features, payload, tilt)
+            total = total + _body_gravity_correction(arm, features, payload.link, params, tilt)
     return total
 
 
@@ -203,15 +206,14 @@ def _gravity_in_base(model: PsmModel, tilt: np.ndarray) -> np.ndarray:
     return np.asarray(gravity_in_base(model, (float(tilt[0]), float(tilt[1]))), dtype=float)
 
 
-def _payload_gravity_correction(arm: Arm, features: TrajectoryFeatures, payload: Payload, tilt: np.ndarray) -> np.ndarray:
-    """Gravity efforts of a payload under tilted minus nominal gravity (N, 7)."""
+def _body_gravity_correction(arm: Arm, features: TrajectoryFeatures, key: int, parameters: np.ndarray, tilt: np.ndarray) -> np.ndarray:
+    """Gravity efforts of a body on link `key` (its 10 dynamic parameters) under tilted minus nominal gravity (N, 7)."""
     im = arm.identified
     model = pin.Model(im.pin_model)
-    key = payload.link
     j = features._pin_joint_of_link[key]
     for i in range(1, model.njoints):
         model.inertias[i] = pin.Inertia.Zero()
-    model.inertias[j] = pin.Inertia.FromDynamicParameters(point_mass_parameters(payload.mass_kg, np.asarray(payload.position_m)))
+    model.inertias[j] = pin.Inertia.FromDynamicParameters(np.asarray(parameters, dtype=float))
     data = model.createData()
     qt = im.tree_q(features.q)
     delta_g = _gravity_in_base(arm.model, tilt) - arm.model.gravity

@@ -60,6 +60,8 @@ def _size_words(entry: dict) -> str:
     unit = next(iter(units.values()), "")
     if not isinstance(size, (int, float)):
         return ""
+    if entry.get("kind") == "mass_scale":
+        return f", {abs(size):.0%} {'lighter' if size < 0 else 'heavier'}"
     return f", {size:.0%} of it" if unit == "1" else f", size {size:.3g} {unit}".rstrip()  # a share of an identified term
 
 
