@@ -5,6 +5,7 @@ otherwise; the velocity column is checked against the rate)."""
 
 from __future__ import annotations
 
+import functools
 import os
 import urllib.request
 from pathlib import Path
@@ -90,7 +91,14 @@ def input_record(path: str | Path, model: PsmModel, topics: BagTopics = BagTopic
 
 
 def _time_column_rate(path: Path, model: PsmModel) -> float | None:
-    return read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names).rate_hz
+    stat = path.stat()
+    return _file_time_column_rate(str(path), stat.st_mtime_ns, stat.st_size, model.motor_map, tuple(model.dvrk_topics.joint_names))
+
+
+@functools.lru_cache(maxsize=32)
+def _file_time_column_rate(path: str, mtime_ns: int, size: int, motor_map, joint_names: tuple) -> float | None:
+    """Per file version (a command records the same run in several outputs; the file was read once already)."""
+    return read_csv_run(Path(path), motor_map, joint_names).rate_hz
 
 
 def _checked(path: Path, name: str) -> Path:

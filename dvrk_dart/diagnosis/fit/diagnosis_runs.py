@@ -17,7 +17,7 @@ from dvrk_dart.diagnosis.effects.library import (
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
 from dvrk_dart.io.signal import (  # noqa: F401
-    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, process_periodic, same_motion, spanning_columns)
+    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, same_motion, spanning_columns)
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -63,7 +63,8 @@ def choose_processing(specs, processing: str | None, model: PsmModel, topics: Ba
     if not fitted + scored and processing is None:
         return RunProcessing(why="no measured file among the runs", topics=topics)
     try:
-        cutoffs = [process_periodic(load_run(path, model, topics)).periodic.harmonics for path in fitted + scored][:len(fitted)]
+        own_band = RunProcessing("periodic", why="each run's own cutoff", topics=topics)  # cached: a diagnosis meets the runs again
+        cutoffs = [_load_state(path, model, own_band)[1].periodic.harmonics for path in fitted + scored][:len(fitted)]
     except DvrkDartError as exc:
         if processing == "periodic":
             raise
@@ -188,7 +189,7 @@ def _load_state(spec, model: PsmModel, processing: RunProcessing) -> tuple[str, 
     return run_label(spec), state
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=16)
 def _load_processed(path: str, mtime_ns: int, size: int, processing: RunProcessing, model_file: Path) -> ProcessedRun:
     """One processing per file version: the batch re-simulation prefetches the
     states that prepare_run then meets again (keyed by the file's version)."""
