@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from dvrk_dart.metrics import rms
-from dvrk_dart.model.friction import PreslidingState, reversal
+from dvrk_dart.model.friction import reversal
+from dvrk_dart.sim import kernels
 from arms import PSM
 
 
@@ -28,12 +29,22 @@ def test_the_state_reverses_over_the_distance():
 
 
 def test_the_stepped_state_is_the_sequence_law():
+    """The simulator's per-step kernel (two frictions, on q1 and on q2 - q1) and the law over a trajectory."""
     rng = np.random.default_rng(0)
-    position = np.cumsum(rng.normal(scale=3e-5, size=400))
-    rate = np.gradient(position)
-    state = PreslidingState(1e-4, position[0], rate[0])
-    stepped = [state.state] + [state.step(x) for x in position[1:]]
-    assert np.allclose(stepped, reversal(position, rate, 1e-4), atol=1e-14)
+    q = np.zeros((400, 7))
+    q[:, :2] = np.cumsum(rng.normal(scale=3e-5, size=(400, 2)), axis=0)
+    coefficients = np.zeros((2, 7))
+    coefficients[0, 0], coefficients[1, :2] = 1.0, (-1.0, 1.0)
+    distances = np.array([1e-4, 3e-5])
+    positions = q @ coefficients.T
+    rates = np.gradient(positions, axis=0)
+    position, state = positions[0].copy(), np.sign(rates[0])
+    stepped = [state.copy()]
+    for row in q[1:]:
+        kernels.dahl_step(row, coefficients, position, state, distances)
+        stepped.append(state.copy())
+    for i, distance in enumerate(distances):
+        assert np.allclose(np.array(stepped)[:, i], reversal(positions[:, i], rates[:, i], distance), atol=1e-14)
 
 
 @pytest.fixture(scope="module")

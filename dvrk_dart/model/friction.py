@@ -12,7 +12,8 @@ et al. 1994). The state z in [-1, 1] multiplies Fc:
 for each increment dx of the joint's position. x_s = 0 is the sign law. The
 state depends on the path, not on the instantaneous velocity: a model of q, dq
 and ddq alone cannot reproduce it, which is why the gap it leaves repeats from
-session to session and is still no function of the state.
+session to session and is still no function of the state. The simulator steps
+the same law with each of its steps (`sim/kernels.py` `dahl_step`).
 """
 
 from __future__ import annotations
@@ -40,23 +41,3 @@ def reversal(position: np.ndarray, rate: np.ndarray, presliding: float) -> np.nd
             state = s + (state - s) * math.exp(-abs(step) / presliding)
         z[k] = state
     return z
-
-
-class PreslidingState:
-    """Dahl's state of one joint, stepped with the simulation (see module)."""
-
-    def __init__(self, presliding: float, position: float, rate: float):
-        self.presliding = presliding
-        self.position = position
-        self.state = float(np.sign(rate))
-
-    def step(self, position: float) -> float:
-        """The state after moving to `position` (distance 0: the sign of the step)."""
-        step = position - self.position
-        self.position = position
-        if step != 0.0 and self.presliding <= 0.0:
-            self.state = 1.0 if step > 0.0 else -1.0
-        elif step != 0.0:
-            s = 1.0 if step > 0.0 else -1.0
-            self.state = s + (self.state - s) * math.exp(-abs(step) / self.presliding)
-        return self.state

@@ -44,6 +44,7 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -53,6 +54,7 @@ from dvrk_dart.model.dh import Link
 from dvrk_dart.model.identified import spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
+from dvrk_dart.sim import kernels
 from dvrk_dart.sim.builder import DartPsm
 from dvrk_dart.sim.config import JointEffects, SimConfig, position_load_table
 
@@ -70,9 +72,6 @@ class PreslidingFriction:
     #: Fc piecewise linear in coeffs·q: at these positions, these values (empty: `coulomb` throughout)
     knots: tuple[float, ...] = ()
     coulomb_at_knots: tuple[float, ...] = ()
-
-    def coulomb_at(self, position: float) -> float:
-        return float(np.interp(position, self.knots, self.coulomb_at_knots)) if self.knots else self.coulomb
 
 
 @dataclass(frozen=True)
@@ -113,27 +112,52 @@ class ExplicitEffects:
             or self.position_loads
         )
 
-    def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray | None = None) -> np.ndarray:
+    def effort(self, q: np.ndarray, dq: np.ndarray, presliding: np.ndarray) -> np.ndarray:
         """Model-based efforts the actuators must supply beyond DART's physics (q
         space); `presliding`: the Dahl state of each of `self.presliding`."""
-        effort = self.offset + self.viscous * dq + self.coulomb * np.sign(dq) + self.stiffness * q
-        effort = effort + self.smooth_coulomb * np.tanh(dq / self.reversal_velocity)
-        for link in self.friction_links:
-            p = self.params[link.key]
-            rate = float(dq @ link.variable.coeffs)
-            reversing = 0.0 if p.presliding > 0.0 else np.sign(rate)  # a pre-sliding Coulomb term is below
-            effort = effort + (p.coulomb * reversing + p.viscous * rate) * link.variable.coeffs
-        for friction, state in zip(self.presliding, presliding if presliding is not None else ()):
-            coulomb = friction.coulomb_at(float(q @ friction.coeffs))
-            effort = effort + (coulomb * state + friction.viscous * float(dq @ friction.coeffs)) * friction.coeffs
-        for target, source, c_sin, c_cos in self.angle_loads:
-            effort[int(target)] += c_sin * np.sin(q[int(source)]) + c_cos * np.cos(q[int(source)])
-        for target, source, knots, values in self.position_loads:
-            effort[target] += float(np.interp(q[source], knots, values, left=0.0, right=0.0))
+        effort = kernels.explicit_effort(q, dq, presliding, *self.tables)
         for link in self.linkage_springs:
             x = float(q @ link.variable.coeffs)
             effort = effort + float(spring_torque(self.params[link.key].spring, x, link.spring_linkage)) * link.variable.coeffs
         return effort
+
+    @cached_property
+    def tables(self) -> tuple[np.ndarray, ...]:
+        """The terms as the arrays of `kernels.explicit_effort` (its docstring has their layout)."""
+        per_joint = np.array([self.offset, self.viscous, self.coulomb, self.stiffness, self.smooth_coulomb, self.reversal_velocity], dtype=float)
+        links = [[*link.variable.coeffs, 0.0 if self.params[link.key].presliding > 0.0 else self.params[link.key].coulomb,
+                  self.params[link.key].viscous] for link in self.friction_links]  # a pre-sliding Coulomb is in `presliding`
+        presliding = [[*f.coeffs, f.coulomb, f.viscous] for f in self.presliding]
+        presliding_tables = [(f.knots, f.coulomb_at_knots) for f in self.presliding]
+        angle_loads = [list(entry) for entry in self.angle_loads]
+        loads = [[target, source] for target, source, _, _ in self.position_loads]
+        load_tables = [(knots, values) for _, _, knots, values in self.position_loads]
+        return (per_joint, _rows(links, N_JOINTS + 2), _rows(presliding, N_JOINTS + 2), _tables(presliding_tables),
+                _rows(angle_loads, 4), _rows(loads, 2), _tables(load_tables))
+
+    @cached_property
+    def presliding_coefficients(self) -> np.ndarray:
+        """(n, 7): the position each pre-sliding friction's Dahl state follows, as coefficients of q."""
+        return _rows([f.coeffs for f in self.presliding], N_JOINTS)
+
+    @cached_property
+    def presliding_distances(self) -> np.ndarray:
+        return np.array([f.distance for f in self.presliding], dtype=float)
+
+
+def _rows(rows: list, width: int) -> np.ndarray:
+    """A (n, width) float array, (0, width) for none."""
+    return np.array(rows, dtype=float).reshape(len(rows), width)
+
+
+def _tables(tables: list[tuple]) -> np.ndarray:
+    """Piecewise-linear tables (knots, values) as rows (count, knots..., values...), padded with zeros."""
+    width = 1 + 2 * max((len(knots) for knots, _ in tables), default=0)
+    out = np.zeros((len(tables), width))
+    for row, (knots, values) in zip(out, tables):
+        row[0] = len(knots)
+        row[1:1 + 2 * len(knots)] = [*knots, *values]
+    return out
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,6 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_dart.model.description import PsmModel
-from dvrk_dart.model.friction import PreslidingState
 from dvrk_dart.model.joints import INSERTION, N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim import kernels
@@ -153,9 +152,9 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._tendon_ideal = config.counterweight == "on"
         e = self._explicit
         self._has_armature = bool(np.any(e.armature) or np.any(e.directional_armature))
-        self._has_coulomb = bool(np.any(self._coulomb_x))
         self._has_explicit = e.any_effort
-        self._presliding: list[PreslidingState] = []
+        self._presliding = bool(e.presliding)
+        self._presliding_position = np.zeros(len(e.presliding))  # where each Dahl state last moved from
         self._presliding_z = np.zeros(len(e.presliding))
 
     # ------------------------------------------------------------- state
@@ -185,8 +184,9 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._state_changed()
         self.last_effort = np.full(N_JOINTS, np.nan)
         # an imposed state starts each pre-sliding friction sliding the way it moves
-        self._presliding = [PreslidingState(f.distance, float(q @ f.coeffs), float(dq @ f.coeffs)) for f in self._explicit.presliding]
-        self._presliding_z = np.array([state.state for state in self._presliding])
+        coefficients = self._explicit.presliding_coefficients
+        self._presliding_position = coefficients @ q
+        self._presliding_z = np.sign(coefficients @ dq)
 
     @property
     def time_s(self) -> float:
@@ -277,25 +277,18 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         skeleton.computeInverseDynamics(touching, False, False)
         F = skeleton.getForces()
         if self._has_implicit:  # DART's implicit damping and springs at the end-of-step state
-            F += self._implicit_diag * xdd + self._implicit_damping * v + self._implicit_stiffness * (x + self.dt * v)
+            kernels.add_implicit(F, xdd, x, v, self._implicit_diag, self._implicit_damping, self._implicit_stiffness, self.dt)
         if self._free_dofs and not self._tendon_ideal:  # the PID's tension gives the counterweight's acceleration
             cw = self._counterweight_dof
             column = skeleton.getMassMatrix()[:, cw].copy()
             column[cw] += self._implicit_diag[cw]
             xdd[cw] = (self._counterweight_pid(q, dq, x, v) - F[cw]) / column[cw]
             F += column * xdd[cw]
-        tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
-        if self._has_armature:
-            tau += self._explicit.armature_at(dq) * ddq
-        if self._has_explicit:
-            tau += self._explicit.effort(q, dq, self._presliding_z)
-        if self._has_coulomb:  # DART's Coulomb rows sit at their bound, opposing the target velocity
-            coulomb = self.psm.G.T @ (self._coulomb_x * np.sign(self.psm.G @ dq_target))
-            tau += coulomb
-            forces += self._force_map @ coulomb
-        if self._has_implicit:
-            v_next = v + self.dt * xdd
-            forces -= self._implicit_damping * v_next + self._implicit_stiffness * (x + self.dt * v_next)
+        explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
+        e = self._explicit
+        tau, forces = kernels.servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, self._effort_of_F, self._dof_forces_of_F,
+                                            e.armature, e.directional_armature, self.psm.G, self._coulomb_x, self._force_map,
+                                            self._implicit_damping, self._implicit_stiffness, self.dt)
         skeleton.setForces(forces)
         self.world.step()
         self._after_step(dq, tau, float(F[self._counterweight_dof]) if self._free_dofs else 0.0)
@@ -324,5 +317,6 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self.last_effort = effort
         self.last_counterweight_force = counterweight_force
         if self._presliding:
-            self._presliding_z = np.array([state.step(float(self._q @ f.coeffs)) for state, f in zip(self._presliding, self._explicit.presliding)])
+            kernels.dahl_step(self._q, self._explicit.presliding_coefficients, self._presliding_position, self._presliding_z,
+                              self._explicit.presliding_distances)
         self._check(self._x, self._v, self._q, in_range)
