@@ -125,6 +125,7 @@ class Selector:
         self.penalised = train.noise is not None
         self._span: dict[int, np.ndarray] = {}
         self._absorbed_by: dict[tuple[int, ...], np.ndarray] = {}
+        self._fitted: dict[tuple[int, ...], Fit] = {}
         if self.penalised:
             # periodic processing: every period a copy, so a time fold is no held-out data. The score is the
             # in-sample fraction less the optimism (Mallows' Cp): 2 x the noise energy each fitted parameter
@@ -172,7 +173,14 @@ class Selector:
         return self._span[i]
 
     def fit_all(self, chosen, warm=None) -> Fit:
-        return self.fitter.fit(chosen, self.A_total, self.g_total, warm, self.energy_total)
+        """The effects `chosen` fitted on all training data; without a warm start, once per set (the report
+        asks again for the fits the selection made; callers read the Fit, never change it)."""
+        if warm is not None:
+            return self.fitter.fit(chosen, self.A_total, self.g_total, warm, self.energy_total)
+        key = tuple(chosen)
+        if key not in self._fitted:
+            self._fitted[key] = self.fitter.fit(chosen, self.A_total, self.g_total, None, self.energy_total)
+        return self._fitted[key]
 
     def cross_validate(self, chosen: list[int], warm: list[dict[int, np.ndarray]] | None = None) -> CvResult:
         after = self.train.s.copy()
