@@ -312,11 +312,14 @@ class IdentifiedModel:
 
     def tool_tip_jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x7 Jacobian (linear; angular) of the tool tip, base-frame axes, w.r.t. q."""
-        qt = self.tree_q(q)
-        pin.computeJointJacobians(self.pin_model, self.data, qt)
+        return self.tool_tip_pose_and_jacobian(q)[1]
+
+    def tool_tip_pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The tool tip's pose and Jacobian from one kinematics pass (a controller's step asks for both)."""
+        pin.computeJointJacobians(self.pin_model, self.data, self.tree_q(q))
         pin.updateFramePlacements(self.pin_model, self.data)
         J_tree = pin.getFrameJacobian(self.pin_model, self.data, self.tip_frame_id, pin.LOCAL_WORLD_ALIGNED)
-        return J_tree @ self.G
+        return self.data.oMf[self.tip_frame_id].homogeneous.copy(), J_tree @ self.G
 
     def tool_tip_bias_acceleration(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """dJ/dt dq (linear; angular) of the tool tip: its acceleration at ddq = 0."""

@@ -31,6 +31,11 @@ def _rk4_step(f, t: float, q: np.ndarray, dt: float) -> np.ndarray:
     return q + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
+def _twist(velocity: np.ndarray) -> np.ndarray:
+    """The tool tip's twist (linear; angular) at a constant orientation."""
+    return np.concatenate((velocity, np.zeros(3)))
+
+
 class CartesianDriver:
     def __init__(self, arm: Arm, scenario: Scenario, mode: str, dt: float, steps: int):
         self.mode, self.dt = mode, dt
@@ -38,6 +43,7 @@ class CartesianDriver:
         pose0 = arm.identified.tool_tip_pose(self.q0)
         self.path = scenario.cartesian_path(pose0[:3, 3])
         self.R_d = pose0[:3, :3]
+        self.reference_pose_at_start = pose_vector(pose0)  # the orientation stays the start's
         self.kinematic = KinematicController(arm)
         self.torque = CartesianTorqueController(arm)
         self.q_kin = self.q0.copy()
@@ -49,7 +55,7 @@ class CartesianDriver:
         p, v, a = self.path.position_velocity_acceleration(t)
         T = np.eye(4)
         T[:3, :3], T[:3, 3] = self.R_d, p
-        return T, np.r_[v, np.zeros(3)], a
+        return T, _twist(v), a
 
     def closed_loop_velocity(self, t: float, q: np.ndarray) -> np.ndarray:
         T_d, twist_d, _ = self.reference(t)
@@ -57,7 +63,8 @@ class CartesianDriver:
 
     def impose(self, k: int, sim) -> None:
         t = k * self.dt
-        self.reference_pose[k] = pose_vector(self.reference(t)[0])
+        self.reference_pose[k] = self.reference_pose_at_start
+        self.reference_pose[k, :3] = self.path.position_velocity_acceleration(t)[0]
         if self.mode == "kinematic":
             # imposed, not simulated: nothing else stops a path that leaves the joints' ranges
             raise_if_out_of_range(self.q_kin, self.joint_lower, self.joint_upper, f"step {k} (t = {t:.3f} s)",
@@ -75,7 +82,7 @@ class CartesianDriver:
             # the step's velocity is its mean over [t, t + dt] (semi-implicit Euler, below):
             # feed forward the reference's velocity there, centred at t + dt/2
             _, v_half, _ = self.path.position_velocity_acceleration(t + self.dt / 2)
-            sim.step_velocity(self.kinematic.joint_velocity(q, T_d, np.r_[v_half, np.zeros(3)]))
+            sim.step_velocity(self.kinematic.joint_velocity(q, T_d, _twist(v_half)))
         else:
             # semi-implicit Euler: q_k = q_(k-1) + dt dq_k, so the sampled velocity is the
             # mean over the previous step, centred at t - dt/2: compare it with the

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+import pinocchio as pin
 
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
@@ -25,7 +25,7 @@ ARM_JOINTS = slice(0, 3)
 
 def orientation_error(R_desired: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Rotation vector of R_d R^T (base axes): zero when the orientations agree."""
-    return Rotation.from_matrix(R_desired @ R.T).as_rotvec()
+    return pin.log3(R_desired @ R.T)
 
 
 @dataclass
@@ -43,9 +43,9 @@ class KinematicController:
         self._dvrk_to_motor = self.arm.model.motor_map.positions_to_model(np.eye(N_JOINTS)).T
 
     def joint_velocity(self, q: np.ndarray, pose_desired: np.ndarray, twist_desired: np.ndarray) -> np.ndarray:
-        pose = self.arm.identified.tool_tip_pose(q)
-        error = np.r_[pose_desired[:3, 3] - pose[:3, 3], orientation_error(pose_desired[:3, :3], pose[:3, :3])]
-        J_dvrk = self.arm.identified.tool_tip_jacobian(q) @ self._dvrk_to_motor
+        pose, J = self.arm.identified.tool_tip_pose_and_jacobian(q)
+        error = np.concatenate((pose_desired[:3, 3] - pose[:3, 3], orientation_error(pose_desired[:3, :3], pose[:3, :3])))
+        J_dvrk = J @ self._dvrk_to_motor
         dtheta = np.zeros(N_JOINTS)
         dtheta[:6] = np.linalg.solve(J_dvrk[:, :6], self.gain * error + twist_desired)  # jaw held: dtheta[6] = 0
         return self._dvrk_to_motor @ dtheta
@@ -67,9 +67,8 @@ class CartesianTorqueController:
         """(u for J1..J3, position error p_d - p)."""
         identified = self.arm.identified
         M, c, g = identified.mcg(q, dq)
-        J_L = identified.tool_tip_jacobian(q)[:3, ARM_JOINTS]
-        p = identified.tool_tip_pose(q)[:3, 3]
-        v = identified.tool_tip_jacobian(q)[:3] @ dq
+        pose, J = identified.tool_tip_pose_and_jacobian(q)
+        J_L, p, v = J[:3, ARM_JOINTS], pose[:3, 3], J[:3] @ dq
         e_p = p_desired - p
         a = a_desired + self.kp * e_p + self.kd * (v_desired - v)
         bias = identified.tool_tip_bias_acceleration(q, dq)[:3]
