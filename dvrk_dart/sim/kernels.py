@@ -58,6 +58,12 @@ def servo_accelerations(x, v, q, dq, dq_des, q_des, inv_time_constant, dt, G, co
 
 
 @_compiled
+def split_inverse_dynamics(F, effort_of_F, dof_forces_of_F):
+    """(actuator efforts, forces on the dofs) from DART's inverse dynamics F."""
+    return effort_of_F @ F, dof_forces_of_F @ F
+
+
+@_compiled
 def add_implicit(F, xdd, x, v, implicit_diag, damping, stiffness, dt):
     """DART's inverse dynamics F plus the implicit joint damping and springs at the end-of-step state (in place)."""
     F += implicit_diag * xdd + damping * v + stiffness * (x + dt * v)
@@ -70,8 +76,7 @@ def servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, effort_of_F, dof_f
     armature's (its directional part with the sign of dq) and the explicit efforts added; DART's Coulomb
     rows sit at their bound, opposing the target velocity, and the implicit damping and springs act at the
     end-of-step state, so the dofs' forces leave both to DART (terms that are zero cost a few flops)."""
-    tau = effort_of_F @ F
-    forces = dof_forces_of_F @ F
+    tau, forces = split_inverse_dynamics(F, effort_of_F, dof_forces_of_F)
     tau += (armature + directional_armature * np.sign(dq)) * ddq
     tau += explicit
     coulomb = G.T @ (coulomb_x * np.sign(G @ dq_target))
@@ -151,6 +156,7 @@ def _compile() -> None:
     x, q, e = np.zeros(n), np.zeros(m), np.zeros(0)
     servo_accelerations(x, x, q, q, q, e, 1.0, 1e-3, np.zeros((n, m)), -1, 1.0)
     servo_accelerations(x, x, q, q, q, q, 1.0, 1e-3, np.zeros((n, m)), -1, 1.0)
+    split_inverse_dynamics(x, np.zeros((m, n)), np.zeros((n, n)))
     add_implicit(x, x, x, x, x, x, x, 1e-3)
     servo_efforts(x, x, x, x, q, q, q, q, np.zeros((m, n)), np.zeros((n, n)), q, q, np.zeros((n, m)), x, np.zeros((n, m)), x, x, 1e-3)
     counterweight_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1e-3)

@@ -153,6 +153,7 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         e = self._explicit
         self._has_armature = bool(np.any(e.armature) or np.any(e.directional_armature))
         self._has_explicit = e.any_effort
+        self._has_terms = self._has_armature or self._has_explicit or self._has_implicit or bool(np.any(self._coulomb_x))
         self._presliding = bool(e.presliding)
         self._presliding_position = np.zeros(len(e.presliding))  # where each Dahl state last moved from
         self._presliding_z = np.zeros(len(e.presliding))
@@ -284,11 +285,14 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
             column[cw] += self._implicit_diag[cw]
             xdd[cw] = (self._counterweight_pid(q, dq, x, v) - F[cw]) / column[cw]
             F += column * xdd[cw]
-        explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
-        e = self._explicit
-        tau, forces = kernels.servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, self._effort_of_F, self._dof_forces_of_F,
-                                            e.armature, e.directional_armature, self.psm.G, self._coulomb_x, self._force_map,
-                                            self._implicit_damping, self._implicit_stiffness, self.dt)
+        if self._has_terms:
+            explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
+            e = self._explicit
+            tau, forces = kernels.servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, self._effort_of_F, self._dof_forces_of_F,
+                                                e.armature, e.directional_armature, self.psm.G, self._coulomb_x, self._force_map,
+                                                self._implicit_damping, self._implicit_stiffness, self.dt)
+        else:  # the rigid bodies alone
+            tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
         skeleton.setForces(forces)
         self.world.step()
         self._after_step(dq, tau, float(F[self._counterweight_dof]) if self._free_dofs else 0.0)
