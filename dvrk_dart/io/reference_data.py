@@ -6,6 +6,7 @@ otherwise; the velocity column is checked against the rate)."""
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
 import urllib.request
 from pathlib import Path
@@ -17,7 +18,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import atomic_path
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.io.bags import BagTopics, is_bag, load_bag_run
-from dvrk_dart.io.csv_run import joints_with_efforts, read_csv_run, say_once, still_position_notes
+from dvrk_dart.io.csv_run import CsvValues, joints_with_efforts, read_csv_run, say_once, still_position_notes
 from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers' names)
     CSV_COLUMNS,
     MANIFEST_FILE,
@@ -91,14 +92,25 @@ def input_record(path: str | Path, model: PsmModel, topics: BagTopics = BagTopic
 
 
 def _time_column_rate(path: Path, model: PsmModel) -> float | None:
-    stat = path.stat()
-    return _file_time_column_rate(str(path), stat.st_mtime_ns, stat.st_size, model.motor_map, tuple(model.dvrk_topics.joint_names))
+    return _read_csv(path, model).rate_hz
+
+
+def _read_csv(path: Path, model: PsmModel) -> CsvValues:
+    """A measured-run CSV parsed once per content: a command loads a run, records it in its outputs and may
+    load it again (a replay chooses its processing first). Keyed by the bytes' digest, not the file's time
+    (a file rewritten within a clock tick); its values are read-only."""
+    try:
+        digest = hashlib.blake2b(path.read_bytes(), digest_size=16).hexdigest()
+    except OSError:  # read_csv_run says what is wrong with the path
+        return read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names)
+    return _read_csv_version(str(path), digest, model.motor_map, tuple(model.dvrk_topics.joint_names))
 
 
 @functools.lru_cache(maxsize=32)
-def _file_time_column_rate(path: str, mtime_ns: int, size: int, motor_map, joint_names: tuple) -> float | None:
-    """Per file version (a command records the same run in several outputs; the file was read once already)."""
-    return read_csv_run(Path(path), motor_map, joint_names).rate_hz
+def _read_csv_version(path: str, digest: str, motor_map, joint_names: tuple) -> CsvValues:
+    read = read_csv_run(Path(path), motor_map, joint_names)
+    read.values.setflags(write=False)
+    return read
 
 
 def _checked(path: Path, name: str) -> Path:
@@ -267,7 +279,7 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     path = Path(path)
     if is_bag(path):
         return load_bag_run(path, model, topics)
-    read = read_csv_run(path, model.motor_map, model.dvrk_topics.joint_names)
+    read = _read_csv(path, model)
     values = read.values
     if len(values) < MIN_ROWS:
         raise DvrkDartError(f"{path}: {len(values)} rows, at least {MIN_ROWS} needed (the processing trims {CUT_SAMPLES} from each end)")

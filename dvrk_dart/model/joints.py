@@ -46,6 +46,16 @@ class MotorCoordinateMap:
             raise ValueError(f"the coupling of {width} columns is {width}x{width}, not {self.matrix.shape}")
         self._inverse = np.linalg.inv(self.matrix)
 
+    def _identity(self) -> tuple:
+        columns = tuple(range(N_JOINTS)[self.columns]) if isinstance(self.columns, slice) else tuple(self.columns.tolist())
+        return self.matrix.tobytes(), columns
+
+    def __eq__(self, other) -> bool:  # a value: two arms' maps read a file alike when their numbers agree
+        return isinstance(other, MotorCoordinateMap) and self._identity() == other._identity()
+
+    def __hash__(self) -> int:
+        return hash(self._identity())
+
     def _mapped(self, values, matrix):
         out = np.array(values, dtype=float, copy=True)
         out[..., self.columns] = out[..., self.columns] @ matrix.T
