@@ -5,7 +5,7 @@ twenty operations on 7- and 12-vectors) as DART spends integrating the closed
 chain; these kernels do the same arithmetic in a few calls: the velocity
 servo's, and the explicit efforts of the identified and diagnosed effects
 (`effects.py`), which in numpy took longer than DART's step (a replay with a
-diagnosis's effects ran at 10x real time, 27x without them).  They are the
+diagnosis's effects ran at 8x real time, 27x without them: docs/speed.md).  They are the
 implementation (no numpy twin to drift from).  Compiled once per machine
 (`cache=True`, under the package's __pycache__ or the user's cache folder), at
 import: a process pays it with its imports, not inside a run.  A user who can
@@ -102,7 +102,7 @@ def observe(x, v, coordinates_of_x, dq_before, dt, range_mid, range_half):
 
 @_compiled
 def explicit_effort(q, dq, presliding_state, per_joint, links, presliding, presliding_tables, angle_loads, loads, load_tables):
-    """The explicit efforts (q space) of `effects.ExplicitTables`' arrays:
+    """The explicit efforts (q space) of `effects.ExplicitEffects.tables`:
     per_joint rows offset, viscous, Coulomb, stiffness, smooth Coulomb, its velocity scale;
     links rows (coefficients..., Coulomb, viscous) of a friction on a linear combination of q;
     presliding rows (coefficients..., Coulomb, viscous) times the Dahl state, their Coulomb
