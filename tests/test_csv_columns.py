@@ -1,6 +1,8 @@
 """The columns of a measured-run CSV: headers, time columns and rates, velocity and effort columns
 that are not what they say, and the notes or one-line refusals each gets."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -93,19 +95,24 @@ def test_a_three_joint_log_of_an_arm_that_couples_them_is_refused(tmp_path):
         load_run(TEST1, MTM)
 
 
-def test_rate_and_a_time_column_must_agree(tmp_path, capsys):
+def test_rate_is_for_the_files_without_a_time_column(tmp_path, capsys):
+    """--rate sets the rate of a log without a time column; a file with one keeps its stamps' rate (a note
+    names it), so that a 100 Hz log without stamps and a 200 Hz one with them go into one command."""
     two = load_run(resolve_run("two"), PSM)
-    path = write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
-    assert main(["model-errors", "--measured", str(path), "--rate", "100"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--rate 100" in err and "time column at 200 Hz" in err
-    # within 1 % it agrees, and the stamps set the rate (--rate 199 read the run 0.5 % slow)
-    assert load_run(path, PSM, BagTopics(rate_hz=199.0)).rate_hz == pytest.approx(200.0)
+    timed = write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
+    every_other = SimpleNamespace(t=two.t[::2], q=two.q[::2], dq=two.dq[::2], tau=two.tau[::2])
+    untimed = write_header_csv(tmp_path / "untimed.csv", every_other, ["q1", "dq1", "tau1"], t=False)
+    assert load_run(untimed, PSM, BagTopics(rate_hz=100.0)).rate_hz == 100.0
+    assert main(["model-errors", "--measured", str(timed), "--rate", "100"]) == 0
+    err = capsys.readouterr().err
+    assert "--rate 100 is for the files without a time column" in err and "timed.csv keeps its own, 200 Hz" in err, err
+    # within 1 % the stamps set the rate too (--rate 199 read the run 0.5 % slow)
+    assert load_run(timed, PSM, BagTopics(rate_hz=199.0)).rate_hz == pytest.approx(200.0)
 
 
 def test_a_wrong_time_column_is_named_as_what_to_correct(tmp_path, capsys):
     """A t column at twice the rows' real spacing: the error says to correct the
-    column (a --rate beside it would be refused), and which rate fits."""
+    column (a --rate beside it would not apply to this file), and which rate fits."""
     two = load_run(resolve_run("two"), PSM)
     path = write_header_csv(tmp_path / "timed.csv", two, ["q1", "dq1", "tau1"])
     frame = pd.read_csv(path)

@@ -61,18 +61,18 @@ def reference_run_arm(name: str) -> str:
 
 
 def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | None = None) -> tuple[float, str]:
-    """(rows per second, where it comes from) of a CSV: --rate (`explicit`), else its time
-    column's, else the manifest's entry of that file name, else the reference data's default."""
-    if explicit is not None:
-        if not (np.isfinite(explicit) and explicit > 0):
-            raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
-        if time_column_hz is not None and abs(explicit / time_column_hz - 1.0) > 0.01:
-            raise DvrkDartError(f"--rate {explicit:g}: {path} has a time column at {time_column_hz:.6g} Hz (leave --rate out)")
-        if time_column_hz is not None:  # it agrees: the stamps are the rate (--rate 199 on a 200 Hz file read it 0.5 % off)
-            return time_column_hz, TIME_COLUMN_SOURCE
-        return float(explicit), "--rate"
+    """(rows per second, where it comes from) of a CSV: its time column's, else --rate (`explicit`), else the
+    manifest's entry of that file name, else the reference data's default. --rate is the rate of the files
+    without a time column: a command may mix them with files that have one, which keep their stamps' rate
+    (a note says so where --rate differs by more than 1 %)."""
+    if explicit is not None and not (np.isfinite(explicit) and explicit > 0):
+        raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
     if time_column_hz is not None:
+        if explicit is not None and abs(explicit / time_column_hz - 1.0) > 0.01:
+            say_once([f"--rate {explicit:g} is for the files without a time column: {path} keeps its own, {time_column_hz:.6g} Hz"])
         return time_column_hz, TIME_COLUMN_SOURCE
+    if explicit is not None:
+        return float(explicit), "--rate"
     entry = manifest()["files"].get(Path(path).name, {})
     if "sample_rate_hz" in entry:
         return float(entry["sample_rate_hz"]), f"{MANIFEST_FILE.name} [{Path(path).name}]"
@@ -187,7 +187,9 @@ def resolve_run(name_or_path: str | Path) -> Path:
             raise DvrkDartError(f"{text}: both the reference run '{text}' and a file here: give ./{text} for the file")
         return resolve(RUNS[text])
     if text in manifest()["files"] and not here:  # a file of that name where the user points wins
-        return resolve(text)
+        path = resolve(text)
+        say_once([f"{text}: no such file here; read the reference data's {path}"])
+        return path
     if is_bag(text):
         return Path(text)
     if Path(text).is_dir():
