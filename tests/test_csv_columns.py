@@ -82,7 +82,19 @@ def test_an_uneven_time_column_is_refused(tmp_path):
     fields[0] = str(float(fields[0]) + 0.003)
     text[300] = ",".join(fields)
     path.write_text("\n".join(text) + "\n")
-    with pytest.raises(DvrkDartError, match="time column, row"):
+    # line 301 of the file: its 300th data row, the step into it from the 299th
+    with pytest.raises(DvrkDartError, match=r"time column, row 300 \(line 301 of the file\)"):
+        load_run(path, PSM)
+
+
+def test_a_header_file_counts_its_rows_as_a_file_without_one(tmp_path):
+    """A missing value is named by its data row, as every check counts them, and by its line in the file."""
+    two = load_run(resolve_run("two"), PSM)
+    path = write_header_csv(tmp_path / "gap.csv", two, ["q1", "dq1", "tau1"])
+    text = path.read_text().splitlines()
+    text[101] = text[101].rsplit(",", 1)[0] + ",nan"
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(DvrkDartError, match=r"row 101 \(line 102 of the file\), column tau1: missing"):
         load_run(path, PSM)
 
 

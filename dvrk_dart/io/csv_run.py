@@ -178,12 +178,17 @@ def _numbers(raw: pd.DataFrame, names: list[str], path: Path, first_row: int) ->
     bad = numeric.isna() & raw.notna()
     if bad.to_numpy().any():
         row, col = np.argwhere(bad.to_numpy())[0]
-        raise DvrkDartError(f"{path}: row {row + first_row}, column {names[col]}: '{raw.iat[row, col]}' is not a number")
+        raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: '{raw.iat[row, col]}' is not a number")
     values = numeric.to_numpy(dtype=float)
     if not np.all(np.isfinite(values)):
         row, col = np.argwhere(~np.isfinite(values))[0]
-        raise DvrkDartError(f"{path}: row {row + first_row}, column {names[col]}: missing, NaN or infinite value")
+        raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: missing, NaN or infinite value")
     return values
+
+
+def _row(index: int, first_row: int) -> str:
+    """A data row as every message counts them (from 1), and its line in the file where a header shifts it."""
+    return f"row {index + 1}" + (f" (line {index + first_row} of the file)" if first_row != 1 else "")
 
 
 def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
@@ -195,8 +200,7 @@ def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
     median = float(np.median(step))
     uneven = np.flatnonzero(np.abs(step - median) > TIME_JITTER * median)
     if len(uneven):
-        row = int(uneven[0]) + 1 + first_row
-        raise DvrkDartError(f"{path}: time column, row {row}: a step of {step[uneven[0]]:.6g} s where the rows are "
+        raise DvrkDartError(f"{path}: time column, {_row(int(uneven[0]) + 1, first_row)}: a step of {step[uneven[0]]:.6g} s where the rows are "
                             f"{median:.6g} s apart (rows must be evenly spaced: resample first, or drop the time column "
                             "and give --rate)")
     # from the whole span, not one step: stamps far from zero (Unix time) are quantised to ~0.2 us, which moved
