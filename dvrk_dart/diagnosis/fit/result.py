@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, MAX_BLOCKS_PER_RUN, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
-from dvrk_dart.diagnosis.fit.problem import Problem
+from dvrk_dart.diagnosis.fit.problem import EFFORT_WEIGHT_FLOOR, Problem
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import (
     BOOTSTRAP_RESAMPLES,
@@ -38,7 +38,8 @@ class Selection:
 
     def method(self) -> str:
         return (f"greedy forward selection on {len(self.selector.folds)}-fold contiguous time-segment cross-validation of the training "
-                f"runs, weighted least squares (joint weight 1/RMS before), bounded to physical ranges; stop when the held-out gain < "
+                f"runs, weighted least squares (joint weight 1/RMS before; runs minus their baseline refitted with 1/RMS after), bounded to "
+                f"physical ranges; stop when the held-out gain < "
                 f"{MIN_HELDOUT_GAIN} or not positive with probability {1 - GAIN_FAILURE_QUANTILE:.2f} (block bootstrap, "
                 f"{BLOCK_DURATION_S} s blocks, at most {MAX_BLOCKS_PER_RUN} a run, {BOOTSTRAP_RESAMPLES} resamples); a payload's link among its equivalent links "
                 f"(identical efforts) by the penalised training cost")
@@ -47,8 +48,21 @@ class Selection:
 def select(problem: Problem, max_effects: int) -> Selection:
     selector = Selector(problem.design, problem.train_grams, problem.joint_weights, problem.folds)
     selected, steps, individual, selected_cv = selector.greedy(max_effects)
+    if selected and all(run.role is RunRole.DIFFERENCE for run in problem.train_runs):
+        # runs minus their baseline: what the selection leaves is their noise and the session's change, and the final
+        # fit weighs each joint by it (feasible generalised least squares); of a run alone, what is left is model error
+        selector = selector.fitting_by(_residual_weights(problem, selector.fit_all(selected)))
     selected, final, selected_cv = choose_within_families(selector, selected, selected_cv)
     return Selection(selector, selected, final, steps, individual, selected_cv)
+
+
+def _residual_weights(problem: Problem, fit: Fit) -> np.ndarray:
+    """1 / the training runs' residual energy per sample on each joint after `fit` (floored as the weights before).
+    A tool payload's off-axis first moment took q3's noise, which the gap's weights let pull what q2 pins: q2 was
+    left at 1.9x the true physics' gap on another noise draw of the 2018 design (docs/diagnosis-method.md)."""
+    grams = problem.train_grams
+    after = sse(fit.beta, grams.A, grams.g, grams.s).sum(0) / max(grams.n.sum(), 1)
+    return np.where(problem.joint_weights > 0, 1.0 / np.maximum(after, EFFORT_WEIGHT_FLOOR**2), 0.0)
 
 
 def without_last_effect(selection: Selection) -> Selection:

@@ -107,14 +107,16 @@ class CvResult:
 class Selector:
     """Cross-validated scores, bootstrap intervals and greedy forward selection."""
 
-    def __init__(self, design: Design, train: Grams, w2: np.ndarray, folds: int):
+    def __init__(self, design: Design, train: Grams, w2: np.ndarray, folds: int, fit_w2: np.ndarray | None = None):
+        """w2: the joints' weights of the scores (explained fractions, bootstrap); fit_w2: the fits' (w2 if None)."""
         self.design, self.train, self.w2 = design, train, w2
+        self.fit_w2 = w2 if fit_w2 is None else fit_w2
         self.fitter = Fitter(design)
         self.folds = sorted(set(train.fold.tolist()))
-        Aw = np.einsum("bjpq,j->bpq", train.A, w2)
-        gw = np.einsum("bjp,j->bp", train.g, w2)
+        Aw = np.einsum("bjpq,j->bpq", train.A, self.fit_w2)
+        gw = np.einsum("bjp,j->bp", train.g, self.fit_w2)
         self.A_total, self.g_total = Aw.sum(0), gw.sum(0)
-        sw = train.s @ w2
+        sw = train.s @ self.fit_w2
         self.energy_total = float(sw.sum())
         self.energy_fold = {f: float(sw[train.fold == f].sum()) for f in self.folds}
         self.A_fold = {f: Aw[train.fold == f].sum(0) for f in self.folds}
@@ -131,9 +133,13 @@ class Selector:
             # in-sample fraction less the optimism (Mallows' Cp): 2 x the noise energy each fitted parameter
             # absorbs, per column spread over the blocks and joints where it lives (sum over them: x^T (W D) x / x^T W x)
             diag = np.einsum("bjpp->bjp", train.A)  # (b, 7, P)
-            den = np.einsum("bjp,j->p", diag, w2)
-            share = np.einsum("bjp,bj,j->pbj", diag, train.noise, w2)  # in train.s units
+            den = np.einsum("bjp,j->p", diag, self.fit_w2)
+            share = np.einsum("bjp,bj,j->pbj", diag, train.noise, self.fit_w2)  # in train.s units
             self.noise_share = np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
+
+    def fitting_by(self, fit_w2: np.ndarray) -> "Selector":
+        """The same scores, the fits weighted by `fit_w2`."""
+        return Selector(self.design, self.train, self.w2, len(self.folds), fit_w2)
 
     def optimism(self, chosen: list[int]) -> np.ndarray:
         """(n_blocks, 7) twice the noise energy the chosen effects' fitted
@@ -164,12 +170,12 @@ class Selector:
         i's columns span) split by block and joint; made once per effect (every candidate set it is in reads it)."""
         if i not in self._span:
             A = self.train.A[:, :, self.design.slices[i], self.design.slices[i]]
-            G = np.einsum("bjpq,j->pq", A, self.w2)
+            G = np.einsum("bjpq,j->pq", A, self.fit_w2)
             # on unit columns: the trace is the same, and which near-collinear directions count is not set by the units
             scale = np.sqrt(np.diag(G))
             scale = np.where(scale > 0, scale, 1.0)
             inverse = np.linalg.pinv(G / np.outer(scale, scale), rcond=1e-10, hermitian=True) / np.outer(scale, scale)
-            self._span[i] = self.w2[None, :] * np.einsum("pq,bjqp->bj", inverse, A)
+            self._span[i] = self.fit_w2[None, :] * np.einsum("pq,bjqp->bj", inverse, A)
         return self._span[i]
 
     def fit_all(self, chosen, warm=None) -> Fit:
