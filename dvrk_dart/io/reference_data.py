@@ -292,6 +292,6 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     velocity_notes = check_velocity_columns(values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], rate, str(path))
     measured, effort_notes = joints_with_efforts(read, path)
     say_once(velocity_notes + effort_notes + still_position_notes(values, measured, path))  # last: notes only for a file that loads
-    data = pd.DataFrame(values, columns=CSV_COLUMNS)
+    data = pd.DataFrame(values, columns=CSV_COLUMNS, copy=True)  # the parse is shared (read-only): the run owns its copy
     data.insert(0, "t", np.arange(len(data)) / rate)
     return MeasuredRun(path=path, data=data, model=model, measured=measured)
