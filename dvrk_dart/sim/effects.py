@@ -125,8 +125,7 @@ class ExplicitEffects:
     def tables(self) -> tuple[np.ndarray, ...]:
         """The terms as the arrays of `kernels.explicit_effort` (its docstring has their layout)."""
         per_joint = np.array([self.offset, self.viscous, self.coulomb, self.stiffness, self.smooth_coulomb, self.reversal_velocity], dtype=float)
-        links = [[*link.variable.coeffs, 0.0 if self.params[link.key].presliding > 0.0 else self.params[link.key].coulomb,
-                  self.params[link.key].viscous] for link in self.friction_links]  # a pre-sliding Coulomb is in `presliding`
+        links = [[*link.variable.coeffs, *self._sharp_friction(link)] for link in self.friction_links]
         presliding = [[*f.coeffs, f.coulomb, f.viscous] for f in self.presliding]
         presliding_tables = [(f.knots, f.coulomb_at_knots) for f in self.presliding]
         angle_loads = [list(entry) for entry in self.angle_loads]
@@ -134,6 +133,11 @@ class ExplicitEffects:
         load_tables = [(knots, values) for _, _, knots, values in self.position_loads]
         return (per_joint, _rows(links, N_JOINTS + 2), _rows(presliding, N_JOINTS + 2), _tables(presliding_tables),
                 _rows(angle_loads, 4), _rows(loads, 2), _tables(load_tables))
+
+    def _sharp_friction(self, link: Link) -> tuple[float, float]:
+        """(Coulomb, viscous) of a motor-side link's friction: a pre-sliding Coulomb is in `presliding`."""
+        p = self.params[link.key]
+        return (0.0 if p.presliding > 0.0 else p.coulomb), p.viscous
 
     @cached_property
     def presliding_coefficients(self) -> np.ndarray:

@@ -127,7 +127,7 @@ class Selector:
         self.penalised = train.noise is not None
         self._span: dict[int, np.ndarray] = {}
         self._absorbed_by: dict[tuple[int, ...], np.ndarray] = {}
-        self._fitted: dict[tuple[int, ...], Fit] = {}
+        self._fitted: dict[tuple, Fit] = {}
         if self.penalised:
             # periodic processing: every period a copy, so a time fold is no held-out data. The score is the
             # in-sample fraction less the optimism (Mallows' Cp): 2 x the noise energy each fitted parameter
@@ -179,11 +179,12 @@ class Selector:
         return self._span[i]
 
     def fit_all(self, chosen, warm=None) -> Fit:
-        """The effects `chosen` fitted on all training data; without a warm start, once per set (the report
-        asks again for the fits the selection made; callers read the Fit, never change it)."""
+        """The effects `chosen` fitted on all training data; without a warm start, once per set and bounds (the
+        report asks again for the fits the selection made; `mass_profile` narrows a payload's mass in place;
+        callers read the Fit, never change it)."""
         if warm is not None:
             return self.fitter.fit(chosen, self.A_total, self.g_total, warm, self.energy_total)
-        key = tuple(chosen)
+        key = tuple((i, *((p.lower, p.upper) for p in self.design.effects[i].parameters)) for i in chosen)
         if key not in self._fitted:
             self._fitted[key] = self.fitter.fit(chosen, self.A_total, self.g_total, None, self.energy_total)
         return self._fitted[key]
