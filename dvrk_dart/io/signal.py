@@ -16,7 +16,9 @@ the excitation's harmonics, with `in_band` projecting a prediction likewise.
 
 from __future__ import annotations
 
+import hashlib
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -36,6 +38,9 @@ MIN_ROWS = 2 * CUT_SAMPLES + MIN_KEPT_SAMPLES
 PROCESSINGS = ("upstream", "periodic")
 #: a position span at or below this (rad or m) is a still joint's round-off, far below any encoder's step
 STILL_SPAN = 1e-9
+#: periodic analyses kept by the content they were made of (a replay chooses its processing, then processes)
+_ANALYSES: OrderedDict[tuple, PeriodicAnalysis] = OrderedDict()
+_ANALYSES_KEPT = 8
 
 
 def spanning_columns(q: np.ndarray) -> np.ndarray:
@@ -186,11 +191,27 @@ def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> Processed
     """Analytic q, dq, ddq and the efforts projected on the harmonics (io/periodic.py)."""
     tau = run.tau - run.model.cable_efforts(run.q)  # what the identification removed before fitting
     coupled = np.isin(np.arange(run.q.shape[1]), np.arange(run.q.shape[1])[run.model.motor_map.columns])
-    analysis = analyse(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design, coupled)
+    analysis = _analysis(run.t, run.q, tau, run.rate_hz, f"{run.path}: --processing periodic", harmonics, run.measured_mask, design, coupled)
     kept = slice(*analysis.kept)  # without a start or end transient (io/transient.py)
     t = run.t[kept] - run.t[kept][0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
     return ProcessedRun(run.t[kept], q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
+
+
+def _analysis(t, q, tau, rate_hz: float, where: str, harmonics, measured: np.ndarray, design, coupled: np.ndarray) -> PeriodicAnalysis:
+    """`analyse`, once per content: keyed by a digest of the arrays and the options (an analysis is frozen; a
+    run given its excitation's design is analysed each time)."""
+    if design is not None:
+        return analyse(t, q, tau, rate_hz, where, harmonics, measured, design, coupled)
+    digest = hashlib.blake2b(digest_size=16)
+    for array in (t, q, tau, measured, coupled):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    key = (digest.hexdigest(), rate_hz, where, harmonics)
+    if key not in _ANALYSES:
+        _ANALYSES[key] = analyse(t, q, tau, rate_hz, where, harmonics, measured, design, coupled)
+        while len(_ANALYSES) > _ANALYSES_KEPT:
+            _ANALYSES.popitem(last=False)
+    return _ANALYSES[key]
 
 
 def process_all(runs: list[MeasuredRun], processing: str | None, design=None,
