@@ -117,9 +117,22 @@ def test_rate_is_for_the_files_without_a_time_column(tmp_path, capsys):
     assert load_run(untimed, PSM, BagTopics(rate_hz=100.0)).rate_hz == 100.0
     assert main(["model-errors", "--measured", str(timed), "--rate", "100"]) == 0
     err = capsys.readouterr().err
-    assert "--rate 100 is for the files without a time column" in err and "timed.csv keeps its own, 200 Hz" in err, err
+    assert "--rate 100 is for the files whose rate is not known" in err and "timed.csv keeps its own 200 Hz" in err, err
     # within 1 % the stamps set the rate too (--rate 199 read the run 0.5 % slow)
     assert load_run(timed, PSM, BagTopics(rate_hz=199.0)).rate_hz == pytest.approx(200.0)
+
+
+def test_rate_leaves_a_reference_run_at_its_recorded_rate(tmp_path, capsys):
+    """A reference run's rate is known (the manifest's, by its content), so a 100 Hz log of the user's goes into
+    one command with it; a copy whose content differs is the user's file, read at --rate."""
+    assert load_run(resolve_run("two"), PSM, BagTopics(rate_hz=100.0)).rate_hz == 200.0
+    assert "two_results.csv is the reference data's two_results.csv, recorded at 200 Hz" in capsys.readouterr().err
+    half = resolve_run("one-105g-half")  # the manifest pins its rows at 10 ms
+    assert load_run(half, PSM, BagTopics(rate_hz=100.0)).rate_hz == 100.0
+    two = load_run(resolve_run("two"), PSM)
+    every_other = SimpleNamespace(t=two.t[::2], q=two.q[::2], dq=two.dq[::2], tau=two.tau[::2])
+    edited = write_header_csv(tmp_path / "two_results.csv", every_other, ["q1", "dq1", "tau1"], t=False)
+    assert load_run(edited, PSM, BagTopics(rate_hz=100.0)).rate_hz == 100.0
 
 
 def test_a_wrong_time_column_is_named_as_what_to_correct(tmp_path, capsys):

@@ -63,20 +63,29 @@ def reference_run_arm(name: str) -> str:
 def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | None = None) -> tuple[float, str]:
     """(rows per second, where it comes from) of a CSV: its time column's, else --rate (`explicit`), else the
     manifest's entry of that file name, else the reference data's default. --rate is the rate of the files
-    without a time column: a command may mix them with files that have one, which keep their stamps' rate
-    (a note says so where --rate differs by more than 1 %)."""
+    whose rate is not known: a command may mix them with files that have a time column, or with the
+    reference data's runs (their content the manifest's), which keep their own rate (a note says so where
+    --rate differs by more than 1 %)."""
     if explicit is not None and not (np.isfinite(explicit) and explicit > 0):
         raise DvrkDartError(f"--rate: {explicit!r} is not a positive rate (Hz)")
     if time_column_hz is not None:
-        if explicit is not None and abs(explicit / time_column_hz - 1.0) > 0.01:
-            say_once([f"--rate {explicit:g} is for the files without a time column: {path} keeps its own, {time_column_hz:.6g} Hz"])
+        _say_rate_not_used(explicit, time_column_hz, f"{path} keeps its own")
         return time_column_hz, TIME_COLUMN_SOURCE
+    name = Path(path).name
+    entry = manifest()["files"].get(name, {})
+    known = float(entry.get("sample_rate_hz", sample_rate_hz()))
+    source = f"{MANIFEST_FILE.name} [{name}]" if "sample_rate_hz" in entry else "the default rate"
+    if explicit is not None and entry.get("sha256") == sha256_of(path):
+        _say_rate_not_used(explicit, known, f"{path} is the reference data's {name}, recorded at")
+        return known, source
     if explicit is not None:
         return float(explicit), "--rate"
-    entry = manifest()["files"].get(Path(path).name, {})
-    if "sample_rate_hz" in entry:
-        return float(entry["sample_rate_hz"]), f"{MANIFEST_FILE.name} [{Path(path).name}]"
-    return sample_rate_hz(), "the default rate"
+    return known, source
+
+
+def _say_rate_not_used(explicit: float | None, rate_hz: float, whose: str) -> None:
+    if explicit is not None and abs(explicit / rate_hz - 1.0) > 0.01:
+        say_once([f"--rate {explicit:g} is for the files whose rate is not known: {whose} {rate_hz:.6g} Hz"])
 
 
 def input_record(path: str | Path, model: PsmModel, topics: BagTopics = BagTopics()) -> dict:
