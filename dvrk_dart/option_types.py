@@ -9,6 +9,7 @@ import os
 import re
 from pathlib import Path
 
+from dvrk_dart.model.card_checks import ARM_NAMESPACE
 from dvrk_dart.runs.config import MAX_DURATION_S
 
 
@@ -21,7 +22,7 @@ def non_empty(text: str) -> str:
 
 def arm_namespace(text: str) -> str:
     """A ROS namespace of one name (PSM1, MTML): letters, digits, underscores, a letter first."""
-    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", text):
+    if not re.fullmatch(ARM_NAMESPACE, text):
         raise argparse.ArgumentTypeError(f"'{text}' is not an arm's namespace (a ROS name such as PSM1: letters, digits, _)")
     return text
 

@@ -443,7 +443,15 @@ def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
                               ({"closure_residual_limit_m": "x"}, "sim_config.closure_residual_limit_m: not finite numbers"),
                               ({"dt_s": -0.001}, "sim_config.dt_s: above zero"),
                               ({"extra": {"coulomb": [0.1] * 6}}, "sim_config.extra.coulomb: a list of 7 numbers"),
-                              ({"bogus": 1}, "unknown key 'bogus'")):
+                              ({"bogus": 1}, "unknown key 'bogus'"),
+                              # the entries' layouts (an index out of range or a short entry ended in IndexError)
+                              ({"extra": {"position_friction": [[9, 1e-4, 0.0, 1.0, 0.1, 0.1]]}}, "its number 1 is a coordinate, 0..6"),
+                              ({"extra": {"position_friction": [[1.0]]}}, "increasing knots and as many values"),
+                              ({"extra": {"position_load": [[1, 1, 0.5, 0.2, 0.1, 0.1]]}}, "increasing knots"),
+                              ({"extra": {"angle_load": [[1.0]]}}, "angle_load: entries of 4 numbers"),
+                              ({"extra": {"angle_load": [[1.5, 1, 0.1, 0.0]]}}, "its number 1 is a coordinate"),
+                              ({"extra": {"link_friction": [[99, 1.0, 1.0]]}}, "link_friction: entries of 4 numbers"),
+                              ({"extra": {"link_mass_scale": [[2.5, 0.1]]}}, "its number 1 is a link's key")):
         dynamics = tmp_path / "d.json"
         dynamics.write_text(json.dumps({"sim_config": sim_config}))
         for command in (["replay", "--duration", "0.2"], ["force"]):

@@ -120,3 +120,47 @@ def test_a_repeat_pair_names_two_files(tmp_path):
     bad.write_text(re.sub(r"repeat_pair = \[.*\]", 'repeat_pair = ["one_results.csv"]', card))
     with pytest.raises(DvrkDartError, match="repeat_pair names 1 files"):
         load_model(bad)
+
+
+@pytest.mark.parametrize("entry, edited, message", [
+    ("gravity_m_s2 = [0.0, 0.0, -9.81]", "gravity_m_s2 = [0.0, -9.81]", r"gravity_m_s2 must be 3 finite numbers"),
+    ("lower = [-1.6, -0.9, 0.0, -3.0, -3.2, -3.2, -3.2]", "lower = [-1.6, -0.9]", r"\[joint_limits\] lower must be 7"),
+    ("lower = [-1.6, -0.9, 0.0, -3.0, -3.2, -3.2, -3.2]", "lower = [1.6, -0.9, 0.0, -3.0, -3.2, -3.2, -3.2]",
+     r"each lower must be below its upper"),
+    ("matrix = [[1.0186, 0.0, 0.0], [-0.8306, 0.6089, 0.6089], [0.0, -1.2177, 1.2177]]", "matrix = [[1.0, 0.0], [0.0, 1.0]]",
+     r"\[dvrk_coupling\] matrix must be 3x3"),
+    ("matrix = [[1.0186, 0.0, 0.0], [-0.8306, 0.6089, 0.6089], [0.0, -1.2177, 1.2177]]", "matrix = [[0, 0, 0], [0, 0, 0], [0, 0, 0]]",
+     r"matrix is singular"),
+    ("cutoff_parameter_hz = 5.4", "cutoff_parameter_hz = 0.0", r"cutoff_parameter_hz must be in \(0, 31.8\)"),
+    ("cutoff_parameter_hz = 5.4", "cutoff_parameter_hz = 5000.0", r"cutoff_parameter_hz must be in \(0, 31.8\)"),
+    ("first_period_samples = 1111", "first_period_samples = 0", r"first_period_samples must be a positive"),
+    ("identification_mass_bounds_kg = { 2 = 10.0,", 'identification_mass_bounds_kg = { 2 = "x",', r"identification_mass_bounds_kg: 2 = 'x'"),
+    ('namespace = "PSM1"', 'namespace = "PSM 1"', r"namespace 'PSM 1' is not a ROS name"),
+    ("ratio = 1.0", "ratio = 0.0", r"\[counterweight\] ratio must be a finite non-zero"),
+    ('leader = "q3"', 'leader = "q9"', r"\[counterweight\] leader 'q9'"),
+    ("kinematic_gain = 15.0", "kinematic_gain = -15.0", r"\[controllers\] kinematic_gain must be a positive number"),
+    ("counterweight_pid = [2000.0, 0.0, 60.0]", "counterweight_pid = [2000.0]", r"counterweight_pid must be \[Kp, Ki, Kd\]"),
+    ("min_lever_m = 0.05", "min_lever_m = -1", r"min_lever_m must be a positive length"),
+])
+def test_a_card_value_no_command_could_use_is_refused_in_one_line(tmp_path, entry, edited, message):
+    """Shapes and signs of the card's values, checked when it is read (they ended in tracebacks deep in a command)."""
+    card = PSM.source.read_text()
+    assert card.count(entry) == 1
+    bad = tmp_path / "psm.toml"
+    bad.write_text(card.replace(entry, edited))
+    with pytest.raises(DvrkDartError, match=rf"^{bad}: .*{message}"):
+        load_model(bad)
+
+
+def test_the_tool_tip_and_the_force_point_name_what_the_card_has(tmp_path):
+    import re
+
+    card = PSM.source.read_text()
+    tip = re.search(r"\[tool_tip\]\nparent = (\d+)", card)
+    bad = tmp_path / "psm.toml"
+    bad.write_text(card[:tip.start(1)] + "99" + card[tip.end(1):])
+    with pytest.raises(DvrkDartError, match=r"\[tool_tip\] parent 99 is not a link"):
+        load_model(bad)
+    bad.write_text(re.sub(r'(\[force_point\][^\[]*?joints = )\[[^\]]*\]', r'\1["q1", "q9"]', card))
+    with pytest.raises(DvrkDartError, match=r"\[force_point\] joints: unknown q9"):
+        load_model(bad)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.card_checks import check_model_values
 from dvrk_dart.model.description import DvrkTopics, ForcePoint, LoopClosure, PsmModel, UpstreamProcessing
 from dvrk_dart.model.dh import DHFrame, LinearExpr, Link
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
@@ -65,8 +66,12 @@ def _force_point(raw: dict, path: Path, links: dict) -> ForcePoint | None:
     keys = [k for k, link in links.items() if link.name == name]
     if not keys:
         raise DvrkDartError(f"{path}: [force_point] link '{name}' is not a link of the model")
-    joints = tuple(JOINT_NAMES.index(j) for j in _require(table, "joints", path, "[force_point]"))
-    return ForcePoint(keys[0], str(table.get("point", name)), joints, float(_require(table, "min_lever_m", path, "[force_point]")))
+    names = list(_require(table, "joints", path, "[force_point]"))
+    unknown = [str(j) for j in names if j not in JOINT_NAMES]
+    if unknown:
+        raise DvrkDartError(f"{path}: [force_point] joints: unknown {', '.join(unknown)} (known: {', '.join(JOINT_NAMES)})")
+    lever = _floats(_require(table, "min_lever_m", path, "[force_point]"), path, "[force_point] min_lever_m")
+    return ForcePoint(keys[0], str(table.get("point", name)), tuple(JOINT_NAMES.index(j) for j in names), float(lever))
 
 
 def _diagnosis_base(raw: dict, path: Path) -> str:
@@ -100,26 +105,26 @@ def load_model(path: Path | str) -> PsmModel:
     limits = _require(raw, "joint_limits", path, "file")
     coupling = _require(raw, "dvrk_coupling", path, "file")
     checks = raw.get("parameter_checks", {})
-    return PsmModel(
+    model = PsmModel(
         name=raw.get("name", path.stem),
         source=path,
         constants=constants,
-        gravity=np.array(raw.get("gravity_m_s2", [0.0, 0.0, -9.81]), dtype=float),
+        gravity=_floats(raw.get("gravity_m_s2", [0.0, 0.0, -9.81]), path, "gravity_m_s2"),
         default_parameters=raw.get("default_parameters", "params.json"),
         links=links,
         tool_tip=_tool_tip(raw, path, reader),
         loop_closures=_loop_closures(raw, path, reader, links),
         counterweight_link=int(cw["link"]) if cw is not None else None,
         counterweight_ratio=float(cw.get("ratio", 1.0)) if cw is not None else 0.0,
-        joint_lower=np.array(limits["lower"], dtype=float),
-        joint_upper=np.array(limits["upper"], dtype=float),
-        dvrk_coupling_matrix=np.array(_require(coupling, "matrix", path, "[dvrk_coupling]"), dtype=float),
+        joint_lower=_floats(_require(limits, "lower", path, "[joint_limits]"), path, "[joint_limits] lower"),
+        joint_upper=_floats(_require(limits, "upper", path, "[joint_limits]"), path, "[joint_limits] upper"),
+        dvrk_coupling_matrix=_floats(_require(coupling, "matrix", path, "[dvrk_coupling]"), path, "[dvrk_coupling] matrix"),
         dvrk_coupling_columns=_coupling_columns(coupling, path),
-        dvrk_velocity_limits=np.array(raw["dvrk_velocity_limits"]["upper"], dtype=float) if "dvrk_velocity_limits" in raw else None,
+        dvrk_velocity_limits=_floats(raw["dvrk_velocity_limits"].get("upper"), path, "[dvrk_velocity_limits] upper") if "dvrk_velocity_limits" in raw else None,
         inertia_tolerance=float(checks.get("inertia_tolerance_kg_m2", 0.0)),
         max_link_mass_kg=float(checks.get("max_link_mass_kg", float("inf"))),
         max_com_distance_m=float(checks.get("max_com_distance_m", float("inf"))),
-        identification_mass_bounds_kg={int(k): float(v) for k, v in checks.get("identification_mass_bounds_kg", {}).items()},
+        identification_mass_bounds_kg=_mass_bounds(checks, path, links),
         model_angles=dict(reader.model_angles),
         session_offset_joints=_session_offset_joints(raw, path),
         session_repeat_pair=_session_repeat_pair(raw, path),
@@ -133,6 +138,27 @@ def load_model(path: Path | str) -> PsmModel:
         diagnosis_base=_diagnosis_base(raw, path),
         force_point=_force_point(raw, path, links),
     )
+    check_model_values(model, model.controller_gains, cw)
+    return model
+
+
+def _floats(values, path: Path, entry: str) -> np.ndarray:
+    """An entry's numbers as an array (its shape is check_model_values's)."""
+    try:
+        return np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        raise DvrkDartError(f"{path}: {entry} must be numbers, not {values!r}") from None
+
+
+def _mass_bounds(checks: dict, path: Path, links: dict) -> dict[int, float]:
+    """[parameter_checks] identification_mass_bounds_kg: {link key = kg}."""
+    bounds = {}
+    for key, value in checks.get("identification_mass_bounds_kg", {}).items():
+        if not (str(key).isdigit() and int(key) in links and isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise DvrkDartError(f"{path}: [parameter_checks] identification_mass_bounds_kg: {key} = {value!r}: "
+                                "a link's key and its largest mass (kg, positive)")
+        bounds[int(key)] = float(value)
+    return bounds
 
 
 def _read_toml(path: Path) -> dict:

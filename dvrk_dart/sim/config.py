@@ -10,6 +10,7 @@ import numpy as np
 
 #: the identified model's rigid-body terms, always simulated
 from dvrk_dart.model.identified import INERTIAL_TERMS
+from dvrk_dart.model.joints import N_JOINTS
 
 COUNTERWEIGHT_VARIANTS = ("on", "off", "pid")
 MODES = ("kinematic", "velocity", "torque")
@@ -157,9 +158,38 @@ def _joint_effects(raw) -> JointEffects:
         if name not in kinds:
             raise ValueError(f"sim_config.extra: unknown key {name!r}")
         key = f"sim_config.extra.{name}"
-        checked[name] = (tuple(_numbers(entry, key, 0) for entry in _numbers_list(value, key)) if kinds[name] == ()
+        checked[name] = (tuple(_entry(name, _numbers(entry, key, 0), key) for entry in _numbers_list(value, key)) if kinds[name] == ()
                          else _numbers(value, key, len(kinds[name])))
     return JointEffects(**checked)
+
+
+#: JointEffects entries: (positions that are coordinate indices, positions that are link keys, their length; None:
+#: two leading numbers and a table of knots, increasing, and as many values)
+_ENTRY_LAYOUTS = {
+    "link_friction": ((), (0,), 4),
+    "position_friction": ((0,), (), None),
+    "angle_load": ((0, 1), (), 4),
+    "position_load": ((0, 1), (), None),
+    "link_mass_scale": ((), (0,), 2),
+}
+
+
+def _entry(name: str, entry: tuple[float, ...], key: str) -> tuple[float, ...]:
+    """An entry of a JointEffects table, its layout checked (`_ENTRY_LAYOUTS`)."""
+    coordinates, links, length = _ENTRY_LAYOUTS[name]
+    if length is not None and len(entry) != length:
+        raise ValueError(f"{key}: entries of {length} numbers, not {list(entry)}")
+    if length is None:
+        table = np.asarray(entry[2:])
+        if len(table) < 2 or len(table) % 2 or not np.all(np.diff(table[:len(table) // 2]) > 0):
+            raise ValueError(f"{key}: entries of two numbers, then increasing knots and as many values, not {list(entry)}")
+    for i in coordinates:
+        if not (entry[i].is_integer() and 0 <= entry[i] < N_JOINTS):
+            raise ValueError(f"{key}: {list(entry)}: its number {i + 1} is a coordinate, 0..{N_JOINTS - 1} (0 is q1)")
+    for i in links:
+        if not (entry[i].is_integer() and entry[i] >= 0):
+            raise ValueError(f"{key}: {list(entry)}: its number {i + 1} is a link's key, a whole number")
+    return entry
 
 
 def _payload(raw, index: int) -> Payload:
