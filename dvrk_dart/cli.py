@@ -307,8 +307,20 @@ def _check(args: argparse.Namespace) -> None:
         _check_bag_options(args)
 
 
+def _stopped(how: str, written_before: int) -> str:
+    """The line of a command stopped by a signal: what it removed, and the folders it had completed."""
+    from dvrk_dart.io.outputs import FOLDERS_WRITTEN
+
+    complete = FOLDERS_WRITTEN[written_before:]
+    kept = f"; {', '.join(map(str, complete))} written before it, complete" if complete else ""
+    return f"dvrk-dart: {how} (partial outputs removed{kept})"
+
+
 def _run(args: argparse.Namespace) -> int:
     """The command, its failures as one line and an exit code."""
+    from dvrk_dart.io.outputs import FOLDERS_WRITTEN
+
+    written_before = len(FOLDERS_WRITTEN)
     try:
         _check(args)
         code = args.func(args)
@@ -318,7 +330,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"dvrk-dart: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
+        print(_stopped("interrupted", written_before), file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader of stdout left (| head): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -328,7 +340,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"dvrk-dart: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except Terminated:
-        print("dvrk-dart: terminated (partial outputs removed)", file=sys.stderr)
+        print(_stopped("terminated", written_before), file=sys.stderr)
         return 143
     except RuntimeError as exc:  # pathlib's "Symlink loop from '...'": a path given, not a fault of the tool
         if not str(exc).startswith("Symlink loop"):
@@ -338,7 +350,7 @@ def _run(args: argparse.Namespace) -> int:
     except Exception:  # an interrupt that surfaced as another error (ImportError, SystemError) is an interrupt
         if not interrupted.is_set():
             raise
-        print("dvrk-dart: interrupted (partial outputs removed)", file=sys.stderr)
+        print(_stopped("interrupted", written_before), file=sys.stderr)
         return 130
 
 

@@ -331,6 +331,18 @@ def test_an_interrupted_run_leaves_no_partial_folder(tmp_path, signum):
     assert not list(tmp_path.glob(".run.*")), "a partial folder was left"
 
 
+def test_a_command_stopped_after_writing_a_folder_says_that_folder_is_complete(tmp_path):
+    """A SIGTERM while diagnose printed its summary said "partial outputs removed" of a complete folder."""
+    from dvrk_dart.cli import _stopped
+    from dvrk_dart.io.outputs import FOLDERS_WRITTEN, building_folder
+
+    before = len(FOLDERS_WRITTEN)
+    assert _stopped("terminated", before) == "dvrk-dart: terminated (partial outputs removed)"
+    with building_folder(tmp_path / "done", "run") as folder:
+        (folder / "a.json").write_text("{}")
+    assert _stopped("terminated", before) == f"dvrk-dart: terminated (partial outputs removed; {tmp_path / 'done'} written before it, complete)"
+
+
 def test_divergence_values_show_enough_digits(tmp_path, capsys):
     def edge(values):  # just past the pitch limit after the first step
         values[:, 1] = 0.8999999

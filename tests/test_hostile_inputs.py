@@ -442,7 +442,7 @@ def test_a_previous_folder_left_aside_is_cleaned_only_when_nothing_of_the_users_
 
 
 def test_a_repeat_of_another_rate_is_refused_before_any_replay(tmp_path, capsys, monkeypatch):
-    """Upstream processing does not resample: the repeat at half the rate is another motion, said before 30 s of replays."""
+    """Upstream processing does not resample: the repeat at half the rate is refused, its rate named, before 30 s of replays."""
     import dvrk_dart.diagnosis.api as api
 
     def no_replay(*_, **__):
@@ -454,7 +454,7 @@ def test_a_repeat_of_another_rate_is_refused_before_any_replay(tmp_path, capsys,
     names = [f"{kind}{j}" for kind in ("q", "dq", "tau") for j in range(1, 8)]
     np.savetxt(path, np.column_stack([np.arange(len(values)) / 100.0, values]), delimiter=",", header=",".join(["t", *names]), comments="")
     code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--repeat", path, "--processing", "upstream", "--out", tmp_path / "d")
-    assert code == 2 and len(lines) == 1 and "--repeat half: not the same motion as one" in lines[0], lines
+    assert code == 2 and len(lines) == 1 and "--repeat half: logged at 100 Hz, the run it is compared with at 200 Hz" in lines[0], lines
     assert not (tmp_path / "d").exists()
 
 

@@ -373,3 +373,19 @@ def test_a_diagnosis_opens_with_what_a_joint_the_log_left_out_may_have_put_there
     notes = json.loads((out / "diagnosis.json").read_text())["unrecorded_joint_notes"]
     assert notes and all(note.startswith("q1_q2: q3 is not recorded") for note in notes) and "q2 " in notes[0]
     assert printed.startswith("First: q1_q2: q3 is not recorded")
+
+
+def test_an_upstream_session_floor_names_the_rates_and_the_samples_it_compares(tmp_path, capsys):
+    """The same motion logged at 100 Hz read "not the same motion" upstream (which does not resample), and a
+    longer run was cut to the shorter's samples without a word."""
+    from types import SimpleNamespace
+
+    nw = load_run(resolve_run("one-no-weight"), PSM)
+    every_other = SimpleNamespace(t=nw.t[::2], q=nw.q[::2], dq=nw.dq[::2], tau=nw.tau[::2])
+    slow = write_header_csv(tmp_path / "nw_100hz.csv", every_other, columns_of(*range(1, 8)))
+    line = refusal(capsys, "session-floor", "--measured", "one", "--repeat", str(slow), "--processing", "upstream")
+    assert "logged at 100 Hz, the run it is compared with at 200 Hz: the upstream processing compares runs sample by sample" in line, line
+    values = np.loadtxt(resolve_run("one-no-weight"), delimiter=",")
+    np.savetxt(tmp_path / "nw_half.csv", values[:3000], delimiter=",")
+    assert main(["session-floor", "--measured", "one", "--repeat", str(tmp_path / "nw_half.csv"), "--processing", "upstream"]) == 0
+    assert "compared on the first 2600 processed samples (13.0 s), which both have" in capsys.readouterr().err

@@ -28,7 +28,8 @@ import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import HarmonicSeries
-from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, same_motion, spanning_columns
+from dvrk_dart.io.csv_run import say_once
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, not_comparable_sample_by_sample, same_motion, spanning_columns
 from dvrk_dart.metrics import moved_constants, per_measured_joint, rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
@@ -166,9 +167,13 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
         if abs(pa.period_s - pb.period_s) > SAME_PERIOD_FRACTION * pa.period_s:
             raise DvrkDartError(f"period {pb.period_s:.4f} s, not {pa.period_s:.4f} s: not the same trajectory")
         return
+    if why := not_comparable_sample_by_sample(a, b):
+        raise DvrkDartError(why)
     n = min(len(a), len(b))
     if not same_motion(a.head(n), b.head(n)):
         raise DvrkDartError("not the same motion sample by sample")
+    if len(a) != len(b):
+        say_once([f"the two runs compared on the first {n} processed samples ({n / a.rate_hz:.1f} s), which both have"])
 
 
 def processed_pair(names: tuple[str, str], processing: str | None, model: PsmModel, topics: BagTopics = BagTopics()) -> list[ProcessedRun]:

@@ -235,6 +235,8 @@ def _process_alive(pid: int) -> bool:
 
 #: the file every half-built folder holds from its first instant: only such folders are ever removed as stale
 BUILDING_SENTINEL = ".dvrk-dart-building"
+#: the output folders this process has put in place, in order (a command stopped later names them: they are complete)
+FOLDERS_WRITTEN: list[Path] = []
 
 
 def remove_stale_building(target: Path) -> None:
@@ -292,6 +294,7 @@ def building_folder(target: str | os.PathLike, kind: str) -> Iterator[Path]:
             if target.is_dir():
                 _carry_user_files(target, building)
             swap_in(building, target)
+            FOLDERS_WRITTEN.append(target)
     finally:
         with signals_held():  # a Ctrl-C during the removal would leave half of it
             if building.exists():

@@ -259,6 +259,19 @@ SAME_MOTION_POSITION_RMS = 0.01
 SAME_MOTION_VELOCITY_FRACTION = 0.1
 
 
+def same_rate(a_hz: float, b_hz: float) -> bool:
+    """Two logs at one rate (to a millionth: rates read from time columns or manifests)."""
+    return abs(a_hz - b_hz) <= 1e-6 * a_hz
+
+
+def not_comparable_sample_by_sample(a: ProcessedRun, b: ProcessedRun) -> str | None:
+    """Why `b` cannot be compared with `a` sample by sample, when it is their rates (upstream processing)."""
+    if a.periodic is not None or same_rate(a.rate_hz, b.rate_hz):
+        return None
+    return (f"logged at {b.rate_hz:.6g} Hz, the run it is compared with at {a.rate_hz:.6g} Hz: the upstream processing compares "
+            "runs sample by sample (the periodic processing puts a run on another's rate)")
+
+
 def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
     """Whether two runs of one length follow the same motion sample by sample, on the joints both recorded
     (a baseline's gap can then be subtracted as it is)."""

@@ -81,7 +81,8 @@ def replay_duration(processed: ProcessedRun, duration_s: float | None) -> float:
     available = float(processed.t[-1] - processed.t[0])
     duration = available if duration_s is None else float(duration_s)
     if not 0.0 < duration <= available + 1e-12:
-        raise DvrkDartError(f"--duration: {duration:g} s outside (0, {available:.3f}] s of the measured run")
+        raise DvrkDartError(f"--duration: {duration:g} s outside (0, {available:.3f}] s, what the {processed.processing} processing keeps "
+                            "of the measured run (without the ends it trims or a transient it leaves out)")
     shortest = (MIN_KEPT_SAMPLES - 1) / processed.rate_hz
     if duration < shortest - 1e-12:
         raise DvrkDartError(f"--duration: {duration:g} s holds fewer than {MIN_KEPT_SAMPLES} samples of the measured run "

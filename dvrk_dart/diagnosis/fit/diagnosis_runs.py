@@ -17,7 +17,7 @@ from dvrk_dart.diagnosis.effects.library import (
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
 from dvrk_dart.io.signal import (  # noqa: F401
-    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, same_motion, spanning_columns)
+    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, same_motion, same_rate, spanning_columns)
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -216,11 +216,6 @@ def simulated_efforts(arm: Arm, state: ProcessedRun, simulate: Simulate | None, 
     if simulate is not None:
         return state.in_band(np.asarray(simulate(config, state), dtype=float))
     return state.in_band(config_effort_by_formula(arm, config, state.q, state.dq, state.ddq))
-
-
-def same_rate(a_hz: float, b_hz: float) -> bool:
-    """Two logs at one rate (to a millionth: rates read from time columns or manifests)."""
-    return abs(a_hz - b_hz) <= 1e-6 * a_hz
 
 
 def on_rate(state: ProcessedRun, rate_hz: float | None) -> ProcessedRun:

@@ -29,6 +29,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
+from dvrk_dart.io.signal import not_comparable_sample_by_sample
 from dvrk_dart.metrics import moved_constants, rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
@@ -58,6 +59,8 @@ def check_repeat_motion(reference, repeat, model: PsmModel, processing: RunProce
     if not all(isinstance(spec, (str, Path)) for spec in (reference, repeat)):
         return
     a, b = (on_rate(state, rate_hz) for state in loaded_states([reference, repeat], model, processing))
+    if not aligned and (why := not_comparable_sample_by_sample(a, b)):
+        raise DvrkDartError(f"--repeat {run_label(repeat)}: {why}")
     n = min(len(a), len(b))
     if not (motion_offset(a, b) is not None if aligned else same_motion(a.head(n), b.head(n))):
         raise DvrkDartError(_not_a_repeat(run_label(reference), run_label(repeat)))
