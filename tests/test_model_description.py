@@ -74,6 +74,7 @@ def test_parameters_are_converted_to_link_frames(arm, tmp_path):
         (lambda p: p["8"].__setitem__("I", [1.0, 0, 0, 1.0, 0, 3.0]), "not physically consistent"),
         (lambda p: p.pop("9"), r"link 9 \(counterweight\): missing"),
         (lambda p: p["8"].__setitem__("I", [1.0, 0.0]), "list of 6 numbers"),
+        (lambda p: p["8"].__setitem__("fc", 0.1), r"link 8 \(.*\): unknown 'fc' \(a link holds m, r, I, Fc"),
     ],
 )
 def test_bad_parameters_give_a_clear_error(arm, tmp_path, mutate, message):

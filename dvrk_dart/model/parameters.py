@@ -171,6 +171,11 @@ def _presliding(entry: dict, where: str) -> float:
     return value
 
 
+#: what a link of params.json holds: mass, first moment's point, inertia, Coulomb, viscous, offset, motor inertia,
+#: spring, pre-sliding distance
+LINK_ENTRIES = ("m", "r", "I", "Fc", "Fv", "Fo", "Im", "K", "xs")
+
+
 def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
     """Read params.json, check it, and convert every link to its own frame."""
     path = Path(path)
@@ -192,6 +197,8 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
         entry = raw.get(str(key))
         if not isinstance(entry, dict):
             raise DvrkDartError(f"{where}: missing")
+        if unknown := sorted(set(entry) - set(LINK_ENTRIES)):  # a misspelt "Fc" would leave the friction at 0
+            raise DvrkDartError(f"{where}: unknown {', '.join(map(repr, unknown))} (a link holds {', '.join(LINK_ENTRIES)})")
         mass = _scalar(entry, "m", where)
         if mass < 0.0:
             raise DvrkDartError(f"{where}: negative mass {mass}")
