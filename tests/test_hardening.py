@@ -472,6 +472,18 @@ def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
             assert not (tmp_path / "never").exists()
 
 
+def test_a_diagnosis_of_another_arm_is_refused(tmp_path, capsys):
+    """An MTM diagnosis given to a PSM replay or force estimate ran, its effects on the PSM's joints and links."""
+    for recorded, words in (({"units": ["N·m"] * 7}, "a diagnosis of another arm (efforts in N·m"),
+                            ({"arm_model": {"name": "dVRK MTM"}}, "a diagnosis of the arm 'dVRK MTM', not of psm.toml's")):
+        dynamics = tmp_path / "d.json"
+        dynamics.write_text(json.dumps({"sim_config": {}, **recorded}))
+        for command in (["replay", "--duration", "0.2"], ["force"]):
+            code, lines = cli(capsys, *command, "--measured", "two", "--dynamics", dynamics, "--out", tmp_path / "never")
+            assert_one_line_error(code, lines, "d.json", words)
+            assert not (tmp_path / "never").exists()
+
+
 def test_a_sim_config_reads_back_from_memory_and_from_json():
     from dvrk_dart.sim.config import JointEffects, Payload, SimConfig
 

@@ -74,3 +74,42 @@ def test_unreadable_scenario_files_give_clear_errors(tmp_path):
 def test_unknown_scenario_names_the_known_ones():
     with pytest.raises(DvrkDartError, match="unknown scenario 'nope' \\(known: .*rectilinear"):
         load_scenario("nope")
+
+
+LINE = """name = "fz"
+kind = "cartesian"
+duration_s = {duration}
+modes = ["velocity"]
+start_pose = [0.0, 0.0, 0.14, 0.0, 0.0, 0.0, 0.0]
+[path]
+type = "line"
+length_m = 0.01
+direction = {direction}
+"""
+
+
+def test_a_scenario_whose_duration_holds_too_few_or_too_many_steps_is_refused_before_running(tmp_path, capsys):
+    """A 1 µs scenario ran 0 samples and exited 0 (excitation: a traceback); an hour at --dt 1e-5 ran out of memory."""
+    from dvrk_dart.cli import main
+
+    tiny, hour = tmp_path / "tiny.toml", tmp_path / "hour.toml"
+    tiny.write_text(LINE.format(duration=1e-6, direction=[1, 0, 0]))
+    hour.write_text(LINE.format(duration=3600, direction=[1, 0, 0]))
+    for argv, words in ((["run", str(tiny)], "scenario fz's duration_s: 1e-06 s is fewer than 10 steps"),
+                        (["run", str(hour), "--dt", "1e-5"], "is 3.6e+08 steps, more than 3.6e+06"),
+                        (["excitation", str(tiny)], "duration_s 1e-06 s holds no two samples")):
+        capsys.readouterr()
+        assert main([*argv, "--out", str(tmp_path / "never")]) == 2
+        assert words in capsys.readouterr().err
+        assert not (tmp_path / "never").exists()
+
+
+def test_a_line_direction_of_any_scale_gives_the_same_path(tmp_path):
+    """[1e300, 1e300, 0] overflowed to a still path; [1e-300, 0, 0] was refused as zero."""
+    import numpy as np
+
+    paths = []
+    for i, direction in enumerate(([1, 1, 0], [1e300, 1e300, 0], [1e-300, 1e-300, 0])):
+        (tmp_path / f"s{i}.toml").write_text(LINE.format(duration=1.0, direction=direction))
+        paths.append(load_scenario(str(tmp_path / f"s{i}.toml")).cartesian_path(np.zeros(3)).position_velocity_acceleration(0.5)[0])
+    assert np.allclose(paths[1], paths[0]) and np.allclose(paths[2], paths[0]) and np.linalg.norm(paths[0]) == pytest.approx(0.005)

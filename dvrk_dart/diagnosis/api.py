@@ -154,7 +154,7 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     if holdout:
         beyond["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, found["processing"], c.topics)
     # the diagnosis and what was studied on top of it: built once here, written once
-    result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base,
+    result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base, "arm_model": {"name": arm.model.name, **file_record(arm.model.source)},
               "params": file_record(arm.params.source), "versions": software_versions()}
     result = {**result, **(_repeatable_shares(result) if holdout else {}), "wall_time_s": time.perf_counter() - start}
     _write_one_configuration(result, out_dir)
@@ -231,7 +231,8 @@ def _write_one_configuration(result: dict, out_dir: Path) -> None:
         write_json_atomic(out_dir / ONE_CONFIGURATION_FILE, {
             "sim_config": combined["sim_config"], "joints": result["joints"], "units": result["units"],
             "gap_holdout": combined["gap_holdout"], "train_runs": result.get("train_runs"), "holdout_runs": result.get("holdout_runs"),
-            "processing": {k: result["processing"].get(k) for k in ("processing", "harmonics")}, "params": result["params"],
+            "processing": {k: result["processing"].get(k) for k in ("processing", "harmonics")}, "arm_model": result["arm_model"],
+            "params": result["params"],
             "method": combined["method"], "diagnosis": "diagnosis.json (one_configuration: its inputs, versions and figures)"})
 
 

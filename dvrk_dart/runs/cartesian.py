@@ -7,6 +7,8 @@ follows a path with the start's orientation, in one of three modes:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_dart.io.arm import Arm
@@ -17,6 +19,11 @@ from dvrk_dart.runs.scenarios import Scenario
 from dvrk_dart.sim.config import SimConfig
 from dvrk_dart.sim.controllers import CartesianTorqueController, KinematicController
 from dvrk_dart.sim.readout import raise_if_out_of_range
+
+#: a Cartesian run logs at most this rate (a smaller step is for the physics) ...
+MAX_LOG_RATE_HZ = 1000.0
+#: ... and at most this many samples: a logged sample costs some 20 kB on its way to the MCAP and Rerun logs
+MAX_LOGGED_SAMPLES = 100_000
 
 #: joints held by the velocity servo under torque control (the paper drives
 #: J1..J3 only; the identified tool links are massless)
@@ -104,8 +111,8 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
     driver = CartesianDriver(arm, scenario, mode, config.dt_s, steps)
     sim = PsmSimulator(arm.model, arm.params, config)
     sim.reset(driver.q0)
-    log = simulate(sim, driver, steps)
-    n = len(log)
+    log = simulate(sim, driver, steps, log_every(config.dt_s, steps))
+    logged = np.asarray(log.steps, dtype=int)
     record = RunRecord(
         name="",
         config={},
@@ -114,12 +121,17 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
         dq=log.array("dq"),
         ddq=log.array("ddq"),
         effort_sim=log.array("effort"),
-        effort_command=driver.command[:n] if mode == "torque" else None,
+        effort_command=driver.command[logged] if mode == "torque" else None,
         tool_pose=log.tool_pose(),
-        tool_pose_ref=driver.reference_pose[:n],
+        tool_pose_ref=driver.reference_pose[logged],
         closure_residual_m=np.asarray(log.closure, dtype=float),
         body_positions=log.body_positions(),
     )
     if log.error is not None:
         record.metrics["error"] = str(log.error)
     return record
+
+
+def log_every(dt_s: float, steps: int) -> int:
+    """Steps between logged samples: every step at 1 ms, fewer for a smaller step or a long run."""
+    return max(1, round(1.0 / (MAX_LOG_RATE_HZ * dt_s)), math.ceil(steps / MAX_LOGGED_SAMPLES))

@@ -22,6 +22,8 @@ import numpy as np
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.signal import PROCESSINGS
+from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.runs.scenarios import DYNAMICS_CHOICES, MAX_DURATION_S  # noqa: F401  (the CLI's bound too)
 from dvrk_dart.sim.config import IDENTIFIED_PHYSICS, SimConfig
 
@@ -65,14 +67,18 @@ class RunConfig:
             raise DvrkDartError(f"--dt: {self.dt_s} s is outside [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s")
         if self.duration_s is not None and not (0.0 < self.duration_s <= MAX_DURATION_S):
             raise DvrkDartError(f"--duration: {self.duration_s} s is outside (0, {MAX_DURATION_S:g}] s")
-        if self.duration_s is not None and self.duration_s < MIN_STEPS * self.dt_s:
-            raise DvrkDartError(f"--duration: {self.duration_s:g} s is fewer than {MIN_STEPS} steps of {self.dt_s:g} s: "
-                                "nothing to compare")
-        if self.duration_s is not None and self.duration_s / self.dt_s > MAX_STEPS:
-            raise DvrkDartError(f"--dt: {self.dt_s:g} s over {self.duration_s:g} s is {self.duration_s / self.dt_s:.3g} steps, "
-                                f"more than {MAX_STEPS:.3g}: a longer step or a shorter --duration")
+        if self.duration_s is not None:
+            self.check_steps(self.duration_s, "--duration")
         if self.dynamics not in DYNAMICS_CHOICES and not Path(self.dynamics).suffix == ".json":
             raise DvrkDartError(f"--dynamics: '{self.dynamics}' is not one of {', '.join(DYNAMICS_CHOICES)} nor a diagnosis.json")
+
+    def check_steps(self, duration_s: float, whose: str) -> None:
+        """A run of `duration_s` (`whose`: the option or scenario that set it) holds MIN_STEPS to MAX_STEPS steps."""
+        if duration_s < MIN_STEPS * self.dt_s:
+            raise DvrkDartError(f"{whose}: {duration_s:g} s is fewer than {MIN_STEPS} steps of {self.dt_s:g} s: nothing to compare")
+        if duration_s / self.dt_s > MAX_STEPS:
+            raise DvrkDartError(f"--dt: {self.dt_s:g} s over {duration_s:g} s ({whose}) is {duration_s / self.dt_s:.3g} steps, "
+                                f"more than {MAX_STEPS:.3g}: a longer step or a shorter --duration")
 
     @property
     def dynamics_label(self) -> str:
@@ -122,18 +128,18 @@ def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str =
     return "_".join(parts)
 
 
-def sim_config_for(config: RunConfig) -> SimConfig:
-    """The simulator's options of a run: step, counterweight and dynamics."""
+def sim_config_for(config: RunConfig, model: PsmModel | None = None) -> SimConfig:
+    """The simulator's options of a run of `model`'s arm (None: not checked): step, counterweight and dynamics."""
     if config.dynamics == "inertial":
         sim = SimConfig()
     elif config.dynamics == "identified":
         sim = IDENTIFIED_PHYSICS
     else:
-        sim = diagnosis_sim_config(Path(config.dynamics))
+        sim = diagnosis_sim_config(Path(config.dynamics), model=model)
     return replace(sim, dt_s=config.dt_s, counterweight=config.counterweight)
 
 
-def diagnosis_sim_config(path: Path, physical: bool = True) -> SimConfig:
+def diagnosis_sim_config(path: Path, physical: bool = True, model: PsmModel | None = None) -> SimConfig:
     """The SimConfig a diagnosis selected (its diagnosis.json `sim_config`, or a one_configuration.json's);
     `physical`: checked as DART physics (a replay), not only evaluated by formula. A diagnosis with --baseline
     is refused: it fitted what the runs differ by from their baseline, and its sim_config is not the arm (a
@@ -153,9 +159,23 @@ def diagnosis_sim_config(path: Path, physical: bool = True) -> SimConfig:
         config = SimConfig.from_dict(raw["sim_config"])
     except (TypeError, ValueError, KeyError) as exc:
         raise DvrkDartError(f"--dynamics: {path}: malformed sim_config ({exc})") from None
+    if model is not None:
+        _check_arm(raw, path, model)
     if physical:
         _check_physical(config, path)
     return config
+
+
+def _check_arm(raw: dict, path: Path, model: PsmModel) -> None:
+    """A diagnosis of another arm is refused: its effects name that arm's joints and links. Its `arm_model`
+    says which (a file written before it existed: its efforts' units)."""
+    recorded = raw.get("arm_model", {}).get("name") if isinstance(raw.get("arm_model"), dict) else None
+    units = raw.get("units")
+    if recorded is not None and recorded != model.name:
+        raise DvrkDartError(f"--dynamics: {path}: a diagnosis of the arm {recorded!r}, not of {model.source.name}'s: give its --arm-model")
+    if recorded is None and units is not None and units != [model.effort_unit(j) for j in JOINT_NAMES]:
+        raise DvrkDartError(f"--dynamics: {path}: a diagnosis of another arm (efforts in {', '.join(map(str, units))}) than {model.source.name}'s: "
+                            "give its --arm-model")
 
 
 def recorded_processing(dynamics: str | None) -> tuple[str, int | None] | None:

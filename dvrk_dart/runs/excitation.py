@@ -27,7 +27,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
-from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.description import PsmModel, resolve_arm_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
 #: the identification's excitation (data README): nominal base frequency and harmonics
@@ -131,9 +131,13 @@ def cartesian_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
     scenario = load_scenario(name)
     if scenario.kind != "cartesian":
         raise DvrkDartError(f"'{name}' is a {scenario.kind} scenario: an excitation is {', '.join(EXCITATIONS)} or a Cartesian scenario")
+    if scenario.arm_model and resolve_arm_model(scenario.arm_model).resolve() != arm.model.source.resolve():
+        raise DvrkDartError(f"{scenario.source}: a path of the arm {scenario.arm_model} (its arm_model), not of {arm.model.source.name}'s")
     substeps = max(1, math.ceil(1.0 / (rate_hz * MAX_KINEMATIC_STEP_S) - 1e-9))
     dt = 1.0 / (rate_hz * substeps)
     samples = int(math.floor(scenario.duration_s * rate_hz + 1e-9)) + 1
+    if samples < 2:
+        raise DvrkDartError(f"{scenario.source}: duration_s {scenario.duration_s:g} s holds no two samples at {rate_hz:g} Hz")
     steps = (samples - 1) * substeps + 1
     driver = CartesianDriver(arm, scenario, "kinematic", dt, steps)
     q, dq = np.empty((samples, N_JOINTS)), np.empty((samples, N_JOINTS))

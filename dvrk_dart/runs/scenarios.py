@@ -41,6 +41,7 @@ class CartesianPath:
         if self.type == "line":
             speed = self.params["length_m"] / self.duration_s
             u = np.asarray(self.params["direction"], dtype=float)
+            u = u / np.abs(u).max()  # first: the norm of 1e300 or 1e-300 components is not a float
             u = u / np.linalg.norm(u)
             return p0 + speed * t * u, speed * u, np.zeros(3)
         A, h = self.params["radius_m"], self.params["height_m"]
@@ -190,7 +191,7 @@ def load_scenario_file(path: Path) -> Scenario:
         _fail(path, f"[path] of type {path_table['type']} takes exactly {sorted(expected)}, got {sorted(path_table)}")
     for key in expected - {"type", "direction"}:
         _positive(path, path_table, key, "path.")
-    if "direction" in path_table and not np.linalg.norm(_vector(path, path_table, "direction", 3, "path.")) > 0:
+    if "direction" in path_table and not np.any(_vector(path, path_table, "direction", 3, "path.") != 0):
         _fail(path, "path.direction must be a non-zero 3-vector")
     return Scenario(name, kind, modes, counterweights, duration, start, dict(path_table), source=path, dynamics=dynamics,
                     arm_model=arm_model)

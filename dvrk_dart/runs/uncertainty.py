@@ -176,10 +176,10 @@ def _replayed_samples(config: UncertaintyConfig, paths: list[Path], processing: 
             failures[Path(task[1]).name] = error
     if "nominal.json" not in results:
         raise DvrkDartError(f"the nominal replay failed: {failures.get('nominal.json')}")
-    sims = np.stack([r["sim"] for name, r in sorted(results.items()) if name != "nominal.json"])
+    sims = [r["sim"] for name, r in sorted(results.items()) if name != "nominal.json"]
     if len(sims) < 2:
         raise DvrkDartError(f"only {len(sims)} sample replay(s) succeeded: no band ({next(iter(failures.values()), '')})")
-    return results["nominal.json"], sims, failures
+    return results["nominal.json"], np.stack(sims), failures
 
 
 def _write_band_csv(path: Path, nominal: dict, low: np.ndarray, high: np.ndarray, recorded: np.ndarray) -> None:
