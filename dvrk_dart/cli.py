@@ -166,14 +166,20 @@ def cmd_identify(args: argparse.Namespace) -> int:
     print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m, N for a prismatic joint; fitted: {' '.join(data['fitted_joints'])})")
     reference = data.get("reference") or {}
     labels = distinct_labels([*(name for runs in data["errors"].values() for name in runs), *(reference.get("errors_first_period") or {})])
+    whole_samples = {name: spans["whole_run"]["samples"] for runs in data["errors"].values() for name, spans in runs.items()}
+
+    def span_label(name: str, span: str, samples: int) -> str:  # a run shorter than a period: its first "period" is the run
+        short = span == "first_period" and samples >= whole_samples.get(name, samples + 1)
+        return f"{labels[name]} {'whole (< 1 period)' if short else span.replace('_run', '')}"
+
     for kind, runs in data["errors"].items():
         for name, spans in runs.items():
             for span, e in spans.items():
-                label = f"{labels[name]} {span.replace('_run', '')}"
+                label = span_label(name, span, e["samples"])
                 fitted = [v if j in data["fitted_joints"] else None for j, v in zip(JOINT_NAMES, e["rms"])]  # no figure on a joint not fitted
                 print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in fitted) + f"   {kind}")
     for name, e in (reference.get("errors_first_period") or {}).items():
-        label = f"{labels[name]} first_period"
+        label = span_label(name, "first_period", e["samples"])
         print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
               + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
     for line in data["warnings"]:
@@ -189,7 +195,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     if args.friction_law == "tanh":
         print("note: errors above use the tanh law; params.json readers apply sign(v)")
     worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
-    outside = [k for k, m in data["masses_kg"].items() if not m["lower"] <= m["value"] <= m["upper"]]
+    # the solver meets a bound to its tolerance (5.000000000005 kg on [5, 5])
+    outside = [k for k, m in data["masses_kg"].items() if not m["lower"] - 1e-6 * m["upper"] <= m["value"] <= m["upper"] * (1 + 1e-6)]
     print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
           f"params: {Path(args.out) / 'params.json'}")
     return 0

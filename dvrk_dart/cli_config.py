@@ -33,8 +33,13 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
     tokens = []
     for key, value in table.items():
         option = "--" + key.replace("_", "-")
-        if option not in known or option == "--config":
+        if option not in known or option in ("--config", "--help"):
             raise DvrkDartError(f"--config {path}: {key} is not an option of {argv[0]}")
+        takes_list = known[option].nargs in ("+", "*")
+        if isinstance(value, list) and not takes_list:
+            raise DvrkDartError(f"--config {path}: {key} takes one value, not a list")
+        if any(isinstance(v, str) and v.startswith("-") for v in (value if isinstance(value, list) else [value])):
+            raise DvrkDartError(f"--config {path}: {key} = {value!r}: a value does not start with '-' (an option's name)")
         if isinstance(value, bool) != (known[option].nargs == 0):
             raise DvrkDartError(f"--config {path}: {key} " + ("is a switch: true or false" if known[option].nargs == 0 else
                                                                f"takes a value, not {str(value).lower()}"))

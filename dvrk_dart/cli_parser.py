@@ -128,7 +128,8 @@ def build_parser(commands) -> argparse.ArgumentParser:
 def _add_sim_options(p: argparse.ArgumentParser, duration_help: str = "simulate only the first seconds") -> None:
     """The simulation's options of `run` and `replay`."""
     p.add_argument("--counterweight", default=None, choices=COUNTERWEIGHT_VARIANTS,
-                   help="ideal tendon (on, the default), removed, or the paper's PID mirror (velocity and torque modes)")
+                   help="ideal tendon (on, the default unless the scenario runs without it: then its first), removed, or the paper's "
+                        "PID mirror (velocity and torque modes)")
     p.add_argument("--dt", type=number_in(MIN_STEP_S, MAX_STEP_S, "s"), default=1e-3, help="simulation step (s)")
     p.add_argument("--duration", type=SECONDS, default=None, help=duration_help)
     p.add_argument("--dynamics", default=None, metavar="inertial|identified|DIAGNOSIS.json",
@@ -201,10 +202,11 @@ def _identify_command(sub, commands) -> None:
 
 
 def _import_command(sub, commands) -> None:
-    p = sub.add_parser("import", help="a ROS bag of a dVRK PSM -> a measured-run CSV")
+    p = sub.add_parser("import", help="a ROS bag of a dVRK arm -> a measured-run CSV")
     p.add_argument("bag", help="rosbag2 folder, .mcap or .db3 file, or ROS 1 .bag")
     p.add_argument("--out", required=True, help="the CSV to write (21 columns, model coordinates, 200 Hz)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    _add_arm_model_option(p)
     _add_bag_options(p)
     p.set_defaults(func=commands.cmd_import)
 
@@ -223,7 +225,7 @@ def _excitation_command(sub, commands) -> None:
     p.add_argument("name", help="one | two (the identification's excitations) or a Cartesian scenario (rectilinear, spiral, ...)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--arm", default=None, type=arm_namespace, help="the arm's namespace of the servo_jp topics (default: the arm model's, PSM1)")
-    p.add_argument("--rate", type=RATE_HZ, default=None, help="command rate (Hz, default 200)")
+    p.add_argument("--rate", type=RATE_HZ, default=None, help="command rate (Hz, default 200; at least 50: servo_jp jumps to each setpoint)")
     p.set_defaults(func=commands.cmd_excitation)
 
 

@@ -29,7 +29,8 @@ def _run_config(args: argparse.Namespace, scenario: str, mode: str, measured: st
                 raise DvrkDartError(f"{option} {value}: a kinematic run imposes the poses and simulates no dynamics; "
                                     "use --mode velocity or torque")
     dynamics = args.dynamics or spec.dynamics
-    return RunConfig(scenario, mode, args.counterweight or "on", dynamics, args.dt, args.duration, args.params, measured,
+    counterweight = args.counterweight or ("on" if "on" in spec.counterweights else spec.counterweights[0])  # as --mode: the scenario's
+    return RunConfig(scenario, mode, counterweight, dynamics, args.dt, args.duration, args.params, measured,
                      getattr(args, "processing", "upstream"), getattr(args, "harmonics", None), args.arm_model, reading_options(args))
 
 

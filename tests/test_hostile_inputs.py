@@ -282,7 +282,7 @@ def test_the_rate_a_half_rate_file_names_is_its_rate(tmp_path, capsys):
     path = tmp_path / "half_rate.csv"
     np.savetxt(path, np.loadtxt(resolve_run("two"), delimiter=",")[::2], delimiter=",", fmt="%.17g")
     code, lines, _ = cli(capsys, "model-errors", "--measured", path)
-    fits = float(lines[0].split("--rate ")[1].rstrip(")"))
+    fits = float(lines[0].split("--rate ")[1].split(";")[0])
     assert code == 2 and abs(fits - 100.0) < 1.0, lines
 
 

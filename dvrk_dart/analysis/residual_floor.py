@@ -159,7 +159,7 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
     both recorded."""
     moving = [spanning_columns(run.q) for run in (a, b)]
     if not np.array_equal(*moving):
-        joints = [", ".join(n for n, on in zip(JOINT_NAMES, m) if on) for m in moving]
+        joints = [", ".join(n for n, on in zip(JOINT_NAMES, m) if on) or "none" for m in moving]
         raise DvrkDartError(f"its positions move {joints[1]}, the measured run's {joints[0]}: two sessions are compared on "
                             "runs that record the same joints' positions")
     if a.periodic is not None:

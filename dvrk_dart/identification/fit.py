@@ -98,7 +98,12 @@ def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
         lower, upper = float(pair[0]), float(pair[1])
         if not (math.isfinite(lower) and math.isfinite(upper) and 0.0 <= lower <= upper):
             raise DvrkDartError(f"{where}: need 0 <= lower <= upper, finite (got {pair})")
+        if upper >= model.max_link_mass_kg:  # the fit could land on a mass every reader of params.json refuses
+            raise DvrkDartError(f"{where}: upper {upper:g} kg at or above the plausible {model.max_link_mass_kg:g} kg of "
+                                f"{model.source.name} ([parameter_checks] max_link_mass_kg)")
         masses[int(key_text)] = (lower, upper)
+    _check_names(raw, {"mass_bounds_kg": None, "prior_std": set(PARAMETER_CLASSES.values()), "presliding": {"revolute_rad", "prismatic_m"}},
+                 path)
     missing = [link.key for link in model.links.values() if link.inertia and link.key not in masses]
     if missing:
         raise DvrkDartError(f"{path}: mass_bounds_kg has no bounds for links {missing}")
@@ -108,6 +113,16 @@ def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0.0):
             raise DvrkDartError(f"{path}: prior_std.{cls} must be a positive number")
     return Bounds(path, masses, {k: float(v) for k, v in std.items()}, _presliding_candidates(raw.get("presliding", {}), path))
+
+
+def _check_names(raw: dict, known: dict[str, set | None], path: Path) -> None:
+    """The file's sections and keys (None: any key) are the known ones: a misspelt name would be left out silently."""
+    for section, table in raw.items():
+        if section not in known or not isinstance(table, dict):
+            raise DvrkDartError(f"{path}: [{section}] is not a section of a bounds file (known: {', '.join(known)})")
+        unknown = sorted(set(table) - known[section]) if known[section] is not None else []
+        if unknown:
+            raise DvrkDartError(f"{path}: [{section}] {unknown[0]}: not one of {', '.join(sorted(known[section]))}")
 
 
 def _presliding_candidates(raw: dict, path: Path) -> PreslidingCandidates:

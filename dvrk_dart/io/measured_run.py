@@ -65,7 +65,7 @@ def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source
     if abs(scale - 1.0) > RATE_TOLERANCE:
         fits = rate_hz / scale
         fix = (f"correct the time column, or remove it and give --rate {fits:.4g}" if source == TIME_COLUMN_SOURCE
-               else f"--rate {fits:.4g}")
+               else f"--rate {fits:.4g}; or a time column t in s, where runs of other rates are in the command")
         unit = next((f"; a time column in {name}? give it in seconds" for name, factor in (("ms", 1e3), ("µs", 1e6), ("ns", 1e9))
                      if source == TIME_COLUMN_SOURCE and abs(fits / (rate_hz * factor) - 1.0) < RATE_TOLERANCE), "")
         fix += unit

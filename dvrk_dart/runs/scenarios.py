@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.reference_data import RUNS
 from dvrk_dart.model.description import DEFAULT_MODEL_FILE, resolve_arm_model
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import N_JOINTS
@@ -168,6 +169,11 @@ def load_scenario_file(path: Path) -> Scenario:
     arm_model = raw.get("arm_model")
     if arm_model is not None and not isinstance(arm_model, str):
         _fail(path, f"arm_model must be an arm's name (psm, mtm), got {arm_model!r}")
+    if arm_model is not None:
+        try:
+            resolve_arm_model(arm_model)
+        except DvrkDartError as exc:  # its words name the option; the value is the file's
+            _fail(path, f"arm_model: {str(exc).removeprefix('--arm-model ')}")
     if kind == "replay":
         if not isinstance(raw.get("measured"), str) or not raw["measured"]:
             _fail(path, "a replay needs measured = '<run name or file>'")
@@ -175,6 +181,8 @@ def load_scenario_file(path: Path) -> Scenario:
         measured = raw["measured"]
         if Path(measured).suffix and not Path(measured).is_absolute():  # a file, relative to the scenario file (a run name has no suffix)
             measured = str(path.parent / measured)
+        if measured not in RUNS and not Path(measured).exists():
+            _fail(path, f"measured = {raw['measured']!r}: not a reference run ({', '.join(RUNS)}) nor a file")
         return Scenario(name, kind, modes, counterweights, duration, measured=measured, source=path, dynamics=dynamics,
                         arm_model=arm_model)
     duration = _duration(path, raw)
