@@ -16,7 +16,10 @@ def test_a_config_file_gives_the_options_and_the_command_line_wins(tmp_path, cap
 
 def test_a_bad_config_file_is_one_line_naming_it(tmp_path, capsys):
     for text, words in (('bogus = 1\n', "bogus is not an option of replay"), ('measured = \n', "not a readable TOML file"),
-                        ('measured = "no-such-run"\n', "no-such-run")):
+                        ('measured = "no-such-run"\n', "no-such-run"),
+                        # argparse read these as options: "expected one argument", help printed with exit 0, "unrecognized 3"
+                        ('measured = "--help"\n', "a value does not start with '-'"), ('help = true\n', "help is not an option"),
+                        ('duration = [2, 3]\n', "duration takes one value, not a list")):
         config = tmp_path / "bad.toml"
         config.write_text(text)
         capsys.readouterr()

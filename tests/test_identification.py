@@ -242,6 +242,18 @@ def test_bounds_file_is_honoured(tmp_path):
     assert abs(mass - 2.0) < 1e-6
 
 
+def test_a_bounds_file_with_a_name_it_does_not_know_is_refused(tmp_path):
+    """A misspelt [presliding] key left the revolute joints on the sign law; an upper bound over the card's
+    plausible mass was refused only after the fit, by the reader of its params.json."""
+    for old, new, words in (("revolute_rad =", "revolute_radd =", r"\[presliding\] revolute_radd: not one of prismatic_m, revolute_rad"),
+                            ("[presliding]", "[pre-sliding]", r"\[pre-sliding\] is not a section of a bounds file"),
+                            ("2 = [0.1, 10.0]", "2 = [0.1, 30.0]", r"mass_bounds_kg.2: upper 30 kg at or above the plausible 20 kg")):
+        bounds = tmp_path / "bounds.toml"
+        bounds.write_text(DEFAULT_BOUNDS.read_text().replace(old, new))
+        with pytest.raises(DvrkDartError, match=words):
+            load_bounds(bounds, PSM)
+
+
 def test_model_errors_reads_the_identified_file(result, tmp_path, capsys):
     """The acceptance path: `model-errors --measured two --first-period --params
     DIR/params.json` gives the held-out numbers of identification.json."""

@@ -113,3 +113,20 @@ def test_a_line_direction_of_any_scale_gives_the_same_path(tmp_path):
         (tmp_path / f"s{i}.toml").write_text(LINE.format(duration=1.0, direction=direction))
         paths.append(load_scenario(str(tmp_path / f"s{i}.toml")).cartesian_path(np.zeros(3)).position_velocity_acceleration(0.5)[0])
     assert np.allclose(paths[1], paths[0]) and np.allclose(paths[2], paths[0]) and np.linalg.norm(paths[0]) == pytest.approx(0.005)
+
+
+def test_a_scenario_file_names_itself_for_its_arm_and_its_run_and_sets_the_counterweight_default(tmp_path, capsys):
+    """arm_model = "nosuch" was blamed on --arm-model, a measured run not found on no file; a scenario run only
+    with the PID mirror was refused for the default --counterweight on."""
+    from dvrk_dart.cli import main
+
+    replay = 'name = "fz"\nkind = "replay"\nduration_s = 0.2\nmodes = ["velocity"]\nmeasured = "nosuch"\n'
+    other_arm = LINE.format(duration=1.0, direction=[1, 0, 0]).replace("[path]", 'arm_model = "nosuch"\n[path]')
+    for text, words in ((other_arm, "arm_model: nosuch: no such arm"), (replay, "measured = 'nosuch': not a reference run")):
+        (tmp_path / "s.toml").write_text(text)
+        with pytest.raises(DvrkDartError, match=rf"s.toml: {words}"):
+            load_scenario(str(tmp_path / "s.toml"))
+    pid = LINE.format(duration=1.0, direction=[1, 0, 0]).replace('modes = ["velocity"]', 'modes = ["velocity"]\ncounterweights = ["pid"]')
+    (tmp_path / "pid.toml").write_text(pid)
+    assert main(["run", str(tmp_path / "pid.toml"), "--duration", "0.05", "--out", str(tmp_path / "run")]) == 0
+    assert "cw-pid" in capsys.readouterr().out
