@@ -4,6 +4,7 @@ the Cartesian reference paths they describe."""
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,8 +153,8 @@ def load_scenario_file(path: Path) -> Scenario:
     if unknown:
         _fail(path, f"unknown key(s) {', '.join(sorted(unknown))}")
     name = raw.get("name", path.stem)
-    if not isinstance(name, str) or not name or "/" in name:
-        _fail(path, f"name must be a non-empty string without '/', got {name!r}")
+    if not (isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", name)):  # it names the run's folder and files
+        _fail(path, f"name must be letters, digits, '_', '-' and '.' (it names the run's folder), got {name!r}")
     kind = raw.get("kind")
     if kind not in ("cartesian", "replay"):
         _fail(path, f"kind must be 'cartesian' or 'replay', got {kind!r}")
