@@ -21,8 +21,8 @@ ARM_NAMESPACE = r"[A-Za-z][A-Za-z0-9_]*"
 MAX_COUPLING_CONDITION = 1e8
 
 
-def check_model_values(model: PsmModel, controllers: dict, counterweight: dict | None) -> None:
-    """One-line refusal of a card's value that no command could use."""
+def check_model_values(model: PsmModel, counterweight: dict | None) -> None:
+    """One-line refusal of a card's value that no command could use (`counterweight`: its [counterweight] table)."""
     where = model.source
     _vector(where, "gravity_m_s2", model.gravity, 3)
     _vector(where, "[joint_limits] lower", model.joint_lower, N_JOINTS)
@@ -40,7 +40,7 @@ def check_model_values(model: PsmModel, controllers: dict, counterweight: dict |
     if not re.fullmatch(ARM_NAMESPACE, model.dvrk_topics.namespace):
         raise DvrkDartError(f"{where}: [dvrk_topics] namespace {model.dvrk_topics.namespace!r} is not a ROS name such as PSM1 (letters, digits, _)")
     _counterweight(model, counterweight)
-    _controllers(where, controllers)
+    _controllers(where, model.controller_gains)
 
 
 def _vector(where, entry: str, values: np.ndarray, size: int, positive: bool = False) -> None:

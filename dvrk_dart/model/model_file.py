@@ -138,7 +138,7 @@ def load_model(path: Path | str) -> PsmModel:
         diagnosis_base=_diagnosis_base(raw, path),
         force_point=_force_point(raw, path, links),
     )
-    check_model_values(model, model.controller_gains, cw)
+    check_model_values(model, cw)
     return model
 
 
