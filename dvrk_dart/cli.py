@@ -210,7 +210,7 @@ def cmd_uncertainty(args: argparse.Namespace) -> int:
                                args.params_cov, args.duration, executor=args.executor, jobs=args.jobs, processing=args.processing,
                                arm_model=str(arm_model_file(args)), topics=reading_options(args))
     summary = run_uncertainty(config, args.out, args.ray_address)
-    print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays in {summary['wall_time_s']:.0f} s (wall) -> {args.out}")
+    print(f"parameters: {summary['parameters']}; {summary['samples_replayed']} replays in {summary['wall_time_s']:.3g} s (wall) -> {args.out}")
     print(f"processing: {summary['processing']['processing']} ({summary['processing']['chosen_because']})")
     print(f"{'joint':>6} {'inside':>7} {'outside rms':>16} {'model inside':>13}")
     for j, name in enumerate(JOINT_NAMES):
