@@ -13,7 +13,18 @@ JOBS   ?= 2
 # subprocesses, validate's workers) compiled every imported module again: ~2.5 s each
 unexport PYTHONDONTWRITEBYTECODE
 
-.PHONY: validate test bench report check-report view clean setup docs
+.PHONY: validate test bench report check-report view clean setup docs help
+
+help:
+	@echo "make validate      the whole validation campaign, then the report ($(OUT), $(REPORT)/index.html)"
+	@echo "make test          the tests, JOBS=$(JOBS) side by side"
+	@echo "make bench         performance figures against their targets ($(OUT)/bench.json)"
+	@echo "make docs          the documentation site (site/), figures from the last validation"
+	@echo "make report        the report of the runs in RUNS=$(RUNS)"
+	@echo "make check-report  the report's browser test"
+	@echo "make view RUN=DIR  a run in the Rerun viewer (DIR/run.rrd)"
+	@echo "make setup         the virtual environment ($(VENV)); every target makes it when missing"
+	@echo "make clean         remove $(OUT), $(REPORT), site and the project's bytecode caches"
 
 setup: $(STAMP)
 
@@ -48,8 +59,10 @@ check-report: $(STAMP)
 
 ## make view RUN=out/runs/<run-name>
 view: $(STAMP)
+	@test -n "$(RUN)" || { echo "make view: give RUN=out/runs/<run-name> (a folder holding run.rrd)"; exit 2; }
+	@test -f "$(RUN)/run.rrd" || { echo "make view: $(RUN)/run.rrd: no such file"; exit 2; }
 	$(BIN)/rerun $(RUN)/run.rrd
 
 clean:
 	rm -rf $(OUT) $(REPORT) site .pytest_cache
-	find . -name __pycache__ -type d -prune -exec rm -rf {} +
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +  # the venv's caches stay (2.5 s a process)

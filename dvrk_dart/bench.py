@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import central_difference
@@ -170,7 +172,7 @@ def bench_replay(repeat: int = 3) -> dict:
             code = cli.main(["replay", "--measured", "two", "--out", str(out)])
             wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
             if code != 0 or not all((out / name).is_file() for name in ("run.mcap", "run.rrd", "config.json", "metrics.json")):
-                raise RuntimeError(f"bench: dvrk-dart replay --measured two failed (exit {code})")
+                raise DvrkDartError(f"dvrk-dart replay --measured two failed (exit {code})")
             simulated = json.loads((out / "metrics.json").read_text())["duration_s"]
             rates.append((simulated / wall, simulated / cpu))
     best = max(rates)
@@ -185,9 +187,13 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     figures = {}
     # the end-to-end replay first: nothing else (Ray's daemons, worker pools) runs beside it yet
-    for part in (bench_replay, bench_model, bench_periodic, bench_force, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis, bench_identification,
-                 bench_monte_carlo, bench_bag_import):
-        figures.update(part())
+    try:
+        for part in (bench_replay, bench_model, bench_periodic, bench_force, bench_simulation, lambda: bench_campaign(out.parent), bench_diagnosis,
+                     bench_identification, bench_monte_carlo, bench_bag_import):
+            figures.update(part())
+    except DvrkDartError as exc:  # a failed command's own line (no reference data, say) is printed above it
+        print(f"bench: {exc}", file=sys.stderr)
+        return 2
     print(f"{'figure':<29} {'value':>10} {'target':>8}  {'ratio':>6}  meaning")
     for key, (target, sense, unit, meaning) in TARGETS.items():
         value = figures.get(key)

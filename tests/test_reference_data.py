@@ -4,6 +4,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -70,7 +71,8 @@ def test_bad_checksum_is_refused(tmp_path, monkeypatch):
         resolve("two_results.csv")
     env = dict(os.environ, **{reference_data.ENV_DATA_DIR: str(tmp_path)})
     out = subprocess.run([sys.executable, "-m", "dvrk_dart.cli", "model-errors", "--measured", "two"], capture_output=True, text=True, env=env)
-    assert out.returncode == 2 and "sha256" in out.stderr and out.stderr.count("\n") == 1
+    errors = [line for line in out.stderr.splitlines() if not line.startswith("dvrk-dart: note:")]  # params.json: read elsewhere, said
+    assert out.returncode == 2 and len(errors) == 1 and "sha256" in errors[0], out.stderr
 
 
 def test_environment_variable_wins_over_shared_folder(tmp_path, monkeypatch):
@@ -98,3 +100,42 @@ def test_download_from_pinned_commit_with_checksum(tmp_path, monkeypatch):
     with pytest.raises(DvrkDartError, match="sha256"):
         resolve("params.json")
     assert not any((tmp_path / "cache").rglob("params.json"))
+
+
+def test_a_download_that_cannot_be_made_is_one_line_naming_what_to_correct(tmp_path, monkeypatch):
+    """A URL template without a scheme or with a wrong placeholder, a connection cut mid-file and a server that
+    is not HTTP ended in tracebacks; an empty DVRK_DART_CACHE downloaded into the current folder."""
+    import http.client
+    import urllib.request
+
+    monkeypatch.setattr(reference_data, "SHARED_ROOT", tmp_path / "absent")
+    monkeypatch.delenv(reference_data.ENV_DATA_DIR, raising=False)
+    monkeypatch.setenv(reference_data.ENV_CACHE_DIR, str(tmp_path / "cache"))
+    for template, words in (("/no/scheme/{path}", "unknown url type"), ("file:///m/{repo}/{path}", "not a URL template"),
+                            ("file:///m/{repository/{path}", "not a URL template")):
+        monkeypatch.setenv(reference_data.ENV_URL_TEMPLATE, template)
+        with pytest.raises(DvrkDartError, match=words):
+            resolve("params.json")
+
+    def cut(url, timeout):
+        raise http.client.IncompleteRead(b"x" * 10, 100)
+
+    monkeypatch.setenv(reference_data.ENV_URL_TEMPLATE, "http://127.0.0.1:9/{path}")
+    monkeypatch.setattr(urllib.request, "urlopen", cut)
+    with pytest.raises(DvrkDartError, match=r"params.json: not found in .* and download from http://127.0.0.1:9/.* failed \(IncompleteRead"):
+        resolve("params.json")
+    assert not any((tmp_path / "cache").rglob("params.json*"))
+    monkeypatch.setenv(reference_data.ENV_CACHE_DIR, "")
+    assert reference_data.cache_dir("params.json").parent == Path.home() / ".cache" / "dvrk_dart"
+
+
+def test_a_data_folder_laid_out_as_the_shared_one_is_read_and_one_without_the_file_is_said(tmp_path, monkeypatch, capsys):
+    """DVRK_REFERENCE_DATA=../shared/reference_data (wpi-mtm/, wpi-2018/) fell back to a download; a folder without
+    the file was passed over without a word."""
+    (tmp_path / "wpi-mtm").mkdir()
+    shutil.copy(resolve("mtm/params.json"), tmp_path / "wpi-mtm" / "params.json")
+    monkeypatch.setenv(reference_data.ENV_DATA_DIR, str(tmp_path))
+    assert resolve("mtm/params.json") == tmp_path / "wpi-mtm" / "params.json"
+    path = resolve("two_results.csv")
+    assert path != tmp_path / "two_results.csv" and path.is_file()
+    assert f"DVRK_REFERENCE_DATA={tmp_path} holds neither two_results.csv nor wpi/two_results.csv: read {path}" in capsys.readouterr().err

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import http.client
 import os
+import time
 import urllib.request
 from pathlib import Path
 
@@ -122,11 +124,12 @@ def _read_csv_version(path: str, digest: str, motor_map, joint_names: tuple) -> 
     return read
 
 
-def _checked(path: Path, name: str) -> Path:
+def _checked(path: Path, name: str, cached: bool = False) -> Path:
     expected = manifest()["files"][name]["sha256"]
     actual = sha256_of(path)
     if actual != expected:
-        raise DvrkDartError(f"{path}: sha256 {actual[:12]}... does not match the manifest ({expected[:12]}...)")
+        again = ": a download's copy, delete it to download it again" if cached else ""
+        raise DvrkDartError(f"{path}: sha256 {actual[:12]}... does not match the manifest ({expected[:12]}...){again}")
     return path
 
 
@@ -138,27 +141,55 @@ def _source(name: str | None) -> tuple[str, str]:
 
 
 def cache_dir(name: str | None = None) -> Path:
-    """Where downloads of the pinned commit (of `name`'s repository) are kept."""
-    return Path(os.environ.get(ENV_CACHE_DIR, Path.home() / ".cache" / "dvrk_dart")) / _source(name)[1][:12]
+    """Where downloads of the pinned commit (of `name`'s repository) are kept (DVRK_DART_CACHE, set and not empty)."""
+    return Path(os.environ.get(ENV_CACHE_DIR) or Path.home() / ".cache" / "dvrk_dart") / _source(name)[1][:12]
+
+
+#: a download that has not arrived whole after this long has failed (a server sending a byte at a time never times out a read)
+DOWNLOAD_DEADLINE_S = 300.0
 
 
 def _download(name: str) -> Path:
     m = manifest()
     entry = m["files"][name]
-    template = os.environ.get(ENV_URL_TEMPLATE, m["url_template"])
+    template = os.environ.get(ENV_URL_TEMPLATE) or m["url_template"]
     repository, commit = _source(name)
-    url = template.format(repository=repository, commit=commit, path=entry["path"])
+    try:
+        url = template.format(repository=repository, commit=commit, path=entry["path"])
+    except (KeyError, IndexError, ValueError) as exc:
+        raise DvrkDartError(f"{ENV_URL_TEMPLATE}={template}: not a URL template with {{repository}}, {{commit}} and {{path}} ({exc!r})") from None
     target = cache_dir(name) / name
     try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DvrkDartError(f"{target.parent}: the download cache cannot be made there ({exc.strerror or exc}; {ENV_CACHE_DIR} sets it)") from None
+    try:
         with atomic_path(target) as tmp:
-            with urllib.request.urlopen(url, timeout=60) as response:
-                tmp.write_bytes(response.read())
+            tmp.write_bytes(_fetch(url))
             _checked(tmp, name)
     except DvrkDartError:
         raise DvrkDartError(f"{url}: downloaded file fails its sha256 check") from None
-    except OSError as exc:
-        raise DvrkDartError(f"{name}: not found locally and download from {url} failed ({exc})") from None
+    except (OSError, ValueError, http.client.HTTPException) as exc:  # ValueError: a URL of no known scheme
+        raise DvrkDartError(f"{name}: not found in {_searched()} and download from {url} failed ({exc!r})") from None
     return target
+
+
+def _fetch(url: str) -> bytes:
+    """The bytes at `url`, whole within DOWNLOAD_DEADLINE_S."""
+    start, chunks = time.monotonic(), []
+    with urllib.request.urlopen(url, timeout=60) as response:
+        read = getattr(response, "read1", response.read)  # what has arrived, so that the deadline is checked
+        while chunk := read(1 << 16):
+            chunks.append(chunk)
+            if time.monotonic() - start > DOWNLOAD_DEADLINE_S:
+                raise TimeoutError(f"not whole after {DOWNLOAD_DEADLINE_S:g} s")
+    return b"".join(chunks)
+
+
+def _searched() -> str:
+    """Where a reference file was looked for before a download, in words."""
+    places = [f"{ENV_DATA_DIR}={os.environ[ENV_DATA_DIR]}"] if os.environ.get(ENV_DATA_DIR) else []
+    return ", ".join([*places, str(SHARED_ROOT), "the download cache"])
 
 
 def resolve(name: str, explicit: Path | str | None = None) -> Path:
@@ -172,17 +203,18 @@ def resolve(name: str, explicit: Path | str | None = None) -> Path:
         return path
     if name not in manifest()["files"]:
         raise DvrkDartError(f"unknown reference file '{name}' (known: {', '.join(manifest()['files'])})")
-    candidates = []
+    local = manifest()["files"][name].get("local", f"wpi/{name}")  # where ../shared/reference_data keeps it
+    own = []
     if os.environ.get(ENV_DATA_DIR):
         folder = Path(os.environ[ENV_DATA_DIR])
         if not folder.is_dir():  # a setting the user made must not be silently ignored
             raise DvrkDartError(f"{ENV_DATA_DIR}={folder}: not a folder")
-        candidates.append(folder)
-    paths = [folder / name for folder in candidates]
-    paths += [SHARED_ROOT / manifest()["files"][name].get("local", f"wpi/{name}"), cache_dir(name) / name]
-    for path in paths:
+        own = [folder / name, folder / local]  # the manifest's names, or a copy of ../shared/reference_data
+    for path in [*own, SHARED_ROOT / local, cache_dir(name) / name]:
         if path.is_file():
-            return _checked(path, name)
+            if own and path not in own:
+                say_once([f"{ENV_DATA_DIR}={folder} holds neither {name} nor {local}: read {path}"])
+            return _checked(path, name, cached=path == cache_dir(name) / name)
     return _download(name)
 
 
