@@ -143,7 +143,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from dvrk_dart.identification.identify import IdentificationConfig
     from dvrk_dart.identification.outputs import identify_into_folder
     from dvrk_dart.identification.regressor import FrictionLaw
-    from dvrk_dart.io.reference_data import distinct_labels
 
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
@@ -163,6 +162,31 @@ def cmd_identify(args: argparse.Namespace) -> int:
     periods = f", {extent['whole_periods']} whole periods" if extent["whole_periods"] is not None else ""
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {extent['runs']} run(s), "
           f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
+    _print_identification_errors(data)
+    for line in data["warnings"]:
+        print(f"warning: {line}")
+    departure = data["consistent_departure"]
+    print(f"the physical fit (params.json) lies up to {departure['max_standard_errors']:.3g} standard errors from the weighted least "
+          f"squares ({departure['base_parameter']}; {departure['over_3_standard_errors']} of {departure['of']} base parameters over 3): "
+          "the standard errors leave out model error and the constraints")
+    if not data["errors"].get("holdout"):
+        print("note: no --holdout run: how well these parameters carry to another motion is not measured (one short run "
+              "may not determine the arm)")
+    print(f"friction law: {data['config']['friction_law']}")
+    if args.friction_law == "tanh":
+        print("note: errors above use the tanh law; params.json readers apply sign(v)")
+    worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
+    # the solver meets a bound to its tolerance (5.000000000005 kg on [5, 5])
+    outside = [k for k, m in data["masses_kg"].items() if not m["lower"] - 1e-6 * m["upper"] <= m["value"] <= m["upper"] * (1 + 1e-6)]
+    print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
+          f"params: {Path(args.out) / 'params.json'}")
+    return 0
+
+
+def _print_identification_errors(data: dict) -> None:
+    """identify's table: each run's RMS per joint, training and held out, and the reference parameters' on the held-out runs."""
+    from dvrk_dart.io.reference_data import distinct_labels
+
     print(f"{'run':<22} " + " ".join(f"{j:>7}" for j in JOINT_NAMES) + f"   (RMS, N·m, N for a prismatic joint; fitted: {' '.join(data['fitted_joints'])})")
     reference = data.get("reference") or {}
     labels = distinct_labels([*(name for runs in data["errors"].values() for name in runs), *(reference.get("errors_first_period") or {})])
@@ -182,24 +206,6 @@ def cmd_identify(args: argparse.Namespace) -> int:
         label = span_label(name, "first_period", e["samples"])
         print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
               + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
-    for line in data["warnings"]:
-        print(f"warning: {line}")
-    departure = data["consistent_departure"]
-    print(f"the physical fit (params.json) lies up to {departure['max_standard_errors']:.3g} standard errors from the weighted least "
-          f"squares ({departure['base_parameter']}; {departure['over_3_standard_errors']} of {departure['of']} base parameters over 3): "
-          "the standard errors leave out model error and the constraints")
-    if not data["errors"].get("holdout"):
-        print("note: no --holdout run: how well these parameters carry to another motion is not measured (one short run "
-              "may not determine the arm)")
-    print(f"friction law: {data['config']['friction_law']}")
-    if args.friction_law == "tanh":
-        print("note: errors above use the tanh law; params.json readers apply sign(v)")
-    worst = min(min(v) for v in data["pseudo_inertia_eigenvalues_kg_m2"].values())
-    # the solver meets a bound to its tolerance (5.000000000005 kg on [5, 5])
-    outside = [k for k, m in data["masses_kg"].items() if not m["lower"] - 1e-6 * m["upper"] <= m["value"] <= m["upper"] * (1 + 1e-6)]
-    print(f"smallest pseudo-inertia eigenvalue {worst:.3g} kg m^2; masses outside their bounds: {outside or 'none'}; "
-          f"params: {Path(args.out) / 'params.json'}")
-    return 0
 
 
 def cmd_uncertainty(args: argparse.Namespace) -> int:
