@@ -125,6 +125,12 @@ def test_a_download_that_cannot_be_made_is_one_line_naming_what_to_correct(tmp_p
     with pytest.raises(DvrkDartError, match=r"params.json: not found in .* and download from http://127.0.0.1:9/.* failed \(IncompleteRead"):
         resolve("params.json")
     assert not any((tmp_path / "cache").rglob("params.json*"))
+    link = reference_data.cache_dir("params.json") / "params.json"
+    link.parent.mkdir(parents=True, exist_ok=True)
+    link.symlink_to(tmp_path / "nowhere")  # the user's link: a download never replaces it
+    with pytest.raises(DvrkDartError, match="a link in the download cache"):
+        resolve("params.json")
+    assert link.is_symlink()
     monkeypatch.setenv(reference_data.ENV_CACHE_DIR, "")
     assert reference_data.cache_dir("params.json").parent == Path.home() / ".cache" / "dvrk_dart"
 

@@ -159,6 +159,8 @@ def _download(name: str) -> Path:
     except (KeyError, IndexError, ValueError) as exc:
         raise DvrkDartError(f"{ENV_URL_TEMPLATE}={template}: not a URL template with {{repository}}, {{commit}} and {{path}} ({exc!r})") from None
     target = cache_dir(name) / name
+    if target.is_symlink():  # the user's, not a download: never replaced
+        raise DvrkDartError(f"{target}: a link in the download cache, which holds only downloads: remove it, or point it to the file")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
