@@ -102,11 +102,16 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     check_shared_folder(args.out, VALIDATION_KIND)
     if args.dynamics is not None:
+        from dvrk_dart.model.description import DEFAULT_MODEL_FILE
+        from dvrk_dart.model.model_file import load_model
         from dvrk_dart.runs.config import RunConfig, sim_config_for
 
-        sim_config_for(RunConfig("replay", "velocity", dynamics=args.dynamics))  # a bad --dynamics fails now, not after the campaign
+        # a bad --dynamics fails now, not after the campaign (its runs are the PSM's)
+        sim_config_for(RunConfig("replay", "velocity", dynamics=args.dynamics), load_model(DEFAULT_MODEL_FILE))
     check_output_folder(args.report, "report", "--report")
     check_not_inside(args.out, args.report, "--out", "--report")
+    if Path(args.out).resolve() in Path(args.report).resolve().parents:  # validate rewrites its --out's folders whole
+        raise DvrkDartError(f"--report: {args.report} is inside --out {args.out}, whose folders validate replaces: give it a folder of its own")
 
     return validate(Path(args.out), Path(args.report), jobs=args.jobs, force=args.force, dynamics=args.dynamics,
                     executor=args.executor, ray_address=args.ray_address)

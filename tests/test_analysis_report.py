@@ -316,7 +316,11 @@ def test_extra_sections_and_atomic_rebuild(small_runs_dir, report, tmp_path):
     _copy(image, extra / "gap_per_joint.png")
     (extra / "notes.html").write_text("<p>notes of the diagnosis</p>")
     text = build_report(runs_dir, out, extra_sections=extra).read_text()
-    assert "figures/extra/gap_per_joint.png" in text and "notes of the diagnosis" in text and "found it" not in text
+    assert "figures/extra/gap_per_joint.png" in text and "<p>notes of the diagnosis</p>" in text and "found it" not in text  # not escaped
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(DvrkDartError, match="holds no .html section nor image"):
+        build_report(runs_dir, out, extra_sections=empty)
 
 
 def _copy(source: Path, target: Path) -> Path:

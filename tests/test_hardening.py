@@ -475,13 +475,25 @@ def test_a_hand_written_dynamics_file_is_type_checked(tmp_path, capsys):
 def test_a_diagnosis_of_another_arm_is_refused(tmp_path, capsys):
     """An MTM diagnosis given to a PSM replay or force estimate ran, its effects on the PSM's joints and links."""
     for recorded, words in (({"units": ["N·m"] * 7}, "a diagnosis of another arm (efforts in N·m"),
-                            ({"arm_model": {"name": "dVRK MTM"}}, "a diagnosis of the arm 'dVRK MTM', not of psm.toml's")):
+                            ({"arm_model": {"name": "dVRK MTM"}}, "a diagnosis of the arm 'dVRK MTM', not of psm.toml's"),
+                            ({"sim_config": {"extra": {"link_friction": [[99, 0.1, 0.1, 0.1]]}}},  # force: KeyError 99
+                             "sim_config.extra.link_friction names link 99, not a link of psm.toml")):
         dynamics = tmp_path / "d.json"
         dynamics.write_text(json.dumps({"sim_config": {}, **recorded}))
         for command in (["replay", "--duration", "0.2"], ["force"]):
             code, lines = cli(capsys, *command, "--measured", "two", "--dynamics", dynamics, "--out", tmp_path / "never")
             assert_one_line_error(code, lines, "d.json", words)
             assert not (tmp_path / "never").exists()
+
+
+def test_validate_refuses_a_dynamics_file_of_another_arm_and_a_report_inside_its_out_before_any_run(tmp_path, capsys):
+    dynamics = tmp_path / "d.json"
+    dynamics.write_text(json.dumps({"sim_config": {"extra": {"link_friction": [[99, 0.1, 0.1, 0.1]]}}}))
+    for extra, words in ((["--dynamics", dynamics], "names link 99"), ([], "is inside --out")):
+        report = tmp_path / "out" / "runs" if not extra else tmp_path / "report"
+        code, lines = cli(capsys, "validate", "--out", tmp_path / "out", "--report", report, *extra)
+        assert_one_line_error(code, lines, words)
+        assert not (tmp_path / "out").exists()
 
 
 def test_a_sim_config_reads_back_from_memory_and_from_json():

@@ -301,31 +301,39 @@ def _extra_items(extra_sections, out_dir: Path) -> list[tuple[str, str]]:
     """Normalise the extra sections to (title, html), copying their files into the report."""
     if extra_sections is None:
         return []
-    items: list[tuple[str, str]] = []
     extra_dir = out_dir / EXTRA_DIR
     if isinstance(extra_sections, (str, os.PathLike)):
-        folder = Path(extra_sections)
-        if not folder.is_dir():
-            raise DvrkDartError(f"--extra: {folder} is not a folder")
-        for path in sorted(folder.iterdir()):
-            if path.suffix.lower() == ".html":
-                try:
-                    items.append((path.stem.replace("_", " "), path.read_text(encoding="utf-8")))
-                except UnicodeDecodeError:
-                    raise DvrkDartError(f"--extra: {path}: not UTF-8 text (an HTML section is)") from None
-            elif path.suffix.lower() in IMAGE_SUFFIXES:
+        items = _extra_folder_items(Path(extra_sections), extra_dir)
+    else:
+        items = []
+        for entry in extra_sections:
+            title, body, *files = entry
+            for file in (files[0] if files else []):
                 extra_dir.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(path, extra_dir / path.name)
-                items.append((path.stem.replace("_", " "), render("figure.html", src=f"{EXTRA_DIR}/{path.name}", alt=path.stem, caption="")))
-        return items
-    for entry in extra_sections:
-        title, body, *files = entry
-        for file in (files[0] if files else []):
-            extra_dir.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(file, extra_dir / Path(file).name)
-        items.append((str(title), str(body)))
-    # a section's html is the tool's own (a diagnosis page's fragment, a figure), not text to escape
+                shutil.copy2(file, extra_dir / Path(file).name)
+            items.append((str(title), str(body)))
+    # a section's html is the tool's own or the user's (--extra: their fragment, a figure), not text to escape
     return [(title, Markup(body)) for title, body in items]
+
+
+def _extra_folder_items(folder: Path, extra_dir: Path) -> list[tuple[str, str]]:
+    """--extra FOLDER: its .html files as sections, its images as figures (copied into the report), by name."""
+    if not folder.is_dir():
+        raise DvrkDartError(f"--extra: {folder} is not a folder")
+    items = []
+    for path in sorted(folder.iterdir()):
+        if path.suffix.lower() == ".html":
+            try:
+                items.append((path.stem.replace("_", " "), path.read_text(encoding="utf-8")))
+            except UnicodeDecodeError:
+                raise DvrkDartError(f"--extra: {path}: not UTF-8 text (an HTML section is)") from None
+        elif path.suffix.lower() in IMAGE_SUFFIXES:
+            extra_dir.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(path, extra_dir / path.name)
+            items.append((path.stem.replace("_", " "), render("figure.html", src=f"{EXTRA_DIR}/{path.name}", alt=path.stem, caption="")))
+    if not items:
+        raise DvrkDartError(f"--extra: {folder} holds no .html section nor image ({', '.join(sorted(IMAGE_SUFFIXES))}) at its top level")
+    return items
 
 
 # ---------------------------------------------------------------- build

@@ -161,6 +161,7 @@ def diagnosis_sim_config(path: Path, physical: bool = True, model: PsmModel | No
         raise DvrkDartError(f"--dynamics: {path}: malformed sim_config ({exc})") from None
     if model is not None:
         _check_arm(raw, path, model)
+        _check_links(config, path, model)
     if physical:
         _check_physical(config, path)
     return config
@@ -176,6 +177,15 @@ def _check_arm(raw: dict, path: Path, model: PsmModel) -> None:
     if recorded is None and units is not None and units != [model.effort_unit(j) for j in JOINT_NAMES]:
         raise DvrkDartError(f"--dynamics: {path}: a diagnosis of another arm (efforts in {', '.join(map(str, units))}) than {model.source.name}'s: "
                             "give its --arm-model")
+
+
+def _check_links(config: SimConfig, path: Path, model: PsmModel) -> None:
+    """The links a diagnosis's effects name are the arm's (a friction on link 99 ended in a KeyError)."""
+    extra = config.extra
+    for name, entries in (("link_friction", extra.link_friction), ("link_mass_scale", extra.link_mass_scale)):
+        unknown = sorted({int(entry[0]) for entry in entries} - set(model.links))
+        if unknown:
+            raise DvrkDartError(f"--dynamics: {path}: sim_config.extra.{name} names link {unknown[0]}, not a link of {model.source.name}")
 
 
 def recorded_processing(dynamics: str | None) -> tuple[str, int | None] | None:
