@@ -116,6 +116,17 @@ def test_an_effect_is_unmodelled_only_where_the_run_leaves_the_parameter_band(tm
     assert result["effects"][2]["beyond_parameter_uncertainty"]  # not selected, still marked
 
 
+def test_a_band_with_a_fraction_that_is_not_a_number_is_refused(tmp_path):
+    """NaN compares false: a band summary edited to NaN read "outside on no joint, unmodelled effects: none"."""
+    from dvrk_dart.diagnosis.payload.parameter_band import load_band
+    from dvrk_dart.errors import DvrkDartError
+
+    folder = _band_folder(tmp_path, [1.0] * 6 + [None])
+    (folder / "uncertainty.json").write_text((folder / "uncertainty.json").read_text().replace("1.0, null", "NaN, null"))
+    with pytest.raises(DvrkDartError, match="measured_inside_band_fraction holds a value that is not finite"):
+        load_band(folder)
+
+
 def test_a_band_of_another_run_is_refused(tmp_path):
     from dvrk_dart.diagnosis.payload.parameter_band import apply_band, load_band
     from dvrk_dart.errors import DvrkDartError

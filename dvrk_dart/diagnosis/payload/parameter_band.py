@@ -13,6 +13,7 @@ make an effect unmodelled.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from dvrk_dart.errors import DvrkDartError
@@ -43,6 +44,8 @@ def load_band(folder: str | Path) -> dict:
     for key, n in lengths.items():
         if n != len(JOINT_NAMES):
             raise DvrkDartError(f"--parameter-band: {path}: {n} joints in {key}, expected {len(JOINT_NAMES)}")
+        if not all(v is None or math.isfinite(float(v)) for v in band[key]):  # NaN compares false: "outside on no joint"
+            raise DvrkDartError(f"--parameter-band: {path}: {key} holds a value that is not finite (a joint not recorded is null)")
     return {**band, "folder": str(folder), "run": run_label(measured), "sha256": digest, "replayed_s": replayed}
 
 
