@@ -110,3 +110,33 @@ def test_replayed_residuals_come_back_in_the_tasks_order():
     lengths = [3000, 100]  # 15 s, then 0.5 s
     residuals = replayed_residuals([(arm, SimConfig(), state.head(n)) for n in lengths], "local", jobs=2)
     assert [len(r) for r in residuals] == lengths
+
+
+def _build_slowly(folder):
+    """A task that builds an output folder for a minute (a worker's run folder)."""
+    import time
+
+    from dvrk_dart.io.outputs import building_folder
+
+    with building_folder(folder, "run") as building:
+        (building / "half.txt").write_text("half")
+        time.sleep(60)
+
+
+def test_workers_ended_mid_task_remove_the_folders_they_were_building(tmp_path):
+    """A validate stopped by SIGTERM said "partial outputs removed" and left its workers' .building folders."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from dvrk_dart.runs.executors import _in_worker, _stop, quiet_worker
+
+    pool = ProcessPoolExecutor(max_workers=2, initializer=quiet_worker)
+    for name in ("a", "b"):
+        pool.submit(_in_worker, _build_slowly, tmp_path / name)
+    deadline = time.monotonic() + 30
+    while len(list(tmp_path.glob(".*.building-*"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(list(tmp_path.glob(".*.building-*"))) == 2
+    started = time.monotonic()
+    _stop(pool, finished=False)
+    assert not list(tmp_path.iterdir()) and time.monotonic() - started < 10

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -27,23 +28,55 @@ PR_SET_PDEATHSIG = 1
 
 def quiet_worker() -> None:
     """A pool worker's start: Ctrl-C is the main process's to handle (it ends
-    the pool), a worker it ends dies at once, without a traceback, and a
-    worker whose parent died (a pool inside a pool worker) dies with it."""
+    the pool), a worker it ends stops at once, without a traceback, removing
+    the folder it was building, and a worker whose parent died (a pool inside a
+    pool worker) dies with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, _end_worker)
     with contextlib.suppress(OSError, AttributeError):  # not Linux: the pool's own shutdown ends it
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
+
+class _WorkerEnded(BaseException):
+    """SIGTERM in a worker's task: raised through the task's finally blocks (not an Exception: no task catches it)."""
+
+
+def _end_worker(signum, _frame) -> None:
+    """SIGTERM in a worker: inside a task, the task's finally blocks run first (a half-built output folder is
+    removed; the default action left it behind a command that said "partial outputs removed")."""
+    if not _in_task:
+        os._exit(128 + signum)
+    raise _WorkerEnded
+
+
+def _in_worker(fn: Callable, task):
+    """A task in a pool worker, which ends the process once an ended task has cleaned up."""
+    global _in_task
+    _in_task = True
+    try:
+        return fn(task)
+    except _WorkerEnded:
+        os._exit(128 + signal.SIGTERM)
+    finally:
+        _in_task = False
+
+
+_in_task = False
+#: how long the main process waits for ended workers to remove what they were building (s)
+WORKER_CLEANUP_S = 10.0
 
 #: how long a Ray head may take to accept a connection before the address is called unreachable (s)
 RAY_CONNECT_TIMEOUT_S = 5.0
 
 
 def check_ray_address(address: str | None) -> None:
-    """A Ray head is listening at HOST:PORT (or ray://HOST:PORT): checked in
+    """Ray is installed and a Ray head is listening at HOST:PORT (or ray://HOST:PORT): checked in
     seconds, before any work (ray.init itself retries for minutes)."""
+    import importlib.util
     import socket
 
+    if importlib.util.find_spec("ray") is None:  # a dependency of the project: only a broken install lands here
+        raise DvrkDartError("--executor ray: the ray package is not installed")
     if not address or address == "auto":
         return
     target = address.split("://", 1)[-1]
@@ -94,6 +127,8 @@ def _stop(pool: ProcessPoolExecutor, finished: bool) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
+    for process in processes:  # their half-built folders removed before the command says so
+        process.join(timeout=WORKER_CLEANUP_S)
 
 
 def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int = 2, ray_address: str | None = None,
@@ -111,7 +146,7 @@ def run_tasks(fn: Callable, tasks: Sequence, executor: str = "local", jobs: int 
             pool = ProcessPoolExecutor(max_workers=max(1, min(jobs, len(tasks))), initializer=quiet_worker)
             finished = False
             try:
-                futures = {pool.submit(fn, task): task for task in tasks}
+                futures = {pool.submit(_in_worker, fn, task): task for task in tasks}
                 for future in as_completed(futures):
                     try:
                         yield futures[future], future.result(), None
