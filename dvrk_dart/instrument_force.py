@@ -49,15 +49,15 @@ def processed_run(config: ForceConfig, model: PsmModel) -> tuple[ProcessedRun, s
 
 def model_efforts(arm: Arm, config: ForceConfig, state: ProcessedRun) -> np.ndarray:
     """The model's efforts at the run's samples, in the band of its measured efforts."""
-    return state.in_band(config_effort_by_formula(arm, model_config(config.dynamics, arm.model), state.q, state.dq, state.ddq))
+    return state.in_band(config_effort_by_formula(arm, model_config(config.dynamics, arm), state.q, state.dq, state.ddq))
 
 
-def model_config(dynamics: str, model: PsmModel) -> SimConfig:
-    """The physics of --dynamics on `model`'s arm, evaluated by formula here (not simulated: a
+def model_config(dynamics: str, arm: Arm) -> SimConfig:
+    """The physics of --dynamics on `arm`, evaluated by formula here (not simulated: a
     diagnosis's explicit terms need not be a physical DART damping)."""
     if dynamics in DYNAMICS_CHOICES:
         return sim_config_for(RunConfig("replay", "velocity", dynamics=dynamics))
-    return diagnosis_sim_config(Path(dynamics), physical=False, model=model)
+    return diagnosis_sim_config(Path(dynamics), physical=False, model=arm.model, params_path=arm.params.source)
 
 
 def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dict:

@@ -486,6 +486,14 @@ def test_a_diagnosis_of_another_arm_is_refused(tmp_path, capsys):
             assert not (tmp_path / "never").exists()
 
 
+def test_a_diagnosis_fitted_on_other_parameters_is_said(tmp_path, capsys):
+    """--dynamics of a diagnosis with --params other than those it was fitted on ran without a word."""
+    dynamics = tmp_path / "d.json"
+    dynamics.write_text(json.dumps({"sim_config": {}, "params": {"path": "/elsewhere/params.json", "sha256": "0" * 64}}))
+    code, lines = cli(capsys, "replay", "--measured", "two", "--duration", "0.2", "--dynamics", dynamics, "--out", tmp_path / "run")
+    assert code == 0 and any("fitted on other identified parameters (params.json, sha256 000000000000...)" in line for line in lines), lines
+
+
 def test_validate_refuses_a_dynamics_file_of_another_arm_and_a_report_inside_its_out_before_any_run(tmp_path, capsys):
     dynamics = tmp_path / "d.json"
     dynamics.write_text(json.dumps({"sim_config": {"extra": {"link_friction": [[99, 0.1, 0.1, 0.1]]}}}))

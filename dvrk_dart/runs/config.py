@@ -128,18 +128,19 @@ def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str =
     return "_".join(parts)
 
 
-def sim_config_for(config: RunConfig, model: PsmModel | None = None) -> SimConfig:
-    """The simulator's options of a run of `model`'s arm (None: not checked): step, counterweight and dynamics."""
+def sim_config_for(config: RunConfig, model: PsmModel | None = None, params_path: Path | None = None) -> SimConfig:
+    """The simulator's options of a run of `model`'s arm with the parameters of `params_path` (None: not
+    checked): step, counterweight and dynamics."""
     if config.dynamics == "inertial":
         sim = SimConfig()
     elif config.dynamics == "identified":
         sim = IDENTIFIED_PHYSICS
     else:
-        sim = diagnosis_sim_config(Path(config.dynamics), model=model)
+        sim = diagnosis_sim_config(Path(config.dynamics), model=model, params_path=params_path)
     return replace(sim, dt_s=config.dt_s, counterweight=config.counterweight)
 
 
-def diagnosis_sim_config(path: Path, physical: bool = True, model: PsmModel | None = None) -> SimConfig:
+def diagnosis_sim_config(path: Path, physical: bool = True, model: PsmModel | None = None, params_path: Path | None = None) -> SimConfig:
     """The SimConfig a diagnosis selected (its diagnosis.json `sim_config`, or a one_configuration.json's);
     `physical`: checked as DART physics (a replay), not only evaluated by formula. A diagnosis with --baseline
     is refused: it fitted what the runs differ by from their baseline, and its sim_config is not the arm (a
@@ -162,6 +163,8 @@ def diagnosis_sim_config(path: Path, physical: bool = True, model: PsmModel | No
     if model is not None:
         _check_arm(raw, path, model)
         _check_links(config, path, model)
+    if params_path is not None:
+        _say_other_parameters(raw, path, params_path)
     if physical:
         _check_physical(config, path)
     return config
@@ -186,6 +189,18 @@ def _check_links(config: SimConfig, path: Path, model: PsmModel) -> None:
         unknown = sorted({int(entry[0]) for entry in entries} - set(model.links))
         if unknown:
             raise DvrkDartError(f"--dynamics: {path}: sim_config.extra.{name} names link {unknown[0]}, not a link of {model.source.name}")
+
+
+def _say_other_parameters(raw: dict, path: Path, params_path: Path) -> None:
+    """A note where the diagnosis was fitted on other identified parameters than the run's: its effects are
+    corrections to those (a replay with them does not find the diagnosis's figures)."""
+    from dvrk_dart.io.csv_run import say_once
+    from dvrk_dart.io.provenance import sha256_of
+
+    recorded = raw.get("params", {}).get("sha256") if isinstance(raw.get("params"), dict) else None
+    if recorded is not None and recorded != sha256_of(params_path):
+        say_once([f"--dynamics {path}: fitted on other identified parameters ({Path(str(raw['params'].get('path', '?'))).name}, "
+                  f"sha256 {str(recorded)[:12]}...) than {params_path}: its effects are corrections to those"])
 
 
 def recorded_processing(dynamics: str | None) -> tuple[str, int | None] | None:

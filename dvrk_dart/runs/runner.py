@@ -107,7 +107,7 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
     scenario = scenario_of(config)
     mode, counterweight = config.mode, config.counterweight
     _check_scenario_options(scenario, mode, counterweight, arm)
-    sim_config = sim_config_for(config, arm.model)
+    sim_config = sim_config_for(config, arm.model, arm.params.source)
     duration = config.duration_s or scenario.duration_s
     if scenario.kind != "replay" and duration > scenario.duration_s:  # the path would go on past its end
         raise DvrkDartError(f"--duration {duration:g}: the scenario {scenario.name} lasts {scenario.duration_s:g} s")
