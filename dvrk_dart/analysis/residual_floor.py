@@ -86,7 +86,7 @@ def _phase_shift(a: ProcessedRun, b: ProcessedRun, phase: np.ndarray) -> float:
     found = scipy.optimize.minimize_scalar(mismatch, bounds=(coarse - step, coarse + step), method="bounded")
     qb = b.periodic.positions(((phase + found.x) % 1.0) * b.periodic.period.period_s)
     if float(np.sqrt(np.mean((qa - qb) ** 2))) > SAME_MOTION_POSITION_RMS:
-        raise DvrkDartError(f"the positions differ by {float(np.sqrt(np.mean((qa - qb) ** 2))):.3g} RMS at the best phase: not the same trajectory")
+        raise DvrkDartError(f"the positions differ by {float(np.sqrt(np.mean((qa - qb) ** 2))):.3g} RMS (rad, m) at the best phase: not the same trajectory")
     return float(found.x)
 
 
