@@ -214,6 +214,11 @@ def _analysis(t, q, tau, rate_hz: float, where: str, harmonics, measured: np.nda
     return _ANALYSES[key]
 
 
+def forget_analyses() -> None:
+    """Drop the analyses kept by content (a benchmark times each replay as a new process makes it)."""
+    _ANALYSES.clear()
+
+
 def process_all(runs: list[MeasuredRun], processing: str | None, design=None,
                 harmonics: int | None = None) -> tuple[list[ProcessedRun], str | None]:
     """Runs through one processing, and a note when the choice was not the user's:
