@@ -165,14 +165,12 @@ def bench_replay(repeat: int = 3) -> dict:
     import dvrk_dart.runs.replay  # noqa: F401
     from dvrk_dart import cli
 
-    from dvrk_dart.io.reference_data import _read_csv_version
-    from dvrk_dart.io.signal import forget_analyses
+    from dvrk_dart.io.reference_data import forget_read_runs
 
     rates = []
     with tempfile.TemporaryDirectory() as folder, contextlib.redirect_stdout(io.StringIO()):
         for i in range(repeat):
-            _read_csv_version.cache_clear()  # each replay parses and analyses its run, as a process of its own does
-            forget_analyses()
+            forget_read_runs()  # each replay parses and analyses its run, as a process of its own does
             out = Path(folder) / f"replay-two-{i}"
             wall, cpu = time.perf_counter(), time.process_time()
             code = cli.main(["replay", "--measured", "two", "--out", str(out)])

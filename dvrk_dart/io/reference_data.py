@@ -34,7 +34,7 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     sample_rate_hz,
 )
 from dvrk_dart.io.provenance import file_record, sha256_of  # noqa: F401  (sha256_of re-exported)
-from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, spanning_columns
+from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, forget_analyses, spanning_columns
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
 
@@ -122,6 +122,13 @@ def _read_csv_version(path: str, digest: str, motor_map, joint_names: tuple) -> 
     read = read_csv_run(Path(path), motor_map, joint_names)
     read.values.setflags(write=False)
     return read
+
+
+def forget_read_runs() -> None:
+    """Drop what this process keeps of the runs it read (their parse, their periodic analysis): a benchmark times
+    each replay as a process of its own makes it."""
+    _read_csv_version.cache_clear()
+    forget_analyses()
 
 
 def _checked(path: Path, name: str, cached: bool = False) -> Path:

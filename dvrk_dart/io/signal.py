@@ -215,7 +215,7 @@ def _analysis(t, q, tau, rate_hz: float, where: str, harmonics, measured: np.nda
 
 
 def forget_analyses() -> None:
-    """Drop the analyses kept by content (a benchmark times each replay as a new process makes it)."""
+    """Drop the analyses kept by content (io/reference_data.forget_read_runs)."""
     _ANALYSES.clear()
 
 

@@ -158,13 +158,13 @@ def _joint_effects(raw) -> JointEffects:
         if name not in kinds:
             raise ValueError(f"sim_config.extra: unknown key {name!r}")
         key = f"sim_config.extra.{name}"
-        checked[name] = (tuple(_entry(name, _numbers(entry, key, 0), key) for entry in _numbers_list(value, key)) if kinds[name] == ()
+        checked[name] = (tuple(check_entry(name, _numbers(entry, key, 0), key) for entry in _numbers_list(value, key)) if kinds[name] == ()
                          else _numbers(value, key, len(kinds[name])))
     return JointEffects(**checked)
 
 
 #: JointEffects entries: (positions that are coordinate indices, positions that are link keys, their length; None:
-#: two leading numbers and a table of knots, increasing, and as many values)
+#: two leading numbers and a piecewise-linear table: two or more knots, increasing, and as many values)
 _ENTRY_LAYOUTS = {
     "link_friction": ((), (0,), 4),
     "position_friction": ((0,), (), None),
@@ -174,20 +174,20 @@ _ENTRY_LAYOUTS = {
 }
 
 
-def _entry(name: str, entry: tuple[float, ...], key: str) -> tuple[float, ...]:
-    """An entry of a JointEffects table, its layout checked (`_ENTRY_LAYOUTS`)."""
+def check_entry(name: str, entry: tuple[float, ...], key: str) -> tuple[float, ...]:
+    """An entry of the JointEffects table `name`, its layout checked (`_ENTRY_LAYOUTS`); ValueError naming `key`."""
     coordinates, links, length = _ENTRY_LAYOUTS[name]
     if length is not None and len(entry) != length:
         raise ValueError(f"{key}: entries of {length} numbers, not {list(entry)}")
     if length is None:
-        table = np.asarray(entry[2:])
-        if len(table) < 2 or len(table) % 2 or not np.all(np.diff(table[:len(table) // 2]) > 0):
-            raise ValueError(f"{key}: entries of two numbers, then increasing knots and as many values, not {list(entry)}")
+        table = np.asarray(entry[2:], dtype=float)
+        if len(table) < 4 or len(table) % 2 or not np.all(np.diff(table[:len(table) // 2]) > 0):
+            raise ValueError(f"{key}: entries of two numbers, then two or more increasing knots and as many values, not {list(entry)}")
     for i in coordinates:
-        if not (entry[i].is_integer() and 0 <= entry[i] < N_JOINTS):
+        if not (float(entry[i]).is_integer() and 0 <= entry[i] < N_JOINTS):
             raise ValueError(f"{key}: {list(entry)}: its number {i + 1} is a coordinate, 0..{N_JOINTS - 1} (0 is q1)")
     for i in links:
-        if not (entry[i].is_integer() and entry[i] >= 0):
+        if not (float(entry[i]).is_integer() and entry[i] >= 0):
             raise ValueError(f"{key}: {list(entry)}: its number {i + 1} is a link's key, a whole number")
     return entry
 

@@ -56,7 +56,7 @@ from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters
 from dvrk_dart.sim import kernels
 from dvrk_dart.sim.builder import DartPsm
-from dvrk_dart.sim.config import JointEffects, SimConfig, position_load_table
+from dvrk_dart.sim.config import JointEffects, SimConfig, check_entry, position_load_table
 
 
 @dataclass(frozen=True)
@@ -300,14 +300,12 @@ def _place_extra_joint_terms(acc: _Placing, extra: JointEffects, psm: DartPsm, s
 
 
 def _checked_position_loads(entries) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
-    """JointEffects.position_load entries as (target, source, knots, values):
-    coordinates in range, as many values as knots, knots increasing."""
+    """JointEffects.position_load entries as (target, source, knots, values), their layout checked (sim/config.py)."""
     out = []
     for entry in entries:
-        if len(entry) < 6 or len(entry) % 2:
-            raise DvrkDartError("SimConfig.extra.position_load: (target, source, knots..., values...) with as many values as knots expected")
-        target, source, knots, values = position_load_table(entry)
-        if not (0 <= target < N_JOINTS and 0 <= source < N_JOINTS and np.all(np.diff(knots) > 0.0)):
-            raise DvrkDartError(f"SimConfig.extra.position_load: coordinates 0..{N_JOINTS - 1} and increasing knots expected (got {entry[:2]})")
-        out.append((target, source, knots, values))
+        try:
+            check_entry("position_load", tuple(entry), "SimConfig.extra.position_load")
+        except ValueError as exc:
+            raise DvrkDartError(str(exc)) from None
+        out.append(position_load_table(entry))
     return out
