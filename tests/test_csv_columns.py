@@ -294,3 +294,14 @@ def test_a_trailing_comma_on_every_line_is_named(tmp_path):
     path.write_text("".join(line.rstrip("\r") + ",\n" for line in lines))
     with pytest.raises(DvrkDartError, match="a trailing comma"):
         load_run(path, PSM)
+
+
+@needs_2018
+def test_rate_leaves_the_2018_and_mtm_reference_runs_at_their_recorded_rate(capsys):
+    """Found by content, not by name: the 2018 and MTM files' manifest names (2018/..., mtm/...) are not their file names."""
+    from arms import MTM
+
+    assert load_run(resolve_run("2018-test1"), PSM, BagTopics(rate_hz=100.0)).rate_hz == 200.0
+    assert load_run(resolve_run("mtm-one"), MTM, BagTopics(rate_hz=100.0)).rate_hz == 200.0
+    err = capsys.readouterr().err
+    assert "reference data's 2018/psm1_fourier_test1.csv, recorded at 200 Hz" in err and "mtm/one_results.csv" in err, err

@@ -73,16 +73,19 @@ def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | N
     if time_column_hz is not None:
         _say_rate_not_used(explicit, time_column_hz, f"{path} keeps its own")
         return time_column_hz, TIME_COLUMN_SOURCE
-    name = Path(path).name
-    entry = manifest()["files"].get(name, {})
+    files = manifest()["files"]
+    if explicit is not None:  # a reference run, wherever it is and whatever its name, keeps its recorded rate
+        digest = sha256_of(path)
+        name = next((key for key, entry in files.items() if entry.get("sha256") == digest), None)
+        if name is None:
+            return float(explicit), "--rate"
+    else:
+        name = Path(path).name
+    entry = files.get(name, {})
     known = float(entry.get("sample_rate_hz", sample_rate_hz()))
-    source = f"{MANIFEST_FILE.name} [{name}]" if "sample_rate_hz" in entry else "the default rate"
-    if explicit is not None and entry.get("sha256") == sha256_of(path):
-        _say_rate_not_used(explicit, known, f"{path} is the reference data's {name}, recorded at")
-        return known, source
     if explicit is not None:
-        return float(explicit), "--rate"
-    return known, source
+        _say_rate_not_used(explicit, known, f"{path} is the reference data's {name}, recorded at")
+    return known, f"{MANIFEST_FILE.name} [{name}]" if "sample_rate_hz" in entry else "the default rate"
 
 
 def _say_rate_not_used(explicit: float | None, rate_hz: float, whose: str) -> None:
