@@ -15,7 +15,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.excitation_design import read_design
 from dvrk_dart.io.force_log import force_table, write_force_logs
-from dvrk_dart.io.provenance import file_record, software_versions
+from dvrk_dart.io.provenance import arm_model_record, file_record, software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
 from dvrk_dart.io.signal import ProcessedRun, chosen_because, process, process_all
 from dvrk_dart.io.arm import Arm
@@ -81,8 +81,9 @@ def instrument_force(arm: Arm, config: ForceConfig, out_dir: Path | None) -> dic
                       "(singular value of J) is under min_lever_m is not determined (NaN in force.csv); the figures are "
                       "over the determined samples, *_all_samples_* over every sample",
         "inputs": {run_label(config.measured): input_record(resolve_run(config.measured), arm.model, config.topics),
-                   **({"excitation": file_record(Path(config.excitation))} if config.excitation else {})},
-        "params": file_record(arm.params.source), "versions": software_versions(),
+                   **({"excitation": file_record(Path(config.excitation))} if config.excitation else {}),
+                   **({"dynamics": file_record(Path(config.dynamics))} if config.dynamics.endswith(".json") else {})},
+        "arm_model": arm_model_record(arm.model), "params": file_record(arm.params.source), "versions": software_versions(),
     }
     if out_dir is not None:
         table = force_table(state.t, point_positions(arm.model, state.q, point.link), estimate.force, estimate.determined, estimate.lever_m)

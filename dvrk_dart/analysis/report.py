@@ -274,7 +274,7 @@ def provenance_section(analysis: Analysis) -> str:
             num_cell(float(run.config.get("duration_s", math.nan) or math.nan), run=name, field="duration_s"),
             num_cell(float(sim.get("dt_s", math.nan)), run=name, field="dt_s"),
             text_cell(_effects(sim)),
-            code_cell(revision[:10] + (" (dirty)" if dirty == "true" else ""), revision),
+            code_cell(revision[:10] + (" (dirty)" if dirty in (True, "true") else ""), revision),
             code_cell(mcap_sha[:16], mcap_sha),
             code_cell((run.config.get("inputs_sha256") or "—")[:16], run.config.get("inputs_sha256") or ""),
         ])

@@ -23,8 +23,8 @@ from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.identification.outputs import FOLDER_ENTRIES
 from dvrk_dart.io.atomic import write_json_atomic, write_text_atomic
-from dvrk_dart.io.provenance import file_record, software_versions
-from dvrk_dart.io.reference_data import load_run, resolve_run, run_label, sha256_of
+from dvrk_dart.io.provenance import arm_model_record, file_record, software_versions
+from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import process
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
@@ -113,8 +113,13 @@ def log_replays(arm: Arm, measured: str, config_after: SimConfig, out_dir: Path,
     for label, config in (("before", base_sim_config(arm)), ("after", config_after)):
         record = replay_processed(processed, measured, "velocity", config, None, 5, arm.model, arm.params)
         record.name = f"diagnosis-{run_label(measured)}_{label}"
+        dynamics = arm.model.diagnosis_base + (" + the selected effects" if label == "after" else "")
         record.config = {"scenario": {"name": record.name, "kind": "replay", "measured": str(measured)}, "mode": "velocity",
-                         "counterweight": config.counterweight, "sim": config.to_dict()}
+                         "counterweight": config.counterweight, "dynamics": dynamics, "duration_s": record.metrics["duration_s"],
+                         "processing": processing, "sim": config.to_dict(), "model_file": arm.model.source.name,
+                         "arm_model": arm_model_record(arm.model), "params_file": str(arm.params.source),
+                         "params_sha256": sha256_of(arm.params.source), "inputs": {str(measured): input_record(resolve_run(measured), arm.model, topics)}}
+        record.metrics |= {"dynamics": dynamics, "samples": len(record)}
         record.markers.setdefault("rcm", rcm_position(arm))
         write_run_folder(record, out_dir / f"replay_{label}", arm.model)
 
@@ -154,7 +159,7 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     if holdout:
         beyond["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, found["processing"], c.topics)
     # the diagnosis and what was studied on top of it: built once here, written once
-    result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base, "arm_model": {"name": arm.model.name, **file_record(arm.model.source)},
+    result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base, "arm_model": arm_model_record(arm.model),
               "params": file_record(arm.params.source), "versions": software_versions()}
     result = {**result, **(_repeatable_shares(result) if holdout else {}), "wall_time_s": time.perf_counter() - start}
     _write_one_configuration(result, out_dir)

@@ -333,7 +333,7 @@ def write_mcap(record: RunRecord, path: str | os.PathLike, model: PsmModel) -> N
         (METADATA_CONFIG, _json_strings(record.config)),
         (METADATA_METRICS, _json_strings(record.metrics)),
         (METADATA_MARKERS, _json_strings(record.markers)),
-        (METADATA_VERSIONS, versions),
+        (METADATA_VERSIONS, {k: v if isinstance(v, str) else json.dumps(v) for k, v in versions.items()}),  # MCAP metadata: strings
     ]
     with atomic_output(path) as tmp, open(tmp, "wb") as stream:
         write_bulk(stream, schemas, channels, MessageEncoding.JSON, ns, metadata, library=f"dvrk_dart {versions['dvrk_dart']}")

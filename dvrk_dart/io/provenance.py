@@ -13,8 +13,9 @@ from pathlib import Path
 from dvrk_dart.paths import PACKAGE_DIR
 
 
-def software_versions() -> dict[str, str]:
-    """Versions of what produced the run, so a log can be traced to its code."""
+def software_versions() -> dict[str, str | bool | None]:
+    """Versions of what produced the run, so a log can be traced to its code (`git_dirty`: whether the
+    package's tree had uncommitted changes, null where git cannot tell)."""
     versions = {"python": platform.python_version()}
     for label, dist in (
         ("numpy", "numpy"),
@@ -33,8 +34,8 @@ def software_versions() -> dict[str, str]:
 
 
 @functools.lru_cache(maxsize=1)
-def _git_state() -> tuple[str, str]:
-    """(HEAD revision, 'true'/'false' for uncommitted changes) of the package's
+def _git_state() -> tuple[str, bool | None]:
+    """(HEAD revision, whether there are uncommitted changes, None if unknown) of the package's
     tree, read once per process: the code a process runs is the code it loaded."""
     here = PACKAGE_DIR
 
@@ -49,9 +50,9 @@ def _git_state() -> tuple[str, str]:
 
     revision = git("rev-parse", "HEAD")
     if revision is None:
-        return "unknown", "unknown"
+        return "unknown", None
     status = git("status", "--porcelain", "--untracked-files=no")
-    return revision, "unknown" if status is None else str(bool(status)).lower()
+    return revision, None if status is None else bool(status)
 
 
 def sha256_of(path: Path) -> str:
@@ -72,3 +73,8 @@ def file_record(path: Path) -> dict[str, str]:
     """A file an output rests on (the identified parameters, ...): its path (absolute: a path relative to where the
     command ran names no file later) and content hash."""
     return {"path": os.path.abspath(path), "sha256": sha256_of(path)}
+
+
+def arm_model_record(model) -> dict[str, str]:
+    """The arm an output is of (a `PsmModel`): its model card's name, path and content hash."""
+    return {"name": model.name, **file_record(model.source)}

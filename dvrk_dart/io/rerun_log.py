@@ -15,7 +15,8 @@ Entity paths (timeline "sim_time", a duration in s):
   world/tool/...          actual and reference paths, moving tool points, tool frame
   efforts/<joint>/<src>   src in sim, model, measured, command
   model_terms/<joint>/<term>
-  errors/<kind>/<joint>   effort_sim_minus_model, effort_sim_minus_measured,
+  errors/<kind>/<joint>   effort_sim_minus_model (the model's terms the simulation
+                          holds: metrics' model_terms_compared), effort_sim_minus_measured,
                           position_sim_minus_measured; errors/tool_position_m
   closure/residual_m
   run/config, run/metrics text documents
@@ -74,6 +75,9 @@ def _series(rec: rr.RecordingStream, entity: str, times: rr.TimeColumn, values: 
 
 def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.TimeColumn, model: PsmModel) -> None:
     model_total = record.model_total() if record.effort_model else None
+    # the error against the model is against the terms the simulation holds, as metrics.json's rms_sim_vs_model
+    compared = record.metrics.get("model_terms_compared")
+    model_compared = record.model_total(tuple(compared)) if record.effort_model and compared is not None else model_total
     for j, joint in enumerate(JOINT_NAMES):
         tau, pos = model.effort_unit(joint), model.position_unit(joint)
         sources = {"sim": record.effort_sim, "model": model_total, "measured": record.effort_measured, "command": record.effort_command}
@@ -83,7 +87,7 @@ def _log_joint_series(rec: rr.RecordingStream, record: RunRecord, times: rr.Time
         for k, (term, effort) in enumerate(record.effort_model.items()):
             _series(rec, f"model_terms/{joint}/{term}", times, effort[:, j], f"{term} ({tau})", TERM_COLORS[k % len(TERM_COLORS)])
         errors = {
-            "effort_sim_minus_model": (record.effort_sim, model_total, tau),
+            "effort_sim_minus_model": (record.effort_sim, model_compared, tau),
             "effort_sim_minus_measured": (record.effort_sim, record.effort_measured, tau),
             "position_sim_minus_measured": (record.q, record.q_measured, pos),
         }
@@ -198,7 +202,7 @@ def blueprint(record: RunRecord) -> rrb.Blueprint:
 
     tabs = [per_joint("efforts", "Efforts (sim red, model blue, measured green)")]
     if record.effort_model:
-        tabs.append(per_joint("errors/effort_sim_minus_model", "Effort sim - model"))
+        tabs.append(per_joint("errors/effort_sim_minus_model", "Effort sim - model (the terms simulated)"))
         tabs.append(per_joint("model_terms", "Model terms"))
     if record.effort_measured is not None:
         tabs.append(per_joint("errors/effort_sim_minus_measured", "Effort sim - measured"))

@@ -61,6 +61,8 @@ class ProcessedRun:
     upstream_first_period: int | None = field(default=None, compare=False)
     #: (7,) bool: the joints the run recorded (the others carry no figure, fit or cutoff)
     measured: np.ndarray | None = field(default=None, compare=False)
+    #: the recording's row of the first sample (None: samples of no recording's rows, e.g. resampled)
+    first_row: int | None = field(default=None, compare=False)
 
     def __post_init__(self):
         if self.measured is None:
@@ -93,7 +95,7 @@ class ProcessedRun:
     def head(self, n: int) -> "ProcessedRun":
         """The first n samples (a periodic run's band no longer applies: project before)."""
         return ProcessedRun(*(a[:n] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), upstream_first_period=self.upstream_first_period,
-                            measured=self.measured)
+                            measured=self.measured, first_row=self.first_row)
 
     def window(self, start: int, n: int) -> "ProcessedRun":
         """Samples start..start+n; a periodic run's band is then that of the
@@ -104,7 +106,7 @@ class ProcessedRun:
             projector = self.periodic.projector
             periodic = replace(self.periodic, projector=type(projector)(projector.t[part], projector.frequency_hz, projector.harmonics))
         return ProcessedRun(*(a[part] for a in (self.t, self.q, self.dq, self.ddq, self.tau)), periodic, self.upstream_first_period,
-                            self.measured)
+                            self.measured, None if self.first_row is None else self.first_row + start)
 
     def at_rate(self, rate_hz: float) -> "ProcessedRun":
         """A periodic run on samples at `rate_hz` over the same span: its harmonic series evaluated there (exact in
@@ -121,7 +123,10 @@ class ProcessedRun:
     def summary(self) -> dict:
         """What every output records of the processing."""
         if self.periodic is None:
-            return {"processing": "upstream", "period_s": None, "harmonics": None, "noise_rms": None, **self._rows_note()}
+            rows = {} if self.first_row is None else {
+                "samples_analysed": [self.first_row, self.first_row + len(self)],
+                "transient_rule": f"upstream's zero-phase filter: the recording's first and last {CUT_SAMPLES} rows left out, as upstream did"}
+            return {"processing": "upstream", "period_s": None, "harmonics": None, "noise_rms": None, **rows, **self._rows_note()}
         return self.periodic.summary()
 
     def _rows_note(self) -> dict:
@@ -184,7 +189,7 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, desi
     tau = zero_phase_lowpass(run.tau - model.cable_efforts(run.q), fc)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
     return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep], upstream_first_period=upstream.first_period_samples,
-                        measured=run.measured_mask)
+                        measured=run.measured_mask, first_row=CUT_SAMPLES)
 
 
 def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> ProcessedRun:
@@ -195,7 +200,7 @@ def process_periodic(run: MeasuredRun, harmonics=None, design=None) -> Processed
     kept = slice(*analysis.kept)  # without a start or end transient (io/transient.py)
     t = run.t[kept] - run.t[kept][0]
     q, dq, ddq = (analysis.positions(t, derivative) for derivative in range(3))
-    return ProcessedRun(run.t[kept], q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask)
+    return ProcessedRun(run.t[kept], q, dq, ddq, analysis.efforts(t), analysis, measured=run.measured_mask, first_row=analysis.kept[0])
 
 
 def _analysis(t, q, tau, rate_hz: float, where: str, harmonics, measured: np.ndarray, design, coupled: np.ndarray) -> PeriodicAnalysis:

@@ -8,6 +8,7 @@ follows a path with the start's orientation, in one of three modes:
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -111,7 +112,9 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
     driver = CartesianDriver(arm, scenario, mode, config.dt_s, steps)
     sim = PsmSimulator(arm.model, arm.params, config)
     sim.reset(driver.q0)
+    start = time.perf_counter()
     log = simulate(sim, driver, steps, log_every(config.dt_s, steps))
+    wall = time.perf_counter() - start
     logged = np.asarray(log.steps, dtype=int)
     record = RunRecord(
         name="",
@@ -127,6 +130,13 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
         closure_residual_m=np.asarray(log.closure, dtype=float),
         body_positions=log.body_positions(),
     )
+    record.metrics = {
+        "steps": log.steps_done,
+        "duration_s": log.steps_done * config.dt_s,
+        "realtime_factor": log.steps_done * config.dt_s / wall if wall > 0 else None,
+        "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
+        "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(log) else 0.0,
+    }
     if log.error is not None:
         record.metrics["error"] = str(log.error)
     return record

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError, SimulationDiverged
-from dvrk_dart.io.provenance import file_record
+from dvrk_dart.io.provenance import arm_model_record, file_record
 from dvrk_dart.io.reference_data import resolve_run, run_label, sha256_of
 from dvrk_dart.metrics import TORQUE_TRANSIENT_S, rms
 from dvrk_dart.io.arm import Arm, load_arm
@@ -60,6 +60,7 @@ def cartesian_metrics(record: RunRecord, mode: str, config: SimConfig) -> dict:
         norm = np.linalg.norm(position, axis=1)
         metrics["position_error_max_first_s_m"] = float(norm[~after].max()) if (~after).any() else None
     if mode != "kinematic" and record.effort_model:
+        metrics["model_terms_compared"] = list(simulated_terms(config))
         model = record.model_total(simulated_terms(config))
         ok = np.all(np.isfinite(record.effort_sim), axis=1) & np.all(np.isfinite(model), axis=1)
         metrics["rms_sim_vs_model"] = rms(record.effort_sim[ok] - model[ok]).tolist() if ok.any() else None
@@ -136,9 +137,10 @@ def run(config: RunConfig, arm: Arm | None = None) -> RunRecord:
         "mode": mode,
         "counterweight": counterweight,
         "dynamics": config.dynamics_label,
-        "duration_s": float(record.t[-1] + sim_config.dt_s) if len(record) else 0.0,
+        "duration_s": record.metrics["duration_s"],  # simulated: the steps taken (to a divergence) times the step
         "sim": sim_config.to_dict(),
         "model_file": str(arm.model.source.name),
+        "arm_model": arm_model_record(arm.model),
         "params_file": str(arm.params.source),
         "params_sha256": sha256_of(arm.params.source),
         "inputs": inputs_used(config, scenario, arm.model),
