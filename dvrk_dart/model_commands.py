@@ -207,7 +207,10 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(table))
         return 0
-    print(f"identified model's residual, {args.measured} vs {args.repeat} ({table['runs'][args.measured]['processing']} processing)")
+    processing = table["runs"][args.measured]["processing"]
+    why = f"--processing {args.processing}" if args.processing else ("the default: both runs are periodic excitations" if processing == "periodic"
+                                                                     else "the default where a run is not a periodic excitation")
+    print(f"identified model's residual, {args.measured} vs {args.repeat} ({processing} processing, {why})")
     print(f"{'joint':>6} {'unit':>4} {'rms diff':>9} {'demeaned':>9} {'noise':>9} {'one sess.':>9}  verdict")
     def cell(value) -> str:
         return f"{'-':>9}" if value is None else f"{value:9.4f}"

@@ -59,7 +59,7 @@ class DiagnosisConfig:
     payload_at: object = None
     parameter_band: str | None = None
     refit: bool = False
-    processing: str | None = "upstream"
+    processing: str | None = None  # as the command's: periodic where every run is a periodic excitation
     executor: str = "local"
     jobs: int = 2
     ray_address: str | None = None

@@ -27,6 +27,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.io.provenance import arm_model_record, file_record, software_versions
 from dvrk_dart.model.description import PsmModel, resolve_arm_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
@@ -94,7 +95,8 @@ def fitted_excitation(name: str, rate_hz: float, model: PsmModel) -> Excitation:
     from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
     if name not in EXCITATIONS:
         raise DvrkDartError(f"unknown excitation '{name}' (known: {', '.join(EXCITATIONS)})")
-    run = load_run(resolve_run(name), model)
+    path = resolve_run(name)
+    run = load_run(path, model)
     motor_map = model.motor_map
     q_dvrk, dq_dvrk = motor_map.positions_to_dvrk(run.q), motor_map.positions_to_dvrk(run.dq)
     base_hz = fitted_base_frequency(run.t, q_dvrk)
@@ -107,6 +109,7 @@ def fitted_excitation(name: str, rate_hz: float, model: PsmModel) -> Excitation:
     source = {
         "kind": "fourier series fitted to a measured run",
         "measured": RUNS[name],
+        "measured_file": file_record(path),
         "base_frequency_hz": base_hz,
         "nominal_base_frequency_hz": EXCITATION_BASE_HZ,
         "harmonics": EXCITATION_HARMONICS,
@@ -147,7 +150,8 @@ def cartesian_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
             dq[k // substeps] = driver.closed_loop_velocity(k * dt, driver.q_kin)
         if k < steps - 1:
             driver.advance(k, None)
-    source = {"kind": "Cartesian scenario, kinematic mode (Eq. 5 controller, RK4)", "scenario": str(scenario.source), "integration_step_s": dt}
+    source = {"kind": "Cartesian scenario, kinematic mode (Eq. 5 controller, RK4)", "scenario": str(scenario.source),
+              "scenario_file": file_record(scenario.source), "integration_step_s": dt}
     return Excitation(scenario.name, np.arange(samples) / rate_hz, q, dq, source)
 
 
@@ -200,10 +204,9 @@ def write_excitation(excitation: Excitation, folder, model: PsmModel, namespace:
     bag = folder / f"{excitation.name}_servo_jp"
     states = arm_joint_states(model, namespace, excitation.t, excitation.q, suffix="servo_jp")
     write_bag(bag, states)
-    from dvrk_dart.io.provenance import software_versions
-
     summary = {
         "versions": software_versions(),
+        "arm_model": arm_model_record(model),
         "name": excitation.name,
         "samples": len(excitation.t),
         "duration_s": float(excitation.t[-1]),

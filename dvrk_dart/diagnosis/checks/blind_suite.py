@@ -74,7 +74,7 @@ def measured_noise(spec: dict, real: ProcessedRun, joints_with_session_offsets: 
             "session_offsets": np.where(joints_with_session_offsets, first[:span].mean(axis=0) - second[:span].mean(axis=0), 0.0)}
 
 
-def _write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict, rng: np.random.Generator) -> Path:
+def write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict, rng: np.random.Generator) -> Path:
     """The run as a measured CSV: the 21 columns where the suite's real run records every joint at the default
     rate, else a header naming the joints it records and a time column (a 3-joint design's wrist, simulated
     without noise, is no measured joint; a run logged at 100 Hz read at 200 Hz is refused)."""
@@ -99,8 +99,8 @@ def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, no
     clean = simulated_efforts(arm, motion, simulate, config)
     clean_baseline = simulated_efforts(arm, motion, simulate, base) + noise["session_offsets"]
     folder.mkdir(parents=True, exist_ok=True)
-    return {"measured": _write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
-            "baseline": _write_run(folder / f"{case['name']}_baseline.csv", motion, clean_baseline, noise, rng)}
+    return {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
+            "baseline": write_run(folder / f"{case['name']}_baseline.csv", motion, clean_baseline, noise, rng)}
 
 
 def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunProcessing, with_baseline: bool,

@@ -28,6 +28,7 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     JointOffset,
     JointStiffness,
 )
+from dvrk_dart.diagnosis.checks.other_arm import validate_other_arm
 from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
 from dvrk_dart.diagnosis.output.answer import AT_FLOOR_RATIO, joints_at_level
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
@@ -187,7 +188,7 @@ def validate_synthetic(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
 #: the withheld-effect validations (pipelines/withheld.toml's tables), longest first:
 #: they run side by side, each in its own process
 WITHHELD_STEPS = ("blind_suite_periodic", "blind_suite_upstream", "payload", "blind_suite_2018", "mtm_holdout", "holdout", "holdout_2018",
-                  "synthetic", "payload_speeds", "insertion", "null_pair", "out_of_library")
+                  "other_arm", "synthetic", "payload_speeds", "insertion", "null_pair", "out_of_library")
 #: the blind effect suite runs as one step per processing (side by side), and on another design (its own table
 #: of pipelines/withheld.toml on top of [blind_suite])
 BLIND_SUITE_STEPS = {"blind_suite_upstream": {"processings": ["upstream"]}, "blind_suite_periodic": {"processings": ["periodic"]},
@@ -199,7 +200,8 @@ def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], flo
     name, out_dir, parameter_band = task
     step = {"payload": validate_payload, "insertion": validate_insertion, "holdout": validate_holdout, "holdout_2018": validate_holdout,
             "mtm_holdout": validate_other_arm_holdout, "synthetic": validate_synthetic, "out_of_library": validate_out_of_library,
-            "payload_speeds": validate_payload_speeds, "null_pair": validate_null_pair, **dict.fromkeys(BLIND_SUITE_STEPS, validate_blind_suite)}[name]
+            "payload_speeds": validate_payload_speeds, "null_pair": validate_null_pair, "other_arm": validate_other_arm,
+            **dict.fromkeys(BLIND_SUITE_STEPS, validate_blind_suite)}[name]
     start = time.perf_counter()
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
     tables = tomllib.loads(WITHHELD_FILE.read_text())
@@ -280,6 +282,6 @@ def benchmark_diagnosis(measured=("two",), baseline=None) -> float:
     arm = load_arm(DEFAULT_MODEL_FILE)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        run_diagnosis(arm, DiagnosisConfig(measured, baseline, logs=False), Path(tmp))
+        run_diagnosis(arm, DiagnosisConfig(measured, baseline, processing="upstream", logs=False), Path(tmp))
         return time.perf_counter() - start
 
