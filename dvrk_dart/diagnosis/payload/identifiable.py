@@ -26,6 +26,7 @@ from dvrk_dart.diagnosis.payload.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.diagnosis.payload.payload_report import (
+    J1_SLOPE_SENTENCE,
     MASS_IDENTIFIED_RATIO,
     SWAMPED,
     WITHOUT_REPEAT,
@@ -238,6 +239,12 @@ def _text(value, interval, unit: str, number: str) -> str:
     return f"{value:{number}} {unit} (interval {interval[0]:{number}} to {interval[1]:{number}})"
 
 
+def j1_sentences(report: dict) -> list[str]:
+    """The sentence that quotes J1's slope at q = 0 with its interval (the efforts at q = 0 are quoted without)."""
+    slope = _text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad", "+.3f")
+    return [f"{J1_SLOPE_SENTENCE}{slope} at q = 0: the J1 signature that scales with the weight."]
+
+
 def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied: bool) -> list[str]:
     units = [arm.model.effort_unit(j) for j in JOINT_NAMES]
     moment = ", ".join("not determined" if v is None else f"{v:+.4f}" for v in report["first_moment_base_at_q0_kg_m"])
@@ -247,8 +254,7 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
         f"(base frame, q = 0, as a body on {report['first_moment_reference_link']}; pitch shaft centre at the base origin, shaft along base x, "
         "+y towards the remote centre of motion, +z up) "
         f"and its gravity efforts at q = 0: {efforts}.",
-        f"J1's effort changes with q1 at {_text(report['q1_gravity_slope_at_q0_nm_per_rad'], report['q1_gravity_slope_at_q0_nm_per_rad_interval'], 'N·m/rad', '+.3f')} "
-        "at q = 0: the J1 signature that scales with the weight.",
+        *j1_sentences(report),
     ]
     if effect.equivalent_links:
         words.append(f"The link is one of {', '.join((effect.link_name,) + effect.equivalent_links)}: payloads on these links give identical efforts.")

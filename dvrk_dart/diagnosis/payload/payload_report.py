@@ -60,6 +60,17 @@ NOT_RECORDED = "not recorded by the runs: no figure on it"
 YAW_SLOPE = "q1_gravity_slope_at_q0_nm_per_rad"
 
 
+#: how the sentences that quote J1's figures begin (their intervals grow after the words are written: yaw_path_inertia)
+J1_EFFORTS_SENTENCE = "Gravity efforts at q = 0: "
+J1_SLOPE_SENTENCE = "J1's effort changes with q1 at "
+
+
+def renew_sentences(report: dict, fresh: list[str]) -> None:
+    """The report's sentences on J1's figures replaced by `fresh` (written again from the final figures)."""
+    by_start = {start: f for f in fresh for start in (J1_EFFORTS_SENTENCE, J1_SLOPE_SENTENCE) if f.startswith(start)}
+    report["words"] = [next((f for start, f in by_start.items() if w.startswith(start)), w) for w in report.get("words", [])]
+
+
 def without_unrecorded_joints(report: dict, recorded: np.ndarray) -> None:
     """A payload report's gravity efforts at q = 0 (and at the hand position's)
     null, with the reason, on the joints the runs did not record; J1's slope

@@ -11,7 +11,15 @@ import numpy as np
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.payload.payload import equivalents_of, mass_seen_by_gravity, point_mass_parameters
-from dvrk_dart.diagnosis.payload.payload_report import SWAMPED, WITHOUT_REPEAT, effort_not_determined, pitch_shaft_offsets, swamp
+from dvrk_dart.diagnosis.payload.payload_report import (
+    J1_EFFORTS_SENTENCE,
+    J1_SLOPE_SENTENCE,
+    SWAMPED,
+    WITHOUT_REPEAT,
+    effort_not_determined,
+    pitch_shaft_offsets,
+    swamp,
+)
 from dvrk_dart.diagnosis.payload.intervals import INTERVAL_PROBABILITY
 from dvrk_dart.diagnosis.payload.periodic_payload import (
     Pair,
@@ -244,6 +252,14 @@ def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
     return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f})"
 
 
+def j1_sentences(report: dict, model) -> list[str]:
+    """The sentences that quote the gravity efforts at q = 0 and J1's slope, with their intervals."""
+    slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad")
+    return [J1_EFFORTS_SENTENCE + ", ".join(f"{j} {_interval_text(v, i, model.effort_unit(j))}" for j, v, i in
+                                            zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".",
+            f"{J1_SLOPE_SENTENCE}{slope} at q = 0 (J1's own path: how the real yaw axis lies relative to gravity)."]
+
+
 def _words(report: dict, model) -> list[str]:
     words = []
     if not report["found"]:
@@ -260,11 +276,7 @@ def _words(report: dict, model) -> list[str]:
     moment, intervals = report["first_moment_base_at_q0_kg_m"], report["first_moment_base_at_q0_kg_m_interval"]
     words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
                  + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
-    words.append("Gravity efforts at q = 0: " + ", ".join(
-        f"{j} {_interval_text(v, i, model.effort_unit(j))}" for j, v, i in
-        zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".")
-    slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad")
-    words.append(f"J1's effort changes with q1 at {slope} at q = 0 (J1's own path: how the real yaw axis lies relative to gravity).")
+    words += j1_sentences(report, model)
     if report["mass_kg"] is None:
         words.append(f"The mass is not determined: {report['not_determined'].get('mass_kg', '')}.")
     else:
