@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO, repeatable_share
 from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
@@ -201,7 +201,9 @@ def _repeatable_shares(result: dict) -> dict:
         values = repeatable_share(*(np.asarray(x, dtype=float) for x in (result["identified_model_gap_holdout"], gap, floor)))
         return [None if np.isnan(v) else float(v) for v in values]
 
-    shares = {"repeatable_gap_explained_share": share(after)}
+    shares = {"repeatable_gap_explained_share": share(after),
+              "repeatable_gap_share_null_when": f"the identified model's held-out gap is within {AT_FLOOR_RATIO:g}x the session floor (no "
+                                                "repeatable gap shown: a session's change alone can leave it), or the joint was not recorded"}
     if combined:
         shares["one_configuration"] = {**combined, "repeatable_gap_explained_share": share(combined["gap_holdout"])}
     return shares

@@ -146,6 +146,10 @@ def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, m
     return rows
 
 
+#: a gap within this multiple of the session floor is what a session's change alone can leave: no share of it is counted
+AT_FLOOR_RATIO = 1.5
+
+
 def above_floor(gap, floor):
     """The RMS-equivalent of a gap above the session floor, sqrt(gap^2 - floor^2) (0 at or below it)."""
     gap, floor = np.asarray(gap, dtype=float), np.asarray(floor, dtype=float)
@@ -156,9 +160,13 @@ def repeatable_share(before, after, floor):
     """The share of a gap's repeatable part (above the session floor) that is
     gone after, per joint: 1 - above_floor(after) / above_floor(before), in
     RMS-equivalents as the diagnosis's words weigh it (output/wording.py);
-    NaN where nothing repeatable was there."""
+    NaN where no repeatable gap is shown: the gap before within AT_FLOOR_RATIO
+    of the floor, which a session's change alone can leave (a joint at 1.34x
+    its floor read "100 % removed" once the effects took it under the floor)."""
+    before = np.asarray(before, dtype=float)
     repeatable, left = above_floor(before, floor), above_floor(after, floor)
-    return np.where(repeatable > 0.0, 1.0 - left / np.where(repeatable > 0.0, repeatable, 1.0), np.nan)
+    shown = before > AT_FLOOR_RATIO * np.asarray(floor, dtype=float)
+    return np.where(shown, 1.0 - left / np.where(shown, repeatable, 1.0), np.nan)
 
 
 def card_repeat(model: PsmModel, baseline, given_runs: list) -> tuple[str | None, str]:

@@ -11,12 +11,9 @@ import numpy as np
 
 from dvrk_dart.diagnosis.output.clauses import (ANSWER_JOINTS, constants_clause, effort_unit, identified_terms_clause, insertion_clause,
                                                 refit_clause)
-from dvrk_dart.diagnosis.output.wording import explanation, joints_apart, share_above_floor, words_for
+from dvrk_dart.diagnosis.output.wording import NOT_DETERMINED, explanation, joints_apart, share_above_floor, words_for
+from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.model.joints import JOINT_NAMES
-
-#: what is left counts as at the floor below this multiple of the session floor
-AT_FLOOR_RATIO = 1.5
-
 
 _KIND_WORDS = {
     "offset": "a constant effort offset on {joints}",
@@ -317,6 +314,11 @@ def answer_paragraphs(result: dict) -> list[str]:
         else "The gap"
     if effects == "no effect":
         sentence = f"{gap} is not explained: no effect of the library was selected; {where}, {gaps}"
+    elif explained["words"] == NOT_DETERMINED:
+        within = explained.get("within_floor") or []
+        sentence = (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x the session floor"
+                    f"{_floor_source(result)} on {', '.join(within)}, which a session's change alone can leave; the effects selected, "
+                    f"{effects}: {where}, {gaps}")
     elif explained["words"] == "not explained":
         sentence = f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {where}, {gaps}"
     else:
@@ -324,7 +326,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
-        sentence += ("; removed: " + ", ".join(f"{j} {'— (nothing above its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
+        sentence += ("; removed: " + ", ".join(f"{j} {f'— (within {AT_FLOOR_RATIO:g}x its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
                      + " of that gap above the session floor")
     sentence += identified_terms_clause(result) + constants_clause(result)
     floor = split_floors(result)

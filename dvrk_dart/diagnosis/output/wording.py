@@ -4,7 +4,12 @@ selected effects remove, on the joints they act on.
 
 - "mostly explained": they remove more than half of the gap there;
 - "partly explained": 20 % to 50 %;
-- "not explained": less than 20 %, or no effect selected.
+- "not explained": less than 20 %, or no effect selected;
+- "not determined": where a --repeat measured the session floor, every joint
+  they act on had a gap within 1.5x that floor before them (AT_FLOOR_RATIO):
+  a session's change alone can leave such a gap, so what they remove of it
+  says nothing (a joint at 1.34x its floor read "100 % removed, mostly
+  explained" once the effects took it under the floor).
 
 The share is 1 - after / before of the gap's RMS, averaged over the joints the
 selected effects act on (each joint in its own unit), on the held-out runs
@@ -27,15 +32,18 @@ import math
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.session_floor import above_floor, repeatable_share
+from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO, above_floor, repeatable_share
 
 MOSTLY_SHARE = 0.5
+#: the words where every joint the effects act on has its gap within AT_FLOOR_RATIO of the session floor
+NOT_DETERMINED = "not determined"
 #: a joint's gap at or below this fraction of the largest joint's is round-off, not a gap (0.1 N·m: 10 µN·m)
 NOTHING_TO_EXPLAIN = 1e-4
 PARTLY_SHARE = 0.2
 RULE = (f"1 - after/before of the gap's RMS (above the session floor where a --repeat measured it), averaged over the joints the "
         f"selected effects act on: above {MOSTLY_SHARE:.0%} 'mostly explained', {PARTLY_SHARE:.0%}-{MOSTLY_SHARE:.0%} 'partly explained', "
-        f"below {PARTLY_SHARE:.0%} 'not explained'")
+        f"below {PARTLY_SHARE:.0%} 'not explained'; a joint whose gap before is within {AT_FLOOR_RATIO:g}x the session floor does not "
+        f"count (a session's change alone can leave it), and where no joint is left, '{NOT_DETERMINED}'")
 
 
 def words_for(share: float | None) -> str:
@@ -57,17 +65,21 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
     split = "holdout" if gap_after.get("holdout") else "train"
     acted = {j for entry in selected_entries for j in entry.get("joints", ())}
     before, after = list(gap_before.get(split) or []), list(gap_after.get(split) or [])
+    at_floor = []  # the acted joints whose gap before is within AT_FLOOR_RATIO of the floor: nothing repeatable shown there
     for j, f in enumerate(floor or []):
         if f is not None and j < len(before) and before[j] is not None and after[j] is not None:
+            if before[j] <= AT_FLOOR_RATIO * f and joint_names[j] in acted:
+                at_floor.append(joint_names[j])
             before[j], after[j] = float(above_floor(before[j], f)), float(above_floor(after[j], f))
     largest = max((b for b in before if b is not None), default=0.0)
     joints = [j for j, name in enumerate(joint_names)
-              if name in acted and j < len(before) and before[j] is not None and after[j] is not None
+              if name in acted and name not in at_floor and j < len(before) and before[j] is not None and after[j] is not None
               and max(before[j], after[j]) > NOTHING_TO_EXPLAIN * largest]
     shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in joints}
     share = float(np.mean(list(shares.values()))) if joints else None
-    return {"words": words_for(share), "removed_share": share, "joints": list(shares), "runs": split, "rule": RULE,
-            "above_session_floor": floor is not None and any(f is not None for f in floor),
+    words = NOT_DETERMINED if share is None and at_floor else words_for(share)
+    return {"words": words, "removed_share": share, "joints": list(shares), "runs": split, "rule": RULE,
+            "above_session_floor": floor is not None and any(f is not None for f in floor), "within_floor": at_floor,
             "by_joint": {name: {"removed_share": s, "words": words_for(s)} for name, s in shares.items()}}
 
 
@@ -83,7 +95,8 @@ def joints_apart(explained: dict) -> str:
 
 def share_words(share: float | None) -> str:
     """A repeatable_share in words: a percentage, or why there is none."""
-    return "not determined (no repeatable gap above the session floor)" if share is None or math.isnan(share) else f"{share:.0%}"
+    return (f"not determined (the gap within {AT_FLOOR_RATIO:g}x the session floor: no repeatable gap shown)" if share is None or math.isnan(share)
+            else f"{share:.0%}")
 
 
 def terms_beside_own_friction(study: dict) -> str:
