@@ -42,7 +42,10 @@ def test_held_out_trajectory_beats_the_identified_model(arm, spec, tmp_path):
     combined = result["one_configuration"]
     gap = np.array(combined["gap_holdout"][:3])
     assert np.all(gap <= [0.035, 0.065, 0.085]) and np.all(gap < after - [0.004, 0.01, 0.02]), (gap, after)
-    assert np.all(np.array(combined["repeatable_gap_explained_share"][:3]) > np.array(result["repeatable_gap_explained_share"][:3]) + 0.1)
+    # the shares of the identified model's repeatable gap, where one is shown (J2's gap, 0.0950 N·m, is within 1.5x its
+    # session floor, 0.0636: none counted there, as the answer says)
+    pairs = [(c, e) for c, e in zip(combined["repeatable_gap_explained_share"][:3], result["repeatable_gap_explained_share"][:3]) if e is not None]
+    assert len(pairs) >= 2 and all(c > e + 0.1 for c, e in pairs), (combined["repeatable_gap_explained_share"], result["repeatable_gap_explained_share"])
     # written beside diagnosis.json as a file `--dynamics` runs
     assert diagnosis_sim_config(tmp_path / ONE_CONFIGURATION_FILE) == SimConfig.from_dict(combined["sim_config"])
     # the held-out gap split: explained, session-to-session (floor from one vs one-no-weight), left over

@@ -85,6 +85,8 @@ def refit_check(arm: Arm, train, holdout, result: dict, out_dir: Path, executor:
         "simulated_source": "DART replay of each held-out run, every identified term as physics",
         "gap_holdout_arm_params": published, "gap_holdout_refit": refit,
         "repeatable_gap_removed_share": share,
+        "repeatable_gap_removed_share_null_when": "the published parameters' held-out gap is within 1.5x the session floor (no repeatable "
+                                                  "gap shown), or no --repeat measured the floor",
         "words": refit_sentence(published, refit, share),
     }
 

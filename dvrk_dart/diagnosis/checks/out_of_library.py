@@ -87,11 +87,15 @@ def validate_out_of_library(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
                   "injected_rms": float(rms(extra)[j]), "noise_rms": noise, "gap_before": before, "gap_after": after,
                   "closest_library_effect": selected[0] if selected else None, "selected": selected,
                   "explained_share_of_gap": float(1.0 - after / before) if before > 0 else 0.0, "left_over_above_noise": leftover}
+        report["words"] = result["explanation"]["words"]
         cases.append(report)
-        verdicts.append({"check": f"out-of-library {case['name']}: not explained to within the noise (a leftover remains)",
+        # a leftover is present, not large: the blind suite's tolerance (1.5x the noise) would call these gaps closed
+        verdicts.append({"check": f"out-of-library {case['name']}: a leftover above the noise remains on {JOINT_NAMES[j]} (gap after over "
+                                  f"{np.sqrt(LEFTOVER_ENERGY_RATIO):.2f}x the noise in RMS)",
                          "passed": bool(after**2 > LEFTOVER_ENERGY_RATIO * noise**2),
-                         "value": f"{JOINT_NAMES[j]}: closest {report['closest_library_effect']}, explains {report['explained_share_of_gap']:.0%} of the gap, "
-                                  f"after {after:.4f} vs noise {noise:.4f} {report['unit']}, left over {leftover:.4f}"})
+                         "value": f"closest {report['closest_library_effect']}, explains {report['explained_share_of_gap']:.0%} of the gap "
+                                  f"(answer: {report['words']}), after {after:.4f} vs noise {noise:.4f} {report['unit']} ({after / noise:.2f}x), "
+                                  f"left over {leftover:.4f}"})
     summary = {"cases": cases, "noise_rms": noise_rms.tolist(), "generator": "DART replay + physics outside the library + coloured noise"}
     write_json_atomic(out_dir / "out_of_library.json", summary)
     return summary, verdicts

@@ -156,11 +156,13 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
         estimates[run] = {"mass_kg": at.get("mass_kg"), "interval": at.get("mass_kg_interval")}
     known = [e for e in estimates.values() if e["mass_kg"] is not None and e["interval"] is not None]
     agree = len(known) == len(estimates) and max(e["interval"][0] for e in known) <= min(e["interval"][1] for e in known)
+    holding_zero = [run for run, e in estimates.items() if e in known and not e["interval"][0] > 0.0]  # a mass not determined
     value = "; ".join(f"{run} {e['mass_kg']:.3f} kg [{e['interval'][0]:.3f}, {e['interval'][1]:.3f}]" if e in known else f"{run}: no mass"
                       for run, e in estimates.items())
     return estimates, [{"check": f"the same {spec['expected_mass_kg'] * 1000:g} g at two speeds ({', '.join(spec['measured'])}), each "
-                                 "diagnosed alone: masses at the hand position agree within their intervals",
-                        "passed": bool(agree), "value": value}]
+                                 "diagnosed alone: masses at the hand position agree within their intervals"
+                                 + (f" ({', '.join(holding_zero)}: an interval that holds zero, a mass not determined)" if holding_zero else ""),
+                        "passed": bool(agree), "value": value, **({"not_determined": True} if holding_zero else {})}]
 
 
 def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:

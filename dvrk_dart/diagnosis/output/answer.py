@@ -15,6 +15,9 @@ from dvrk_dart.diagnosis.output.wording import NOT_DETERMINED, explanation, join
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.model.joints import JOINT_NAMES
 
+#: an effort at q = 0 below this is round-off, not a size (an MTM mismatch's q2 read +2.36e-19 N·m)
+ROUND_OFF_EFFORT = 1e-9
+
 _KIND_WORDS = {
     "offset": "a constant effort offset on {joints}",
     "armature": "extra reflected motor inertia on {joints}",
@@ -59,7 +62,7 @@ def _size_words(entry: dict) -> str:
         return ""
     if entry.get("kind") == "mass_scale":
         return f", {abs(size):.0%} {'lighter' if size < 0 else 'heavier'}"
-    return f", {size:.0%} of it" if unit == "1" else f", size {size:.3g} {unit}".rstrip()  # a share of an identified term
+    return f", {size:.0%} of the identified term" if unit == "1" else f", size {size:.3g} {unit}".rstrip()
 
 
 def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None, every: bool = False) -> str:
@@ -77,7 +80,7 @@ def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list
             return ", size not determined: no gravity effort at q = 0 is told from zero"
     if not shown:
         return ""
-    shown = [j for j in shown if efforts[j] != 0.0] if every else shown[:1]
+    shown = [j for j in shown if abs(efforts[j]) > ROUND_OFF_EFFORT] if every else shown[:1]
     return (", " + ", ".join(f"{efforts[j]:+.3g} {units[j]} on {JOINT_NAMES[j]}" for j in shown) + " at q = 0") if shown else ""
 
 

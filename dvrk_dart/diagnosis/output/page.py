@@ -107,14 +107,15 @@ def _payload(result: dict) -> tuple[str, Markup | None]:
         efforts = table(["payload at q = 0", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES[:3])],
                         [[text_cell("gravity effort (interval)"), *(text_cell(_value_interval(v, i)) for v, i in zip(g[:3], gi[:3]))]], css="")
         return " ".join(payload["words"]), efforts
-    text = (f"payload: {payload['mass_kg']:.3f} kg on {payload['link']} ({payload['group']}), "
-            f"at {[round(x, 3) for x in payload['position_m']]} m in the link frame")
+    profile = payload.get("mass_profile")
+    mass = f"{payload['mass_kg']:.3f} kg" if not profile or profile["identifiable"] else \
+        f"a mass not identified by these runs (the fit's {payload['mass_kg']:.3f} kg)"
+    text = f"payload: {mass} on {payload['link']} ({payload['group']}), at {[round(x, 3) for x in payload['position_m']]} m in the link frame"
     if payload.get("equivalent_links"):
         text += f"; the efforts cannot tell it from the same payload on {', '.join(payload['equivalent_links'])}"
-    if payload.get("mass_profile"):
-        lo, hi = payload["mass_profile"]["mass_interval_kg"]
-        pinned = "identified" if payload["mass_profile"]["identifiable"] else "not identified by these runs"
-        text += f"; cross-validated mass interval {lo:.3f}-{hi:.3f} kg ({pinned})"
+    if profile:
+        lo, hi = payload["mass_interval_kg"]
+        text += f"; the masses cross-validation cannot tell apart, with the fit's: {lo:.3f}-{hi:.3f} kg"
     return text, None
 
 

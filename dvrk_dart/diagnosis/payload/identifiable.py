@@ -29,6 +29,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     J1_SLOPE_SENTENCE,
     MASS_IDENTIFIED_RATIO,
     SWAMPED,
+    at_position_sentence,
     WITHOUT_REPEAT,
     effort_not_determined,
     pitch_shaft_offsets,
@@ -221,8 +222,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
         report["payload_at"] = _at_position(arm, selector, chosen, index, at_index, session_fit)
         report["position_m"] = report["payload_at"]["position_m"]
         at = report["payload_at"]
-        words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
-                     f"{_text(at['mass_kg'], at['mass_kg_interval'], 'kg', '.3f')}.")
+        words.append(at_position_sentence(at, _text(at['mass_kg'], at['mass_kg_interval'], 'kg', '.3f')))
     if session_fit is None:
         words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "
                      "which share their sessions: " + WITHOUT_REPEAT)

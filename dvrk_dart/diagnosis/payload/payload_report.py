@@ -65,6 +65,13 @@ J1_EFFORTS_SENTENCE = "Gravity efforts at q = 0: "
 J1_SLOPE_SENTENCE = "J1's effort changes with q1 at "
 
 
+def at_position_sentence(at: dict, mass_text: str) -> str:
+    """The mass a point at the hand position reads (`mass_text`: it with its interval), not determined where that holds zero."""
+    zero = at["mass_kg"] is not None and at["mass_kg_interval"] is not None and at["mass_kg_interval"][0] <= 0.0
+    return (f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is {mass_text}"
+            + (": not determined, its interval holds zero" if zero else "") + ".")
+
+
 def renew_sentences(report: dict, fresh: list[str]) -> None:
     """The report's sentences on J1's figures replaced by `fresh` (written again from the final figures)."""
     by_start = {start: f for f in fresh for start in (J1_EFFORTS_SENTENCE, J1_SLOPE_SENTENCE) if f.startswith(start)}
@@ -234,5 +241,11 @@ def describe_payload(effect: PointPayload, p: np.ndarray, arm: Arm, profile: dic
     report["gravity_efforts_at_q0"] = payload_gravity_efforts_at_zero(arm, effect.link_key, p[0], p[1:4]).tolist()
     if profile is not None:
         report["mass_profile"] = profile
-        report["mass_interval_kg"] = profile["mass_interval_kg"]
+        # the profile's masses are those whose cross-validated score the bootstrap cannot tell from the best one's; the
+        # fit's own mass minimises the training error instead, and may lie outside them (0.571 kg beside [0.60, 2.0]):
+        # the interval holds both, and the mass is then not identified
+        lo, hi = profile["mass_interval_kg"]
+        report["mass_interval_kg"] = [min(lo, float(p[0])), max(hi, float(p[0]))]
+        if not lo <= p[0] <= hi:
+            profile["identifiable"] = False
     return report

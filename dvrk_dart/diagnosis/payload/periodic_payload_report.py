@@ -16,6 +16,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     J1_SLOPE_SENTENCE,
     SWAMPED,
     WITHOUT_REPEAT,
+    at_position_sentence,
     effort_not_determined,
     pitch_shaft_offsets,
     swamp,
@@ -283,8 +284,7 @@ def _words(report: dict, model) -> list[str]:
         words.append(f"Mass {_interval_text(report['mass_kg'], report['mass_kg_interval'], 'kg')}.")
     at = report.get("payload_at")
     if at:
-        words.append(f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is "
-                     f"{_interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')}.")
+        words.append(at_position_sentence(at, _interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')))
     words.append(f"Intervals: {report['interval_method']}.")
     if report["left_out"]:
         words.append(f"Left out of this fit: {', '.join(report['left_out'])} (another motion than the baseline's: the model's error "
