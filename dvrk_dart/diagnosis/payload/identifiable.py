@@ -270,7 +270,9 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
         words.append(f"The mass is not determined: {SWAMPED}.")
     else:
         lo, hi = report["mass_kg_interval"]
-        words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed axis sees m·c only, "
+        span = (f"any mass the search allows, {max(lo, 0.0):.3f}-{hi:.3f} kg, fits" if lo <= 0.0 and hi >= effect.upper[0]
+                else f"interval {max(lo, 0.0):.3f}-{hi:.3f} kg")
+        words.append(f"The mass is not identified ({span}): gravity on a link turning about a fixed axis sees m·c only, "
                      "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
     words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
                  "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
