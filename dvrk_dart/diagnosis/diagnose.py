@@ -16,7 +16,7 @@ import pandas as pd
 from dvrk_dart.diagnosis.fit.design import Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
-from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, j1_sentences, with_point_ties
+from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, with_point_ties
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import (
@@ -24,10 +24,8 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     effort_not_determined,
     flag_payload_at_link,
     mass_profile,
-    renew_sentences,
     without_unrecorded_joints,
 )
-from dvrk_dart.diagnosis.payload.periodic_payload_report import j1_sentences as periodic_j1_sentences
 from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload_report
 from dvrk_dart.diagnosis.payload.yaw_path_inertia import span_both_path_models
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
@@ -235,8 +233,6 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
         reports = [periodic_payload_report(problem.arm, candidates, problem.train_runs, problem.repeat_run, problem.features_of, offsets, at,
                                            effects[i]) for i in selected_moments[:1]]
         span_both_path_models(problem, s.final.params, reports, at_key, periodic=True)
-        for report in reports:
-            renew_sentences(report, periodic_j1_sentences(report, problem.arm.model))
         return reports, points
     session_fit = _session_fit(problem, s)
     # J1's constant is read from a run minus its baseline of the same motion; without one, from runs of another motion
@@ -251,8 +247,6 @@ def _payload_reports(problem: Problem, s: Selection, profile_payload_mass: bool)
         elif report.get("payload_at"):
             effort_not_determined(report["payload_at"], 0, J1_OTHER_MOTION)
     span_both_path_models(problem, s.final.params, reports, at_key, periodic=False, payloads=selected_moments)
-    for report in reports:
-        renew_sentences(report, j1_sentences(report))
     return reports, points
 
 

@@ -100,10 +100,10 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
                 verdicts.append({"check": check + " (or not determined)", "passed": bool(reason), "value": f"not determined: {reason}",
                                  "not_determined": True})
                 continue
-            width = (intervals[axis][1] - intervals[axis][0]) / max(abs(hand_moment[axis]), 1e-12)
+            width = (intervals[axis][1] - intervals[axis][0]) / max(float(np.linalg.norm(hand_moment)), 1e-12)
             verdicts.append({"check": check, "passed": _inside(hand_moment[axis], intervals[axis]),
                              "value": f"{hand_moment[axis]:+.4f} kg·m vs [{intervals[axis][0]:+.4f}, {intervals[axis][1]:+.4f}] "
-                                      f"(the interval {width:.1f}x the weight's own)"})
+                                      f"(the interval {width:.1f}x the weight's whole first moment)"})
         verdicts.append(_mass_verdict(payload, m_true, tol, title))
         at = payload.get("payload_at")
         if at:

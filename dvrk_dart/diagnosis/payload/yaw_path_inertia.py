@@ -30,7 +30,9 @@ from dvrk_dart.diagnosis.effects.geometry import joints_moving_link
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
 from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
-from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _yaw_slope
+from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _yaw_slope, j1_sentences
+from dvrk_dart.diagnosis.payload.payload_report import renew_sentences
+from dvrk_dart.diagnosis.payload.periodic_payload_report import j1_sentences as periodic_j1_sentences
 from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -187,5 +189,6 @@ def span_both_path_models(problem, params: dict, reports: list[dict], at_key: in
             models = (RIGID_PATH, POINT_INERTIA) if inertia is not None else (RIGID_PATH, BARE_PATH)
             shifts = _part_shifts(problem.arm, [at_key], targets, own, inertia, models)
             moved += [("at the hand position", name, shifts) for name in span_readings(at, shifts, own)]
-        if moved:
+        if moved:  # the sentences that quote J1's figures written again, then why they grew
+            renew_sentences(report, periodic_j1_sentences(report, model) if periodic else j1_sentences(report))
             report.setdefault("words", []).append(path_words(moved, model.effort_unit(JOINT_NAMES[YAW_PATH_JOINT])))
