@@ -8,7 +8,7 @@ that force to the instrument's body; it is the truth. The estimate
 `F = J^-T (tau - tau_model)` (model/force.py) from the simulated efforts,
 with the model the simulation was built from evaluated at the simulated
 states, must give it back (sim-to-sim); a held-out run's real residual added
-to the efforts gives the error a user should expect on the real arm."""
+to the efforts estimates the error on the real arm, if the free-motion residual carries into contact unchanged."""
 
 from __future__ import annotations
 

@@ -101,7 +101,9 @@ def validate_real_payload(arm: Arm, spec: dict, out_dir: Path, title: str) -> tu
                                  "not_determined": True})
                 continue
             width = (intervals[axis][1] - intervals[axis][0]) / max(float(np.linalg.norm(hand_moment)), 1e-12)
-            verdicts.append({"check": check, "passed": _inside(hand_moment[axis], intervals[axis]),
+            holds_zero = _inside(0.0, intervals[axis])  # the component is not told from none: inside it says little
+            verdicts.append({"check": check + (" (its interval holds zero: not determined)" if holds_zero else ""),
+                             "passed": _inside(hand_moment[axis], intervals[axis]), **({"not_determined": True} if holds_zero else {}),
                              "value": f"{hand_moment[axis]:+.4f} kg·m vs [{intervals[axis][0]:+.4f}, {intervals[axis][1]:+.4f}] "
                                       f"(the interval {width:.1f}x the weight's whole first moment)"})
         verdicts.append(_mass_verdict(payload, m_true, tol, title))

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.analysis.checks import on_not_determined, verdict_label
+from dvrk_dart.analysis.checks import closer_than, on_not_determined, verdict_label
 from dvrk_dart.diagnosis.api import DiagnosisConfig, images_of, run_diagnosis, simulation_hook
 from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt
 from dvrk_dart.diagnosis.diagnose import diagnose
@@ -88,7 +88,7 @@ def validate_holdout(arm: Arm, spec: dict, out_dir: Path, parameter_band: Path |
     after = np.asarray(result["gap_after"]["holdout"], dtype=float)
     shares = _share_texts(result, result.get("repeatable_gap_explained_share"))  # of the identified model's repeatable gap (api.run_diagnosis)
     verdicts = [{"check": f"held-out {', '.join(spec['holdout'])}: simulation with the selected effects at least as close as the identified model on {j}",
-                 "passed": bool(after[i] <= bar[i]), "value": f"{after[i]:.4f} vs {bar[i]:.4f} {arm.model.effort_unit(j)}{shares[i]}"}
+                 **closer_than(after[i], bar[i]), "value": f"{after[i]:.5f} vs {bar[i]:.5f} {arm.model.effort_unit(j)}{shares[i]}"}
                 for i, j in enumerate(JOINT_NAMES[:3])]
     return result, verdicts + _refit_verdicts(result, spec) + _insertion_verdicts(result, spec)
 
@@ -127,7 +127,7 @@ def _one_configuration_verdicts(result: dict, spec: dict) -> list[dict]:
     gap, bar = combined["gap_holdout"], result["identified_model_gap_holdout"]
     shares = _share_texts(result, combined.get("repeatable_gap_explained_share"))
     return [{"check": f"held-out {', '.join(spec['holdout'])}: one DART configuration (the selected effects, J3's terms and the pitch-angle loads) closer than the "
-                      f"identified model on {j}", "passed": bool(gap[i] <= bar[i]),
+                      f"identified model on {j}", **closer_than(gap[i], bar[i]),
              "value": f"{gap[i]:.4f} vs {bar[i]:.4f} {result['units'][i]}{shares[i]}"}
             for i, j in enumerate(JOINT_NAMES[:3])]
 
@@ -141,7 +141,7 @@ def _refit_verdicts(result: dict, spec: dict) -> list[dict]:
     before, after = refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]
     return [{"check": f"held-out {', '.join(spec['holdout'])}: the identified parameters refitted on {', '.join(spec['train'])} at least as close "
                       f"as the published ones on {j} (both replayed with every identified term)",
-             "passed": bool(after[i] <= before[i]), "value": f"{after[i]:.4f} vs {before[i]:.4f} {result['units'][i]}"}
+             **closer_than(after[i], before[i]), "value": f"{after[i]:.4f} vs {before[i]:.4f} {result['units'][i]}"}
             for i, j in enumerate(JOINT_NAMES[:3])]
 
 

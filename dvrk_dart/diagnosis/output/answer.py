@@ -176,7 +176,8 @@ def beyond_identified_sentence(result: dict) -> str:
         apart = joints_apart({"words": words_for(removed), "by_joint": {JOINT_NAMES[j]: {"removed_share": share, "words": words_for(share)}
                                                                         for j, share in shares.items()}})
         gaps += (f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in shares)}: {words_for(removed)} beyond it"
-                 + (f" ({apart})" if apart else ""))
+                 + (f" ({apart})" if apart else "")
+                 + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
     return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
