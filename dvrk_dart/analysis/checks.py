@@ -3,6 +3,7 @@ the comparison with published numbers (pipelines/published.toml)."""
 
 from __future__ import annotations
 
+import decimal
 import math
 import os
 import tomllib
@@ -144,6 +145,11 @@ def compare_with_published(metrics: pd.DataFrame, published: dict) -> pd.DataFra
                     "reproduced_to": abs(ours - value) if goal == "equal" else math.nan,
                 })
     return pd.DataFrame(rows, columns=COMPARISON_COLUMNS)
+
+
+def half_last_digit(published: float) -> float:
+    """Half a unit of a published figure's last digit, as written (0.2394: 5e-5)."""
+    return 0.5 * 10.0 ** decimal.Decimal(repr(float(published))).as_tuple().exponent
 
 
 def on_not_determined(verdict: dict) -> bool:

@@ -51,7 +51,7 @@ from dvrk_dart.io.html import (
     unit_text,
 )
 from dvrk_dart.analysis.run_folders import CONFIG_FILE
-from dvrk_dart.analysis.checks import KIND_ERROR, MAX_MEANINGFUL_RATIO, ROUND_OFF, STATUS_FAIL, STATUS_MISSING, STATUS_PASS, load_published, other_checks
+from dvrk_dart.analysis.checks import KIND_ERROR, MAX_MEANINGFUL_RATIO, ROUND_OFF, STATUS_FAIL, STATUS_MISSING, STATUS_PASS, half_last_digit, load_published, other_checks
 from dvrk_dart.analysis.tables import (
     ALL_COMPONENTS,
     CARTESIAN_ORIENTATION_AXES,
@@ -182,9 +182,11 @@ def _comparison_entry(comparison: pd.DataFrame, entry: dict) -> dict | None:
                 better, round_off = better + 1, round_off + 1
             else:
                 ratio = compared.ratio_published_over_ours
-                css = ("better" if ratio > 1 else ("worse" if ratio < 1 else "")) if is_error else ""
+                # better only beyond the published figure's last digit (0.239392 is not better than a published 0.2394)
+                ahead = ratio > 1 and compared.our_value < first.loc[c, "published_value"] - half_last_digit(first.loc[c, "published_value"])
+                css = ("better" if ahead else ("worse" if ratio < 1 else "")) if is_error else ""
                 second.append(num_cell(ratio, RATIO_DIGITS, css, **key, field="ratio_published_over_ours"))
-                better += int(ratio > 1)
+                better += int(ahead)
             if goal == "smaller":
                 total += int(math.isfinite(compared.our_value))
         counts[run] = [better, round_off, total]
