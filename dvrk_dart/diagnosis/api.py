@@ -16,6 +16,7 @@ from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
 from dvrk_dart.diagnosis.beyond.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
+from dvrk_dart.diagnosis.output.answer import beyond_identified
 from dvrk_dart.diagnosis.output.page import diagnosis_page
 from dvrk_dart.diagnosis.payload.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, check_refit_inputs, refit_check
@@ -161,7 +162,8 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     # the diagnosis and what was studied on top of it: built once here, written once
     result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base, "arm_model": arm_model_record(arm.model),
               "params": file_record(arm.params.source), "versions": software_versions()}
-    result = {**result, **(_repeatable_shares(result) if holdout else {}), "wall_time_s": time.perf_counter() - start}
+    result = {**result, **(_repeatable_shares(result) if holdout else {})}
+    result = {**result, "beyond_identified_model": beyond_identified(result), "wall_time_s": time.perf_counter() - start}
     _write_one_configuration(result, out_dir)
     write_json_atomic(out_dir / "diagnosis.json", result)
     write_text_atomic(out_dir / "diagnosis.html", diagnosis_page(result, [str(p.relative_to(out_dir)) for p in images_of(out_dir)], page_title(result)))

@@ -131,17 +131,18 @@ def _main_joints(recorded: list[int]) -> list[int]:
     return [j for j in recorded if j < ANSWER_JOINTS] or recorded
 
 
-def beyond_identified_sentence(result: dict) -> str:
-    """What the data show beyond the identified model, first: its gap on the
-    held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
+def beyond_identified(result: dict) -> dict | None:
+    """What the data show beyond the identified model, as figures (diagnosis.json's `beyond_identified_model`):
+    per joint J1..J3 its held-out gap (`bar`) and the diagnosis's simulation's (`after`), the joints where that
+    is worse, those where the bar is already at the floor (no share), the one rule's shares and words; None
+    without held-out runs."""
     bar = result.get("identified_model_gap_holdout")
     if result.get("diagnosis_base", "inertial") != "inertial":  # the effects sit on the identified arm in DART: it is the bar
         bar = (result.get("gap_before") or {}).get("holdout")
     combined = result.get("one_configuration")
-    after, what = ((combined["gap_holdout"], "one DART configuration: the selected effects, J3's terms and the pitch-angle loads")
-                   if combined else ((result.get("gap_after") or {}).get("holdout"), "the selected effects simulated in DART"))
+    after = combined["gap_holdout"] if combined else (result.get("gap_after") or {}).get("holdout")
     if not bar or not after:
-        return ""
+        return None
     recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
     acted = {JOINT_NAMES.index(j) for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
     acted |= set(range(ANSWER_JOINTS)) if combined else set()  # J3's terms and the pitch loads act on J1..J3
@@ -152,31 +153,42 @@ def beyond_identified_sentence(result: dict) -> str:
     # was "worse"); at the floor, only beyond it (a tenth of the noise was "worse")
     made_worse = {j for j in recorded if after[j] > bar[j] and f"{after[j]:.3g}" != f"{bar[j]:.3g}" and (j in acted or not result.get("effects"))
                   and (j not in at_level or after[j] > AT_FLOOR_RATIO * level[j])}
-    if result.get("diagnosis_base", "inertial") != "inertial" and not made_worse:
-        return ""  # the answer's own figures are these: said once
-    shown = sorted(set(_main_joints(recorded)) | made_worse)
-    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
-    worse = [JOINT_NAMES[j] for j in shown if j in made_worse]
-    if worse:
-        gaps += f"; worse than the identified model on {', '.join(worse)}: what was fitted there on the training runs does not carry to the held-out runs"
     # the one rule (output/wording.py), against the identified model instead of the inertia alone: above the floor where there is one
     shares = {j: (share_above_floor(bar[j], after[j], floor[j]) if floor and floor[j] is not None else 1.0 - after[j] / bar[j])
               for j in _main_joints(recorded) if bar[j] > 0 and j not in at_level}
-    at_main = [JOINT_NAMES[j] for j in _main_joints(recorded) if j in at_level]
-    if at_main:
+    shares = {JOINT_NAMES[j]: share for j, share in shares.items() if share is not None}
+    removed = sum(shares.values()) / len(shares) if shares else None
+    return {"bar": [bar[j] for j in range(len(bar))], "after": [after[j] for j in range(len(after))], "recorded": recorded,
+            "simulation": "one configuration" if combined else "the selected effects", "made_worse": [JOINT_NAMES[j] for j in sorted(made_worse)],
+            "at_floor": [JOINT_NAMES[j] for j in _main_joints(recorded) if j in at_level], "above_session_floor": bool(floor),
+            "removed_share": removed, "words": words_for(removed) if removed is not None else None,
+            "by_joint": {name: {"removed_share": share, "words": words_for(share)} for name, share in shares.items()}}
+
+
+def beyond_identified_sentence(result: dict) -> str:
+    """What the data show beyond the identified model, first: its gap on the
+    held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
+    found = beyond_identified(result)
+    if found is None or (result.get("diagnosis_base", "inertial") != "inertial" and not found["made_worse"]):
+        return ""  # the answer's own figures are these: said once
+    bar, after, floor = found["bar"], found["after"], result.get("session_floor")
+    what = ("one DART configuration: the selected effects, J3's terms and the pitch-angle loads" if found["simulation"] == "one configuration"
+            else "the selected effects simulated in DART")
+    worse = [JOINT_NAMES.index(name) for name in found["made_worse"]]
+    shown = sorted(set(_main_joints(found["recorded"])) | set(worse))
+    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
+    if worse:
+        gaps += f"; worse than the identified model on {', '.join(found['made_worse'])}: what was fitted there on the training runs does not carry to the held-out runs"
+    if found["at_floor"]:
         level_words = "the session floor, where a session's change" if floor else "the noise, where the noise"
         gaps += (f"; the identified model's gap is within {AT_FLOOR_RATIO:g}x {level_words} alone can leave it, on "
-                 f"{', '.join(at_main)}: no share counted there")
-    shares = {j: share for j, share in shares.items() if share is not None}
-    removed = sum(shares.values()) / len(shares) if shares else None
+                 f"{', '.join(found['at_floor'])}: no share counted there")
+    removed = found["removed_share"]
     if removed is not None:
         gap = "the identified model's gap" + (" above the session floor" if floor else "")
         change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
-        # a joint whose own share earns other words than the average's, named, as in the main sentence
-        apart = joints_apart({"words": words_for(removed), "by_joint": {JOINT_NAMES[j]: {"removed_share": share, "words": words_for(share)}
-                                                                        for j, share in shares.items()}})
-        gaps += (f"; {change} on average over {', '.join(JOINT_NAMES[j] for j in shares)}: {words_for(removed)} beyond it"
-                 + (f" ({apart})" if apart else "")
+        apart = joints_apart({"words": found["words"], "by_joint": found["by_joint"]})  # joints whose own words differ, named
+        gaps += (f"; {change} on average over {', '.join(found['by_joint'])}: {found['words']} beyond it" + (f" ({apart})" if apart else "")
                  + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
@@ -330,8 +342,11 @@ def answer_paragraphs(result: dict) -> list[str]:
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
+        counted = explained.get("joints") or []
+        mean = (f"; {explained['removed_share']:.0%} on average over {', '.join(counted)}, as the words weigh it"
+                if explained.get("removed_share") is not None and counted != joints else "")
         sentence += ("; removed: " + ", ".join(f"{j} {f'— (within {AT_FLOOR_RATIO:g}x its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
-                     + " of that gap above the session floor")
+                     + " of that gap above the session floor" + mean)
     sentence += identified_terms_clause(result) + constants_clause(result)
     floor = split_floors(result)
     if floor is None:

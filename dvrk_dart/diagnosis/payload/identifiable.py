@@ -217,7 +217,7 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
     report["position_m"] = (np.asarray(p[1:4]) / p[0]).tolist() if mass_identified else None
     moment = report["first_moment_base_at_q0_kg_m"]
     report["pitch_shaft_offsets_of_first_moment_m_kg"] = pitch_shaft_offsets(arm, np.asarray(moment)) if None not in moment else None
-    words = _first_moment_words(report, arm, effect, bool(ties))
+    words = _first_moment_words(report, arm, effect, bool(ties), at_index is not None)
     if at_index is not None:
         report["payload_at"] = _at_position(arm, selector, chosen, index, at_index, session_fit)
         report["position_m"] = report["payload_at"]["position_m"]
@@ -245,7 +245,7 @@ def j1_sentences(report: dict) -> list[str]:
     return [f"{J1_SLOPE_SENTENCE}{slope} at q = 0: the J1 signature that scales with the weight."]
 
 
-def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied: bool) -> list[str]:
+def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied: bool, at_given: bool) -> list[str]:
     units = [arm.model.effort_unit(j) for j in JOINT_NAMES]
     moment = ", ".join("not determined" if v is None else f"{v:+.4f}" for v in report["first_moment_base_at_q0_kg_m"])
     efforts = ", ".join(f"{j} {'not determined' if v is None else f'{v:+.3f} {u}'}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units))
@@ -273,7 +273,8 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
         span = (f"any mass the search allows, {max(lo, 0.0):.3f}-{hi:.3f} kg, fits" if lo <= 0.0 and hi >= effect.upper[0]
                 else f"interval {max(lo, 0.0):.3f}-{hi:.3f} kg")
         words.append(f"The mass is not identified ({span}): gravity on a link turning about a fixed axis sees m·c only, "
-                     "and the inertia of a small mass is below the noise; give --payload-at LINK:x,y,z to turn the first moment into a mass.")
+                     "and the inertia of a small mass is below the noise" + ("" if at_given else
+                                                                             "; give --payload-at LINK:x,y,z to turn the first moment into a mass") + ".")
     words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
                  "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
                  "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "
