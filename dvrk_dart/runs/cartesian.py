@@ -130,13 +130,7 @@ def run_cartesian(arm: Arm, scenario: Scenario, mode: str, config: SimConfig, du
         closure_residual_m=np.asarray(log.closure, dtype=float),
         body_positions=log.body_positions(),
     )
-    record.metrics = {
-        "steps": log.steps_done,
-        "duration_s": log.steps_done * config.dt_s,
-        "realtime_factor": log.steps_done * config.dt_s / wall if wall > 0 else None,
-        "passive_joint_error_max_rad": float(np.max(log.passive, initial=0.0)),
-        "counterweight_error_max_m": float(np.nanmax(np.abs(log.counterweight), initial=0.0)) if len(log) else 0.0,
-    }
+    record.metrics = log.figures(config.dt_s, wall)
     if log.error is not None:
         record.metrics["error"] = str(log.error)
     return record

@@ -65,6 +65,14 @@ class LoopLog:
     def counterweight(self) -> np.ndarray:
         return self.readout["counterweight"]
 
+    def figures(self, dt: float, wall_s: float) -> dict:
+        """What every run records of its loop: steps, simulated time (the steps taken, to a divergence, times the
+        step), simulated s per wall s of the loop, the largest passive-joint and counterweight errors."""
+        return {"steps": self.steps_done, "duration_s": self.steps_done * dt,
+                "realtime_factor": self.steps_done * dt / wall_s if wall_s > 0 else None,
+                "passive_joint_error_max_rad": float(np.max(self.passive, initial=0.0)),
+                "counterweight_error_max_m": float(np.nanmax(np.abs(self.counterweight), initial=0.0)) if len(self) else 0.0}
+
     def tool_pose(self) -> np.ndarray:
         """(N, 7) position (m) + quaternion (x, y, z, w), one batched conversion."""
         poses = self.readout["tool"]

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
-from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
+from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO, repeatable_share
 from dvrk_dart.diagnosis.fit.result import gaps
 from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
 from dvrk_dart.errors import DvrkDartError
@@ -85,8 +85,8 @@ def refit_check(arm: Arm, train, holdout, result: dict, out_dir: Path, executor:
         "simulated_source": "DART replay of each held-out run, every identified term as physics",
         "gap_holdout_arm_params": published, "gap_holdout_refit": refit,
         "repeatable_gap_removed_share": share,
-        "repeatable_gap_removed_share_null_when": "the published parameters' held-out gap is within 1.5x the session floor (no repeatable "
-                                                  "gap shown), or no --repeat measured the floor",
+        "repeatable_gap_removed_share_null_when": f"the published parameters' held-out gap is within {AT_FLOOR_RATIO:g}x the session floor "
+                                                  "(no repeatable gap shown), or no --repeat measured the floor",
         "words": refit_sentence(published, refit, share),
     }
 
