@@ -166,7 +166,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     extent = data["data"]
     periods = f", {extent['whole_periods']} whole periods" if extent["whole_periods"] is not None else ""
     print(f"identified {data['n_base']} base parameters ({data['n_standard']} standard) from {extent['runs']} run(s), "
-          f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}, {result.timings_s['total_s']:.1f} s -> {args.out}")
+          f"{extent['seconds']:.1f} s{periods}: condition number {data['condition_number']:.3g}; fitted in {result.timings_s['total_s']:.1f} s -> {args.out}")
     _print_identification_errors(data)
     for line in data["warnings"]:
         print(f"warning: {line}")
@@ -175,8 +175,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
           f"squares ({departure['base_parameter']}; {departure['over_3_standard_errors']} of {departure['of']} base parameters over 3): "
           "the standard errors leave out model error and the constraints")
     if not data["errors"].get("holdout"):
-        print("note: no --holdout run: how well these parameters carry to another motion is not measured (one short run "
-              "may not determine the arm)")
+        few = " (one short run may not determine the arm)" if extent["runs"] == 1 else ""
+        print(f"note: no --holdout run: how well these parameters carry to another motion is not measured{few}")
     print(f"friction law: {data['config']['friction_law']}")
     if args.friction_law == "tanh":
         print("note: errors above use the tanh law; params.json readers apply sign(v)")

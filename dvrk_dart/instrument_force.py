@@ -113,7 +113,7 @@ def estimate_force_all(arm: Arm, q: np.ndarray, gap: np.ndarray) -> dict:
 
 def print_force_summary(s: dict) -> None:
     """What `dvrk-dart force` prints: the figures of force.json with their units."""
-    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}, parameters {s['params']['path']}), "
+    print(f"force at the {s['point']} of {s['measured']} (model: --dynamics {s['dynamics']}{' (the default)' if s['dynamics'] == 'identified' else ''}, parameters {s['params']['path']}), "
           f"{s['processing']} processing ({s['chosen_because']})")
     if s.get("rate_note"):
         print(f"  note: {s['rate_note']}")

@@ -56,7 +56,8 @@ def test_a_header_with_the_dvrk_joint_names(tmp_path):
 
 
 @pytest.mark.parametrize("header, words", [
-    ("t,q1,dq1", "q1 without tau"),
+    ("t,q1,dq1", "q1 without tau1"),
+    ("t,position.outer_yaw,velocity.outer_yaw", "outer_yaw without effort.outer_yaw"),  # named as the header names it
     ("t,q1,dq1,tau1,bogus", "'bogus' is not a known name"),
     ("t,q1,q1,dq1,tau1", "q of q1 given twice"),
     (",t,q1,dq1,tau1", r"column 1 is empty \(an index column\? \(pandas"),  # to_csv's default index

@@ -88,7 +88,8 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
         assert ("make it worse" in sentence and "offset -0.133 N" in sentence) == (not carries), sentence
     result = {"identified_model_gap_holdout": [0.086, 0.144, 0.191], "units": ["N·m", "N·m", "N"],
               "one_configuration": {"gap_holdout": [0.066, 0.093, 0.412]}, "processing": {"processing": "periodic", "harmonics": 29}}
-    assert "worse than the identified model on q3:" in beyond_identified_sentence(result)
+    # the joint's own ratio, which the mean share over q1..q3 (-21 %) hid
+    assert "worse than the identified model on q3 (2.16x its gap):" in beyond_identified_sentence(result)
     result["one_configuration"]["gap_holdout"][2] = 0.15
     assert "worse" not in beyond_identified_sentence(result)
 
@@ -209,7 +210,7 @@ def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_
     assert beyond_identified_sentence(result) == ""  # nothing made worse than the identified arm simulated
     result["gap_after"]["holdout"] = [0.027, 0.0310, 0.032, 0.01, 0.01, 0.01, 0.01]  # q2 worse; q4..q7 worse but nothing acts there
     sentence = beyond_identified_sentence(result)
-    assert "worse than the identified model on q2:" in sentence and "q6" not in sentence, sentence
+    assert "worse than the identified model on q2 (1.02x its gap):" in sentence and "q6" not in sentence, sentence
 
 
 def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_model():

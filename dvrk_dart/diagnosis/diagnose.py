@@ -145,7 +145,7 @@ def diagnose(
     own = [r for r in problem.train_runs if r.role is RunRole.RAW] if not problem.has_baseline else []
     result["constants_beyond_session"] = constants_beyond_session(result["nuisance_offsets"], differences or own, problem.repeat_run,
                                                                   problem.reference_run, problem.arm.model, result["units"],
-                                                                  offsets_left_out(problem.arm, carried))
+                                                                  offsets_left_out(problem.arm, carried, problem.recorded))
     if out_dir is None:
         return result
     # the run the answer speaks of; before and after both without the nuisance constants the fit takes out
@@ -308,7 +308,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     # a payload-shaped fit names a payload only where a baseline run without it isolates it
     fits = first_moments + points
     payload_fits, mismatch = (fits, None) if problem.has_baseline else (
-        [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried)) if fits else None)
+        [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried, problem.recorded)) if fits else None)
     not_distinguished = None
     if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
         not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}

@@ -144,7 +144,10 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
     for joint in joints:
         missing = [f for f in FIELDS if (f, joint) not in columns]
         if missing:
-            raise DvrkDartError(f"{path}: the header has {joint} without {', '.join(missing)}: a joint needs its position, velocity and effort")
+            dvrk = dvrk_joints[JOINT_NAMES.index(joint)] if kinds == {True} else None  # named as the header names it
+            names = [f"{next(w for w, f in DVRK_FIELDS.items() if f == field)}.{dvrk}" if dvrk else f"{field}{joint[1:]}" for field in missing]
+            raise DvrkDartError(f"{path}: the header has {dvrk or joint} without {', '.join(names)}: a joint needs its position, velocity "
+                                "and effort (an effort not recorded: a column of zeros)")
     if not joints:
         raise DvrkDartError(f"{path}: the header names no joint")
     return CsvLayout(columns, time_column, joints, kinds == {True})

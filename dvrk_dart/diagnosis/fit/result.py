@@ -21,6 +21,7 @@ from dvrk_dart.diagnosis.fit.selection import (
     Selector,
 )
 from dvrk_dart.metrics import rms, per_measured_joint
+from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.sim.config import SimConfig
 
 
@@ -111,7 +112,7 @@ def _entry(problem: Problem, s: Selection, rank: int, i: int) -> dict:
         "name": e.name,
         "kind": e.kind if problem.has_baseline or e.kind not in WITHHELD_KINDS else GRAVITY_MISMATCH_KIND,
         "family": e.family,
-        "joints": list(e.joints),
+        "joints": [name for name in e.joints if problem.recorded[JOINT_NAMES.index(name)]],  # no say on a joint not recorded
         "parameters": e.describe(p),
         "units": e.units(),
         "size": e.size(p),

@@ -178,7 +178,8 @@ def beyond_identified_sentence(result: dict) -> str:
     shown = sorted(set(_main_joints(found["recorded"])) | set(worse))
     gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
     if worse:
-        gaps += f"; worse than the identified model on {', '.join(found['made_worse'])}: what was fitted there on the training runs does not carry to the held-out runs"
+        ratios = ", ".join(f"{JOINT_NAMES[j]} ({after[j] / bar[j]:.3g}x its gap)" for j in worse)  # an average share would hide it
+        gaps += f"; worse than the identified model on {ratios}: what was fitted there on the training runs does not carry to the held-out runs"
     if found["at_floor"]:
         level_words = "the session floor, where a session's change" if floor else "the noise, where the noise"
         gaps += (f"; the identified model's gap is within {AT_FLOOR_RATIO:g}x {level_words} alone can leave it, on "
@@ -192,7 +193,9 @@ def beyond_identified_sentence(result: dict) -> str:
                  + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
     processing = result.get("processing") or {}
     band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
-    return f"Beyond the identified model ({Path(str((result.get('params') or {}).get('path', 'params.json'))).name}), on the held-out runs ({band}): {gaps} ({what}). "
+    params = Path(str((result.get("params") or {}).get("path", "params.json")))
+    params = f"{params.parent.name}/{params.name}" if params.parent.name else params.name  # not a user's own identify output
+    return f"Beyond the identified model (the arm's parameters, {params}), on the held-out runs ({band}): {gaps} ({what}). "
 
 
 def joints_at_level(result: dict, bar: list) -> set[int]:

@@ -13,13 +13,14 @@ from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
-def offsets_left_out(arm, carried: dict | None) -> list[float] | None:
-    """The identified model's constant efforts (its offsets, N·m or N per joint) where the base simulation
-    leaves them out (`carried`: identified_terms_share's answer), else None."""
+def offsets_left_out(arm, carried: dict | None, recorded: np.ndarray) -> list[float | None] | None:
+    """The identified model's constant efforts (its offsets, N·m or N per joint; None on a joint the runs did not
+    record) where the base simulation leaves them out (`carried`: identified_terms_share's answer), else None."""
     if not carried or "offset" not in carried.get("terms", ()):
         return None
     zero = np.zeros((1, len(JOINT_NAMES)))
-    return arm.identified.predict(zero, zero, zero, ("offset",))[0].tolist()
+    offsets = arm.identified.predict(zero, zero, zero, ("offset",))[0]
+    return [float(x) if seen else None for x, seen in zip(offsets, recorded)]
 
 
 def gravity_mismatch_of(fit: dict, model: PsmModel, left_out_offsets: list[float] | None = None) -> dict:

@@ -35,14 +35,27 @@ def _bar(share) -> Markup:
     return render("diagnosis/bar.html", share=None if missing else share, width=0.0 if missing else max(0.0, min(1.0, share)) * 100)
 
 
+#: what the simulation of the gap before simulates (diagnosis.json `diagnosis_base`)
+_BASE_WORDS = {"inertial": "the identified inertia alone", "identified": "every identified term"}
+
+
 def _gap_table(result: dict) -> Markup:
+    """The gaps before and after the selected effects, each row saying what was simulated; on held-out runs
+    also the full identified model and the one configuration (the figures the answer's first sentence compares)."""
+    base = _BASE_WORDS.get(result.get("diagnosis_base", "inertial"), "the base simulation")
+    what = {"gap_before": f"before: {base}", "gap_after": f"after: {base} + the selected effects"}
     rows = []
     for key in ("gap_before", "gap_after"):
         for split in ("train", "holdout"):
             values = (result.get(key) or {}).get(split)
             if values is not None:
-                rows.append([text_cell(f"{key.replace('gap_', '')}, {split}"), *(text_cell("not measured" if v is None else fmt(v)) for v in values)])
-    return table(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES)], rows, css="")
+                rows.append([f"{what[key]} ({'held-out' if split == 'holdout' else 'training'} runs)", values])
+    rows += [[label, values] for label, values in (
+        ("the identified model, every term (held-out runs)", result.get("identified_model_gap_holdout")),
+        ("one configuration: effects, J3's terms, pitch loads (held-out runs)", (result.get("one_configuration") or {}).get("gap_holdout")))
+        if values is not None]
+    cells = [[text_cell(label), *(text_cell("not measured" if v is None else fmt(v)) for v in values)] for label, values in rows]
+    return table(["gap (RMS measured - simulated)", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES)], cells, css="")
 
 
 def _shown_effects(result: dict) -> list[dict]:
@@ -59,13 +72,20 @@ def _effects_tables(result: dict, shown: list[dict]) -> tuple[Markup, Markup]:
                text_cell("yes" if e.get("selected") else "no"), text_cell(_ROLE_WORDS.get(e.get("role"), "finding")),
                text_cell(_bar(e.get("explained_fraction", {}).get("train"))), text_cell(_bar(e.get("explained_fraction", {}).get("holdout")))]
               for e in shown]
-    parameters = [[code_cell(e["name"]), text_cell(", ".join(
-        f"{k} = {fmt(v) if isinstance(v, (int, float)) else v} {(e.get('units') or {}).get(k, '')}".rstrip()
-        for k, v in e.get("parameters", {}).items()))] for e in shown]
+    parameters = [[code_cell(e["name"]), text_cell(", ".join(_parameter_words(k, v, (e.get("units") or {}).get(k, ""))
+                                                             for k, v in e.get("parameters", {}).items()))] for e in shown]
     held = "held-out runs" if result.get("holdout_runs") else "held-out time segments"
     return (table(["rank", "effect", "identifier", "joints", "selected", "role", "fit's share of the squared gap, alone (train)",
                    f"alone ({held})"], ranked, css=""),
             table(["effect", "parameters"], parameters, css=""))
+
+
+def _parameter_words(name: str, value, unit: str) -> str:
+    """'coulomb = 0.25 N·m'; a flag as yes/no (not 1/0), a dimensionless value without its unit '1'."""
+    if isinstance(value, bool):
+        return f"{name}: {'yes' if value else 'no'}"
+    shown = fmt(value) if isinstance(value, (int, float)) else value
+    return f"{name} = {shown} {'' if unit == '1' else unit}".rstrip()
 
 
 def _split_table(result: dict) -> Markup | None:
@@ -100,8 +120,8 @@ def _value_interval(value, interval) -> str:
 def _payload(result: dict) -> tuple[str, Markup | None]:
     """The payload in words, and the table of its gravity efforts at q = 0 (the identifiable quantity) when there is one."""
     payload = result.get("payload")
-    if not payload:
-        return "", None
+    if not payload:  # without a baseline, a payload-shaped fit is the arm's gravity against the parameters
+        return " ".join((result.get("gravity_mismatch") or {}).get("words") or []), None
     if payload.get("words"):
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
         efforts = table(["payload at q = 0", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES[:3])],
