@@ -36,14 +36,14 @@ def _bar(share) -> Markup:
 
 
 #: what the simulation of the gap before simulates (diagnosis.json `diagnosis_base`)
-_BASE_WORDS = {"inertial": "the identified inertia alone", "identified": "every identified term"}
+_BASE_WORDS = {"inertial": "the identified inertia", "identified": "every identified term"}
 
 
 def _gap_table(result: dict) -> Markup:
     """The gaps before and after the selected effects, each row saying what was simulated; on held-out runs
     also the full identified model and the one configuration (the figures the answer's first sentence compares)."""
     base = _BASE_WORDS.get(result.get("diagnosis_base", "inertial"), "the base simulation")
-    what = {"gap_before": f"before: {base}", "gap_after": f"after: {base} + the selected effects"}
+    what = {"gap_before": f"before: {base} only", "gap_after": f"after: {base} + the selected effects"}
     rows = []
     for key in ("gap_before", "gap_after"):
         for split in ("train", "holdout"):
