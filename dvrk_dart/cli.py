@@ -152,7 +152,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     config = IdentificationConfig(
         runs=tuple(args.runs), holdout=tuple(args.holdout), joints=tuple(args.joints),
         friction_law=FrictionLaw(args.friction_law, args.reversal_velocity), bounds_file=args.bounds,
-        prior=args.prior, seed=args.seed, solver=args.solver, processing=args.processing, excitation=args.excitation,
+        prior=args.prior, seed=args.seed, processing=args.processing, excitation=args.excitation,
         model_file=str(arm_model_file(args)), topics=reading_options(args),
     )
     result, data = identify_into_folder(config, args.out)

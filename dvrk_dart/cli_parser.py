@@ -14,6 +14,7 @@ from dvrk_dart.option_types import (
     RATE_HZ,
     SECONDS,
     arm_namespace,
+    existing_file,
     int_in,
     measured_run,
     non_empty,
@@ -59,7 +60,7 @@ def _add_processing_option(p: argparse.ArgumentParser, default: str | None, said
                         f"excitation's harmonics, analytic derivatives, measured noise (default: {said})")
     if not excitation:
         return
-    p.add_argument("--excitation", default=None, type=measured_run, metavar="FILE",
+    p.add_argument("--excitation", default=None, type=existing_file, metavar="FILE",
                    help="the commanded excitation (a *_commanded.csv of q, dq, ddq rows, or `dvrk-dart excitation`'s CSV): "
                         "the periodic processing takes its period and harmonics from it instead of reading them from the run")
 
@@ -193,7 +194,6 @@ def _identify_command(sub, commands) -> None:
                    help="prior of the parameters the data leave free: 'none' (about zero: minimum norm, the default), "
                         "'default' (the model's default params.json) or a params file")
     p.add_argument("--seed", type=seed, default=0, help="seed of the random states of the base-parameter test")
-    p.add_argument("--solver", default="CLARABEL", choices=("CLARABEL", "SCS"), help="conic solver of the convex program")
     _add_processing_option(p, None, excitation=True)
     _add_bag_options(p)
     _add_arm_model_option(p)

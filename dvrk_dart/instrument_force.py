@@ -42,7 +42,11 @@ def processed_run(config: ForceConfig, model: PsmModel) -> tuple[ProcessedRun, s
     design = read_design(config.excitation) if config.excitation else None
     recorded = recorded_processing(config.dynamics)
     if recorded is not None and config.processing is None and design is None:
-        return process(run, *recorded), f"the one {config.dynamics} was fitted on"
+        try:
+            return process(run, *recorded), f"the one {config.dynamics} was fitted on"
+        except DvrkDartError as exc:  # the option the message names was not given: the file chose it
+            raise DvrkDartError(str(exc).replace(f"--processing {recorded[0]}", f"{recorded[0]} processing (--dynamics {config.dynamics}'s; "
+                                                 "--processing chooses another)")) from None
     [state], note = process_all([run], config.processing, design)  # refuses --excitation with upstream
     return state, chosen_because(config.processing, config.excitation, None, note)
 

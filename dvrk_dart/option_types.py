@@ -81,6 +81,16 @@ def measured_run(text: str) -> str:
     return text
 
 
+def existing_file(text: str) -> str:
+    """A file that must exist (a commanded excitation: no reference run stands for one)."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{text}: file not found")
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text}: a folder, not a file")
+    return text
+
+
 def number_in(low: float, high: float, unit: str = "", open_low: bool = False, open_high: bool = False):
     """An argparse type: a finite number in [low, high] (an end excluded when open)."""
     def parse(text: str) -> float:

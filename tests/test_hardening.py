@@ -302,6 +302,14 @@ def test_the_row_count_message_states_what_the_processing_needs(tmp_path, capsys
     assert MIN_ROWS == 410  # 200 trimmed from each end, 10 kept
 
 
+def test_a_header_without_rows_is_one_line(tmp_path, capsys):
+    """A header and no data rows was a traceback (a reduction over zero rows) in every command that reads a run."""
+    header_only = tmp_path / "header_only.csv"
+    header_only.write_text("q1,dq1,tau1\n")
+    code, lines = cli(capsys, "model-errors", "--measured", header_only)
+    assert_one_line_error(code, lines, "header_only.csv: a header row and no data rows")
+
+
 def test_diagnose_leaves_no_out_folder_on_input_errors(tmp_path, capsys):
     code, lines = cli(capsys, "diagnose", "--measured", tmp_path / "missing.csv", "--out", tmp_path / "diag")
     assert_one_line_error(code, lines, "missing.csv")

@@ -488,3 +488,30 @@ def test_a_file_of_yours_named_as_a_folder_the_diagnosis_writes_is_refused_up_fr
     code, lines, _ = cli(capsys, "diagnose", "--measured", "one", "--holdout", "two", "--refit", "--out", out)
     assert code == 2 and len(lines) == 1 and "d/refit is yours" in lines[0], lines
     assert (out / "refit").read_text() == "my notes"
+
+
+def test_a_model_card_with_text_for_a_number_is_one_line(tmp_path, capsys):
+    """'abc' for a length of the model card was a traceback (float('abc') in the file's reader)."""
+    from dvrk_dart.paths import MODELS_DIR
+
+    card = tmp_path / "psm"
+    shutil.copytree(MODELS_DIR / "psm", card)
+    toml = card / "psm.toml"
+    text = toml.read_text()
+    assert "l_2L1 = 0.096" in text
+    toml.write_text(text.replace("l_2L1 = 0.096", 'l_2L1 = "abc"'))
+    code, lines, _ = cli(capsys, "model-check", "--arm-model", card)
+    assert code == 2 and len(lines) == 1 and "psm.toml: a value of the wrong type" in lines[0] and "'abc'" in lines[0], lines
+
+
+def test_an_excitation_is_a_file_and_a_kinematic_run_exports_nothing(tmp_path, capsys):
+    """--excitation took reference-run names ('one': file not found after all) and folders; exporting a kinematic
+    run (no simulated efforts) said 'effort_sim1 is nan at t = 0.000 s'."""
+    for given, words in (("one", "one: file not found"), (str(tmp_path), "a folder, not a file")):
+        code, lines, _ = cli(capsys, "model-errors", "--measured", "one", "--excitation", given)
+        assert code == 2 and len(lines) == 1 and words in lines[0], lines
+    run = tmp_path / "kinematic"
+    assert cli(capsys, "run", "rectilinear", "--mode", "kinematic", "--duration", "0.2", "--out", run)[0] == 0
+    code, lines, _ = cli(capsys, "export", run, "--bag", tmp_path / "bag")
+    assert code == 2 and len(lines) == 1 and "no simulated efforts (a kinematic run" in lines[0], lines
+    assert not (tmp_path / "bag").exists()

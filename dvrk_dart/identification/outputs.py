@@ -332,7 +332,7 @@ def write_outputs(result: IdentificationResult, folder: Path) -> dict:
     except DvrkDartError as exc:  # name what the user asked for, not the folder being built
         message = str(exc).replace(str(folder / PARAMS_FILE), f"the identified {PARAMS_FILE}")
         fit = result.consistent
-        hint = (f"the {fit.solver} solver ended '{fit.status}': try the default --solver" if fit.status != "optimal"
+        hint = (f"the {fit.solver} solver ended '{fit.status}'" if fit.status != "optimal"
                 else "check --bounds and --prior")
         raise DvrkDartError(f"identify: {message} ({hint})") from None
     data = summary(result)

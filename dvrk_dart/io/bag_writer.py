@@ -140,6 +140,8 @@ def export_run(run_dir: Path, out: Path, model: PsmModel, arm: str | None = None
         raise DvrkDartError(f"{log}: not a readable run log ({first_line(exc)})") from None
     if not len(record):
         raise DvrkDartError(f"{log}: the run has no samples")
+    if np.isnan(record.effort_sim).all():
+        raise DvrkDartError(f"{log}: the run has no simulated efforts (a kinematic run imposes poses only): no recording to export")
     for label, values in (("q", record.q), ("dq", record.dq), ("effort_sim", record.effort_sim)):
         bad = ~np.isfinite(values)
         if bad.any():

@@ -239,6 +239,8 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     if layout.time_column is not None:
         names[layout.time_column] = "t"
     file_values = _numbers(raw, names, path, 2 if header else 1)
+    if not len(file_values):
+        raise DvrkDartError(f"{path}: a header row and no data rows")
     values = np.zeros((len(file_values), 3 * N_JOINTS))
     for (field, joint), index in layout.columns.items():
         values[:, FIELDS.index(field) * N_JOINTS + JOINT_NAMES.index(joint)] = file_values[:, index]

@@ -93,6 +93,13 @@ def load_model(path: Path | str) -> PsmModel:
     """Read and check an arm's model description file."""
     path = Path(path)
     raw = _read_toml(path)
+    try:
+        return _model(raw, path)
+    except (TypeError, ValueError) as exc:  # text where a number goes ("abc" for a length): the file's fault, said in one line
+        raise DvrkDartError(f"{path}: a value of the wrong type ({exc})") from None
+
+
+def _model(raw: dict, path: Path) -> PsmModel:
     constants = {k: float(v) for k, v in _require(raw, "constants", path, "file").items()}
     reader = _ExpressionReader(path, constants)
     for name, table in raw.get("model_angles", {}).items():
@@ -170,12 +177,29 @@ def _read_toml(path: Path) -> dict:
         raise DvrkDartError(f"{path}: not valid TOML ({exc})") from None
 
 
+def _unique_name(entry: dict, links: dict, path: Path, where: str) -> str:
+    name = _require(entry, "name", path, where)
+    if any(link.name == name for link in links.values()):
+        raise DvrkDartError(f"{path}: {where} is named '{name}' like another link")
+    return name
+
+
+def _flag(entry: dict, flag: str, default: bool, path: Path, where: str) -> bool:
+    """A link's true/false entry ('yes' was read as true)."""
+    value = entry.get(flag, default)
+    if not isinstance(value, bool):
+        raise DvrkDartError(f"{path}: {where}.{flag} must be true or false, not {value!r}")
+    return value
+
+
 def _links(raw: dict, path: Path, reader: _ExpressionReader, groups: tuple[str, ...]) -> dict[int, Link]:
     """[[links]], parents before children, each in one of the file's groups."""
     links: dict[int, Link] = {}
     for entry in _require(raw, "links", path, "file"):
         key = int(_require(entry, "key", path, "a link"))
         where = f"links[key={key}]"
+        if key in links:
+            raise DvrkDartError(f"{path}: {where} given twice")
         parent = int(_require(entry, "parent", path, where))
         if parent != 0 and parent not in links:
             raise DvrkDartError(f"{path}: {where} has parent {parent} not defined before it")
@@ -186,13 +210,9 @@ def _links(raw: dict, path: Path, reader: _ExpressionReader, groups: tuple[str, 
             parent=parent,
             **{k: reader.read(entry.get(k, {}), f"{where}.{k}") for k in ("a", "alpha", "d", "theta")},
             key=key,
-            name=_require(entry, "name", path, where),
+            name=_unique_name(entry, links, path, where),
             group=group,
-            body=bool(entry.get("body", True)),
-            inertia=bool(entry.get("inertia", False)),
-            friction=bool(entry.get("friction", False)),
-            motor_inertia=bool(entry.get("motor_inertia", False)),
-            spring=bool(entry.get("spring", False)),
+            **{flag: _flag(entry, flag, flag == "body", path, where) for flag in ("body", "inertia", "friction", "motor_inertia", "spring")},
             spring_linkage={k: float(v) for k, v in entry["spring_linkage"].items()} if "spring_linkage" in entry else None,
             cable_polynomial=tuple(float(c) for c in entry["cable_polynomial"]) if "cable_polynomial" in entry else None,
         )
