@@ -69,12 +69,20 @@ def _check_arm_of_reference_runs(args: argparse.Namespace) -> None:
 
     if not hasattr(args, "arm_model"):
         return
-    asked = args.arm_model or "psm"
+    asked = resolve_arm_model(args.arm_model or "psm")
     for dest in RUN_OPTIONS:
         for value in _values(args, dest):
-            if isinstance(value, str) and value in RUNS and resolve_arm_model(reference_run_arm(value)) != resolve_arm_model(asked):
+            if isinstance(value, str) and value in RUNS and not _same_arm(resolve_arm_model(reference_run_arm(value)), asked):
                 arm = reference_run_arm(value)
                 raise DvrkDartError(f"--{dest}: {value} is a recording of the {arm.upper()}: add --arm-model {arm}")
+
+
+def _same_arm(card: Path, asked: Path) -> bool:
+    """The card itself, or a copy of it (models/psm/ copied and edited, the same name): a file that is not a
+    valid card is said here, in its own words."""
+    from dvrk_dart.model.model_file import load_model
+
+    return card == asked or load_model(asked).name == load_model(card).name
 
 
 def _check_bag_options(args: argparse.Namespace) -> None:
