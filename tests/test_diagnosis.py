@@ -530,6 +530,10 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
     sentence = answer_sentence(result)
     assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
     assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
+    # a friction's viscous part is its size too (a blind viscous change of 0.2 N/(m/s) read "size 0 N")
+    viscous = {**friction, "parameters": {"coulomb": 0.0, "viscous": 0.2, "reversal": "sign"},
+               "units": {"coulomb": "N", "viscous": "N/(m/s)"}, "size": 0.0}
+    assert "(friction_q3, Coulomb 0 N, viscous 0.2 N/(m/s))" in answer_sentence({**result, "effects": [viscous]})
     # q3: 1 - sqrt(0.18^2 - 0.05^2) / sqrt(0.65^2 - 0.05^2) of the gap above the floor removed (the words' measure)
     assert "q3 73% of that gap above the session floor" in sentence
     assert "over 1.5x the session floor on q3" in sentence and "q1" not in sentence.split("floor on")[1]

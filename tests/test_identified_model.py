@@ -125,3 +125,16 @@ def test_non_inertial_terms_follow_the_upstream_definitions(arm):
     f8 = p[8].coulomb * np.sign(dq[2]) + p[8].viscous * dq[2]
     f8_other_links = e["friction"][0][2] - f8
     assert abs(f8_other_links) < 1e-15
+
+
+def test_a_value_the_model_card_does_not_use_is_said(arm, tmp_path):
+    """A motor inertia on link 2 (the card gives the pitch no motor) was accepted and changed nothing, without a word."""
+    from dvrk_dart.model.parameters import load_parameters
+
+    raw = json.loads(arm.params.source.read_text())
+    assert arm.params.unused_values(arm.model) == []  # the published file: zeros where the card has no term
+    raw["2"]["Im"] = 0.05
+    path = tmp_path / "edited.json"
+    path.write_text(json.dumps(raw))
+    notes = load_parameters(path, arm.model).unused_values(arm.model)
+    assert len(notes) == 1 and "link 2 (pitch): Im = 0.05 not used" in notes[0], notes

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
+from dvrk_dart.io.csv_run import say_once
 from dvrk_dart.io.reference_data import resolve
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.model_file import load_model
@@ -32,4 +33,5 @@ def load_arm(model_file: str | Path, params_file: str | Path | None = None) -> A
 def _load_arm(model_file: Path, params_file: str | Path | None) -> Arm:
     model = load_model(model_file)
     params = load_parameters(resolve(model.default_parameters, explicit=params_file), model)
+    say_once(params.unused_values(model))  # on stderr, whatever the command
     return Arm(model, params, IdentifiedModel(model, params))

@@ -43,9 +43,23 @@ class IdentifiedParameters:
     def __getitem__(self, key: int) -> LinkParameters:
         return self.links[key]
 
+    def unused_values(self, model: PsmModel) -> list[str]:
+        """Non-zero values of terms the model card does not give a link (an Im where it has no motor): no
+        simulation or model uses them, which a user who edited them must be told."""
+        notes = []
+        for key, p in self.links.items():
+            link = model.links[key]
+            given = {"Fc": (link.friction, p.coulomb), "Fv": (link.friction, p.viscous), "Fo": (link.friction, p.offset),
+                     "Im": (link.motor_inertia, p.motor_inertia), "K": (link.spring, p.spring)}
+            unused = [f"{name} = {float(np.max(np.abs(value))):.3g}" for name, (has, value) in given.items() if not has and np.any(value)]
+            if unused:
+                notes.append(f"{self.source.name}: link {key} ({link.name}): {', '.join(unused)} not used: the model card "
+                             f"({model.source.name}) gives this link no such term")
+        return notes
+
     def oddities(self, model: PsmModel) -> list[str]:
         """Physically feasible but implausible values, reported, never hidden."""
-        notes = []
+        notes = self.unused_values(model)
         for key, bound in model.identification_mass_bounds_kg.items():
             if key in self.links and abs(self.links[key].mass - bound) < 1e-3 * bound:
                 notes.append(f"link {key} ({model.links[key].name}): mass {self.links[key].mass:.4f} kg sits at the identification bound {bound} kg")

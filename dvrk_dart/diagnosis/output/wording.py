@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from dvrk_dart.diagnosis.fit.problem import EFFORT_WEIGHT_FLOOR as EFFORT_RESOLUTION
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO, above_floor, repeatable_share
 
 MOSTLY_SHARE = 0.5
@@ -43,7 +44,8 @@ PARTLY_SHARE = 0.2
 RULE = (f"1 - after/before of the gap's RMS (above the session floor where a --repeat measured it), averaged over the joints the "
         f"selected effects act on: above {MOSTLY_SHARE:.0%} 'mostly explained', {PARTLY_SHARE:.0%}-{MOSTLY_SHARE:.0%} 'partly explained', "
         f"below {PARTLY_SHARE:.0%} 'not explained'; a joint whose gap before is within {AT_FLOOR_RATIO:g}x the session floor does not "
-        f"count (a session's change alone can leave it), and where no joint is left, '{NOT_DETERMINED}'")
+        f"count (a session's change alone can leave it), and where no joint is left, '{NOT_DETERMINED}'; so too where every "
+        f"such joint's gap before is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N: a simulated run replayed)")
 
 
 def words_for(share: float | None) -> str:
@@ -75,11 +77,14 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
     joints = [j for j, name in enumerate(joint_names)
               if name in acted and name not in at_floor and j < len(before) and before[j] is not None and after[j] is not None
               and max(before[j], after[j]) > NOTHING_TO_EXPLAIN * largest]
-    shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in joints}
-    share = float(np.mean(list(shares.values()))) if joints else None
-    words = NOT_DETERMINED if share is None and at_floor else words_for(share)
+    # no gap to explain: round-off of a replayed simulated run (1e-6 N·m read "partly explained by a gravity mismatch")
+    unresolved = bool(joints) and max(gap_before[split][j] for j in joints) <= EFFORT_RESOLUTION
+    shares = {} if unresolved else {joint_names[j]: float(1.0 - after[j] / before[j]) for j in joints}
+    share = float(np.mean(list(shares.values()))) if shares else None
+    words = NOT_DETERMINED if share is None and (at_floor or unresolved) else words_for(share)
     return {"words": words, "removed_share": share, "joints": list(shares), "runs": split, "rule": RULE,
             "above_session_floor": floor is not None and any(f is not None for f in floor), "within_floor": at_floor,
+            "below_resolution": unresolved,
             "by_joint": {name: {"removed_share": s, "words": words_for(s)} for name, s in shares.items()}}
 
 
