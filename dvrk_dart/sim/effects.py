@@ -8,7 +8,10 @@ Identified non-inertial terms (SimConfig flags, JointEffects extras)
     - viscous friction, Coulomb friction and the J4 spring act on the DART
       joints whose own variable is the link's variable (yaw, pitch, carriage,
       tool roll, wrist pitch, jaws): the mapping is exact.  Coulomb friction is
-      DART's joint friction (an LCP row bounded by Fc).  Viscous friction and
+      DART's joint friction (an LCP row bounded by Fc) in torque mode, where
+      it sticks and slips; in velocity mode the motion is prescribed and the
+      servo's efforts carry it (the simulator lifts the rows: on the
+      near-massless jaws a row held a dof the servo had slide).  Viscous friction and
       the spring are NOT DART's joint damping/stiffness: DART applies those
       implicitly in its forward dynamics but its constraint impulses (the
       Coulomb rows) see the inertia without them, which on the near-massless

@@ -71,17 +71,16 @@ def add_implicit(F, xdd, x, v, implicit_diag, damping, stiffness, dt):
 
 @_compiled
 def servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, effort_of_F, dof_forces_of_F, armature, directional_armature,
-                  G, coulomb_x, force_map, damping, stiffness, dt):
+                  G, coulomb_x, damping, stiffness, dt):
     """(actuator efforts, forces on the dofs) of a servo step from the dofs' inverse dynamics F: the
-    armature's (its directional part with the sign of dq) and the explicit efforts added; DART's Coulomb
-    rows sit at their bound, opposing the target velocity, and the implicit damping and springs act at the
-    end-of-step state, so the dofs' forces leave both to DART (terms that are zero cost a few flops)."""
+    armature's (its directional part with the sign of dq) and the explicit efforts added; the Coulomb
+    friction opposes the target velocity (in velocity mode DART has no Coulomb rows: the prescribed motion
+    leaves the friction to the actuators' efforts), and the implicit damping and springs act at the
+    end-of-step state, so the dofs' forces leave them to DART (terms that are zero cost a few flops)."""
     tau, forces = split_inverse_dynamics(F, effort_of_F, dof_forces_of_F)
     tau += (armature + directional_armature * np.sign(dq)) * ddq
     tau += explicit
-    coulomb = G.T @ (coulomb_x * np.sign(G @ dq_target))
-    tau += coulomb
-    forces += force_map @ coulomb
+    tau += G.T @ (coulomb_x * np.sign(G @ dq_target))
     v_next = v + dt * xdd
     forces -= damping * v_next + stiffness * (x + dt * v_next)
     return tau, forces
@@ -158,7 +157,7 @@ def _compile() -> None:
     servo_accelerations(x, x, q, q, q, q, 1.0, 1e-3, np.zeros((n, m)), -1, 1.0)
     split_inverse_dynamics(x, np.zeros((m, n)), np.zeros((n, n)))
     add_implicit(x, x, x, x, x, x, x, 1e-3)
-    servo_efforts(x, x, x, x, q, q, q, q, np.zeros((m, n)), np.zeros((n, n)), q, q, np.zeros((n, m)), x, np.zeros((n, m)), x, x, 1e-3)
+    servo_efforts(x, x, x, x, q, q, q, q, np.zeros((m, n)), np.zeros((n, n)), q, q, np.zeros((n, m)), x, x, x, 1e-3)
     counterweight_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1e-3)
     observe(x, x, np.zeros((m, n)), q, 1e-3, q, q)
     rows, tables = np.zeros((1, m + 2)), np.array([[2.0, 0.0, 1.0, 0.0, 1.0]])

@@ -145,6 +145,7 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         self._implicit_damping = effects.damping
         self._implicit_stiffness = effects.stiffness
         self._coulomb_x = effects.coulomb
+        self._coulomb_rows_on = True  # place_effects set them on DART's joints
         self._explicit = effects.explicit
         self._pid_integral = 0.0
         self._implicit_diag = self.dt * self._implicit_damping + self.dt**2 * self._implicit_stiffness
@@ -267,6 +268,7 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         counterweight's): tau = G^T F + ratio·F_cw on J3, F_cw being the tendon
         force.  The ideal tendon sets the counterweight's acceleration; the PID
         tendon sets its force, and the acceleration follows from M's column."""
+        self._dart_coulomb_rows(False)
         x, v, q, dq = self._x, self._v, self._q, self._dq
         ideal_cw = self._counterweight_dof if self._tendon_ideal else -1
         dq_target, ddq, xdd = kernels.servo_accelerations(
@@ -289,13 +291,24 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
             explicit = self._explicit.effort(q, dq, self._presliding_z) if self._has_explicit else self._zeros
             e = self._explicit
             tau, forces = kernels.servo_efforts(F, xdd, x, v, dq, ddq, dq_target, explicit, self._effort_of_F, self._dof_forces_of_F,
-                                                e.armature, e.directional_armature, self.psm.G, self._coulomb_x, self._force_map,
+                                                e.armature, e.directional_armature, self.psm.G, self._coulomb_x,
                                                 self._implicit_damping, self._implicit_stiffness, self.dt)
         else:  # the rigid bodies alone
             tau, forces = kernels.split_inverse_dynamics(F, self._effort_of_F, self._dof_forces_of_F)
         skeleton.setForces(forces)
         self.world.step()
         self._after_step(dq, tau, float(F[self._counterweight_dof]) if self._free_dofs else 0.0)
+
+    def _dart_coulomb_rows(self, on: bool) -> None:
+        """DART's Coulomb rows (LCP rows bounded by Fc) for the torque mode's stick-slip; off in velocity mode,
+        where the motion is prescribed and the servo's efforts carry the friction: on a near-massless wrist dof
+        the row held the dof still where the servo had it slide, the step's forces then threw its coupled dofs
+        (the tool yaw at 0.31 rad/s against 0.09 on "one", `replay --dynamics identified`)."""
+        if on == self._coulomb_rows_on:
+            return
+        for dof in np.flatnonzero(self._coulomb_x):
+            self.skeleton.getDof(int(dof)).setCoulombFriction(float(self._coulomb_x[dof]) if on else 0.0)
+        self._coulomb_rows_on = on
 
     def _apply_external_force(self) -> bool:
         """The environment's force on the force point's body (`external_force(point, velocity) -> F`, base frame,

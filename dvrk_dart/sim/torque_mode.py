@@ -22,6 +22,7 @@ class TorqueMode:
         paper torque-controls J1..J3 only); their entries of `last_effort` are
         the efforts the servo needed."""
         self._held = tuple(hold)
+        self._dart_coulomb_rows(True)
         try:
             self._step_torque(np.asarray(tau, dtype=float))
         finally:
