@@ -358,7 +358,8 @@ def answer_paragraphs(result: dict) -> list[str]:
                 if explained.get("removed_share") is not None and counted != joints else "")
         sentence += ("; removed: " + ", ".join(f"{j} {f'— (within {AT_FLOOR_RATIO:g}x its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
                      + " of that gap above the session floor" + mean)
-    sentence += identified_terms_clause(result) + constants_clause(result)
+    if not explained.get("below_resolution"):  # nothing found: nothing for the identified terms to carry
+        sentence += identified_terms_clause(result) + constants_clause(result)
     floor = split_floors(result)
     if floor is None:
         sentence += "."

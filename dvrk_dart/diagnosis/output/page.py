@@ -120,8 +120,9 @@ def _value_interval(value, interval) -> str:
 def _payload(result: dict) -> tuple[str, Markup | None]:
     """The payload in words, and the table of its gravity efforts at q = 0 (the identifiable quantity) when there is one."""
     payload = result.get("payload")
-    if not payload:  # without a baseline, a payload-shaped fit is the arm's gravity against the parameters
-        return " ".join((result.get("gravity_mismatch") or {}).get("words") or []), None
+    if not payload:  # without a baseline, a payload-shaped fit is the arm's gravity against the parameters (if there is a gap)
+        unresolved = (result.get("explanation") or {}).get("below_resolution")
+        return "" if unresolved else " ".join((result.get("gravity_mismatch") or {}).get("words") or []), None
     if payload.get("words"):
         g, gi = payload["gravity_efforts_at_q0"], payload["gravity_efforts_at_q0_interval"]
         efforts = table(["payload at q = 0", *(f"{j} ({effort_unit(result, j)})" for j in JOINT_NAMES[:3])],

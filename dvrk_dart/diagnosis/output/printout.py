@@ -42,7 +42,7 @@ def print_diagnosis(result: dict) -> None:
             print(f"  {sentence}")
     if result.get("payload_not_distinguished"):
         print(f"no payload: {result['payload_not_distinguished']['meaning']}")
-    if result.get("gravity_mismatch"):
+    if result.get("gravity_mismatch") and not (result.get("explanation") or {}).get("below_resolution"):
         for sentence in result["gravity_mismatch"]["words"]:
             print(sentence)
     if result.get("nuisance_offset_joints"):
