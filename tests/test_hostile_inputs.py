@@ -245,7 +245,9 @@ def test_a_run_recording_given_as_a_bag_says_how_to_make_one(tmp_path, capsys):
 
 
 def test_a_parameter_band_of_another_run_is_refused_before_the_diagnosis(tmp_path, capsys, monkeypatch):
-    import dvrk_dart.diagnosis.diagnose as diagnose_module
+    # the name the CLI's diagnosis calls (api's own): patching dvrk_dart.diagnosis.diagnose.diagnose before api was first
+    # imported left api bound to the stub for every later test of the process
+    import dvrk_dart.diagnosis.api as diagnose_module
 
     band = tmp_path / "band"
     assert cli(capsys, "uncertainty", "--measured", "one", "--samples", "2", "--duration", "1", "--out", band)[0] == 0
