@@ -324,11 +324,6 @@ def answer_paragraphs(result: dict) -> list[str]:
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
                                                           split_floors(result))
-    words, apart = explained["words"], joints_apart(explained)
-    qualifiers = [f"of the gap above the session floor{_floor_source(result)}"] if explained.get("above_session_floor") else []
-    qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
-    if qualifiers:
-        words += f" ({'; '.join(qualifiers)})"
     if result.get("payload_not_distinguished"):
         where = ("no payload is distinguished from none (the payload-shaped fit's mass is not positive: a session change read "
                  "as a payload); " + where)
@@ -336,20 +331,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     # the words below are against the paper's simulation, not the identified model: their subject says so
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \
         else "The gap"
-    if effects == "no effect":
-        sentence = f"{gap} is not explained: no effect of the library was selected; {where}, {gaps}"
-    elif explained.get("below_resolution"):
-        sentence = (f"{gap} is {NOT_DETERMINED}: before any effect it is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N) on "
-                    f"every joint the effects act on, nothing to explain; {where}, {gaps}")
-    elif explained["words"] == NOT_DETERMINED:
-        within = explained.get("within_floor") or []
-        sentence = (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x the session floor"
-                    f"{_floor_source(result)} on {', '.join(within)}, which a session's change alone can leave; the effects selected, "
-                    f"{effects}: {where}, {gaps}")
-    elif explained["words"] == "not explained":
-        sentence = f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {where}, {gaps}"
-    else:
-        sentence = f"{gap} is {words} by {effects}: {where}, {gaps}"
+    sentence = _opening(result, explained, gap, effects, f"{where}, {gaps}")
     by_joint = {r.get("joint", JOINT_NAMES[i]): _row_share(r) for i, r in enumerate((result.get("gap_split") or {}).get("joints") or [])}
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
@@ -371,6 +353,27 @@ def answer_paragraphs(result: dict) -> list[str]:
     held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
     caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
     return [paragraph for paragraph in (caution, beyond.strip(), sentence + refit_clause(result) + insertion_clause(result)) if paragraph]
+
+
+def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str) -> str:
+    """The answer's words on `gap`: explained, not, or not determined (and why), by which effects, then `figures`."""
+    words, apart = explained["words"], joints_apart(explained)
+    qualifiers = [f"of the gap above the session floor{_floor_source(result)}"] if explained.get("above_session_floor") else []
+    qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
+    if qualifiers:
+        words += f" ({'; '.join(qualifiers)})"
+    if effects == "no effect":
+        return f"{gap} is not explained: no effect of the library was selected; {figures}"
+    if explained.get("below_resolution"):
+        return (f"{gap} is {NOT_DETERMINED}: before any effect it is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N) on "
+                f"every joint the effects act on, nothing to explain; {figures}")
+    if explained["words"] == NOT_DETERMINED:
+        return (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x the session floor"
+                f"{_floor_source(result)} on {', '.join(explained.get('within_floor') or [])}, which a session's change alone can "
+                f"leave; the effects selected, {effects}: {figures}")
+    if explained["words"] == "not explained":
+        return f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {figures}"
+    return f"{gap} is {words} by {effects}: {figures}"
 
 
 def offset_joints_sentence(offset_joints: dict) -> str:
