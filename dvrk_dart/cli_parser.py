@@ -47,8 +47,8 @@ def _add_bag_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("reading measured runs: ROS bags (rosbag2 folder, .mcap, .db3, ROS 1 .bag) and CSVs")
     g.add_argument("--arm", default=None, type=arm_namespace,
                    help="the arm's namespace (default: the arm model's, PSM1: /PSM1/measured_js, /PSM1/jaw/measured_js; MTML: /MTML/measured_js)")
-    g.add_argument("--topic", help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
-    g.add_argument("--jaw-topic", help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
+    g.add_argument("--topic", type=non_empty, help="the arm's sensor_msgs/JointState topic (default /ARM/measured_js)")
+    g.add_argument("--jaw-topic", type=non_empty, help="the jaw's sensor_msgs/JointState topic (default /ARM/jaw/measured_js)")
     g.add_argument("--rate", type=RATE_HZ, default=None,
                    help="rows per second of a CSV without a time column, or the grid a bag's messages are resampled on (Hz, default 200)")
 

@@ -504,6 +504,9 @@ def test_a_model_card_with_text_for_a_number_is_one_line(tmp_path, capsys):
     toml.write_text(text.replace("l_2L1 = 0.096", 'l_2L1 = "abc"'))
     code, lines, _ = cli(capsys, "model-check", "--arm-model", card)
     assert code == 2 and len(lines) == 1 and "psm.toml: a value of the wrong type" in lines[0] and "'abc'" in lines[0], lines
+    toml.write_text(text + "\n[[linkz]]\nkey = 99\n")  # a misspelt table was read as a parent missing further on
+    code, lines, _ = cli(capsys, "model-check", "--arm-model", card)
+    assert code == 2 and len(lines) == 1 and "psm.toml: unknown 'linkz'" in lines[0], lines
 
 
 def test_an_excitation_is_a_file_and_a_kinematic_run_exports_nothing(tmp_path, capsys):
@@ -517,3 +520,9 @@ def test_an_excitation_is_a_file_and_a_kinematic_run_exports_nothing(tmp_path, c
     code, lines, _ = cli(capsys, "export", run, "--bag", tmp_path / "bag")
     assert code == 2 and len(lines) == 1 and "no simulated efforts (a kinematic run" in lines[0], lines
     assert not (tmp_path / "bag").exists()
+
+
+@pytest.mark.parametrize("option", ["--topic", "--jaw-topic"])
+def test_an_empty_topic_is_refused_not_read_as_the_default(capsys, option):
+    code, lines, _ = cli(capsys, "model-errors", "--measured", "two", option, "")
+    assert code == 2 and len(lines) == 1 and f"argument {option}: an empty value" in lines[0], lines

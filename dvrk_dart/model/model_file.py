@@ -99,7 +99,15 @@ def load_model(path: Path | str) -> PsmModel:
         raise DvrkDartError(f"{path}: a value of the wrong type ({exc})") from None
 
 
+#: the tables and entries of a model card (a misspelt table, [[linkz]], was read as missing links further on)
+CARD_KEYS = ("name", "default_parameters", "groups", "joint_words", "gravity_m_s2", "constants", "model_angles", "links",
+             "loop_closures", "tool_tip", "counterweight", "joint_limits", "dvrk_coupling", "dvrk_velocity_limits", "dvrk_topics",
+             "parameter_checks", "processing", "sessions", "controllers", "diagnosis", "force_point")
+
+
 def _model(raw: dict, path: Path) -> PsmModel:
+    if unknown := sorted(set(raw) - set(CARD_KEYS)):
+        raise DvrkDartError(f"{path}: unknown {', '.join(map(repr, unknown))} (a model card holds {', '.join(CARD_KEYS)})")
     constants = {k: float(v) for k, v in _require(raw, "constants", path, "file").items()}
     reader = _ExpressionReader(path, constants)
     for name, table in raw.get("model_angles", {}).items():
