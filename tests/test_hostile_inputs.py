@@ -237,6 +237,10 @@ def test_a_run_recording_given_as_a_bag_says_how_to_make_one(tmp_path, capsys):
     code, lines, _ = cli(capsys, "model-errors", "--measured", run / "run.mcap")
     assert code == 2 and len(lines) == 1 and "a dvrk-dart run recording" in lines[0] and "export" in lines[0]
     assert "Error" not in lines[0]
+    force = tmp_path / "f"  # another output's recording: no export to suggest (export wants a run folder)
+    assert cli(capsys, "force", "--measured", "two", "--out", force)[0] == 0
+    code, lines, _ = cli(capsys, "model-errors", "--measured", force / "force.mcap")
+    assert code == 2 and len(lines) == 1 and "a dvrk-dart output (force.mcap)" in lines[0] and "export" not in lines[0], lines
     bag = tmp_path / "bag"
     assert cli(capsys, "export", run, "--bag", bag)[0] == 0
     # the PSM's bag read as an MTM's: the hint names the model to add

@@ -172,9 +172,11 @@ def read_topics(path: Path, topics: BagTopics, card: DvrkTopics) -> tuple[TopicS
     except DvrkDartError:
         raise
     except Exception as exc:  # rosbags, mcap, sqlite3 and yaml each raise their own: one line for the user
-        if _is_run_recording(path):
+        if _is_run_recording(path) and path.name == "run.mcap":
             raise DvrkDartError(f"{path}: a dvrk-dart run recording, not a ROS bag (`dvrk-dart export {path.parent} --bag BAG` "
                                 "writes its joint states as one)") from None
+        if _is_run_recording(path):  # force.mcap, ...: no joint states to export
+            raise DvrkDartError(f"{path}: a dvrk-dart output ({path.name}), not a ROS bag of a measured run") from None
         raise DvrkDartError(f"{path}: not a readable bag ({first_line(exc)})") from None
 
 
