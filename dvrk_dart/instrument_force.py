@@ -17,7 +17,7 @@ from dvrk_dart.io.excitation_design import read_design
 from dvrk_dart.io.force_log import force_table, write_force_logs
 from dvrk_dart.io.provenance import arm_model_record, file_record, software_versions
 from dvrk_dart.io.reference_data import input_record, load_run, resolve_run, run_label
-from dvrk_dart.io.signal import ProcessedRun, chosen_because, process, process_all
+from dvrk_dart.io.signal import ProcessedRun, chosen_because, not_periodic_reason, process, process_all
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -45,8 +45,8 @@ def processed_run(config: ForceConfig, model: PsmModel) -> tuple[ProcessedRun, s
         try:
             return process(run, *recorded), f"the one {config.dynamics} was fitted on"
         except DvrkDartError as exc:  # the option the message names was not given: the file chose it
-            raise DvrkDartError(str(exc).replace(f"--processing {recorded[0]}", f"{recorded[0]} processing (--dynamics {config.dynamics}'s; "
-                                                 "--processing chooses another)")) from None
+            raise DvrkDartError(f"{not_periodic_reason(exc)} (the processing --dynamics {config.dynamics} records; "
+                                "--processing chooses another)") from None
     [state], note = process_all([run], config.processing, design)  # refuses --excitation with upstream
     return state, chosen_because(config.processing, config.excitation, None, note)
 

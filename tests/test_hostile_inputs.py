@@ -530,3 +530,15 @@ def test_an_excitation_is_a_file_and_a_kinematic_run_exports_nothing(tmp_path, c
 def test_an_empty_topic_is_refused_not_read_as_the_default(capsys, option):
     code, lines, _ = cli(capsys, "model-errors", "--measured", "two", option, "")
     assert code == 2 and len(lines) == 1 and f"argument {option}: an empty value" in lines[0], lines
+
+
+def test_a_processing_a_dynamics_file_chose_is_named_as_the_files(tmp_path, capsys):
+    """force --dynamics FILE refused a short run with "--processing periodic: ...", an option never given."""
+    short = tmp_path / "short.csv"
+    short.write_text("".join(resolve_run("2018-test1").read_text().splitlines(keepends=True)[:1000]))
+    dynamics = tmp_path / "diagnosis.json"
+    dynamics.write_text(json.dumps({"processing": {"processing": "periodic"}}))
+    code, lines, _ = cli(capsys, "force", "--measured", short, "--dynamics", dynamics, "--out", tmp_path / "f")
+    assert code == 2 and len(lines) == 1 and "--processing periodic" not in lines[0], lines
+    assert "periodic processing" in lines[0] and f"the processing --dynamics {dynamics} records" in lines[0], lines
+    assert not (tmp_path / "f").exists()
