@@ -33,7 +33,8 @@ Selection (`diagnose`):
   simpler one, fewer parameters, not significantly worse and with 90 % of its
   gain) while the gain is at
   least MIN_HELDOUT_GAIN and positive with bootstrap confidence, refusing a
-  candidate that makes a selected effect unstable across folds (collinear);
+  candidate that makes a selected effect unstable across folds (collinear)
+  unless that effect is then unneeded;
   at most one effect of a family is selected (a joint's friction with a sharp
   or a smooth reversal); a payload is chosen only if it beats, significantly,
   the offsets of the joints it moves fitted together (its static part), else
@@ -41,7 +42,11 @@ Selection (`diagnose`):
   that moves joints a rival payload does not must earn them against their
   noise (a chi-square test), else the rival is the step's choice, and every
   step must remove more than the noise of the directions its columns span
-  (the same test, over the candidates that competed for it);
+  (the same test, over the candidates that competed for it,
+  `periodic_noise.PeriodicNoise`);
+- a backward pass then drops, the least missed first, every effect whose
+  place the later ones took (the set without it loses less than
+  MIN_HELDOUT_GAIN, or not with bootstrap confidence);
 - payloads on links whose efforts are identical (a family, see
   `payload.equivalent_payload_links`) are one hypothesis over the union of
   their envelopes: the member kept is the one with the lowest penalised
@@ -65,8 +70,9 @@ from dvrk_dart.diagnosis.fit.design import (
     sse,
     weighted_fraction,
 )
+from dvrk_dart.diagnosis.fit.periodic_noise import BEYOND_NOISE_LEVEL, PeriodicNoise
 from dvrk_dart.diagnosis.payload.payload import PointPayload
-from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.model.joints import JOINT_NAMES
 
 #: contiguous folds of the held-out scoring: a fold of a 28 s run is ~1 base
 #: period (5.6 s) of the excitation, so each fold holds a full trajectory cycle
@@ -91,10 +97,6 @@ PARSIMONY_GAIN_SHARE = 0.9
 #: a candidate that makes an already selected effect that unstable is refused
 #: (e.g. a J2 stiffness trading off against a payload's lever arm)
 STABILITY_LIMIT = 0.5
-#: periodic: a step's fit (and a payload's joints beyond a rival payload's) must remove more than the noise
-#: of the directions its columns span, at this level divided over the candidates that competed
-#: (`Selector._beyond_noise`, `Selector._payload_joints_earned`)
-BEYOND_NOISE_LEVEL = 0.05
 
 
 @dataclass
@@ -124,59 +126,13 @@ class Selector:
         rng = np.random.default_rng(BOOTSTRAP_SEED)
         n = len(train.s)
         self.resamples = rng.integers(0, n, size=(BOOTSTRAP_RESAMPLES, n))
-        self.penalised = train.noise is not None
-        self._span: dict[int, np.ndarray] = {}
-        self._absorbed_by: dict[tuple[int, ...], np.ndarray] = {}
         self._fitted: dict[tuple, Fit] = {}
-        if self.penalised:
-            # periodic processing: every period a copy, so a time fold is no held-out data. The score is the
-            # in-sample fraction less the optimism (Mallows' Cp): 2 x the noise energy each fitted parameter
-            # absorbs, per column spread over the blocks and joints where it lives (sum over them: x^T (W D) x / x^T W x)
-            diag = np.einsum("bjpp->bjp", train.A)  # (b, 7, P)
-            den = np.einsum("bjp,j->p", diag, self.fit_w2)
-            share = np.einsum("bjp,bj,j->pbj", diag, train.noise, self.fit_w2)  # in train.s units
-            self.noise_share = np.where(den[:, None, None] > 0, share / np.where(den > 0, den, 1.0)[:, None, None], 0.0)
+        self.penalised = train.noise is not None
+        self.noise = PeriodicNoise(design, train, self.fit_w2, self.fit_all) if self.penalised else None
 
     def fitting_by(self, fit_w2: np.ndarray) -> "Selector":
         """The same scores, the fits weighted by `fit_w2`."""
         return Selector(self.design, self.train, self.w2, len(self.folds), fit_w2)
-
-    def optimism(self, chosen: list[int]) -> np.ndarray:
-        """(n_blocks, 7) twice the noise energy the chosen effects' fitted
-        parameters absorb: a linear effect's seen parameters, each the mean of
-        its columns' share; a nonlinear effect, the noise its columns' span
-        absorbs (the fit reaches about as far: a first-moment payload's tied
-        inertia, small masses far out, took 2.7 to 4 times the noise its
-        parameters' local directions absorb on joints carrying noise only)."""
-        total = np.zeros_like(self.train.s)
-        for i in chosen:
-            sl, e = self.design.slices[i], self.design.effects[i]
-            if not e.linear:
-                total += 2.0 * self._span_absorbed(i)
-                continue
-            shares = self.noise_share[sl]
-            live = [k for k in range(len(shares)) if shares[k].any()]
-            if live:
-                total += 2.0 * e.n_seen_parameters * shares[live].mean(0)
-        return total
-
-    def _span_absorbed(self, i: int) -> np.ndarray:
-        """(n_blocks, 7) the noise energy a weighted least-squares fit on effect i's columns absorbs, per block and joint
-        (train.s units): noise_bj x its share of the span's directions."""
-        return self.train.noise * self._span_directions(i)
-
-    def _span_directions(self, i: int) -> np.ndarray:
-        """(n_blocks, 7) w2_j tr(G^+ A_bj), G = sum w2_j A_bj: the weighted hat matrix's trace (the directions effect
-        i's columns span) split by block and joint; made once per effect (every candidate set it is in reads it)."""
-        if i not in self._span:
-            A = self.train.A[:, :, self.design.slices[i], self.design.slices[i]]
-            G = np.einsum("bjpq,j->pq", A, self.fit_w2)
-            # on unit columns: the trace is the same, and which near-collinear directions count is not set by the units
-            scale = np.sqrt(np.diag(G))
-            scale = np.where(scale > 0, scale, 1.0)
-            inverse = np.linalg.pinv(G / np.outer(scale, scale), rcond=1e-10, hermitian=True) / np.outer(scale, scale)
-            self._span[i] = self.fit_w2[None, :] * np.einsum("pq,bjqp->bj", inverse, A)
-        return self._span[i]
 
     def fit_all(self, chosen, warm=None) -> Fit:
         """The effects `chosen` fitted on all training data; without a warm start, once per set and bounds (the
@@ -206,7 +162,7 @@ class Selector:
             after[held] = sse(fit.beta, self.train.A, self.train.g, self.train.s)[held]
             fold_params.append(fit.params)
         if self.penalised:  # the folds' copies in the other folds: the noise fitted is not held out, its optimism added
-            after = after + self.optimism(chosen)
+            after = after + self.noise.optimism(chosen)
         return CvResult(after, weighted_fraction(after, self.train.s, self.w2), fold_params)
 
     def bootstrap_fractions(self, after: np.ndarray) -> np.ndarray:
@@ -352,7 +308,7 @@ class Selector:
     def _payload_joints_earned(self, selected: list[int], best: int, trials: dict[int, CvResult], current: CvResult) -> int:
         """Occam's rule for a payload's joints (periodic): a payload that moves joints a rival payload of another
         family does not (a parallelogram link against the yaw link) is kept only if its fit there is beyond their
-        noise (`_noise_statistic`, at BEYOND_NOISE_LEVEL over the candidates that competed: the step's best caught
+        noise (`PeriodicNoise.statistic`, at BEYOND_NOISE_LEVEL over the candidates that competed: the step's best caught
         62 % of q2's noise in 3 of its 12 directions), else the best-scoring rival is the choice. Upstream: `best`."""
         effect = self.design.effects[best]
         if not self.penalised or effect.kind != "payload":
@@ -361,41 +317,17 @@ class Selector:
         payloads = [i for i in trials if self.design.effects[i].kind == "payload"]
         rivals = [i for i in payloads if self.design.effects[i].family != effect.family and joints(i) < joints(best)
                   and trials[i].fraction - current.fraction >= MIN_HELDOUT_GAIN]
-        absorbed_by_best = self._absorbed(selected + [best]) if rivals else None
+        absorbed_by_best = self.noise.absorbed(selected + [best]) if rivals else None
         for rival in sorted(rivals, key=lambda i: -trials[i].fraction):
             extra = sorted(joints(best) - joints(rival))
-            statistic, degrees = self._noise_statistic([best], absorbed_by_best - self._absorbed(selected + [rival]), extra)
+            statistic, degrees = self.noise.statistic([best], absorbed_by_best - self.noise.absorbed(selected + [rival]), extra)
             if degrees > 0 and statistic < chi2.isf(BEYOND_NOISE_LEVEL / len(trials), degrees):
                 return rival
         return best
 
     def _beyond_noise(self, selected: list[int], added: list[int], competing: int) -> bool:
-        """Periodic: whether the step's in-sample fit removes more than the noise of the directions its columns
-        span, at BEYOND_NOISE_LEVEL over the candidates that competed (Cp charges one candidate's average catch; a
-        time shift, the best of sixty, took 27 % of q3's noise with one direction). Upstream (no noise): True."""
-        if not self.penalised:
-            return True
-        removed = self._absorbed(selected + added) - self._absorbed(selected)
-        statistic, degrees = self._noise_statistic(added, removed, list(range(N_JOINTS)))
-        return bool(degrees == 0 or statistic >= chi2.isf(BEYOND_NOISE_LEVEL / max(competing, 1), degrees))
-
-    def _noise_statistic(self, effects: list[int], removed: np.ndarray, joints: list[int]) -> tuple[float, float]:
-        """(statistic, degrees): the energy `removed` (7,) on `joints` over the noise per direction there of the
-        effects' columns, and the directions those columns span there (chi-square with those degrees when the
-        residual there is noise)."""
-        directions = sum(self._span_directions(i) for i in effects)[:, joints].sum(0)
-        expected = sum(self._span_absorbed(i) for i in effects)[:, joints].sum(0)
-        live = (directions > 0) & (expected > 0)
-        return float(np.sum(removed[joints][live] * directions[live] / expected[live])), float(directions[live].sum())
-
-    def _absorbed(self, chosen: list[int]) -> np.ndarray:
-        """(7,) the training residual energy the chosen effects' in-sample fit removes, per joint (made once per set)."""
-        key = tuple(sorted(chosen))
-        if key not in self._absorbed_by:
-            fit = self.fit_all(list(key)) if key else None
-            self._absorbed_by[key] = np.zeros(N_JOINTS) if fit is None else (
-                self.train.s - sse(fit.beta, self.train.A, self.train.g, self.train.s)).sum(0)
-        return self._absorbed_by[key]
+        """Periodic: `PeriodicNoise.beyond_noise`; upstream (no noise measured): True."""
+        return self.noise is None or self.noise.beyond_noise(selected, added, competing)
 
     def _gain(self, trial: CvResult, current: CvResult) -> tuple[float, np.ndarray, float]:
         """A step's gain, its bootstrap resamples and the share of them not positive."""
