@@ -325,3 +325,19 @@ def test_a_gap_below_the_effort_resolution_is_nothing_to_explain():
     real = explanation({"train": [0.3, 0.3, 1e-6]}, {"train": [0.1, 0.1, 1e-6]}, names, [{"joints": names}])
     assert real["words"] == "mostly explained" and not real["below_resolution"]  # one joint above it: the rule as before
     assert EFFORT_RESOLUTION == 1e-3
+
+
+def test_an_effect_that_explains_no_main_joint_alone_does_not_lead():
+    """The null pair: a 0.6 ms time shift, 11 % of q1's gap alone and less elsewhere, led an answer whose q2 a session
+    change explained ("partly explained by efforts recorded late ... with 7 more effects"). Where the effect the answer
+    would lead with removes under a fifth of every main joint's gap alone, the effects are named together."""
+    result = _result([0.3, 0.25, 0.6], [0.1, 0.1, 0.3], ["q1", "q2", "q3"])
+    shift = {"name": "time_shift", "kind": "time_shift", "joints": JOINTS, "selected": True, "parameters": {"delay_s": 6e-4},
+             "explained_fraction_per_joint": {"cross_validated": [0.11, 0.001, 0.019, 0, 0, 0, 0]}}
+    load = {"name": "angle_load_q3_by_q2", "kind": "angle_load", "joints": ["q3"], "selected": True, "parameters": {},
+            "explained_fraction_per_joint": {"cross_validated": [0, 0, 0.055, 0, 0, 0, 0]}}
+    result["effects"], result["selection"]["selected"] = [shift, load], ["time_shift", "angle_load_q3_by_q2"]
+    sentence = answer_sentence(result)
+    assert "by 2 effects together, none removing a fifth of q1, q2 or q3's gap alone (time_shift, angle_load_q3_by_q2)" in sentence
+    shift["explained_fraction_per_joint"]["cross_validated"][0] = 0.25  # a fifth of q1's alone: it leads
+    assert "by efforts recorded late against the positions (time_shift) with 1 more effect" in answer_sentence(result)

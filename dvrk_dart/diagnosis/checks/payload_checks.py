@@ -151,11 +151,12 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
     alone against the baseline with the hand position given: their masses at
     the hand position must agree within their intervals (the intervals overlap)."""
     key, position = hand_position_on_link(arm, spec)
+    processing = spec.get("processing", "upstream")
     estimates = {}
     for run in spec["measured"]:
         # no figures: these diagnoses are read for their estimates only (the report shows the runs together)
         result = run_diagnosis(arm, DiagnosisConfig(run, spec["baseline"], repeat=spec.get("repeat"), payload_at=(key, position), logs=False,
-                                                    processing=spec.get("processing", "upstream"), figures=False), out_dir / run)
+                                                    processing=processing, figures=False), out_dir / run)
         at = (result.get("payload") or {}).get("payload_at") or {}
         estimates[run] = {"mass_kg": at.get("mass_kg"), "interval": at.get("mass_kg_interval")}
     known = [e for e in estimates.values() if e["mass_kg"] is not None and e["interval"] is not None]
@@ -164,7 +165,7 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
     value = "; ".join(f"{run} {e['mass_kg']:.3f} kg [{e['interval'][0]:.3f}, {e['interval'][1]:.3f}]" if e in known else f"{run}: no mass"
                       for run, e in estimates.items())
     return estimates, [{"check": f"the same {spec['expected_mass_kg'] * 1000:g} g at two speeds ({', '.join(spec['measured'])}), each "
-                                 "diagnosed alone: masses at the hand position agree within their intervals"
+                                 f"diagnosed alone ({processing} processing): masses at the hand position agree within their intervals"
                                  + (f" ({', '.join(holding_zero)}: an interval that holds zero, a mass not determined)" if holding_zero else ""),
                         "passed": bool(agree), "value": value, **({"not_determined": True} if holding_zero else {})}]
 

@@ -11,7 +11,8 @@ import numpy as np
 
 from dvrk_dart.diagnosis.output.clauses import (ANSWER_JOINTS, constants_clause, effort_unit, identified_terms_clause, insertion_clause,
                                                 refit_clause)
-from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, NOT_DETERMINED, explanation, joints_apart, share_above_floor, words_for
+from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, share_above_floor,
+                                                 words_for)
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -277,7 +278,7 @@ def _names(names: list[str]) -> str:
     return f"{', '.join(names[:2])}{', ...' if len(names) > 2 else ''}"
 
 
-def _effects_words(result: dict, selected: list[str]) -> str:
+def _effects_words(result: dict, selected: list[str], weigh_lead: bool = True) -> str:
     """The selected effects in words, the lead first. With a baseline, the
     findings and the model errors the runs share with it are told apart, and
     the share is said to be theirs together (a payload found beside nine common
@@ -288,10 +289,30 @@ def _effects_words(result: dict, selected: list[str]) -> str:
     common = [n for n in selected[1:] if n not in findings]
     if not common or roles.get(selected[0], "finding") != "finding":
         others = selected[1:]
+        minor = _minor_lead(result, selected) if weigh_lead else None
+        if minor:  # no effect to lead: the first named removed under a fifth of each main joint's gap alone
+            return f"{len(selected)} effects together, none removing a fifth of {minor}'s gap alone ({_names(selected)})"
         return lead + (f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({_names(others)})" if others else "")
     also = f" and {len(findings)} more change{'s' if len(findings) > 1 else ''} ({_names(findings)})" if findings else ""
     return (f"{len(selected)} effects together: {lead}, what the runs have and their baseline lacks{also}, and {len(common)} model "
             f"error{'s' if len(common) > 1 else ''} the runs share with their baseline ({_names(common)})")
+
+
+def _minor_lead(result: dict, selected: list[str]) -> str | None:
+    """The main joints ('q1, q2 or q3') where several effects were selected and the one the answer would lead with
+    removes, alone, under PARTLY_SHARE of each one's gap (cross-validated): naming it first would say it explains
+    them (a 0.6 ms time shift, 11 % of the null pair's q1, led an answer whose q2 a session change explained);
+    None otherwise, and for a payload-shaped lead, whose words are its own."""
+    first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), None)
+    shares = ((first or {}).get("explained_fraction_per_joint") or {}).get("cross_validated")
+    if len(selected) < 2 or shares is None or selected[0].startswith("payload"):
+        return None
+    recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
+    main = [j for j in _main_joints(recorded) if JOINT_NAMES[j] in first.get("joints", ())]
+    if not main or any(shares[j] is not None and shares[j] >= PARTLY_SHARE for j in main):
+        return None
+    names = [JOINT_NAMES[j] for j in main]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
 
 
 def split_floors(result: dict) -> list | None:
@@ -318,12 +339,13 @@ def answer_paragraphs(result: dict) -> list[str]:
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
     selected = _in_answer_order(result)
-    effects = _effects_words(result, selected) if selected else "no effect"
-    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in zip(joints, before, after))
-    where = "on the held-out runs" if split == "holdout" else "on the training runs"
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
                                                           split_floors(result))
+    # "not explained" already says the best effects remove less than a fifth: no lead to weigh
+    effects = _effects_words(result, selected, explained["words"] != "not explained") if selected else "no effect"
+    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in zip(joints, before, after))
+    where = "on the held-out runs" if split == "holdout" else "on the training runs"
     if result.get("payload_not_distinguished"):
         where = ("no payload is distinguished from none (the payload-shaped fit's mass is not positive: a session change read "
                  "as a payload); " + where)

@@ -98,6 +98,20 @@ def _split_table(result: dict) -> Markup | None:
     return table(["joint", "before", "explained", "session-to-session", "left over", "after", "repeatable gap removed"], rows, css="")
 
 
+def _floor_words(result: dict) -> str:
+    """How the split's floor was made from the repeat pair's (the report gives a pair's floor in several forms)."""
+    one = result.get("session_floor")
+    rows = (result.get("gap_split") or {}).get("joints") or []
+    words = []
+    if one and rows and rows[0].get("session_floor") and one[JOINT_NAMES.index(rows[0]["joint"])]:
+        if rows[0]["session_floor"] / one[JOINT_NAMES.index(rows[0]["joint"])] > 1.2:  # sqrt(2): not one session's
+            words.append("times sqrt(2): runs minus their baseline carry two sessions' deviations")
+    offsets = (result.get("nuisance_offset_joints") or {}).get("joints")
+    if offsets:
+        words.append(f"without the constant each run's offset takes out on {', '.join(offsets)}")
+    return "".join(f"; {w}" for w in words)
+
+
 def _band(result: dict) -> dict | None:
     """Per joint: is the measured run inside the parameters' uncertainty band?"""
     band = result.get("parameter_band")
@@ -155,7 +169,7 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],
                   n_selected=len([x for x in result.get("effects", []) if x.get("selected")]), n_shown=len(shown),
                   n_effects=len(result.get("effects", [])), joint_words=result.get("joint_words", ""), effects_table=effects_table,
-                  parameters_table=parameters_table, split_table=_split_table(result), split_runs=(result.get("gap_split") or {}).get("runs"),
+                  parameters_table=parameters_table, split_table=_split_table(result), split_runs=(result.get("gap_split") or {}).get("runs"), floor_words=_floor_words(result),
                   repeat=str(result.get("repeat")), offset_joints=offset_joints_sentence(offset_joints) if offset_joints else "",
                   nuisance_offsets=[(run, ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
                                     for run, offsets in (result.get("nuisance_offsets") or {}).items()],
