@@ -78,8 +78,13 @@ def test_every_combination_ends_in_a_result_or_one_line(runs, combination, capsy
     code = main(args)
     captured = capsys.readouterr()
     assert "Traceback" not in captured.err
-    if combination["payload_at"] and not combination["baseline"]:  # the one combination the options refuse, in one line
+    if combination["payload_at"] and not combination["baseline"]:  # the combinations the options refuse, in one line
         assert code == 2 and len(captured.err.strip().splitlines()) == 1 and "--payload-at" in captured.err, captured.err
+        return
+    if combination["baseline"] and combination["holdout"]:  # a held-out run of another motion than the baseline's
+        errors = [line for line in captured.err.strip().splitlines() if "note:" not in line]  # the notes on the runs come first
+        assert code == 2 and len(errors) == 1 and "--holdout" in errors[0] and "another motion" in errors[0], captured.err
+        assert not (tmp_path / "out" / "diagnosis.json").exists()
         return
     assert code == 0, captured.err  # every other combination is diagnosed
     result = json.loads((tmp_path / "out" / "diagnosis.json").read_text())

@@ -341,3 +341,23 @@ def test_an_effect_that_explains_no_main_joint_alone_does_not_lead():
     assert "by 2 effects together, none removing a fifth of q1, q2 or q3's gap alone (time_shift, angle_load_q3_by_q2)" in sentence
     shift["explained_fraction_per_joint"]["cross_validated"][0] = 0.25  # a fifth of q1's alone: it leads
     assert "by efforts recorded late against the positions (time_shift) with 1 more effect" in answer_sentence(result)
+
+
+def test_a_joint_fitted_less_closely_on_the_training_runs_too_is_not_called_a_fit_that_does_not_carry():
+    """A blind q5 friction change, diagnosed with a holdout: q5..q7 at 36x the identified model's held-out gap read
+    "what was fitted there on the training runs does not carry", where the training runs were as far from it."""
+    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+
+    result = _result([0.3, 0.25, 0.6], [0.01, 0.01, 0.01], ["q1", "q2", "q3", "q5", "q6"])
+    result["gap_before"]["holdout"] = result["gap_before"]["train"]
+    result["gap_after"]["train"] = [0.01, 0.01, 0.01, 0.0003, 0.0027, 0.002, 0.0017]
+    result["gap_after"]["holdout"] = [0.01, 0.01, 0.01, 0.0005, 0.0025, 0.0025, 0.0022]
+    result["identified_model_gap_holdout"] = [0.0009, 0.0008, 0.3, 2e-5, 7e-5, 7e-5, 6e-5]
+    result["identified_model_gap_train"] = [0.0009, 0.0008, 0.3, 2e-5, 7e-5, 7e-5, 6e-5]
+    sentence = beyond_identified_sentence(result)
+    assert ("worse than the identified model on q1 (11.1x its gap), q2 (12.5x its gap), q5 (35.7x its gap), q6 (35.7x its gap): the "
+            "selected effects fit these less closely than the identified model's own terms, on the training runs too") in sentence, sentence
+    result["gap_after"]["train"][5] = 5e-5  # q6 as close as the model on the training runs: its held-out figure did not carry
+    sentence = beyond_identified_sentence(result)
+    assert ("worse than the identified model on q6 (35.7x its gap): what was fitted there on the training runs does not carry to the "
+            "held-out runs; and on q1 (11.1x its gap), q2 (12.5x its gap), q5 (35.7x its gap): the selected effects fit") in sentence, sentence

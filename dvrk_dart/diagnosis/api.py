@@ -157,8 +157,10 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
         found = apply_band(found, band)
     studies = (arm, training, holdout, found, c.executor, c.jobs, c.ray_address, c.topics)
     beyond = _beyond_the_effects(studies, c.refit, insertion_applies(arm, found, training, holdout, c.baseline), out_dir)
-    if holdout:
+    if holdout and c.baseline is None:  # held-out runs minus a baseline have no identified model's gap to compare with
         beyond["identified_model_gap_holdout"] = identified_model_gap(arm, holdout, found["processing"], c.topics)
+        if not any(isinstance(run, (tuple, list)) for run in training):  # runs of their own, as gap_after's
+            beyond["identified_model_gap_train"] = identified_model_gap(arm, training, found["processing"], c.topics)
     # the diagnosis and what was studied on top of it: built once here, written once
     result = {**found, **beyond, "diagnosis_base": arm.model.diagnosis_base, "arm_model": arm_model_record(arm.model),
               "params": file_record(arm.params.source), "versions": software_versions()}
@@ -211,12 +213,11 @@ def _repeatable_shares(result: dict) -> dict:
     return shares
 
 
-def identified_model_gap(arm: Arm, holdout, processing: dict, topics: BagTopics = BagTopics()) -> list[float | None]:
-    """The identified model on the held-out runs, in the diagnosis's band,
-    pooled over their samples as the simulation's gaps are (result.gaps): what
-    the diagnosis is measured against."""
+def identified_model_gap(arm: Arm, runs, processing: dict, topics: BagTopics = BagTopics()) -> list[float | None]:
+    """The identified model on `runs` (the held-out ones: what the diagnosis is measured against), in the
+    diagnosis's band, pooled over their samples as the simulation's gaps are (result.gaps)."""
     residuals, recorded = [], []
-    for name in holdout:
+    for name in runs:
         state = process(load_run(resolve_run(name), arm.model, topics), processing["processing"], processing.get("harmonics"))
         residuals.append(state.tau - state.in_band(arm.identified.predict(state.q, state.dq, state.ddq, "all")))
         recorded.append(state.measured)

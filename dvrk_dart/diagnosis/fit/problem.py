@@ -277,6 +277,16 @@ def _on_recorded_joints(effects: list[Effect], at_index: int | None, runs: list)
     return kept, next(i for i, e in enumerate(kept) if e is at_effect)
 
 
+def _held_out(run: DiagnosisRun, baseline: DiagnosisRun | None) -> DiagnosisRun:
+    """A held-out run as the training runs are read: minus the baseline where there is one, which needs its motion
+    (a run of another motion scored raw against effects fitted as a change read "378x worse than the identified model")."""
+    if baseline is not None and run.role is RunRole.OTHER_MOTION:
+        raise DvrkDartError(f"--holdout {run.name}: with --baseline a held-out run is scored minus the baseline, which needs the "
+                            f"baseline's motion ({baseline.name}); {run.name} is another motion"
+                            f"{f' ({run.alignment})' if run.alignment else ''}: diagnose it with a baseline of its own, or leave it out")
+    return run
+
+
 def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
                   simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
                   nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics(),
@@ -309,7 +319,7 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     baseline_run = as_run(baseline, rate_hz=rate) if baseline is not None else None
     train_runs = [as_run(m, baseline_run) for m in measured_list]
     train_runs += [as_run(s) for s in (train or []) if not (isinstance(s, (str, Path)) and str(s) in map(str, measured_list))]
-    holdout_runs = [as_run(s) for s in (holdout or [])]
+    holdout_runs = [_held_out(as_run(s, baseline_run), baseline_run) for s in (holdout or [])]
     if baseline_run is not None and any(r.role is RunRole.OTHER_MOTION for r in train_runs):  # the baseline is fitted with them
         train_runs.append(DiagnosisRun(baseline_run.name, baseline_run.state, baseline_run.simulated, role=RunRole.BASELINE))
     repeat_run = as_run(repeat, baseline_run, rate) if repeat is not None else None

@@ -248,7 +248,8 @@ def j1_sentences(report: dict) -> list[str]:
 def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied: bool, at_given: bool) -> list[str]:
     units = [arm.model.effort_unit(j) for j in JOINT_NAMES]
     intervals = report.get("first_moment_base_at_q0_kg_m_interval") or [None] * 3
-    moment = ", ".join("not determined" if v is None else f"{v:+.4f}" + ("" if i is None else f" [{i[0]:+.4f}, {i[1]:+.4f}]")
+    moment = ", ".join("not determined" if v is None else f"{v:+.4f}" + ("" if i is None else f" [{i[0]:+.4f}, {i[1]:+.4f}"
+                                                                          f"{', holding zero' if i[0] <= 0.0 <= i[1] else ''}]")
                        for v, i in zip(report["first_moment_base_at_q0_kg_m"], intervals))
     efforts = ", ".join(f"{j} {'not determined' if v is None else f'{v:+.3f} {u}'}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units))
     words = [

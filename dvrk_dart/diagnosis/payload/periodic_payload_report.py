@@ -247,16 +247,19 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
     return report
 
 
-def _interval_text(value, interval, unit: str, digits: int = 3) -> str:
+def _interval_text(value, interval, unit: str, digits: int = 3, say_zero: bool = False) -> str:
+    """A value with its interval; say_zero: an interval that holds zero says so (the value is not told from none)."""
     if value is None:
         return "not determined"
-    return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f})"
+    zero = ", holding zero" if say_zero and interval[0] <= 0.0 <= interval[1] else ""
+    return f"{value:+.{digits}f} {unit} ({interval[0]:+.{digits}f} to {interval[1]:+.{digits}f}{zero})"
 
 
 def j1_sentences(report: dict, model) -> list[str]:
     """The sentences that quote the gravity efforts at q = 0 and J1's slope, with their intervals."""
-    slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad")
-    return [J1_EFFORTS_SENTENCE + ", ".join(f"{j} {_interval_text(v, i, model.effort_unit(j))}" for j, v, i in
+    slope = _interval_text(report["q1_gravity_slope_at_q0_nm_per_rad"], report["q1_gravity_slope_at_q0_nm_per_rad_interval"], "N·m/rad",
+                           say_zero=True)
+    return [J1_EFFORTS_SENTENCE + ", ".join(f"{j} {_interval_text(v, i, model.effort_unit(j), say_zero=True)}" for j, v, i in
                                             zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], report["gravity_efforts_at_q0_interval"])) + ".",
             f"{J1_SLOPE_SENTENCE}{slope} at q = 0 (J1's own path: how the real yaw axis lies relative to gravity)."]
 
@@ -276,7 +279,7 @@ def _words(report: dict, model) -> list[str]:
                      f"harmonics, the efforts choose {report['link']}: the numbers below are {report['link']}'s.")
     moment, intervals = report["first_moment_base_at_q0_kg_m"], report["first_moment_base_at_q0_kg_m_interval"]
     words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
-                 + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
+                 + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4, say_zero=True)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
     words += j1_sentences(report, model)
     if report["mass_kg"] is None:
         words.append(f"The mass is not determined: {report['not_determined'].get('mass_kg', '')}.")
