@@ -186,6 +186,21 @@ def test_what_the_identified_model_has_is_said_to_be_its_own(arm, segment, noise
     assert result["identified_terms"]["share"] < 0.2 and "beyond the identified model's terms" in answer_sentence(result), result["identified_terms"]
 
 
+def test_what_is_beyond_the_identified_terms_is_put_on_the_effect_it_looks_like(arm, segment, noise_rms):
+    """The identified model's own terms plus a q1 offset 0.2 N·m beyond its own: the selected effects rebuild
+    the model's q1 friction and offset, and what they add to them on q1 is said to be the offset (a blind q1 offset
+    change was told only as "mostly explained beyond it", the lead being J3's published friction)."""
+    from dvrk_dart.model.identified import NON_INERTIAL_TERMS
+
+    own = arm.identified.predict(segment.q, segment.dq, segment.ddq, NON_INERTIAL_TERMS)
+    own[:, 0] += -0.2
+    measured = synthesize_measurement(arm, segment, [], noise_rms, seed=13, extra_effort=own)
+    result = diagnose(measured, arm=arm, max_effects=12, figures=False, profile_payload_mass=False)
+    assert {"offset_q1", "friction_q1"} <= {name.split("_presliding")[0].split("_smooth")[0] for name in result["selection"]["selected"]}
+    carried = result["identified_terms"]
+    assert carried["beyond_carried_by"]["q1"] == "offset_q1" and carried["beyond_rms"]["q1"] == pytest.approx(0.2, rel=0.1), carried
+
+
 def test_with_a_baseline_the_model_errors_shared_with_it_are_said_to_be_the_identified_models(arm, segment, noise_rms):
     """A run of another motion fitted beside its baseline: the model errors the runs share with the baseline were
     the identified friction and offsets the inertia-only simulation leaves out, named "model errors" with no word."""

@@ -361,3 +361,24 @@ def test_a_joint_fitted_less_closely_on_the_training_runs_too_is_not_called_a_fi
     sentence = beyond_identified_sentence(result)
     assert ("worse than the identified model on q6 (35.7x its gap): what was fitted there on the training runs does not carry to the "
             "held-out runs; and on q1 (11.1x its gap), q2 (12.5x its gap), q5 (35.7x its gap): the selected effects fit") in sentence, sentence
+
+
+def test_beyond_the_identified_model_the_effect_that_carries_it_is_named():
+    """A blind q2 viscous change (0.218 -> 0.300) was told only as "mostly explained beyond it"; the effect whose effort
+    is most like what the simulation adds to the identified model's terms on a joint explained beyond it is named, not
+    on a joint where the identified model's gap is below the effort resolution."""
+    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+
+    result = _result([0.3, 0.38, 0.6], [0.01, 0.01, 0.01], ["q1", "q2", "q3"])
+    result["gap_before"]["holdout"] = result["gap_before"]["train"]
+    result["gap_after"]["holdout"] = [1e-5, 1e-5, 2e-5, 0.01, 0.01, 0.01, 0.01]
+    result["identified_model_gap_holdout"] = [0.0009, 0.08, 0.3, 0.01, 0.01, 0.01, 0.01]
+    result["effects"] = [{"name": "friction_q2", "kind": "friction", "joints": ["q2"], "selected": True, "size": 0.0668,
+                          "parameters": {"coulomb": 0.0668, "viscous": 0.3}, "units": {"coulomb": "N·m", "viscous": "N·m/(rad/s)"}},
+                         {"name": "offset_q1", "kind": "offset", "joints": ["q1"], "selected": True, "size": -0.3,
+                          "parameters": {"offset": -0.3}, "units": {"offset": "N·m"}}]
+    result["identified_terms"] = {"beyond_carried_by": {"q1": "offset_q1", "q2": "friction_q2"}}
+    sentence = beyond_identified_sentence(result)
+    assert ("the effect most like what the simulation adds to the identified model's terms, on q2: friction_q2 (Coulomb 0.0668 N·m, "
+            "viscous 0.3 N·m/(rad/s))") in sentence, sentence
+    assert "offset_q1" not in sentence and "over q2, q3:" in sentence  # q1's 0.0009: nothing beyond the model to explain

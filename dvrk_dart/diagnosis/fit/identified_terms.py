@@ -39,19 +39,23 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
             if not problem.has_baseline or run.role is RunRole.BASELINE]
     if not left_out or not selection.selected or not runs:
         return None
-    found, terms = [], []
+    found, terms, by_effect = [], [], []
+    beta, slices = selection.final.beta, problem.design.slices
     for run, columns in runs:
         state = run.state
-        effort = columns @ selection.final.beta
+        effort = columns @ beta
         each = [state.in_band(problem.arm.identified.predict(state.q, state.dq, state.ddq, (term,))) for term in left_out]
+        own = [columns[:, :, slices[i]] @ beta[slices[i]] for i in selection.selected]
         demean = problem.demean_of(run)
         if demean is not None:  # a run's own constant is a nuisance: neither side keeps it
             effort, *each = (x - demean * x.mean(axis=0) for x in (effort, *each))
+            own = [x - demean * x.mean(axis=0) for x in own]
         found.append(effort)
         terms.append(np.stack(each, axis=-1))
-    found, terms = np.vstack(found), np.vstack(terms)  # (N, 7), (N, 7, terms)
+        by_effect.append(np.stack(own, axis=-1))
+    found, terms, by_effect = np.vstack(found), np.vstack(terms), np.vstack(by_effect)  # (N, 7), (N, 7, terms), (N, 7, selected)
     acted = sorted({JOINT_NAMES.index(j) for i in selection.selected for j in problem.effects[i].joints} & set(np.flatnonzero(problem.recorded)))
-    by_joint, beyond = {}, {}
+    by_joint, beyond, carrier = {}, {}, {}
     for j in acted:
         energy = float(found[:, j] @ found[:, j])
         if energy > 0:
@@ -63,13 +67,27 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
             # all the terms, not the closest subset: J1's offset moved from -0.3 to -0.1 N·m is 0.2 from the model's,
             # though leaving the offset out is closer (0.1)
             beyond[JOINT_NAMES[j]] = float(np.sqrt(np.mean((found[:, j] - terms[:, j, :].sum(axis=1)) ** 2)))
+            carrier[JOINT_NAMES[j]] = _carrier(found[:, j] - terms[:, j, :].sum(axis=1), by_effect[:, j, :],
+                                               [problem.effects[i].name for i in selection.selected])
     if not by_joint:
         return None
     # the share weighs efforts in energy: J1's viscous raised from 0.09 to 0.24 beside its Coulomb still read 92 %
-    return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "beyond_rms": beyond, "terms": list(left_out),
+    return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "beyond_rms": beyond, "beyond_carried_by": carrier,
+            "terms": list(left_out),
             "runs": "baseline" if problem.has_baseline else "train",
             "definition": "per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
                           "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on `runs` (the training runs, or "
                           "with a baseline the baseline run fitted beside runs of another motion); "
                           "`share`: their mean over the joints the selected effects act on (each joint in its own unit); `beyond_rms`: per "
-                          "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them)"}
+                          "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them); "
+                          "`beyond_carried_by`: per joint, the selected effect whose effort there is most like that difference "
+                          "(cosine of the two series, uncentred)"}
+
+
+def _carrier(beyond: np.ndarray, efforts: np.ndarray, names: list[str]) -> str | None:
+    """The effect whose effort (a column of `efforts`, (N, selected)) is most like `beyond` (N,): what the selected
+    effects add to the identified model's terms on a joint, by shape (a blind q1 offset change: the offset, not the
+    q1 friction that rebuilds the model's own)."""
+    norms = np.linalg.norm(efforts, axis=0) * np.linalg.norm(beyond)
+    cosine = np.divide(efforts.T @ beyond, norms, out=np.zeros(len(names)), where=norms > 0)
+    return names[int(np.argmax(np.abs(cosine)))] if np.abs(cosine).max() > 0 else None
