@@ -31,7 +31,8 @@ from dvrk_dart.diagnosis.payload.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
-from dvrk_dart.diagnosis.output.answer import answer_sentence, plain_name
+from dvrk_dart.diagnosis.output.answer import answer_sentence
+from dvrk_dart.diagnosis.output.effect_words import plain_name
 from dvrk_dart.diagnosis.output.regimes import residual_regimes
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
 from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled

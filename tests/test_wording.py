@@ -83,7 +83,7 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
     carrying, never as what J3's gap is made of; the joints where the one
     configuration is worse are named."""
     from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_sentence
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
     from dvrk_dart.diagnosis.output.clauses import insertion_clause
 
     coefficients = {"acceleration_along_motion_kg": 0.234, "pitch_load_sin_q2": 0.026, "pitch_load_cos_q2": 0.126,
@@ -109,18 +109,18 @@ def test_terms_that_do_not_carry_to_the_held_out_runs_are_not_called_the_gap():
 
 
 def test_the_pitch_angle_load_in_words():
-    from dvrk_dart.diagnosis.output.answer import plain_name
+    from dvrk_dart.diagnosis.output.effect_words import plain_name
 
     assert plain_name({"name": "angle_load_q3_by_q2", "kind": "load", "joints": ["q3"]}).startswith("a load on q3 set by q2's angle")
 
 
 def test_a_link_lighter_than_identified_in_words():
-    from dvrk_dart.diagnosis.output.answer import _size_words, plain_name
+    from dvrk_dart.diagnosis.output.effect_words import plain_name, size_words
 
     entry = {"name": "mass_scale_insertion_carriage", "kind": "mass_scale", "joints": ["q1", "q2", "q3"], "size": -0.14,
              "units": {"mass_error": "1"}}
     assert plain_name(entry) == "the insertion_carriage link's own mass and inertia off the identified ones"
-    assert _size_words(entry) == ", 14% lighter"
+    assert size_words(entry) == ", 14% lighter"
 
 
 def test_a_joint_below_the_average_words_is_named():
@@ -215,7 +215,7 @@ def test_links_the_runs_do_not_tell_apart_lead_together():
 def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_an_effect_acts():
     """The MTM (effects on the identified arm): q6, which no effect acts on, was called 'worse than the
     identified model' for the formula's 0.00424 against DART's 0.00434; q2 was worse and better at once."""
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 
     result = _result([0.028, 0.0305, 0.036], [0.027, 0.0303, 0.032], ["q2"])
     result["gap_before"]["holdout"], result["gap_after"]["holdout"] = result["gap_before"]["train"], result["gap_after"]["train"]
@@ -229,7 +229,7 @@ def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_
 
 def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_model():
     """'Mostly explained' against the inertia alone sat beside held-out figures 2-16 % under the identified model's."""
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 
     result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
     result["gap_before"]["holdout"], result["gap_after"]["holdout"] = result["gap_before"]["train"], result["gap_after"]["train"]
@@ -252,7 +252,7 @@ def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_mo
 def test_a_held_out_gap_at_the_noise_is_neither_worse_nor_explained():
     """An arm that is the identified model plus noise: 0.00164 -> 0.00183 N·m (a tenth of the noise) read "worse than the
     identified model ... grown by 33 %"."""
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 
     result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q1", "q2", "q3"])
     result["gap_before"]["holdout"] = result["gap_before"]["train"]
@@ -360,7 +360,7 @@ def test_an_effect_that_explains_no_main_joint_alone_does_not_lead():
 def test_a_joint_fitted_less_closely_on_the_training_runs_too_is_not_called_a_fit_that_does_not_carry():
     """A blind q5 friction change, diagnosed with a holdout: q5..q7 at 36x the identified model's held-out gap read
     "what was fitted there on the training runs does not carry", where the training runs were as far from it."""
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 
     result = _result([0.3, 0.25, 0.6], [0.01, 0.01, 0.01], ["q1", "q2", "q3", "q5", "q6"])
     result["gap_before"]["holdout"] = result["gap_before"]["train"]
@@ -381,7 +381,7 @@ def test_beyond_the_identified_model_the_effect_that_carries_it_is_named():
     """A blind q2 viscous change (0.218 -> 0.300) was told only as "mostly explained beyond it"; the effect whose effort
     is most like what the simulation adds to the identified model's terms on a joint explained beyond it is named, not
     on a joint where the identified model's gap is below the effort resolution."""
-    from dvrk_dart.diagnosis.output.answer import beyond_identified_sentence
+    from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 
     result = _result([0.3, 0.38, 0.6], [0.01, 0.01, 0.01], ["q1", "q2", "q3"])
     result["gap_before"]["holdout"] = result["gap_before"]["train"]

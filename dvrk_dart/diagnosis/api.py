@@ -16,7 +16,7 @@ from dvrk_dart.diagnosis.fit.batch import BatchSimulate
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.beyond.insertion_terms import insertion_applies, insertion_check
 from dvrk_dart.diagnosis.beyond.one_configuration import ONE_CONFIGURATION_FILE, one_configuration_check
-from dvrk_dart.diagnosis.output.answer import beyond_identified
+from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified
 from dvrk_dart.diagnosis.output.page import diagnosis_page
 from dvrk_dart.diagnosis.payload.parameter_band import apply_band, band_run, load_band
 from dvrk_dart.diagnosis.beyond.refit import REFIT_FOLDER, check_refit_inputs, refit_check

@@ -30,7 +30,8 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
 )
 from dvrk_dart.diagnosis.checks.other_arm import validate_other_arm
 from dvrk_dart.diagnosis.checks.out_of_library import validate_out_of_library
-from dvrk_dart.diagnosis.output.answer import AT_FLOOR_RATIO, joints_at_level
+from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
+from dvrk_dart.diagnosis.output.beyond_identified import joints_at_level
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
 from dvrk_dart.io.html import render, table, text_cell
 from dvrk_dart.diagnosis.output.wording import share_words

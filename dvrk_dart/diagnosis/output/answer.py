@@ -5,74 +5,15 @@ a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import numpy as np
-
-from dvrk_dart.diagnosis.output.clauses import (ANSWER_JOINTS, constants_clause, effort_unit, identified_terms_clause, insertion_clause,
-                                                refit_clause)
-from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, share_above_floor,
-                                                 words_for)
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
+from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
+from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
+from dvrk_dart.diagnosis.output.effect_words import plain_name, size_words
+from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, share_above_floor
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: an effort at q = 0 below this is round-off, not a size (an MTM mismatch's q2 read +2.36e-19 N·m)
 ROUND_OFF_EFFORT = 1e-9
-
-_KIND_WORDS = {
-    "offset": "a constant effort offset on {joints}",
-    "armature": "extra reflected motor inertia on {joints}",
-    "gravity_tilt": "gravity tilted against the model (base not level)",
-    "time_shift": "efforts recorded late against the positions",
-    "counterweight_transmission": "an error in the counterweight cable's transmission to {joints}",
-}
-
-
-def plain_name(entry: dict) -> str:
-    """An effect of diagnosis.json's `effects` in words (its `name` is the
-    library's identifier, e.g. friction_q3_presliding0.0001)."""
-    name, kind, joints = entry["name"], entry.get("kind", ""), ", ".join(entry.get("joints", ()))
-    reversal = (entry.get("parameters") or {}).get("reversal")
-    how = "" if reversal in (None, "sign") else f", reversing over {reversal.removeprefix('Dahl over ').split(',')[0]}" + (
-        " (pre-sliding)" if reversal.startswith("Dahl") else "")
-    if kind == "friction":
-        if name.startswith("position_friction"):
-            return f"friction of {joints} that changes along its range{how}"
-        if name.startswith("presliding_of_"):  # presliding_of_<link>_<distance>: the identified Coulomb level, its reversal spread
-            link, distance = name.removeprefix("presliding_of_").rsplit("_", 1)
-            return f"the identified friction of {link} ({joints}) reversing gradually over {distance} (pre-sliding)"
-        if len(entry.get("joints", ())) > 1:
-            return f"friction of the coupled joints {joints}{how}"
-        return f"{'Stribeck ' if name.startswith('stribeck') else ''}friction of {joints}{how}"
-    if kind == "elastic":
-        return f"{'a torsion spring' if name.startswith('torsion') else 'cable elasticity'} on {joints}"
-    if kind == "load":  # AngleLoad: angle_load_<joint>_by_<source>
-        return f"a load on {joints} set by {name.split('_by_')[-1]}'s angle, whatever the motion's direction (a cable, a harness)"
-    if kind in ("payload", "payload_at_position", "gravity_mismatch"):
-        link = name.split("_on_")[-1].split("_at_")[-1]
-        return f"a payload on the {link} link" if kind != "gravity_mismatch" else f"a gravity mismatch on the {link} link (mass distribution)"
-    if kind == "mass_scale":
-        return f"the {name.removeprefix('mass_scale_')} link's own mass and inertia off the identified ones"
-    return _KIND_WORDS.get(kind, name).format(joints=joints)
-
-
-#: a fitted size below this (in its unit) is the bounded fit's round-off around zero
-ROUND_OFF = 1e-12
-
-
-def _size_words(entry: dict) -> str:
-    size, units = entry.get("size"), entry.get("units") or {}
-    unit = next(iter(units.values()), "")
-    if not isinstance(size, (int, float)):
-        return ""
-    if entry.get("kind") == "mass_scale":
-        return f", {abs(size):.0%} {'lighter' if size < 0 else 'heavier'}"
-    viscous = (entry.get("parameters") or {}).get("viscous")
-    if entry.get("kind") == "friction" and isinstance(viscous, (int, float)):  # a viscous change read "size 0 N" (its Coulomb)
-        # a part the bounded fit holds at zero comes back as round-off (4.83e-40): zero
-        size, viscous = (0.0 if abs(x) < ROUND_OFF else x for x in (size, viscous))
-        return f", Coulomb {size:.3g} {unit}, viscous {viscous:.3g} {units.get('viscous', '')}".rstrip()
-    return f", {size:.0%} of the identified term" if unit == "1" else f", size {size:.3g} {unit}".rstrip()
 
 
 def effort_at_zero_words(efforts: list | None, units: list[str], intervals: list | None = None, every: bool = False) -> str:
@@ -106,12 +47,12 @@ def offsets_words(efforts: list | None, offsets: list | None, units: list[str]) 
     return f"; the simulation leaves out the identified offsets ({listed}), which a constant part of these efforts may be"
 
 
-def _payload_size_words(payload: dict, units: list[str]) -> str:
+def _payloadsize_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
     when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
     at = payload.get("payload_at") or {}
     if at.get("link_chosen_by_the_efforts") is False:  # the fit's own size; the hand position's mass assumes another link
-        own = _payload_size_words({**payload, "payload_at": None}, units)
+        own = _payloadsize_words({**payload, "payload_at": None}, units)
         return f"{own}; the hand position is on {at['link']}, a link the efforts do not choose"
     if at.get("mass_kg") is not None:
         interval = at.get("mass_kg_interval")
@@ -136,141 +77,6 @@ def _floor_source(result: dict) -> str:
     return "" if result.get("repeat") is None or result.get("repeat_source") == "--repeat" else " of the model card's repeat pair (no --repeat)"
 
 
-def _main_joints(recorded: list[int]) -> list[int]:
-    """The joints an answer speaks of among those the runs recorded: J1..J3, else the wrist's."""
-    return [j for j in recorded if j < ANSWER_JOINTS] or recorded
-
-
-def beyond_identified(result: dict) -> dict | None:
-    """What the data show beyond the identified model, as figures (diagnosis.json's `beyond_identified_model`):
-    per joint J1..J3 its held-out gap (`bar`) and the diagnosis's simulation's (`after`), the joints where that
-    is worse, those where the bar is already at the floor (no share), the one rule's shares and words; None
-    without held-out runs."""
-    bar = result.get("identified_model_gap_holdout")
-    if result.get("diagnosis_base", "inertial") != "inertial":  # the effects sit on the identified arm in DART: it is the bar
-        bar = (result.get("gap_before") or {}).get("holdout")
-    combined = result.get("one_configuration")
-    after = combined["gap_holdout"] if combined else (result.get("gap_after") or {}).get("holdout")
-    if not bar or not after:
-        return None
-    recorded = [j for j in range(min(len(bar), len(after))) if bar[j] is not None and after[j] is not None]
-    acted = {JOINT_NAMES.index(j) for e in result.get("effects", []) if e.get("selected") for j in e.get("joints", ())}
-    acted |= set(range(ANSWER_JOINTS)) if combined else set()  # J3's terms and the pitch loads act on J1..J3
-    floor = result.get("session_floor")
-    level = _held_out_level(result, floor)
-    at_level = joints_at_level(result, bar) & set(recorded)
-    # worse where an effect acts (a joint nothing acts on keeps its figure) and the printed figures show it (0.033456 -> 0.033479
-    # was "worse"); at the floor, only beyond it (a tenth of the noise was "worse")
-    # (and above the effort resolution: a replayed simulated run's 1.5e-5 -> 4.8e-4 N·m read "30x worse")
-    made_worse = {j for j in recorded if after[j] > max(bar[j], EFFORT_RESOLUTION) and f"{after[j]:.3g}" != f"{bar[j]:.3g}"
-                  and (j in acted or not result.get("effects"))
-                  and (j not in at_level or after[j] > AT_FLOOR_RATIO * level[j])}
-    # worse on the training runs too (where the identified model's gap there is known): the effects' shape, not a carry
-    train_bar, train_after = result.get("identified_model_gap_train"), (result.get("gap_after") or {}).get("train")
-    fitted_less = {j for j in made_worse if train_bar and train_after and train_bar[j] is not None and train_after[j] is not None
-                   and train_after[j] > max(train_bar[j], EFFORT_RESOLUTION)}
-    # the one rule (output/wording.py), against the identified model instead of the inertia alone: above the floor where there is one
-    # (not where the identified model's gap is below the effort resolution: nothing beyond it to explain, and a simulated
-    # run's 0.00064 -> 0.011 N·m made an average "grown by 754 %")
-    shares = {j: (share_above_floor(bar[j], after[j], floor[j]) if floor and floor[j] is not None else 1.0 - after[j] / bar[j])
-              for j in _main_joints(recorded) if bar[j] > EFFORT_RESOLUTION and j not in at_level}
-    shares = {JOINT_NAMES[j]: share for j, share in shares.items() if share is not None}
-    removed = sum(shares.values()) / len(shares) if shares else None
-    return {"bar": [bar[j] for j in range(len(bar))], "after": [after[j] for j in range(len(after))], "recorded": recorded,
-            "simulation": "one configuration" if combined else "the selected effects", "made_worse": [JOINT_NAMES[j] for j in sorted(made_worse)],
-            "fitted_less_closely": [JOINT_NAMES[j] for j in sorted(fitted_less)],
-            "at_floor": [JOINT_NAMES[j] for j in _main_joints(recorded) if j in at_level], "above_session_floor": bool(floor),
-            "removed_share": removed, "words": words_for(removed) if removed is not None else None,
-            "by_joint": {name: {"removed_share": share, "words": words_for(share)} for name, share in shares.items()}}
-
-
-def beyond_identified_sentence(result: dict) -> str:
-    """What the data show beyond the identified model, first: its gap on the
-    held-out runs and what the diagnosis's simulation leaves ('' without held-out runs)."""
-    found = beyond_identified(result)
-    if found is None or (result.get("diagnosis_base", "inertial") != "inertial" and not found["made_worse"]):
-        return ""  # the answer's own figures are these: said once
-    bar, after, floor = found["bar"], found["after"], result.get("session_floor")
-    what = ("one DART configuration: the selected effects, J3's terms and the pitch-angle loads" if found["simulation"] == "one configuration"
-            else "the selected effects simulated in DART")
-    worse = [JOINT_NAMES.index(name) for name in found["made_worse"]]
-    # beyond J1..J3, the joints made worse and those the simulation takes under half the identified model's gap (a blind
-    # q5 friction change, 0.0151 -> 0.0048 N·m, went unsaid)
-    halved = [j for j in found["recorded"] if bar[j] > EFFORT_RESOLUTION and after[j] < 0.5 * bar[j]]
-    shown = sorted(set(_main_joints(found["recorded"])) | set(worse) | set(halved))
-    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
-    if worse:
-        gaps += "; worse than the identified model on " + _worse_words(result, found, worse)
-    if found["at_floor"]:
-        level_words = "the session floor, where a session's change" if floor else "the noise, where the noise"
-        gaps += (f"; the identified model's gap is within {AT_FLOOR_RATIO:g}x {level_words} alone can leave it, on "
-                 f"{', '.join(found['at_floor'])}: no share counted there")
-    removed = found["removed_share"]
-    if removed is not None:
-        gap = "the identified model's gap" + (" above the session floor" if floor else "")
-        change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
-        apart = joints_apart({"words": found["words"], "by_joint": found["by_joint"]})  # joints whose own words differ, named
-        gaps += (f"; {change} on average over {', '.join(found['by_joint'])}: {found['words']} beyond it" + (f" ({apart})" if apart else "")
-                 + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
-    # where the simulation goes beyond the identified model, what it adds to the model's terms there
-    explained = [JOINT_NAMES.index(name) for name, row in found["by_joint"].items() if (row["removed_share"] or 0.0) >= PARTLY_SHARE]  # bar counted
-    leads = _leading_effects(result, sorted(set(explained) | (set(halved) - set(_main_joints(found["recorded"])))))
-    if leads:
-        gaps += f"; the effect most like what the simulation adds to the identified model's terms, on {leads}"
-    processing = result.get("processing") or {}
-    band = f"{processing.get('processing')}" + (f", {processing['harmonics']} harmonics" if processing.get("harmonics") else "")
-    params = Path(str((result.get("params") or {}).get("path", "params.json")))
-    params = f"{params.parent.name}/{params.name}" if params.parent.name else params.name  # not a user's own identify output
-    return f"Beyond the identified model (the arm's parameters, {params}), on the held-out runs ({band}): {gaps} ({what}). "
-
-
-def _leading_effects(result: dict, joints: list[int]) -> str:
-    """Per joint, the selected effect whose effort is most like what the selected effects add to the identified
-    model's terms there (`identified_terms.beyond_carried_by`), with its size (a blind q2 viscous change, 0.218 ->
-    0.300, was told only as "mostly explained beyond it", the lead being J3's published friction)."""
-    carried = ((result.get("identified_terms") or {}).get("beyond_carried_by")) or {}
-    entries = {e["name"]: e for e in result.get("effects", [])}
-    names = [(JOINT_NAMES[j], carried.get(JOINT_NAMES[j])) for j in joints]
-    return "; ".join(f"{joint}: {name}" + (f" ({_size_words(entries[name])[2:]})" if _size_words(entries[name]) else "")
-                     for joint, name in names if name in entries)
-
-
-def _worse_words(result: dict, found: dict, worse: list[int]) -> str:
-    """The joints the diagnosis's simulation made worse than the identified model, with their ratios (an average share
-    would hide them), and why: on the training runs too (the effects fit less closely than the model's own terms:
-    a blind q5 friction change read "does not carry" at 36x where the training runs were as far), or only held out."""
-    bar, after = found["bar"], found["after"]
-    ratios = {j: f"{JOINT_NAMES[j]} ({after[j] / bar[j]:.3g}x its gap)" for j in worse}
-    less = [j for j in worse if JOINT_NAMES[j] in found.get("fitted_less_closely", ())]
-    carried = [j for j in worse if j not in less]
-    parts = [f"{', '.join(ratios[j] for j in carried)}: what was fitted there on the training runs does not carry to the held-out runs"] if carried else []
-    if less:
-        parts.append(f"{', '.join(ratios[j] for j in less)}: the selected effects fit {'it' if len(less) == 1 else 'these'} less closely "
-                     "than the identified model's own terms, on the training runs too")
-    return "; and on ".join(parts)
-
-
-def joints_at_level(result: dict, bar: list) -> set[int]:
-    """The joints where the identified model's held-out gap (`bar`) is already within AT_FLOOR_RATIO of the
-    session floor (or, without one, the noise): nothing repeatable to remove there, no share counted."""
-    level = _held_out_level(result, result.get("session_floor"))
-    return {j for j, (b, x) in enumerate(zip(bar, level)) if b is not None and x is not None and b <= AT_FLOOR_RATIO * x}
-
-
-def _held_out_level(result: dict, floor: list | None) -> list:
-    """Per joint, what a gap on the held-out runs cannot go under: the session floor where one was measured,
-    else (periodic) the noise the projection leaves on them (their RMS over the runs); None where not known."""
-    if floor:
-        return list(floor)
-    runs = ((result.get("processing") or {}).get("runs") or {})
-    noise = [runs[name]["noise_rms"] for name in result.get("holdout_runs") or [] if (runs.get(name) or {}).get("noise_rms")]
-    if not noise:
-        return [None] * len(JOINT_NAMES)
-    rows = np.array([[np.nan if x is None else x for x in run] for run in noise], dtype=float)  # None: a joint not recorded
-    level = np.sqrt(np.mean(np.square(rows), axis=0))
-    return [None if np.isnan(x) else float(x) for x in level]
-
-
 def _in_answer_order(result: dict) -> list[str]:
     """The selected effects as the answer names them: with a baseline the findings (what the runs have and the
     baseline lacks) first, the model errors the runs share with it after (a friction on q7 led a payload study's
@@ -280,7 +86,7 @@ def _in_answer_order(result: dict) -> list[str]:
     payload-shaped fit that is no payload, or that stands out from no session scatter, is not named first."""
     entries = {e["name"]: e for e in result.get("effects", [])}
     recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
-    spoken = _main_joints(recorded)
+    spoken = main_joints(recorded)
     selected = sorted(result["selection"]["selected"], key=lambda n: ((entries.get(n) or {}).get("role", "finding") != "finding",
                                                                       not _explains_a_main_joint(entries.get(n) or {}, spoken)))
     if result.get("payload_not_distinguished") or (result.get("payload") or {}).get("found") is False:
@@ -305,7 +111,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
         carried = payload.get("selection_link")
         elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ()), *(payload.get("equivalent_links") or ())) else (
             f"; the figures simulate it on {carried}, where the selection over time segments put it")
-        return f"a payload on {links_words(payload)}{_payload_size_words(payload, result['units'])}{elsewhere})"
+        return f"a payload on {links_words(payload)}{_payloadsize_words(payload, result['units'])}{elsewhere})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
@@ -313,7 +119,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
                 "an attached mass not told apart without a baseline)")
     if selected:
         first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), {"name": selected[0]})
-        return f"{plain_name(first)} ({selected[0]}{_size_words(first)})"
+        return f"{plain_name(first)} ({selected[0]}{size_words(first)})"
     return "no effect"
 
 
@@ -363,7 +169,7 @@ def _minor_lead(result: dict, selected: list[str]) -> str | None:
     if len(selected) < 2 or shares is None or selected[0].startswith("payload"):
         return None
     recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
-    main = [j for j in _main_joints(recorded) if JOINT_NAMES[j] in first.get("joints", ())]
+    main = [j for j in main_joints(recorded) if JOINT_NAMES[j] in first.get("joints", ())]
     if not main or any(shares[j] is not None and shares[j] >= PARTLY_SHARE for j in main):
         return None
     names = [JOINT_NAMES[j] for j in main]
@@ -390,7 +196,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     are), the share of the repeatable gap removed, and what is left against
     the session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    shown = _main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
+    shown = main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
     before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
     joints = [JOINT_NAMES[j] for j in shown]
     selected = _in_answer_order(result)

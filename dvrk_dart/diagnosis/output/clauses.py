@@ -12,6 +12,11 @@ from dvrk_dart.model.joints import JOINT_NAMES
 ANSWER_JOINTS = 3
 
 
+def main_joints(recorded: list[int]) -> list[int]:
+    """The joints an answer speaks of among those the runs recorded: J1..J3, else the wrist's."""
+    return [j for j in recorded if j < ANSWER_JOINTS] or recorded
+
+
 def effort_unit(result: dict, joint: str) -> str:
     """The effort unit of `joint` on the diagnosed arm (diagnosis.json `units`)."""
     return result["units"][JOINT_NAMES.index(joint)]

@@ -14,7 +14,8 @@ from pathlib import Path
 
 from markupsafe import Markup
 
-from dvrk_dart.diagnosis.output.answer import _row_share, answer_paragraphs, offset_joints_sentence, plain_name
+from dvrk_dart.diagnosis.output.answer import _row_share, answer_paragraphs, offset_joints_sentence
+from dvrk_dart.diagnosis.output.effect_words import plain_name
 from dvrk_dart.diagnosis.output.clauses import ANSWER_JOINTS, effort_unit
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.io.html import code_cell, fmt, render, table, text_cell
