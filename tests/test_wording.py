@@ -287,11 +287,20 @@ def test_a_constant_beyond_a_sessions_change_is_said_where_no_effect_accounts_fo
     result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
     result["constants_beyond_session"] = [{"run": "O3_A", "joint": "q3", "offset": 0.346, "session_change": 0.0081,
                                            "session_change_source": "the model card's repeat pair", "unit": "N"}]
-    assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
+    assert "q3 +0.346 N in O3_A (42.7x that change), taken out as a session's offset" in answer_sentence(result)
     result["effects"][0]["joints"] = ["q2", "q3"]  # a friction reverses with the motion: it has no constant of its own
-    assert "q3 +0.346 N in O3_A, taken out as a session's offset" in answer_sentence(result)
+    assert "q3 +0.346 N in O3_A (42.7x that change), taken out as a session's offset" in answer_sentence(result)
     result["effects"][0]["kind"] = "payload"
     assert "taken out as a session's offset" not in answer_sentence(result)
+    # where the effects explain little, the constant is the answer's first finding (a blind J3 offset change of -0.2 N
+    # came last, after "not explained: the best effects, extra reflected motor inertia on q3")
+    result["effects"][0]["kind"] = "armature"  # no constant of its own either
+    result["gap_after"]["train"][:3] = [0.3, 0.25, 0.59]
+    result["explanation"] = explanation(result["gap_before"], result["gap_after"], JOINTS, result["effects"])
+    sentence = answer_sentence(result)
+    assert sentence.startswith("Beyond a session's change (as the model card's repeat pair shows it), the runs' constant effort differs "
+                               "from their baseline's: q3 +0.346 N in O3_A (42.7x that change): a changed offset"), sentence
+    assert "not explained" in sentence
 
 
 def test_the_answer_says_where_the_simulated_payload_sits_when_the_harmonic_fit_chose_another_link():

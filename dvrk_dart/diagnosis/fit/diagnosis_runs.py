@@ -24,6 +24,9 @@ from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.sim.config import SimConfig
 
+#: the effort resolution (N·m or N): a gap, a constant or a residual below it is nothing to explain (the joint
+#: weights' floor, `problem.joint_weights`; the words', output/wording.py)
+EFFORT_RESOLUTION = 1e-3
 #: two recordings of one motion may start this far apart (a share of the shorter
 #: one): the baseline is aligned on the run by whole samples within it, then both
 #: cut to their common span (at least half the shorter run)

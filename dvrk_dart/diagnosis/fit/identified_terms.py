@@ -22,8 +22,15 @@ import numpy as np
 
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.model.identified import NON_INERTIAL_TERMS
-from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig, simulated_terms
+
+
+#: an effect carries what the selected effects add to the identified terms on a joint only if its effort there is
+#: at least this like it (|cosine| of the two series): a quarter of that difference's energy in its shape
+CARRIER_MIN_COSINE = 0.5
+#: the identified model's term each one-joint effect kind stands beside (`identified_counterpart`)
+COUNTERPART_TERMS = {"friction": "friction", "offset": "offset", "elastic": "spring", "armature": "motor_inertia"}
 
 
 def identified_terms_share(problem, selection, base_config: SimConfig) -> dict | None:
@@ -72,7 +79,10 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
     if not by_joint:
         return None
     # the share weighs efforts in energy: J1's viscous raised from 0.09 to 0.24 beside its Coulomb still read 92 %
+    effects = {problem.effects[i].name: problem.effects[i] for i in selection.selected}
+    counterparts = {name: identified_counterpart(problem.arm, effects[name]) for name in set(carrier.values()) if name}
     return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "beyond_rms": beyond, "beyond_carried_by": carrier,
+            "carrier_identified_values": {name: values for name, values in counterparts.items() if values},
             "terms": list(left_out),
             "runs": "baseline" if problem.has_baseline else "train",
             "definition": "per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
@@ -81,13 +91,33 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
                           "`share`: their mean over the joints the selected effects act on (each joint in its own unit); `beyond_rms`: per "
                           "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them); "
                           "`beyond_carried_by`: per joint, the selected effect whose effort there is most like that difference "
-                          "(cosine of the two series, uncentred)"}
+                          f"(cosine of the two series, uncentred, at least {CARRIER_MIN_COSINE:g}), and `carrier_identified_values` the identified model's "
+                          "own values of its parameters where it has such a term"}
 
 
 def _carrier(beyond: np.ndarray, efforts: np.ndarray, names: list[str]) -> str | None:
     """The effect whose effort (a column of `efforts`, (N, selected)) is most like `beyond` (N,): what the selected
     effects add to the identified model's terms on a joint, by shape (a blind q1 offset change: the offset, not the
-    q1 friction that rebuilds the model's own)."""
+    q1 friction that rebuilds the model's own); None where none is like it (|cosine| under CARRIER_MIN_COSINE: a
+    q1 friction at the published values was named for a centre-of-mass shift no effect took)."""
     norms = np.linalg.norm(efforts, axis=0) * np.linalg.norm(beyond)
-    cosine = np.divide(efforts.T @ beyond, norms, out=np.zeros(len(names)), where=norms > 0)
-    return names[int(np.argmax(np.abs(cosine)))] if np.abs(cosine).max() > 0 else None
+    cosine = np.abs(np.divide(efforts.T @ beyond, norms, out=np.zeros(len(names)), where=norms > 0))
+    return names[int(np.argmax(cosine))] if cosine.max() >= CARRIER_MIN_COSINE else None
+
+
+def identified_counterpart(arm, effect) -> dict | None:
+    """The identified model's own values of a one-joint effect's parameters (a friction's Coulomb and viscous along
+    the joint, an offset, a spring, a motor inertia), beside which its fitted ones are read; None where the model has
+    no such term (a payload, a friction along the range, a coupled joints' friction)."""
+    names = [p.name for p in effect.parameters]
+    term = COUNTERPART_TERMS.get(effect.kind)
+    if term is None or len(effect.joints) != 1 or (effect.kind == "friction" and names[:2] != ["coulomb", "viscous"]):
+        return None
+    j = JOINT_NAMES.index(effect.joints[0])
+    zero, unit = np.zeros((2, N_JOINTS)), np.zeros((2, N_JOINTS))
+    unit[:, j] = (1.0, 2.0)  # one and two units along the joint: a term's constant and slope
+    state = {"friction": (zero, unit, zero), "offset": (zero, zero, zero), "spring": (unit, zero, zero), "motor_inertia": (zero, zero, unit)}[term]
+    f = arm.identified.predict(*state, (term,))[:, j]
+    slope, constant = float(f[1] - f[0]), float(2.0 * f[0] - f[1])
+    return {"friction": {"coulomb": constant, "viscous": slope}, "offset": {"offset": constant}, "spring": {"stiffness": slope},
+            "motor_inertia": {"armature": slope}}[term]

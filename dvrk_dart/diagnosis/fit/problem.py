@@ -22,6 +22,7 @@ from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload
 from dvrk_dart.diagnosis.effects.joint_effects import JointOffset, PositionFriction
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
+    EFFORT_RESOLUTION,
     DiagnosisRun,
     RunProcessing,
     RunRole,
@@ -45,7 +46,7 @@ from dvrk_dart.sim.config import SimConfig
 
 #: joint weights are 1 / max(residual RMS, this): a joint whose residual is
 #: below the effort resolution (N·m or N) must not dominate the fit
-EFFORT_WEIGHT_FLOOR = 1e-3
+EFFORT_WEIGHT_FLOOR = EFFORT_RESOLUTION
 
 
 #: the roles whose runs take a nuisance constant on every joint (Problem.demean_of)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
+from dvrk_dart.diagnosis.fit.diagnosis_runs import EFFORT_RESOLUTION, DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import not_comparable_sample_by_sample
@@ -127,7 +127,8 @@ def constants_beyond_session(offsets: dict | None, runs: list[DiagnosisRun], rep
     return [{"run": run.name, "joint": joint, "offset": value, "against": "the identified offset" if own else "the baseline",
              "expected": float(against[j]), "session_change": float(session[j]), "session_change_source": source, "unit": units[j]}
             for run in runs for j, joint in enumerate(JOINT_NAMES)
-            if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0 and abs(value - against[j]) > BEYOND_SESSION_FACTOR * session[j]]
+            if (value := (offsets.get(run.name) or {}).get(joint, 0.0)) != 0.0
+            and abs(value - against[j]) > max(BEYOND_SESSION_FACTOR * session[j], EFFORT_RESOLUTION)]  # 6e-5 N·m was "beyond"
 
 
 def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, model: PsmModel) -> list[dict]:

@@ -86,7 +86,10 @@ def _in_answer_order(result: dict) -> list[str]:
     payload-shaped fit that is no payload, or that stands out from no session scatter, is not named first."""
     entries = {e["name"]: e for e in result.get("effects", [])}
     recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
-    spoken = main_joints(recorded)
+    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
+    before = (result.get("gap_before") or {}).get(split) or []
+    # not a main joint whose gap is below the effort resolution (q1's 0.0007 N·m made a 6e-5 kg·m² armature the lead)
+    spoken = [j for j in main_joints(recorded) if j >= len(before) or before[j] is None or before[j] > EFFORT_RESOLUTION]
     selected = sorted(result["selection"]["selected"], key=lambda n: ((entries.get(n) or {}).get("role", "finding") != "finding",
                                                                       not _explains_a_main_joint(entries.get(n) or {}, spoken)))
     if result.get("payload_not_distinguished") or (result.get("payload") or {}).get("found") is False:
@@ -196,13 +199,16 @@ def answer_paragraphs(result: dict) -> list[str]:
     are), the share of the repeatable gap removed, and what is left against
     the session floor when a --repeat measured it."""
     split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    shown = main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
-    before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
-    joints = [JOINT_NAMES[j] for j in shown]
     selected = _in_answer_order(result)
     explained = result.get("explanation") or explanation(result["gap_before"], result["gap_after"], list(JOINT_NAMES),
                                                           [e for e in result.get("effects", []) if e["name"] in selected],
                                                           split_floors(result))
+    # J1..J3, and a joint past them the effects mostly explain (a blind q5 friction change, 95 %, had no figure)
+    shown = main_joints([j for j, gap in enumerate(result["gap_before"][split]) if gap is not None])
+    shown += [JOINT_NAMES.index(name) for name, row in (explained.get("by_joint") or {}).items()
+              if JOINT_NAMES.index(name) not in shown and row["words"] == "mostly explained"]
+    before, after = ([result[key][split][j] for j in shown] for key in ("gap_before", "gap_after"))
+    joints = [JOINT_NAMES[j] for j in shown]
     # "not explained" already says the best effects remove less than a fifth: no lead to weigh
     effects = _effects_words(result, selected, explained["words"] != "not explained") if selected else "no effect"
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in zip(joints, before, after))
@@ -223,8 +229,9 @@ def answer_paragraphs(result: dict) -> list[str]:
                 if explained.get("removed_share") is not None and counted != joints else "")
         sentence += ("; removed: " + ", ".join(f"{j} {f'— (within {AT_FLOOR_RATIO:g}x its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
                      + " of that gap above the session floor" + mean)
+    constants_first = explained["words"] in ("not explained", NOT_DETERMINED)  # then a constant beyond a session leads
     if not explained.get("below_resolution"):  # nothing found: nothing for the identified terms to carry
-        sentence += identified_terms_clause(result) + constants_clause(result)
+        sentence += identified_terms_clause(result) + ("" if constants_first else constants_clause(result))
     floor = split_floors(result)
     if floor is None:
         sentence += "."
@@ -235,7 +242,8 @@ def answer_paragraphs(result: dict) -> list[str]:
                      "change alone can leave it: no fixed effect is shown to remove more there.")
     held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
     caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
-    return [paragraph for paragraph in (caution, beyond.strip(), sentence + refit_clause(result) + insertion_clause(result)) if paragraph]
+    constant = constants_clause(result, lead=True) if constants_first else ""
+    return [paragraph for paragraph in (caution, beyond.strip(), constant, sentence + refit_clause(result) + insertion_clause(result)) if paragraph]
 
 
 def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str) -> str:

@@ -72,7 +72,9 @@ def beyond_identified_sentence(result: dict) -> str:
     # q5 friction change, 0.0151 -> 0.0048 N·m, went unsaid)
     halved = [j for j in found["recorded"] if bar[j] > EFFORT_RESOLUTION and after[j] < 0.5 * bar[j]]
     shown = sorted(set(main_joints(found["recorded"])) | set(worse) | set(halved))
-    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}" for j in shown)
+    past_main = set(halved) - set(main_joints(found["recorded"]))  # no share of the rule's there: what was removed, said
+    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}"
+                     + (f" ({1.0 - after[j] / bar[j]:.0%} removed)" if j in past_main else "") for j in shown)
     if worse:
         gaps += "; worse than the identified model on " + _worse_words(result, found, worse)
     if found["at_floor"]:
@@ -84,11 +86,12 @@ def beyond_identified_sentence(result: dict) -> str:
         gap = "the identified model's gap" + (" above the session floor" if floor else "")
         change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
         apart = joints_apart({"words": found["words"], "by_joint": found["by_joint"]})  # joints whose own words differ, named
-        gaps += (f"; {change} on average over {', '.join(found['by_joint'])}: {found['words']} beyond it" + (f" ({apart})" if apart else "")
+        over = f"on average over {', '.join(found['by_joint'])}" if len(found["by_joint"]) > 1 else f"on {next(iter(found['by_joint']))}"
+        gaps += (f"; {change} {over}: {found['words']} beyond it" + (f" (by joint: {apart})" if apart else "")
                  + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
     # where the simulation goes beyond the identified model, what it adds to the model's terms there
     explained = [JOINT_NAMES.index(name) for name, row in found["by_joint"].items() if (row["removed_share"] or 0.0) >= PARTLY_SHARE]  # bar counted
-    leads = _leading_effects(result, sorted(set(explained) | (set(halved) - set(main_joints(found["recorded"])))))
+    leads = _leading_effects(result, sorted(set(explained) | past_main))
     if leads:
         gaps += f"; the effect most like what the simulation adds to the identified model's terms, on {leads}"
     processing = result.get("processing") or {}
@@ -100,13 +103,27 @@ def beyond_identified_sentence(result: dict) -> str:
 
 def _leading_effects(result: dict, joints: list[int]) -> str:
     """Per joint, the selected effect whose effort is most like what the selected effects add to the identified
-    model's terms there (`identified_terms.beyond_carried_by`), with its size (a blind q2 viscous change, 0.218 ->
-    0.300, was told only as "mostly explained beyond it", the lead being J3's published friction)."""
-    carried = ((result.get("identified_terms") or {}).get("beyond_carried_by")) or {}
+    model's terms there (`identified_terms.beyond_carried_by`), with its size and the model's own values (a blind q2
+    viscous change, 0.218 -> 0.300, was told only as "mostly explained beyond it", the lead being J3's published
+    friction); a payload-shaped fit without a baseline as what it is, a gravity mismatch."""
+    carried = (result.get("identified_terms") or {})
     entries = {e["name"]: e for e in result.get("effects", [])}
-    names = [(JOINT_NAMES[j], carried.get(JOINT_NAMES[j])) for j in joints]
-    return "; ".join(f"{joint}: {name}" + (f" ({size_words(entries[name])[2:]})" if size_words(entries[name]) else "")
-                     for joint, name in names if name in entries)
+    words = []
+    for joint in (JOINT_NAMES[j] for j in joints):
+        entry = entries.get((carried.get("beyond_carried_by") or {}).get(joint))
+        if entry is None:
+            continue
+        if entry.get("kind") == "gravity_mismatch":
+            words.append(f"{joint}: {entry['name']} (a gravity mismatch: the arm's mass distribution, not a payload)")
+            continue
+        size = size_words(entry)[2:]
+        own = (carried.get("carrier_identified_values") or {}).get(entry["name"])
+        if own:
+            units = entry.get("units") or {}
+            size += "; the identified model's " + ", ".join(f"{name.replace('coulomb', 'Coulomb')} {value:.3g} {units.get(name, '')}".rstrip()
+                                                            for name, value in own.items())
+        words.append(f"{joint}: {entry['name']}" + (f" ({size})" if size else ""))
+    return "; ".join(words)
 
 
 def _worse_words(result: dict, found: dict, worse: list[int]) -> str:

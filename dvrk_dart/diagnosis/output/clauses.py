@@ -28,21 +28,35 @@ CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified mod
                  "not explained": ("little of", "beyond the identified model's terms")}
 
 
-def constants_clause(result: dict) -> str:
+#: effects whose effort has no constant part of its own: they cannot account for a run's constant (friction reverses
+#: with the motion, an armature and a time shift follow accelerations and rates)
+NO_CONSTANT_KINDS = ("friction", "armature", "time_shift")
+
+
+def constants_beyond(result: dict) -> list[dict]:
+    """The runs' constants beyond a session's change on joints no selected effect with a constant part acts on."""
+    acted = {j for e in result.get("effects", []) if e.get("selected") and e.get("kind") not in NO_CONSTANT_KINDS for j in e.get("joints", ())}
+    return [c for c in result.get("constants_beyond_session") or [] if c["joint"] not in acted]
+
+
+def constants_clause(result: dict, lead: bool = False) -> str:
     """A constant of the runs against their baseline beyond a session's change (constants_beyond_session), which the
     nuisance term took out of the gap (a J3 offset changed by 0.35 N read 'not explained', with no word), on a joint
     no selected effect with a constant part acts on (a payload's mean gravity on q3 is the payload's: printed, not in the
     answer); friction reverses with the motion (two runs' J3 offset of +0.35 N beside J3's friction had no word)."""
-    acted = {j for e in result.get("effects", []) if e.get("selected") and e.get("kind") != "friction" for j in e.get("joints", ())}
-    beyond = [c for c in result.get("constants_beyond_session") or [] if c["joint"] not in acted]
+    beyond = constants_beyond(result)
     if not beyond:
         return ""
-    listed = ", ".join(f"{c['joint']} {c['offset']:+.3g} {c['unit']} in {c['run']}" for c in beyond)
+    listed = ", ".join(f"{c['joint']} {c['offset']:+.3g} {c['unit']} in {c['run']}"
+                       + (f" ({abs(c['offset'] - c.get('expected', 0.0)) / c['session_change']:.3g}x that change)" if c.get("session_change") else "")
+                       for c in beyond)
     whose = ("the identified offset ({})".format(", ".join(dict.fromkeys(f"{c['joint']} {c['expected']:+.3g} {c['unit']}" for c in beyond)))
              if beyond[0].get("against") == "the identified offset" else "their baseline's")
-    return (f"; beyond a session's change (as {beyond[0].get('session_change_source', 'the repeat pair')} shows it), the runs' constant "
-            f"effort differs from {whose}: {listed}, taken out as a session's offset: a changed offset or part of an "
-            "effect, not diagnosed")
+    words = (f"beyond a session's change (as {beyond[0].get('session_change_source', 'the repeat pair')} shows it), the runs' constant "
+             f"effort differs from {whose}: {listed}")
+    if lead:  # the answer's first finding where the effects explain little (a J3 offset changed by 0.2 N came last)
+        return f"{words[0].upper()}{words[1:]}: a changed offset or part of an effect, taken out of the gap below as a session's offset."
+    return f"; {words}, taken out as a session's offset: a changed offset or part of an effect, not diagnosed"
 
 
 def identified_terms_clause(result: dict) -> str:

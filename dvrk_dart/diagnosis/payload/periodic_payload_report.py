@@ -267,8 +267,9 @@ def j1_sentences(report: dict, model) -> list[str]:
 def _words(report: dict, model) -> list[str]:
     words = []
     if not report["found"]:
-        words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}): what the runs "
-                     "differ by from their baseline is what two sessions differ by.")
+        words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}, not under the test's "
+                     f"level {PAYLOAD_TEST_LEVEL:g}): in the payload's shape, what the runs differ by from their baseline is what two "
+                     "sessions differ by.")
     words.append(f"The efforts choose a payload on {report['link']} ({report['group']})" + (
         f"; payloads on {', '.join(report['tied_links'])} explain them as well (within {TIED_BIC:g} of BIC), and every interval "
         "spans theirs" if report["tied_links"] else "") + ".")
