@@ -405,3 +405,11 @@ def test_beyond_the_identified_model_the_effect_that_carries_it_is_named():
     assert ("the effect most like what the simulation adds to the identified model's terms, on q2: friction_q2 (Coulomb 0.0668 N·m, "
             "viscous 0.3 N·m/(rad/s))") in sentence, sentence
     assert "offset_q1" not in sentence and "over q2, q3:" in sentence  # q1's 0.0009: nothing beyond the model to explain
+
+
+def test_a_share_on_a_boundary_of_the_words_keeps_a_decimal():
+    """0.5008 printed "50 %" beside "mostly explained" (the words' boundary is strictly above half)."""
+    from dvrk_dart.diagnosis.output.wording import percent
+
+    assert (percent(0.5008), percent(0.499), percent(0.2), percent(0.93)) == ("50.1%", "49.9%", "20.0%", "93%")
+    assert words_for(0.5008) == "mostly explained" and words_for(0.499) == "partly explained"

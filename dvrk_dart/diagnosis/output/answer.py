@@ -9,7 +9,8 @@ from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
 from dvrk_dart.diagnosis.output.effect_words import plain_name, size_words
-from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, share_above_floor
+from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, percent,
+                                                 share_above_floor)
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: an effort at q = 0 below this is round-off, not a size (an MTM mismatch's q2 read +2.36e-19 N·m)
@@ -225,7 +226,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     shares = [by_joint.get(j) for j in joints] if by_joint else []
     if shares and any(s is not None for s in shares):
         counted = explained.get("joints") or []
-        mean = (f"; {explained['removed_share']:.0%} on average over {', '.join(counted)}, as the words weigh it"
+        mean = (f"; {percent(explained['removed_share'])} on average over {', '.join(counted)}, as the words weigh it"
                 if explained.get("removed_share") is not None and counted != joints else "")
         sentence += ("; removed: " + ", ".join(f"{j} {f'— (within {AT_FLOOR_RATIO:g}x its floor)' if s is None else f'{s:.0%}'}" for j, s in zip(joints, shares))
                      + " of that gap above the session floor" + mean)
@@ -236,7 +237,9 @@ def answer_paragraphs(result: dict) -> list[str]:
     if floor is None:
         sentence += "."
     else:
-        above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None and a > AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)]]
+        # (and above the effort resolution: two noise-free replays' floor made 0.00065 N·m "an unmodelled effect")
+        above = [j for j, a in zip(joints, after) if floor[JOINT_NAMES.index(j)] is not None
+                 and a > max(AT_FLOOR_RATIO * floor[JOINT_NAMES.index(j)], EFFORT_RESOLUTION)]
         sentence += (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
                      if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
                      "change alone can leave it: no fixed effect is shown to remove more there.")

@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.clauses import ANSWER_JOINTS, main_joints
 from dvrk_dart.diagnosis.output.effect_words import size_words
-from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, PARTLY_SHARE, joints_apart, share_above_floor, words_for
+from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, PARTLY_SHARE, joints_apart, percent, share_above_floor, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
@@ -84,7 +84,7 @@ def beyond_identified_sentence(result: dict) -> str:
     removed = found["removed_share"]
     if removed is not None:
         gap = "the identified model's gap" + (" above the session floor" if floor else "")
-        change = f"{removed:.0%} of {gap} removed" if removed >= 0 else f"{gap} grown by {-removed:.0%}"
+        change = f"{percent(removed)} of {gap} removed" if removed >= 0 else f"{gap} grown by {percent(-removed)}"
         apart = joints_apart({"words": found["words"], "by_joint": found["by_joint"]})  # joints whose own words differ, named
         over = f"on average over {', '.join(found['by_joint'])}" if len(found["by_joint"]) > 1 else f"on {next(iter(found['by_joint']))}"
         gaps += (f"; {change} {over}: {found['words']} beyond it" + (f" (by joint: {apart})" if apart else "")

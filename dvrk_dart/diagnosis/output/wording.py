@@ -94,13 +94,20 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
             "by_joint": {name: {"removed_share": s, "words": words_for(s)} for name, s in shares.items()}}
 
 
+def percent(share: float) -> str:
+    """A share as a percentage, with a decimal where the whole number would sit on a boundary of the words
+    (0.5008 printed "50 %" beside "mostly explained")."""
+    text = f"{share:.0%}"
+    return f"{share:.1%}" if text in (f"{PARTLY_SHARE:.0%}", f"{MOSTLY_SHARE:.0%}") else text
+
+
 def joints_apart(explained: dict) -> str:
     """The joints whose own share earns other words than the average's, named
     (an average of 75 %, 69 % and 37 % is 'mostly', but not on the third joint)."""
     apart = {}
     for name, joint in (explained.get("by_joint") or {}).items():
         if joint["words"] != explained["words"]:
-            apart.setdefault(joint["words"].split()[0], []).append(f"{name} {joint['removed_share']:.0%}")
+            apart.setdefault(joint["words"].split()[0], []).append(f"{name} {percent(joint['removed_share'])}")
     return "; ".join(f"{words} on {', '.join(names)}" for words, names in apart.items())
 
 
