@@ -44,11 +44,6 @@ from dvrk_dart.io.signal import spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
-#: joint weights are 1 / max(residual RMS, this): a joint whose residual is
-#: below the effort resolution (N·m or N) must not dominate the fit
-EFFORT_WEIGHT_FLOOR = EFFORT_RESOLUTION
-
-
 #: the roles whose runs take a nuisance constant on every joint (Problem.demean_of)
 CONSTANT_ON_EVERY_JOINT = (RunRole.OTHER_MOTION, RunRole.BASELINE)
 
@@ -178,7 +173,7 @@ def direction_noise(run: DiagnosisRun) -> np.ndarray | None:
 
 
 def _joint_weights(residual: np.ndarray) -> np.ndarray:
-    sigma = np.maximum(rms(residual), EFFORT_WEIGHT_FLOOR)
+    sigma = np.maximum(rms(residual), EFFORT_RESOLUTION)  # a joint whose residual is below it must not dominate the fit
     return 1.0 / sigma**2
 
 

@@ -11,8 +11,8 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, MAX_BLOCKS_PER_RUN, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
-from dvrk_dart.diagnosis.fit.problem import EFFORT_WEIGHT_FLOOR, Problem
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.problem import Problem
+from dvrk_dart.diagnosis.fit.diagnosis_runs import EFFORT_RESOLUTION, DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import (
     BOOTSTRAP_RESAMPLES,
     GAIN_FAILURE_QUANTILE,
@@ -63,7 +63,7 @@ def _residual_weights(problem: Problem, fit: Fit) -> np.ndarray:
     left at 1.9x the true physics' gap on another noise draw of the 2018 design (docs/diagnosis-method.md)."""
     grams = problem.train_grams
     after = sse(fit.beta, grams.A, grams.g, grams.s).sum(0) / max(grams.n.sum(), 1)
-    return np.where(problem.joint_weights > 0, 1.0 / np.maximum(after, EFFORT_WEIGHT_FLOOR**2), 0.0)
+    return np.where(problem.joint_weights > 0, 1.0 / np.maximum(after, EFFORT_RESOLUTION**2), 0.0)
 
 
 def without_last_effect(selection: Selection) -> Selection:

@@ -90,7 +90,7 @@ def beyond_identified_sentence(result: dict) -> str:
         gaps += (f"; {change} {over}: {found['words']} beyond it" + (f" (by joint: {apart})" if apart else "")
                  + ("" if floor else "; no --repeat measured the session floor: these shares count a session's change as gap"))
     # where the simulation goes beyond the identified model, what it adds to the model's terms there
-    explained = [JOINT_NAMES.index(name) for name, row in found["by_joint"].items() if (row["removed_share"] or 0.0) >= PARTLY_SHARE]  # bar counted
+    explained = [JOINT_NAMES.index(name) for name, row in found["by_joint"].items() if (row["removed_share"] or 0.0) >= PARTLY_SHARE]  # the rule counted them
     leads = _leading_effects(result, sorted(set(explained) | past_main))
     if leads:
         gaps += f"; the effect most like what the simulation adds to the identified model's terms, on {leads}"
