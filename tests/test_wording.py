@@ -413,3 +413,21 @@ def test_a_share_on_a_boundary_of_the_words_keeps_a_decimal():
 
     assert (percent(0.5008), percent(0.499), percent(0.2), percent(0.93)) == ("50.1%", "49.9%", "20.0%", "93%")
     assert words_for(0.5008) == "mostly explained" and words_for(0.499) == "partly explained"
+
+
+def test_with_a_baseline_a_second_change_has_its_size():
+    """q1 and q3 Coulomb raised against a baseline: the q1 friction led with its size and the q3 one, the larger gap,
+    was a name among "6 more effects"; a finding that explains a main joint alone is given with its size."""
+    result = _result([0.0985, 0.00137, 0.197], [0.00076, 0.00125, 0.0023], ["q1"])
+    per_joint = lambda j, share: {"cross_validated": [share if k == j else 0.0 for k in range(7)]}
+    result["effects"] = [
+        {"name": "friction_q1", "kind": "friction", "joints": ["q1"], "selected": True, "size": 0.0999, "parameters": {"coulomb": 0.0999, "viscous": 0.0},
+         "units": {"coulomb": "N·m", "viscous": "N·m/(rad/s)"}, "explained_fraction_per_joint": per_joint(0, 0.99)},
+        {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "selected": True, "size": 0.1999, "parameters": {"coulomb": 0.1999, "viscous": 0.0},
+         "units": {"coulomb": "N", "viscous": "N/(m/s)"}, "explained_fraction_per_joint": per_joint(2, 0.99)},
+        {"name": "armature_q2", "kind": "armature", "joints": ["q2"], "selected": True, "size": 1e-4, "parameters": {"armature": 1e-4},
+         "units": {"armature": "kg·m²"}, "explained_fraction_per_joint": per_joint(1, 0.09)}]
+    result["selection"]["selected"] = ["friction_q1", "friction_q3", "armature_q2"]
+    assert "with 2 more effects (friction_q3, armature_q2)" in answer_sentence(result)  # no baseline: the names
+    result["baseline"] = "base"
+    assert "with 2 more effects (friction_q3 (Coulomb 0.2 N, viscous 0 N/(m/s)), armature_q2)" in answer_sentence(result)

@@ -86,16 +86,21 @@ def _in_answer_order(result: dict) -> list[str]:
     friction change, 95 % of q5's gap, came after three effects of 10-18 % of J1..J3's floor-level gaps); a
     payload-shaped fit that is no payload, or that stands out from no session scatter, is not named first."""
     entries = {e["name"]: e for e in result.get("effects", [])}
-    recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
-    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
-    before = (result.get("gap_before") or {}).get(split) or []
-    # not a main joint whose gap is below the effort resolution (q1's 0.0007 N·m made a 6e-5 kg·m² armature the lead)
-    spoken = [j for j in main_joints(recorded) if j >= len(before) or before[j] is None or before[j] > EFFORT_RESOLUTION]
+    spoken = _spoken_joints(result)
     selected = sorted(result["selection"]["selected"], key=lambda n: ((entries.get(n) or {}).get("role", "finding") != "finding",
                                                                       not _explains_a_main_joint(entries.get(n) or {}, spoken)))
     if result.get("payload_not_distinguished") or (result.get("payload") or {}).get("found") is False:
         selected = [n for n in selected if not n.startswith("payload")] + [n for n in selected if n.startswith("payload")]
     return selected
+
+
+def _spoken_joints(result: dict) -> list[int]:
+    """The main joints the runs recorded whose gap is above the effort resolution (q1's 0.0007 N·m made a 6e-5 kg·m²
+    armature the lead)."""
+    recorded = [JOINT_NAMES.index(j) for j in result.get("recorded_joints", JOINT_NAMES)]
+    split = "holdout" if (result.get("gap_after") or {}).get("holdout") else "train"
+    before = (result.get("gap_before") or {}).get(split) or []
+    return [j for j in main_joints(recorded) if j >= len(before) or before[j] is None or before[j] > EFFORT_RESOLUTION]
 
 
 def _explains_a_main_joint(entry: dict, main: list[int]) -> bool:
@@ -139,8 +144,20 @@ def links_words(report: dict) -> str:
     return f"{' or '.join([report['link'], *others])}: the runs do not tell these links apart ({in_groups}"
 
 
-def _names(names: list[str]) -> str:
-    return f"{', '.join(names[:2])}{', ...' if len(names) > 2 else ''}"
+def _names(names: list[str], sizes: dict[str, str] | None = None) -> str:
+    """The first two names (with their sizes where given), and '...' for the rest."""
+    shown = [f"{name} ({sizes[name]})" if sizes and sizes.get(name) else name for name in names[:2]]
+    return f"{', '.join(shown)}{', ...' if len(names) > 2 else ''}"
+
+
+def _sized(result: dict, names: list[str]) -> dict[str, str]:
+    """With a baseline, the sizes of the other effects that explain a main joint (a second change: a q3 Coulomb of
+    0.2 N beside the q1 one that led had its size in diagnosis.json only)."""
+    if not result.get("baseline"):
+        return {}
+    entries = {e["name"]: e for e in result.get("effects", [])}
+    spoken = _spoken_joints(result)
+    return {name: size_words(entries[name])[2:] for name in names if name in entries and _explains_a_main_joint(entries[name], spoken)}
 
 
 def _effects_words(result: dict, selected: list[str], weigh_lead: bool = True) -> str:
@@ -157,7 +174,8 @@ def _effects_words(result: dict, selected: list[str], weigh_lead: bool = True) -
         minor = _minor_lead(result, selected) if weigh_lead else None
         if minor:  # no effect to lead: the first named removed under a fifth of each main joint's gap alone
             return f"{len(selected)} effects together, none removing a fifth of {minor}'s gap alone ({_names(selected)})"
-        return lead + (f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({_names(others)})" if others else "")
+        return lead + (f" with {len(others)} more effect{'s' if len(others) > 1 else ''} ({_names(others, _sized(result, others))})"
+                       if others else "")
     also = f" and {len(findings)} more change{'s' if len(findings) > 1 else ''} ({_names(findings)})" if findings else ""
     return (f"{len(selected)} effects together: {lead}, what the runs have and their baseline lacks{also}, and {len(common)} model "
             f"error{'s' if len(common) > 1 else ''} the runs share with their baseline ({_names(common)})")
