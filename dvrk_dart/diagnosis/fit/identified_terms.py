@@ -33,6 +33,17 @@ CARRIER_MIN_COSINE = 0.5
 COUNTERPART_TERMS = {"friction": "friction", "offset": "offset", "elastic": "spring", "armature": "motor_inertia"}
 
 
+#: diagnosis.json's `identified_terms.definition`
+DEFINITION = ("per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
+              "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on `runs` (the training runs, or "
+              "with a baseline the baseline run fitted beside runs of another motion); "
+              "`share`: their mean over the joints the selected effects act on (each joint in its own unit); `beyond_rms`: per "
+              "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them); "
+              "`beyond_carried_by`: per joint, the selected effect whose effort there is most like that difference "
+              f"(cosine of the two series, uncentred, at least {CARRIER_MIN_COSINE:g}), and `carrier_identified_values` the identified model's "
+              "own values of its parameters where it has such a term")
+
+
 def identified_terms_share(problem, selection, base_config: SimConfig) -> dict | None:
     """diagnosis.json's `identified_terms`: per joint the share of the selected
     effects' efforts on the training runs that the identified model's
@@ -85,14 +96,7 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
             "carrier_identified_values": {name: values for name, values in counterparts.items() if values},
             "terms": list(left_out),
             "runs": "baseline" if problem.has_baseline else "train",
-            "definition": "per joint, 1 - |selected effects' efforts - the closest subset (each term whole) of the identified "
-                          "model's terms the base simulation leaves out|^2 / |selected effects' efforts|^2 on `runs` (the training runs, or "
-                          "with a baseline the baseline run fitted beside runs of another motion); "
-                          "`share`: their mean over the joints the selected effects act on (each joint in its own unit); `beyond_rms`: per "
-                          "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them); "
-                          "`beyond_carried_by`: per joint, the selected effect whose effort there is most like that difference "
-                          f"(cosine of the two series, uncentred, at least {CARRIER_MIN_COSINE:g}), and `carrier_identified_values` the identified model's "
-                          "own values of its parameters where it has such a term"}
+            "definition": DEFINITION}
 
 
 def _carrier(beyond: np.ndarray, efforts: np.ndarray, names: list[str]) -> str | None:
