@@ -48,12 +48,12 @@ def offsets_words(efforts: list | None, offsets: list | None, units: list[str]) 
     return f"; the simulation leaves out the identified offsets ({listed}), which a constant part of these efforts may be"
 
 
-def _payloadsize_words(payload: dict, units: list[str]) -> str:
+def _payload_size_words(payload: dict, units: list[str]) -> str:
     """The payload's mass where the efforts determine it, at the hand position
     when one was given, else its gravity effort at q = 0 (effort_at_zero_words)."""
     at = payload.get("payload_at") or {}
     if at.get("link_chosen_by_the_efforts") is False:  # the fit's own size; the hand position's mass assumes another link
-        own = _payloadsize_words({**payload, "payload_at": None}, units)
+        own = _payload_size_words({**payload, "payload_at": None}, units)
         return f"{own}; the hand position is on {at['link']}, a link the efforts do not choose"
     if at.get("mass_kg") is not None:
         interval = at.get("mass_kg_interval")
@@ -120,7 +120,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
         carried = payload.get("selection_link")
         elsewhere = "" if carried in (None, payload["link"], *(payload.get("tied_links") or ()), *(payload.get("equivalent_links") or ())) else (
             f"; the figures simulate it on {carried}, where the selection over time segments put it")
-        return f"a payload on {links_words(payload)}{_payloadsize_words(payload, result['units'])}{elsewhere})"
+        return f"a payload on {links_words(payload)}{_payload_size_words(payload, result['units'])}{elsewhere})"
     if payload_first and mismatch:  # no baseline: the same fit is the arm's gravity, not something attached
         size = effort_at_zero_words(mismatch.get("gravity_efforts_at_q0"), result["units"], every=True)
         size += offsets_words(mismatch.get("gravity_efforts_at_q0"), mismatch.get("identified_offsets_left_out"), result["units"])
