@@ -170,7 +170,8 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],
                   n_selected=len([x for x in result.get("effects", []) if x.get("selected")]), n_shown=len(shown),
                   n_effects=len(result.get("effects", [])), joint_words=result.get("joint_words", ""), effects_table=effects_table,
-                  parameters_table=parameters_table, split_table=_split_table(result), split_runs=(result.get("gap_split") or {}).get("runs"), floor_words=_floor_words(result),
+                  parameters_table=parameters_table, split_table=_split_table(result), split_runs=(result.get("gap_split") or {}).get("runs"),
+                  floor_words=_floor_words(result),
                   repeat=str(result.get("repeat")), offset_joints=offset_joints_sentence(offset_joints) if offset_joints else "",
                   nuisance_offsets=[(run, ", ".join(f"{j} {v:+.3f}" for j, v in list(offsets.items())[:3]))
                                     for run, offsets in (result.get("nuisance_offsets") or {}).items()],
