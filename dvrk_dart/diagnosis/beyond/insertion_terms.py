@@ -43,6 +43,7 @@ import numpy as np
 import scipy.optimize
 
 from dvrk_dart.diagnosis.fit.batch import replayed_residuals
+from dvrk_dart.diagnosis.fit.identified_terms import identified_joint_term
 from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
 from dvrk_dart.diagnosis.output.wording import share_words, terms_beside_own_friction
 from dvrk_dart.diagnosis.fit.diagnosis_runs import loaded_states, processing_of
@@ -145,11 +146,7 @@ def fit_insertion_terms(arm: Arm, train: list[ProcessedRun], terms: tuple[str, .
 
 def identified_viscous(arm: Arm, joint: int) -> float:
     """The identified model's viscous friction along `joint` (effort per unit speed, above the reversals)."""
-    at = np.zeros((2, N_JOINTS))
-    speed = np.zeros((2, N_JOINTS))
-    speed[:, joint] = (1.0, 2.0)
-    friction_efforts = arm.identified.predict(at, speed, np.zeros_like(at), ("friction",))[:, joint]
-    return float(friction_efforts[1] - friction_efforts[0])
+    return identified_joint_term(arm, joint, "friction")[1]
 
 
 def insertion_gap(arm: Arm, fitted: InsertionTerms, state: ProcessedRun) -> float:

@@ -117,11 +117,17 @@ def identified_counterpart(arm, effect) -> dict | None:
     term = COUNTERPART_TERMS.get(effect.kind)
     if term is None or len(effect.joints) != 1 or (effect.kind == "friction" and names[:2] != ["coulomb", "viscous"]):
         return None
-    j = JOINT_NAMES.index(effect.joints[0])
-    zero, unit = np.zeros((2, N_JOINTS)), np.zeros((2, N_JOINTS))
-    unit[:, j] = (1.0, 2.0)  # one and two units along the joint: a term's constant and slope
-    state = {"friction": (zero, unit, zero), "offset": (zero, zero, zero), "spring": (unit, zero, zero), "motor_inertia": (zero, zero, unit)}[term]
-    f = arm.identified.predict(*state, (term,))[:, j]
-    slope, constant = float(f[1] - f[0]), float(2.0 * f[0] - f[1])
+    constant, slope = identified_joint_term(arm, JOINT_NAMES.index(effect.joints[0]), term)
     return {"friction": {"coulomb": constant, "viscous": slope}, "offset": {"offset": constant}, "spring": {"stiffness": slope},
             "motor_inertia": {"armature": slope}}[term]
+
+
+def identified_joint_term(arm, joint: int, term: str) -> tuple[float, float]:
+    """(constant, slope) of one of the identified model's non-inertial terms along `joint`, from its effort at one and
+    two units of the quantity the term follows (a friction: the speed, above its reversal; a spring: the position;
+    a motor inertia: the acceleration; an offset: none)."""
+    zero, unit = np.zeros((2, N_JOINTS)), np.zeros((2, N_JOINTS))
+    unit[:, joint] = (1.0, 2.0)
+    state = {"friction": (zero, unit, zero), "offset": (zero, zero, zero), "spring": (unit, zero, zero), "motor_inertia": (zero, zero, unit)}[term]
+    f = arm.identified.predict(*state, (term,))[:, joint]
+    return float(2.0 * f[0] - f[1]), float(f[1] - f[0])
