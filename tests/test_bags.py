@@ -121,6 +121,25 @@ def test_jaw_in_the_arm_message(tmp_path, run_two):
     np.testing.assert_array_equal(one.data.to_numpy(), both.data.to_numpy())
 
 
+def test_a_bag_without_the_jaw_measures_the_joints_it_gives(tmp_path, capsys, run_two):
+    """/PSM1/measured_js alone (no jaw topic): it was refused; q1..q4 are what
+    the full bag gives, and the wrist's coupled coordinates (each mixing the
+    jaw) are not measured, said once."""
+    topics, stamps = jittered_topics(run_two, rows=slice(0, 800))
+    full = load_bag_run(write_bag(tmp_path / "full", topics, stamps_ns=stamps), PSM)
+    capsys.readouterr()
+    arm_only = load_bag_run(write_bag(tmp_path / "arm", topics[:1], stamps_ns=stamps), PSM)
+    assert arm_only.measured == ("q1", "q2", "q3", "q4")
+    assert "no topic /PSM1/jaw/measured_js: q5, q6, q7 not measured" in capsys.readouterr().err
+    n = min(len(full), len(arm_only))  # the jaw's stamps no longer bound the grid
+    k = int(np.argmin([np.abs(arm_only.q[k:n, 0] - full.q[: n - k, 0]).max() for k in range(2)]))
+    for field in ("q", "dq", "tau"):
+        np.testing.assert_allclose(getattr(arm_only, field)[k:n, :4], getattr(full, field)[: n - k, :4], atol=1e-9)
+        assert not getattr(arm_only, field)[:, 4:].any()
+    with pytest.raises(DvrkDartError, match="no topic /PSM1/jaw/measured_js"):  # asked for by name: refused
+        load_bag_run(write_bag(tmp_path / "arm2", topics[:1], stamps_ns=stamps), PSM, BagTopics(jaw_topic="/PSM1/jaw/measured_js"))
+
+
 def test_missing_header_stamps_fall_back_to_receive_times(tmp_path, capsys, run_two):
     topics, _ = jittered_topics(run_two, rows=slice(0, 600))
     zero = {s.topic: np.zeros(len(s.t), dtype=np.int64) for s in topics}

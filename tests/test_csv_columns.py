@@ -174,7 +174,7 @@ def test_an_effort_column_that_never_changes_is_not_recorded(tmp_path, capsys):
     assert np.allclose(figures["rms"][:6], whole["rms"][:6], rtol=1e-4)  # its start transient is read on q1..q6
     values[:, 14:] = 0.0
     np.savetxt(tmp_path / "no_effort.csv", values, delimiter=",")
-    assert "no_effort.csv: no effort column changes" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "no_effort.csv"))
+    assert "no_effort.csv: no joint's effort can be read (q1, q2, q3, q4, q5, q6, q7: the effort never changes)" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "no_effort.csv"))
 
 
 @pytest.mark.parametrize("broken, words", [
@@ -217,6 +217,24 @@ def test_a_coupled_dvrk_joint_without_its_effort_takes_its_partners_with_it(tmp_
     assert figures["rms"][4:] == [None] * 3 and all(v is not None for v in figures["rms"][:4]), figures["rms"]
     whole = cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
     assert np.allclose(figures["rms"][:4], whole["rms"][:4], rtol=1e-6)
+
+
+def test_a_dvrk_name_header_without_the_jaw_gives_the_joints_it_can(tmp_path, capsys):
+    """The dVRK's columns without the jaw's (it was refused: "the model's
+    coordinates need every coupled joint"): q1..q4 with the full file's
+    figures; the wrist's coupled coordinates, each mixing the jaw, are not measured, said."""
+    one = load_run(resolve_run("one"), PSM)
+    to_dvrk = PSM.motor_map
+    columns = {"position": to_dvrk.positions_to_dvrk(one.q), "velocity": to_dvrk.positions_to_dvrk(one.dq),
+               "effort": to_dvrk.efforts_to_dvrk(one.tau)}
+    table = {f"{field}.{name}": columns[field][:, j] for field in columns for j, name in enumerate(PSM.dvrk_topics.arm_joints)}
+    pd.DataFrame(table).to_csv(tmp_path / "no_jaw.csv", index=False, float_format="%.17g")
+    capsys.readouterr()
+    assert load_run(tmp_path / "no_jaw.csv", PSM).measured == ("q1", "q2", "q3", "q4")
+    assert "q5, q6: coupled to the dVRK's jaw, not logged" in capsys.readouterr().err
+    figures = cli_json(capsys, "model-errors", "--measured", str(tmp_path / "no_jaw.csv"), "--processing", "upstream")
+    whole = cli_json(capsys, "model-errors", "--measured", "one", "--processing", "upstream")
+    assert figures["rms"][4:] == [None] * 3 and np.allclose(figures["rms"][:4], whole["rms"][:4], rtol=1e-6), figures["rms"]
 
 
 def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):

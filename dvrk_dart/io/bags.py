@@ -21,10 +21,12 @@ import pandas as pd
 from scipy.interpolate import CubicSpline
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.csv_run import say_once
 from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun, check_joint_ranges, sample_rate_hz
 from dvrk_dart.io.outputs import MARKER
 from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS
 from dvrk_dart.model.description import DvrkTopics, PsmModel
+from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.model.model_file import load_model
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -158,6 +160,8 @@ def read_topics(path: Path, topics: BagTopics, card: DvrkTopics) -> tuple[TopicS
             present = reader.topics
             # (the two may be one topic: a recorder that puts the jaw in the arm's message)
             wanted = topics.wanted(card)
+            if topics.jaw_topic is None and len(wanted) > 1 and wanted[0][0] in present and wanted[1][0] not in present:
+                wanted = wanted[:1]  # a bag of the arm alone: the joints that need the jaw are not measured (load_bag_run)
             for topic in dict(wanted):
                 if topic not in present:
                     listed = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(present.items())) or "none"
@@ -274,11 +278,26 @@ def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = B
         field: np.hstack([v[:, i * k : (i + 1) * k] for v, k in values])
         for i, field in enumerate(("position", "velocity", "effort"))
     }
-    motor_map = model.motor_map
-    q = motor_map.positions_to_model(dvrk["position"])
-    dq = motor_map.positions_to_model(dvrk["velocity"])
-    tau = motor_map.efforts_to_model(dvrk["effort"])
-    check_joint_ranges(q, path, model)
-    data = pd.DataFrame(np.hstack([q, dq, tau]), columns=CSV_COLUMNS)
+    values, measured = _in_model_coordinates(dvrk, model, path, topics)
+    check_joint_ranges(values[:, :N_JOINTS], path, model)
+    data = pd.DataFrame(values, columns=CSV_COLUMNS)
     data.insert(0, "t", grid_s)
-    return MeasuredRun(path=path, data=data, model=model)
+    return MeasuredRun(path=path, data=data, model=model, measured=measured)
+
+
+def _in_model_coordinates(dvrk: dict, model: PsmModel, path: Path, topics: BagTopics) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The dVRK's position, velocity and effort -> (N, 21) in the model's
+    coordinates, and the joints measured: without the jaw's topic, those whose
+    coordinate needs the jaw are zeros, not measured, and said so."""
+    logged = np.arange(N_JOINTS) < dvrk["position"].shape[1]  # the jaw's columns come last (BagTopics.wanted)
+    padded = {field: np.pad(values, ((0, 0), (0, N_JOINTS - values.shape[1]))) for field, values in dvrk.items()}
+    motor_map = model.motor_map
+    values = np.hstack([motor_map.positions_to_model(padded["position"]), motor_map.positions_to_model(padded["velocity"]),
+                        motor_map.efforts_to_model(padded["effort"])])
+    determined = motor_map.determined_by(logged)
+    values[:, np.tile(~determined, 3)] = 0.0
+    if not determined.all():
+        unmeasured = ", ".join(name for name, known in zip(JOINT_NAMES, determined) if not known)
+        say_once([f"{path}: no topic {topics.jaw(model.dvrk_topics)}: {unmeasured} not measured (each coupled coordinate mixes the jaw; "
+                  "--jaw-topic names another)"])
+    return values, tuple(name for name, known in zip(JOINT_NAMES, determined) if known)

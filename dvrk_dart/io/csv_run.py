@@ -218,7 +218,7 @@ class CsvValues:
     values: np.ndarray
     measured: tuple[str, ...]  # the joints the file has columns of
     rate_hz: float | None  # from the time column, None without one
-    constant_efforts: dict  # joint -> why its effort is not recorded (`_constant_efforts`)
+    unread: dict  # recorded joints read as not recorded -> why (`_constant_efforts`, `_dvrk_to_model`)
 
 
 def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValues:
@@ -244,12 +244,14 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     values = np.zeros((len(file_values), 3 * N_JOINTS))
     for (field, joint), index in layout.columns.items():
         values[:, FIELDS.index(field) * N_JOINTS + JOINT_NAMES.index(joint)] = file_values[:, index]
+    unread = _constant_efforts(file_values, layout, _coupled_joints(motor_map))
     if layout.dvrk_names:
-        values = _dvrk_to_model(values, layout.joints, motor_map, path)
+        values, undetermined = _dvrk_to_model(values, layout.joints, motor_map, dvrk_joints)
+        unread.update(undetermined)
     if layout.time_column is not None and len(file_values) < MIN_TIME_ROWS:
         raise DvrkDartError(f"{path}: {len(file_values)} data rows: a time column needs at least {MIN_TIME_ROWS}")
     rate = None if layout.time_column is None else rate_of_time_column(file_values[:, layout.time_column], path, 2 if header else 1)
-    return CsvValues(values, layout.joints, rate, _constant_efforts(file_values, layout, _coupled_joints(motor_map)))
+    return CsvValues(values, layout.joints, rate, unread)
 
 
 def _constant_efforts(file_values: np.ndarray, layout: CsvLayout, coupled: tuple[int, ...]) -> dict[str, str]:
@@ -271,14 +273,15 @@ def _constant_efforts(file_values: np.ndarray, layout: CsvLayout, coupled: tuple
 
 def joints_with_efforts(read: CsvValues, path: Path) -> tuple[tuple[str, ...], list[str]]:
     """(the joints read as recorded, the note on the others): those whose
-    effort never changes (`_constant_efforts`) are not recorded, positions kept."""
-    if len(read.constant_efforts) == len(read.measured):
-        raise DvrkDartError(f"{path}: no effort column changes (every one holds a single value): no effort was recorded")
+    effort never changes (`_constant_efforts`, positions kept) or whose model
+    coordinate the file does not give (`_dvrk_to_model`) are not recorded."""
     by_why: dict[str, list[str]] = {}
-    for joint, why in read.constant_efforts.items():
+    for joint, why in read.unread.items():
         by_why.setdefault(why, []).append(joint)
     said = "; ".join(f"{', '.join(joints)}: {why}" for why, joints in by_why.items())
-    return (tuple(joint for joint in read.measured if joint not in read.constant_efforts),
+    if len(read.unread) == len(read.measured):
+        raise DvrkDartError(f"{path}: no joint's effort can be read ({said})")
+    return (tuple(joint for joint in read.measured if joint not in read.unread),
             [f"{path}: {said}: read as not recorded"] if said else [])
 
 
@@ -326,12 +329,15 @@ def _coupled_joints(motor_map) -> tuple[int, ...]:
     return tuple(range(N_JOINTS)[columns]) if isinstance(columns, slice) else tuple(int(c) for c in columns)
 
 
-def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, path: Path) -> np.ndarray:
-    """The dVRK's joint values -> the model's coordinates (the coupled columns need each other)."""
-    coupled = [JOINT_NAMES[i] for i in _coupled_joints(motor_map)]
-    present = [j for j in coupled if j in joints]
-    if present and len(present) != len(coupled):
-        raise DvrkDartError(f"{path}: the dVRK's {', '.join(present)} without the joints coupled to them: "
-                            "the model's coordinates need every coupled joint")
+def _dvrk_to_model(values: np.ndarray, joints: tuple[str, ...], motor_map, dvrk_joints: tuple[str, ...]) -> tuple[np.ndarray, dict]:
+    """The dVRK's joint values -> the model's coordinates, and the logged joints
+    coupled to one the file does not log, each with why (their columns zeroed:
+    a PSM log without the jaw gives q1..q4, `MotorCoordinateMap.determined_by`)."""
+    logged = np.array([name in joints for name in JOINT_NAMES])
+    determined = motor_map.determined_by(logged)
     q, dq, tau = (values[:, i * N_JOINTS:(i + 1) * N_JOINTS] for i in range(3))
-    return np.hstack([motor_map.positions_to_model(q), motor_map.positions_to_model(dq), motor_map.efforts_to_model(tau)])
+    model = np.hstack([motor_map.positions_to_model(q), motor_map.positions_to_model(dq), motor_map.efforts_to_model(tau)])
+    model[:, np.tile(~determined, 3)] = 0.0
+    missing = ", ".join(dvrk_joints[j] for j in _coupled_joints(motor_map) if not logged[j])
+    return model, {name: f"coupled to the dVRK's {missing}, not logged"
+                   for name, known in zip(JOINT_NAMES, determined) if name in joints and not known}

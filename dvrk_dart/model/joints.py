@@ -74,3 +74,13 @@ class MotorCoordinateMap:
 
     def efforts_to_dvrk(self, model):
         return self._mapped(model, self._inverse.T)
+
+    def determined_by(self, recorded):
+        """(7,) bool: the model coordinates a log of the dVRK's `recorded`
+        joints ((7,) bool) gives: the coupled ones only all together (each
+        mixes the dVRK's coupled columns, and its model effort the others'
+        motion: a PSM log without the jaw gives q1..q4; q5 alone, with q6 and
+        q7 held, moved its modelled effort's RMS error on "one" from 0.006 to 0.011)."""
+        determined = np.array(recorded, dtype=bool)
+        determined[self.columns] = determined[self.columns].all()
+        return determined
