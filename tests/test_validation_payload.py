@@ -234,3 +234,14 @@ def test_a_verdict_on_a_mass_the_answer_calls_not_determined_is_its_intervals():
     assert _j2_verdict(result, "t")["passed"] and "73% removed" in _j2_verdict(result, "t")["value"]
     result["gap_after"]["train"][1] = 0.15  # shrunk, but less than half of what is above the floor
     assert not _j2_verdict(result, "t")["passed"]
+
+
+def test_a_mass_held_at_zero_is_no_payload():
+    """A fit at its bound of zero (3.55e-19 kg, 2018 test1 against test2 as its baseline: the same arm, no weight) was
+    named "a payload on intermediate (parallelogram, 3.55e-19 kg)"; a gram is the least a payload weighs."""
+    from dvrk_dart.diagnosis.diagnose import payload_distinguished
+
+    assert not payload_distinguished({"mass_kg": 3.55e-19, "mass_identified": True})
+    assert not payload_distinguished({"mass_kg": 0.2, "payload_at": {"mass_kg": 4e-4}})
+    assert payload_distinguished({"mass_kg": 0.098, "mass_identified": True})
+    assert payload_distinguished({"mass_kg": 0.0, "mass_identified": False})  # no mass to judge: its first moment speaks

@@ -222,9 +222,11 @@ def test_on_the_identified_base_worse_means_worse_than_its_own_simulation_where_
     result["identified_model_gap_holdout"] = [0.029, 0.0295, 0.034, 0.001, 0.001, 0.0005, 0.001]
     result["diagnosis_base"] = "identified"
     assert beyond_identified_sentence(result) == ""  # nothing made worse than the identified arm simulated
-    result["gap_after"]["holdout"] = [0.027, 0.0310, 0.032, 0.01, 0.01, 0.01, 0.01]  # q2 worse; q4..q7 worse but nothing acts there
+    result["gap_after"]["holdout"] = [0.027, 0.0310, 0.032, 0.01, 0.01, 0.01, 0.01]  # q2 worse by half the resolution
+    assert beyond_identified_sentence(result) == ""
+    result["gap_after"]["holdout"] = [0.027, 0.0330, 0.032, 0.01, 0.01, 0.01, 0.01]  # q2 worse; q4..q7 worse but nothing acts there
     sentence = beyond_identified_sentence(result)
-    assert "worse than the identified model on q2 (1.02x its gap):" in sentence and "q6" not in sentence, sentence
+    assert "worse than the identified model on q2 (1.08x its gap):" in sentence and "q6" not in sentence, sentence
 
 
 def test_the_answer_says_in_the_rules_words_how_much_is_beyond_the_identified_model():

@@ -44,7 +44,7 @@ from dvrk_dart.diagnosis.fit.result import (
     without_last_effect,
 )
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG, DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import card_repeat, constants_beyond_session, gap_split, session_floor
 from dvrk_dart.diagnosis.output.gravity_mismatch import gravity_mismatch_of, offsets_left_out
@@ -365,16 +365,16 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
 
 
 NOT_DISTINGUISHED = ("the payload-shaped fit is not a payload: the mass it gives (at the --payload-at position, or its own "
-                     "where the data identify one) is not positive: a session change read as a payload")
+                     f"where the data identify one) is under {MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
 
 
 def payload_distinguished(fit: dict) -> bool:
-    """A payload is named unless the mass it gives is not positive: at the hand
+    """A payload is named unless the mass it gives is under a gram: at the hand
     position when one was given, else its own mass where the data identify one
     (a mass at or below zero is a session change read as a payload)."""
     at = fit.get("payload_at") or {}
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
-    return mass is None or mass > 0.0
+    return mass is None or mass >= MIN_PAYLOAD_KG
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,

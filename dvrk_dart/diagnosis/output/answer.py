@@ -5,6 +5,7 @@ a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""
 
 from __future__ import annotations
 
+from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
@@ -83,12 +84,19 @@ def _in_answer_order(result: dict) -> list[str]:
     baseline lacks) first, the model errors the runs share with it after (a friction on q7 led a payload study's
     answer); within each, those that explain a joint the answer speaks of (J1..J3) first (an offset of 0.024 N·m on a
     held wrist joint led an answer whose J1 offset of 0.1 N·m came seventh), else the selection's order (a q5
-    friction change, 95 % of q5's gap, came after three effects of 10-18 % of J1..J3's floor-level gaps); a
-    payload-shaped fit that is no payload, or that stands out from no session scatter, is not named first."""
+    friction change, 95 % of q5's gap, came after three effects of 10-18 % of J1..J3's floor-level gaps); then the
+    largest share of the gap first, as the page's table gives it (a q1 offset that entered with q2's, 23 %, led a
+    q3 friction of 33 %); a payload-shaped fit that is no payload, or that stands out from no session scatter, is
+    not named first."""
     entries = {e["name"]: e for e in result.get("effects", [])}
     spoken = _spoken_joints(result)
+
+    def share(name: str) -> float:
+        return ((entries.get(name) or {}).get("explained_fraction") or {}).get("cross_validated") or 0.0
+
     selected = sorted(result["selection"]["selected"], key=lambda n: ((entries.get(n) or {}).get("role", "finding") != "finding",
-                                                                      not _explains_a_main_joint(entries.get(n) or {}, spoken)))
+                                                                      not _explains_a_main_joint(entries.get(n) or {}, spoken),
+                                                                      -share(n)))
     if result.get("payload_not_distinguished") or (result.get("payload") or {}).get("found") is False:
         selected = [n for n in selected if not n.startswith("payload")] + [n for n in selected if n.startswith("payload")]
     return selected
@@ -234,8 +242,8 @@ def answer_paragraphs(result: dict) -> list[str]:
     gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     if result.get("payload_not_distinguished"):
-        where = ("no payload is distinguished from none (the payload-shaped fit's mass is not positive: a session change read "
-                 "as a payload); " + where)
+        where = (f"no payload is distinguished from none (the payload-shaped fit's mass is under {MIN_PAYLOAD_KG * 1e3:g} g: a session "
+                 "change read as a payload); " + where)
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
     # the words below are against the paper's simulation, not the identified model: their subject says so
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \
