@@ -100,5 +100,6 @@ def cmd_excitation(args: argparse.Namespace) -> int:
     with building_folder(args.out, "excitation") as folder:
         summary = write_excitation(excitation, folder, arm.model, args.arm)
     print(f"excitation {args.name}: {summary['samples']} samples, {summary['duration_s']:.2f} s -> {args.out}/{summary['csv']}, {args.out}/{summary['bag']}")
+    print(f"  the bag plays it from rest, speeding up over its first {summary['lead_s']:g} s and slowing to rest over its last")
     print("  start pose (move there first, e.g. with move_jp): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["start_pose"].items()))
     return 0

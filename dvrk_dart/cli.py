@@ -215,10 +215,11 @@ def _print_identification_errors(data: dict) -> None:
                 label = span_label(name, span, e["samples"])
                 fitted = [v if j in data["fitted_joints"] else None for j, v in zip(JOINT_NAMES, e["rms"])]  # no figure on a joint not fitted
                 print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in fitted) + f"   {kind}")
-    for name, e in (reference.get("errors_first_period") or {}).items():
-        label = span_label(name, "first_period", e["samples"])
-        print(f"{label:<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
-              + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
+    for name in reference.get("errors_first_period") or {}:
+        for span in ("whole_run", "first_period"):
+            e = reference[f"errors_{span}"][name]
+            print(f"{span_label(name, span, e['samples']):<22} " + " ".join("      -" if v is None else f"{v:7.4f}" for v in e["rms"])
+                  + f"   holdout, the reference parameters ({Path(reference['params_file']).name}: the arm's published ones)")
 
 
 def cmd_uncertainty(args: argparse.Namespace) -> int:

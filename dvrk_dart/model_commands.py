@@ -15,6 +15,7 @@ from dvrk_dart.command_args import command_arm, reading_options
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.io.signal import CUT_SAMPLES
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
@@ -114,7 +115,9 @@ def _scored_on(processed, first_period: bool) -> str:
     """What a model-errors figure is over: the whole run, the fitted period, or
     upstream's window (the model card's, set for the identification's own runs)."""
     if not first_period:
-        start, stop = processed.periodic.kept if processed.periodic is not None else (0, 0)
+        if processed.periodic is None:  # upstream's zero-phase filter settles over its first and last rows
+            return f"the whole run but its first and last {CUT_SAMPLES} rows, as upstream left them out"
+        start, stop = processed.periodic.kept
         return f"rows {start + 1}-{stop}: the whole run after its start transient" if start > 0 else "the whole run"
     n = processed.first_period_samples()
     seconds = f"{n * float(processed.t[1] - processed.t[0]):.4g} s"

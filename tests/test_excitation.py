@@ -56,7 +56,14 @@ def test_excitation_two(tmp_path, capsys):
             msg = reader.deserialize(raw, connection.msgtype)
             assert tuple(msg.name) == PSM.dvrk_topics.arm_joints and len(msg.velocity) == 0
             positions.append(msg.position)
-    np.testing.assert_allclose(np.array(positions), csv[list(PSM.dvrk_topics.arm_joints)].to_numpy(), atol=1e-12)
+    # played from rest along the path, back to rest at its end: "two" starts with the pitch at -1.28 rad/s, the jaw at 1.56
+    lead = round(summary["lead_s"] / 0.005)
+    positions, design = np.array(positions), csv[list(PSM.dvrk_topics.arm_joints)].to_numpy()
+    np.testing.assert_allclose(positions[[0, -1]], design[[0, -1]], atol=1e-9)  # its first and last row, at rest
+    np.testing.assert_allclose(positions[lead:len(design) - lead // 2], design[lead // 2:len(design) - lead], atol=1e-6)  # between: the CSV, lead / 2 late
+    speed = np.abs(np.diff(positions, axis=0)) / 0.005
+    assert speed[[0, -1]].max() < 1e-3 and speed.max(axis=0).max() <= np.abs(np.diff(design, axis=0)).max() / 0.005 + 1e-6
+    assert np.abs(np.diff(speed, axis=0)).max() / 0.005 < 20.0  # no velocity step anywhere (rad/s^2, m/s^2)
 
 
 def _scenario(tmp_path, name, start_pose, path_table, duration_s=0.2):

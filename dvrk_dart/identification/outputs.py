@@ -148,7 +148,8 @@ PRESLIDING_DEFINITION = ("per friction link: the distance over which its Coulomb
 
 
 def _errors(result: IdentificationResult):
-    """The fit's errors on its runs; the prior's and the reference parameters' on the held-out runs' first period."""
+    """The fit's errors on its runs; the prior's on the held-out runs' first period, the reference parameters' on
+    their whole run and first period (as the fit's)."""
     errors = {
         "train": {run.name: {"whole_run": result.errors(run)} for run in result.train},
         "holdout": {
@@ -159,7 +160,8 @@ def _errors(result: IdentificationResult):
         run.name: result.errors(run, first_period=True, theta=result.prior_theta, sign_law=True) for run in result.holdout
     }
     reference = reference_theta(result)
-    reference_errors = {run.name: result.errors(run, first_period=True, theta=reference[0], sign_law=True) for run in result.holdout} if reference else {}
+    reference_errors = {span: {run.name: result.errors(run, first_period=span == "first_period", theta=reference[0], sign_law=True)
+                               for run in result.holdout} if reference else {} for span in ("whole_run", "first_period")}
     return errors, prior_errors, reference, reference_errors
 
 
@@ -191,7 +193,8 @@ def summary(result: IdentificationResult) -> dict:
         "prior_errors_first_period": prior_errors,
         "reference": {
             "params_file": reference[1] if reference else None,
-            "errors_first_period": reference_errors,
+            "errors_whole_run": reference_errors["whole_run"],
+            "errors_first_period": reference_errors["first_period"],
             "pseudo_inertia_smallest_eigenvalue_kg_m2": reference[2] if reference else None,
         },
         "condition_number": wls.condition_number,
@@ -285,7 +288,11 @@ def _figure_png(result: IdentificationResult, run: RunData, title: str) -> str:
 
 def _error_table(result: IdentificationResult, data: dict) -> str:
     rows = []
-    for kind, runs in (("train", data["errors"]["train"]), ("held out", data["errors"]["holdout"])):
+    reference = data["reference"]
+    published = {name: {span: reference[f"errors_{span}"][name] for span in ("whole_run", "first_period")}
+                 for name in reference.get("errors_first_period") or {}}
+    for kind, runs in (("train", data["errors"]["train"]), ("held out", data["errors"]["holdout"]),
+                       (f"held out, the reference parameters ({Path(reference['params_file'] or '').name})", published)):
         for name, entries in runs.items():
             for span, e in entries.items():
                 cells = [text_cell(f"{name} ({kind}, {span.replace('_', ' ')})")]

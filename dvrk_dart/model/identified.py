@@ -33,7 +33,6 @@ TERMS = INERTIAL_TERMS + NON_INERTIAL_TERMS
 TERM_GROUPS = {
     "all": TERMS,
     "inertial": INERTIAL_TERMS,
-    "rigid": INERTIAL_TERMS,
 }
 TOOL_TIP_FRAME = "tool_tip"
 

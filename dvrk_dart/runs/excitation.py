@@ -47,6 +47,10 @@ EXCITATIONS = ("one", "two")
 #: integration step of the Cartesian scenarios' kinematic controller: the
 #: simulator's default step, with which the kinematic runs track to ~1e-15 m
 MAX_KINEMATIC_STEP_S = 1e-3
+#: the played bag speeds up from rest along the trajectory, and slows to rest at its end, over this long (s): a
+#: trajectory cut from a periodic series starts and ends mid-motion ("two": the pitch at -1.28 rad/s, the jaw at
+#: 1.56), which played from rest is a velocity step on the real arm
+LEAD_S = 2.0
 
 
 @dataclass
@@ -163,8 +167,37 @@ def build_excitation(name: str, rate_hz: float, arm: Arm) -> Excitation:
         raise DvrkDartError(f"--rate: {rate_hz:g} Hz is below {MIN_SERVO_RATE_HZ:g} Hz: servo_jp jumps to each setpoint, "
                             f"{1 / rate_hz:.3g} s apart would jerk the arm")
     excitation = fitted_excitation(name, rate_hz, arm.model) if name in EXCITATIONS else cartesian_excitation(name, rate_hz, arm)
-    check_limits(excitation, arm.model)
+    check_limits(excitation, arm.model)  # the played bag's path and speeds are within the trajectory's
     return excitation
+
+
+def _path_time(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """The trajectory's time s(t) a played bag is at, and ds/dt: the speed along the path rises from rest over
+    LEAD_S (a quintic smoothstep: no velocity or acceleration step), stays 1, and falls to rest over the last
+    LEAD_S; the path covers the whole trajectory in duration + LEAD_S."""
+    def rise(x):  # the smoothstep and its integral (LEAD_S * 0.5 at x = 1)
+        x = np.clip(x, 0.0, 1.0)
+        return x**3 * (10 - 15 * x + 6 * x**2), LEAD_S * x**4 * (2.5 - 3 * x + x**2)
+
+    up, up_path = rise(t / LEAD_S)
+    down, down_path = rise((t - duration) / LEAD_S)
+    speed = up - down
+    s = up_path + np.clip(t - LEAD_S, 0.0, None) - (down_path + np.clip(t - duration - LEAD_S, 0.0, None))
+    return s, speed
+
+
+def played(excitation: Excitation) -> Excitation:
+    """What the bag plays: the trajectory's own path, speeding up from rest over LEAD_S and slowing to rest over
+    the last LEAD_S (never faster than the trajectory, never off its positions: its checks hold)."""
+    from scipy.interpolate import CubicSpline
+
+    dt = float(excitation.t[1] - excitation.t[0])
+    duration = float(excitation.t[-1] - excitation.t[0])
+    t = np.arange(int(round((duration + LEAD_S) / dt)) + 1) * dt
+    s, speed = _path_time(t, duration)
+    path = CubicSpline(excitation.t - excitation.t[0], excitation.q, axis=0)
+    return Excitation(excitation.name, t, path(np.clip(s, 0.0, duration)), path(np.clip(s, 0.0, duration), 1) * speed[:, None],
+                      excitation.source)
 
 
 def check_limits(excitation: Excitation, model: PsmModel) -> None:
@@ -202,8 +235,10 @@ def write_excitation(excitation: Excitation, folder, model: PsmModel, namespace:
     csv = folder / f"{excitation.name}.csv"
     write_text_atomic(csv, header + "\n" + rows + "\n")
     bag = folder / f"{excitation.name}_servo_jp"
-    states = arm_joint_states(model, namespace, excitation.t, excitation.q, suffix="servo_jp")
+    playing = played(excitation)
+    states = arm_joint_states(model, namespace, playing.t, playing.q, suffix="servo_jp")
     write_bag(bag, states)
+    start = model.motor_map.positions_to_dvrk(playing.q[0])
     summary = {
         "versions": software_versions(),
         "arm_model": arm_model_record(model),
@@ -214,8 +249,12 @@ def write_excitation(excitation: Excitation, folder, model: PsmModel, namespace:
         "csv": csv.name,
         "bag": bag.name,
         "topics": [state.topic for state in states],
-        "start_pose": dict(zip(joints, dvrk[0].tolist())),
-        "max_speed": dict(zip(joints, np.abs(model.motor_map.positions_to_dvrk(excitation.dq)).max(axis=0).tolist())),
+        "lead_s": LEAD_S,
+        "bag_definition": ("the bag plays the CSV's positions along its path, from rest at its first row (start_pose), "
+                           "speeding up over lead_s and slowing to rest at its last row over lead_s: the CSV's time "
+                           "minus lead_s / 2 between them, lead_s / 2 longer in all"),
+        "start_pose": dict(zip(joints, start.tolist())),
+        "max_speed": dict(zip(joints, np.abs(model.motor_map.positions_to_dvrk(playing.dq)).max(axis=0).tolist())),
         "source": excitation.source,
     }
     write_json_atomic(folder / "excitation.json", summary)
