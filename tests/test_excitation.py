@@ -124,3 +124,23 @@ def test_unknown_excitation_and_replay_scenario(tmp_path, capsys):
     assert main(["excitation", "nonexistent", "--out", str(tmp_path / "o")]) == 2
     capsys.readouterr()
     assert not (tmp_path / "o").exists()
+
+
+def test_a_recording_of_the_played_bag_is_read_periodic(arm):
+    """The bag from rest to rest, recorded (positions as played, the identified model's efforts plus noise): the
+    period fit over the whole run explained 97.9 % of its positions (< 99 %: "not a periodic excitation"); the
+    speeding up and slowing down are transients, left out, and the period is the design's."""
+    from dvrk_dart.io.measured_run import CSV_COLUMNS, MeasuredRun
+    from dvrk_dart.io.signal import process_periodic
+    from dvrk_dart.runs.excitation import LEAD_S, build_excitation, played
+
+    excitation = build_excitation("two", 200.0, arm)
+    bag = played(excitation)
+    tau = arm.identified.efforts(bag.q, bag.dq, np.gradient(bag.dq, 0.005, axis=0)).total()
+    tau += np.random.default_rng(0).normal(0.0, 0.01, tau.shape)
+    data = pd.DataFrame(np.hstack([bag.q, bag.dq, tau]), columns=CSV_COLUMNS)
+    data.insert(0, "t", bag.t)
+    periodic = process_periodic(MeasuredRun(PSM.source, data, arm.model)).periodic
+    assert periodic.period.period_s == pytest.approx(1.0 / excitation.source["base_frequency_hz"], rel=1e-5)
+    start, stop = periodic.kept
+    assert 0.5 * LEAD_S * 200 < start < LEAD_S * 200 and 0.5 * LEAD_S * 200 < len(bag.t) - stop < LEAD_S * 200

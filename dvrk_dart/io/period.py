@@ -179,10 +179,12 @@ def moving_joints(q: np.ndarray, measured: np.ndarray | None = None) -> np.ndarr
     return (spread > 0) & (spread >= MOTION_FRACTION * spread.max())
 
 
-def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_period_s: float | None = None) -> Period:
+def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_period_s: float | None = None,
+               checked: bool = True) -> Period:
     """The base period of a run's positions (the moving joints' columns),
-    checked: periodic, two whole periods or more, stable. `start_period_s`:
-    the design's period, where it is known (refined on the data)."""
+    checked (`check_periodic`; `checked` False: two whole periods only, for a
+    first estimate whose run may still have a start or end transient).
+    `start_period_s`: the design's period, where it is known (refined on the data)."""
     x = _unit_variance(q)
     if x.shape[1] == 0:
         raise DvrkDartError(f"{where}: the arm does not move: not a periodic excitation")
@@ -198,6 +200,17 @@ def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_p
     whole = int(math.floor((span_s + 0.5 / rate_hz) * frequency))
     if whole < MIN_PERIODS:
         raise DvrkDartError(f"{where}: {span_s * frequency:.2f} periods of {1 / frequency:.3f} s, at least {MIN_PERIODS} needed")
+    period = Period(1.0 / frequency, standard_error / frequency**2, whole)
+    if checked:
+        check_periodic(t, q, rate_hz, where, period)
+    return period
+
+
+def check_periodic(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, period: Period) -> None:
+    """One line unless the positions are a periodic excitation of `period`: its series explains them, and the
+    period is the same in both halves of the run."""
+    x = _unit_variance(q)
+    frequency = period.frequency_hz
     # as many harmonics as a design may have: an 8-harmonic excitation is periodic too
     explained = 1.0 - _residual_energy(frequency, t, x, DESIGN_MAX_HARMONICS) / float(np.sum(x**2))
     if explained < MIN_EXPLAINED_VARIANCE:
@@ -210,7 +223,6 @@ def fit_period(t: np.ndarray, q: np.ndarray, rate_hz: float, where: str, start_p
     if abs(f1 - f2) > STABLE_PERIOD_STANDARD_ERRORS * math.hypot(s1, s2) and drift_cycles > MAX_DRIFT_CYCLES:
         raise DvrkDartError(f"{where}: unstable period: {1 / f1:.4f} s in the first half, {1 / f2:.4f} s in the second "
                             f"(standard errors {s1 / f1**2:.1e}, {s2 / f2**2:.1e} s)")
-    return Period(1.0 / frequency, standard_error / frequency**2, whole)
 
 
 def design_harmonics(t: np.ndarray, q_moving: np.ndarray, period: Period) -> int:

@@ -46,7 +46,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.csv_run import say_once
 from dvrk_dart.io.excitation_design import harmonic_amplitudes
 from dvrk_dart.io.transient import TRANSIENT_RATIO, WINDOW_PERIOD_FRACTION, steady_span
-from dvrk_dart.io.period import DESIGN_PERIOD_TOLERANCE, Period, design_harmonics, fit_period, harmonic_design, least_squares, moving_joints
+from dvrk_dart.io.period import DESIGN_PERIOD_TOLERANCE, Period, check_periodic, design_harmonics, fit_period, harmonic_design, least_squares, moving_joints
 
 #: the cutoff rule (module docstring): power ratio and run length
 CUTOFF_SNR = 10.0
@@ -317,11 +317,15 @@ def analyse(t: np.ndarray, q: np.ndarray, tau: np.ndarray, rate_hz: float, where
     measured = np.ones(q.shape[1], bool) if measured is None else np.asarray(measured, bool)
     coupled = np.zeros(q.shape[1], bool) if coupled is None else np.asarray(coupled, bool)
     moving = moving_joints(q, measured)
-    period = fit_period(t, q[:, moving], rate_hz, where)  # from the run itself: a design is checked against it, never imposed
+    # from the run itself (a design is checked against it, never imposed); checked once a transient is left out:
+    # a run that goes from rest into the excitation (as `dvrk-dart excitation`'s bags play) is periodic after it
+    period = fit_period(t, q[:, moving], rate_hz, where, checked=False)
     steady = steady_span(tau[:, measured], int(round(period.period_s * rate_hz)))
     if steady.stop - steady.start < len(t):  # a transient left out, the period fitted again without it
         t, q, tau = t[steady] - t[steady.start], q[steady], tau[steady]
         period = fit_period(t, q[:, moving], rate_hz, where)
+    else:
+        check_periodic(t, q[:, moving], rate_hz, where, period)
     if design is not None:
         _check_design_period(design, period, where)
     floor = design.harmonics if design is not None else design_harmonics(t, q[:, moving], period)

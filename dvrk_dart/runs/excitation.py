@@ -49,8 +49,10 @@ EXCITATIONS = ("one", "two")
 MAX_KINEMATIC_STEP_S = 1e-3
 #: the played bag speeds up from rest along the trajectory, and slows to rest at its end, over this long (s): a
 #: trajectory cut from a periodic series starts and ends mid-motion ("two": the pitch at -1.28 rad/s, the jaw at
-#: 1.56), which played from rest is a velocity step on the real arm
-LEAD_S = 2.0
+#: 1.56), which played from rest is a velocity step on the real arm. 1 s: accelerations within the series' own
+#: ("one", "two": up to 5.5 rad/s^2 on the yaw, 8.4 in the series), and short enough that the periodic layer's
+#: transient windows (an eighth of a period) take nearly all of it (2 s left a period 4e-4 long)
+LEAD_S = 1.0
 
 
 @dataclass
