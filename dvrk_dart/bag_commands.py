@@ -17,9 +17,9 @@ from dvrk_dart.errors import DvrkDartError
 def cmd_import(args: argparse.Namespace) -> int:
     """A ROS bag -> the 21-column measured-run CSV (model coordinates, 200 Hz)."""
     from dvrk_dart.io.atomic import atomic_path
-    from dvrk_dart.io.bags import is_bag, load_bag_run
+    from dvrk_dart.io.bags import is_bag
     from dvrk_dart.io.outputs import MARKER, check_writable_folder, enclosing_output
-    from dvrk_dart.io.reference_data import sample_rate_hz
+    from dvrk_dart.io.reference_data import load_run, sample_rate_hz
     from dvrk_dart.model.model_file import load_model
 
     topics = reading_options(args)
@@ -43,7 +43,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise DvrkDartError(f"--out: {out} exists (--force replaces it)")
     check_writable_folder(out.absolute().parent)
-    run = load_bag_run(args.bag, load_model(arm_model_file(args)), topics)
+    run = load_run(args.bag, load_model(arm_model_file(args)), topics)  # the checks of every reader
     values = np.hstack([run.q, run.dq, run.tau])
     with atomic_path(out) as tmp:
         np.savetxt(tmp, values, delimiter=",", fmt="%.17g")

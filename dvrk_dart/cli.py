@@ -50,6 +50,7 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
         raise DvrkDartError(f"{empty[0]}: an empty name")
     outputs = [(getattr(args, dest), option) for dest, option in OUTPUT_OPTIONS.items() if getattr(args, dest, None)]
     for dest, option in INPUT_OPTIONS.items():
+        option = "the input bag" if dest == "bag" and getattr(args, "command", None) == "import" else option  # a positional there
         for value in _values(args, dest):
             if not isinstance(value, (str, os.PathLike)) or not Path(value).exists():
                 continue  # a reference run's name, a dynamics keyword, or absent

@@ -15,7 +15,7 @@ from dvrk_dart.command_args import command_arm, reading_options
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
-from dvrk_dart.io.signal import CUT_SAMPLES
+from dvrk_dart.io.signal import CUT_SAMPLES, spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
@@ -85,8 +85,8 @@ def _coordinates_note(arm: Arm, processed, terms, relative: np.ndarray, first_pe
 
     motor_map = arm.model.motor_map
     coupled = np.arange(len(relative))[motor_map.columns]
-    if not len(coupled) or not processed.measured[coupled].all():
-        return None
+    if not len(coupled) or not processed.measured[coupled].all() or not spanning_columns(processed.q[:, coupled]).all():
+        return None  # a wrist that does not move tells no coordinates apart
     q, dq, ddq = (motor_map.positions_to_model(x) for x in (processed.q, processed.dq, processed.ddq))
     with np.errstate(over="ignore", invalid="ignore"):
         predicted, tau = processed.in_band(arm.identified.predict(q, dq, ddq, terms)), motor_map.efforts_to_model(processed.tau)

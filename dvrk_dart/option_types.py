@@ -4,6 +4,7 @@ value in one line naming it, before any work (cli_parser.py uses them)."""
 from __future__ import annotations
 
 import argparse
+import errno
 import math
 import os
 import re
@@ -71,7 +72,7 @@ def measured_run(text: str) -> str:
         raise argparse.ArgumentTypeError("an empty name (one, two, ... or a path)")
     if text in RUNS or text in manifest()["files"]:
         return text
-    path = Path(text)
+    path = _looked_up(text)
     if path.is_symlink() and not path.exists():
         raise argparse.ArgumentTypeError(f"{text}: a broken symbolic link (to {os.readlink(path)})")
     if not path.exists():
@@ -83,12 +84,26 @@ def measured_run(text: str) -> str:
 
 def existing_file(text: str) -> str:
     """A file that must exist (a commanded excitation: no reference run stands for one)."""
-    path = Path(text)
+    path = _looked_up(text)
     if not path.exists():
         raise argparse.ArgumentTypeError(f"{text}: file not found")
     if not path.is_file():
         raise argparse.ArgumentTypeError(f"{text}: a folder, not a file")
     return text
+
+
+def _looked_up(text: str) -> Path:
+    """The path, once the system can look it up: a folder on the way that may not be searched, or a name too
+    long, is one line (Path.exists raised them)."""
+    path = Path(text)
+    try:
+        path.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        pass  # said by the checks that follow
+    except OSError as exc:
+        if exc.errno != errno.ELOOP:  # a symbolic link's loop is said as a broken link
+            raise argparse.ArgumentTypeError(f"{text}: {exc.strerror or exc}") from None
+    return path
 
 
 def number_in(low: float, high: float, unit: str = "", open_low: bool = False, open_high: bool = False):

@@ -140,6 +140,33 @@ def test_a_bag_without_the_jaw_measures_the_joints_it_gives(tmp_path, capsys, ru
         load_bag_run(write_bag(tmp_path / "arm2", topics[:1], stamps_ns=stamps), PSM, BagTopics(jaw_topic="/PSM1/jaw/measured_js"))
 
 
+def test_an_effort_a_bag_does_not_read_is_not_measured(tmp_path, capsys, run_two):
+    """outer_insertion's effort zero in every message: read as measured zeros (q3 "0.9621 N" in model-errors, and
+    identify's convex program failed on it), where the same values in a CSV are not measured; an empty effort
+    field (JointState allows one) was refused. The jaw's takes its coupled partners with it, as in a CSV."""
+    t, s = _modified(run_two)
+    t[0].effort[:, 2] = 0.0
+    run = load_bag_run(write_bag(tmp_path / "q3", t, stamps_ns=s), PSM)
+    assert run.measured == ("q1", "q2", "q4", "q5", "q6", "q7") and not run.tau[:, 2].any() and run.q[:, 2].any()
+    assert "q3: the effort never changes" in capsys.readouterr().err
+    topics, stamps = jittered_topics(run_two, rows=slice(0, 600))
+    jaw = topics[1]
+    no_effort = type(jaw)(jaw.topic, jaw.names, jaw.t, jaw.position, jaw.velocity, np.zeros((len(jaw.t), 0)))
+    run = load_bag_run(write_bag(tmp_path / "jaw", [topics[0], no_effort], stamps_ns=stamps), PSM)
+    assert run.measured == ("q1", "q2", "q3", "q4")
+
+
+def test_a_dvrk_1x_topic_reads_its_own_jaw(tmp_path, run_two):
+    """--topic /dvrk/PSM1/state_joint_current looked for /dvrk/PSM1/jaw/measured_js, a dVRK 2.x name: the README's
+    recipe needed a --jaw-topic it does not give."""
+    topics, stamps = jittered_topics(run_two, rows=slice(0, 600))
+    renamed = [type(x)(name, x.names, x.t, x.position, x.velocity, x.effort)
+               for x, name in zip(topics, ("/dvrk/PSM1/state_joint_current", "/dvrk/PSM1/state_jaw_current"))]
+    bag = write_bag(tmp_path / "dvrk1.bag", renamed, "ros1", stamps_ns=dict(zip((x.topic for x in renamed), stamps.values())))
+    run = load_bag_run(bag, PSM, BagTopics(topic="/dvrk/PSM1/state_joint_current"))
+    assert run.measured == ("q1", "q2", "q3", "q4", "q5", "q6", "q7")
+
+
 def test_missing_header_stamps_fall_back_to_receive_times(tmp_path, capsys, run_two):
     topics, _ = jittered_topics(run_two, rows=slice(0, 600))
     zero = {s.topic: np.zeros(len(s.t), dtype=np.int64) for s in topics}
@@ -266,6 +293,9 @@ def _bad_bags(tmp_path, run):
     back[arm.topic] = stamps[arm.topic].copy()
     back[arm.topic][400] = back[arm.topic][398]
     bags["backwards"] = (write_bag(tmp_path / "back", topics, stamps_ns=back), ["/PSM1/measured_js", "stamps go backwards", "t = 1.9"])
+    t, s = _modified(run)
+    t[0].effort[300, 0] = 1000.0
+    bags["glitch"] = (write_bag(tmp_path / "glitch", t, stamps_ns=s), ["glitch (on its 200 Hz grid): row", "column tau1", "glitched value"])
     short = jittered_topics(run, rows=slice(0, 300))
     bags["short"] = (write_bag(tmp_path / "short", short[0], stamps_ns=short[1]), ["/PSM1/measured_js", "/PSM1/jaw/measured_js", "at least 410 needed"])
     return bags

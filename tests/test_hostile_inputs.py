@@ -542,3 +542,11 @@ def test_a_processing_a_dynamics_file_chose_is_named_as_the_files(tmp_path, caps
     assert code == 2 and len(lines) == 1 and "--processing periodic" not in lines[0], lines
     assert "periodic processing" in lines[0] and f"the processing --dynamics {dynamics} records" in lines[0], lines
     assert not (tmp_path / "f").exists()
+
+
+@pytest.mark.parametrize("option", [["model-errors", "--measured"], ["identify", "--out", "o", "--runs"], ["model-errors", "--measured", "one", "--excitation"]])
+def test_a_path_the_system_cannot_look_up_is_one_line(tmp_path, capsys, option):
+    """A name too long for the file system (and, likewise, a folder on the way that may not be searched) ended in a
+    63-line traceback from Path.exists."""
+    code, err, _ = cli(capsys, *option, tmp_path / ("a" * 300 + ".csv"))
+    assert code == 2 and len(err) == 1 and "File name too long" in err[0], err

@@ -38,6 +38,8 @@ BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 #: storage of the bags we write: rosbag2's default, and what Foxglove opens
 STORAGES = ("mcap", "sqlite3", "ros1")
 NS = 1_000_000_000
+#: the dVRK 1.x topics of an arm's joints and of its jaw, in the arm's namespace (/dvrk/PSM1/...)
+DVRK1_JOINTS, DVRK1_JAW = "state_joint_current", "state_jaw_current"
 
 
 @dataclass(frozen=True)
@@ -58,10 +60,13 @@ class BagTopics:
         return self.topic or f"/{self.namespace(card)}/measured_js"
 
     def jaw(self, card: DvrkTopics) -> str:
-        """--jaw-topic, else the jaw of the arm's namespace (that of --topic when given)."""
+        """--jaw-topic, else the jaw of the arm's namespace (that of --topic when given; a dVRK 1.x
+        state_joint_current's jaw is its state_jaw_current)."""
         if self.jaw_topic:
             return self.jaw_topic
         namespace = self.topic.rsplit("/", 1)[0] if self.topic else f"/{self.namespace(card)}"
+        if self.topic and self.topic.endswith(f"/{DVRK1_JOINTS}"):
+            return f"{namespace}/{DVRK1_JAW}"
         return f"{namespace}/jaw/measured_js"
 
     def wanted(self, card: DvrkTopics) -> list[tuple[str, tuple[str, ...]]]:
@@ -201,6 +206,8 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
             order, order_key = [key.index(n) for n in names], key
         for field in rows:
             values = np.asarray(getattr(msg, field), dtype=float)
+            if field == "effort" and len(values) == 0:  # JointState allows it: an effort not read (not measured, said)
+                values = np.zeros(len(key))
             if len(values) != len(key):
                 raise DvrkDartError(f"{path}: topic {topic}: {field} has {len(values)} values for {len(key)} joint names at t = {(receive_ns - bag_start) / NS:.3f} s into the bag")
             rows[field].append(values[order])
@@ -287,8 +294,10 @@ def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = B
 
 def _in_model_coordinates(dvrk: dict, model: PsmModel, path: Path, topics: BagTopics) -> tuple[np.ndarray, tuple[str, ...]]:
     """The dVRK's position, velocity and effort -> (N, 21) in the model's
-    coordinates, and the joints measured: without the jaw's topic, those whose
-    coordinate needs the jaw are zeros, not measured, and said so."""
+    coordinates, and the joints measured, the others said: without the jaw's
+    topic, those whose coordinate needs the jaw are zeros; a joint whose effort
+    never changes (not read: zeros, or an empty effort field) is not measured,
+    its positions kept, and a coupled one takes its partners with it (as in a CSV)."""
     logged = np.arange(N_JOINTS) < dvrk["position"].shape[1]  # the jaw's columns come last (BagTopics.wanted)
     padded = {field: np.pad(values, ((0, 0), (0, N_JOINTS - values.shape[1]))) for field, values in dvrk.items()}
     motor_map = model.motor_map
@@ -296,8 +305,17 @@ def _in_model_coordinates(dvrk: dict, model: PsmModel, path: Path, topics: BagTo
                         motor_map.efforts_to_model(padded["effort"])])
     determined = motor_map.determined_by(logged)
     values[:, np.tile(~determined, 3)] = 0.0
+    notes = []
     if not determined.all():
         unmeasured = ", ".join(name for name, known in zip(JOINT_NAMES, determined) if not known)
-        say_once([f"{path}: no topic {topics.jaw(model.dvrk_topics)}: {unmeasured} not measured (each coupled coordinate mixes the jaw; "
-                  "--jaw-topic names another)"])
-    return values, tuple(name for name, known in zip(JOINT_NAMES, determined) if known)
+        notes.append(f"{path}: no topic {topics.jaw(model.dvrk_topics)}: {unmeasured} not measured (each coupled coordinate mixes "
+                     "the jaw; --jaw-topic names another)")
+    read = motor_map.determined_by(logged & (np.ptp(padded["effort"], axis=0) > 0.0)) & determined
+    if (determined & ~read).any():
+        names = ", ".join(name for name, r, d in zip(JOINT_NAMES, read, determined) if d and not r)
+        notes.append(f"{path}: {names}: the effort never changes (or a coupled partner's does not): read as not recorded")
+    if not read.any():
+        raise DvrkDartError(f"{path}: no effort changes: no effort was recorded")
+    values[:, 2 * N_JOINTS:][:, ~read] = 0.0
+    say_once(notes)
+    return values, tuple(name for name, known in zip(JOINT_NAMES, read) if known)

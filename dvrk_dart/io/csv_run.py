@@ -70,12 +70,14 @@ def _read_text(path: Path) -> pd.DataFrame:
         raise DvrkDartError(f"{path}: file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         more = " (a trailing comma, or a row with more cells than the first?)" if "Expected" in str(exc) else ""
+        if "Expected" in str(exc) and ";" in path.read_text(errors="replace").split("\n", 1)[0]:
+            more = " (semicolons between the columns and decimal commas? the layouts are comma-separated, with decimal points)"
         raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]}){more}") from None
     first = str(raw.iloc[0, 0]) if raw.shape[1] == 1 and len(raw) else ""
-    if len(first.split()) > 1 and all(is_number(cell) for cell in first.split()):  # numpy.savetxt's default
-        raise DvrkDartError(f"{path}: the columns are separated by spaces or tabs; the layouts are comma-separated "
-                            "(numpy.savetxt(..., delimiter=','))")
-    return raw
+    for separator, words, fix in ((None, "spaces or tabs", "numpy.savetxt(..., delimiter=',')"), (";", "semicolons", "sep=','")):
+        if len(first.split(separator)) > 1 and all(is_number(cell) for cell in first.split(separator)):  # numpy.savetxt's default
+            raise DvrkDartError(f"{path}: the columns are separated by {words}; the layouts are comma-separated ({fix})")
+    return raw.dropna(how="all").reset_index(drop=True)  # a spreadsheet's rows of empty cells (",,,,"), as blank lines
 
 
 def is_number(text) -> bool:
@@ -227,17 +229,16 @@ def read_csv_run(path: Path, motor_map, dvrk_joints: tuple[str, ...]) -> CsvValu
     header = _has_header(raw)
     if header:
         layout = layout_from_header(list(raw.iloc[0]), path, dvrk_joints)
+        names = [str(cell).strip() for cell in raw.iloc[0]]  # a column named as the file names it
         raw = raw.iloc[1:].reset_index(drop=True)
     else:
         if raw.shape[1] - 1 in HEADERLESS_JOINTS and raw.iloc[:, -1].isna().all():  # every line ends with a separator
             raise DvrkDartError(f"{path}: {raw.shape[1]} columns without a header row, the last one empty on every row: "
                                 f"a trailing comma? ({raw.shape[1] - 1} columns is a known layout)")
         layout = headerless_layout(raw.shape[1], path, _coupled_joints(motor_map))
-    names = [str(c) for c in range(raw.shape[1])]
-    for (field, joint), index in layout.columns.items():
-        names[index] = f"{field}{joint[1:]}"
-    if layout.time_column is not None:
-        names[layout.time_column] = "t"
+        names = [""] * raw.shape[1]
+        for (field, joint), index in layout.columns.items():
+            names[index] = f"{field}{joint[1:]}"
     file_values = _numbers(raw, names, path, 2 if header else 1)
     if not len(file_values):
         raise DvrkDartError(f"{path}: a header row and no data rows")

@@ -333,7 +333,12 @@ def load_run(path: Path | str, model: PsmModel, topics: BagTopics = BagTopics())
     or a ROS bag read with the command's `topics`: io/bags.py), with one-line errors."""
     path = Path(path)
     if is_bag(path):
-        return load_bag_run(path, model, topics)
+        run = load_bag_run(path, model, topics)
+        where = f"{path} (on its {run.rate_hz:g} Hz grid)"
+        values = np.hstack([run.q, run.dq, run.tau])
+        check_glitches(values, run.rate_hz, where)  # as a CSV's: one glitched effort of 1000 was fitted as data
+        say_once(check_velocity_columns(run.q, run.dq, run.rate_hz, where) + still_position_notes(values, run.measured, path))
+        return run
     read = _read_csv(path, model)
     values = read.values
     if len(values) < MIN_ROWS:

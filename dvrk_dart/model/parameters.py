@@ -194,7 +194,7 @@ def load_parameters(path: Path | str, model: PsmModel) -> IdentifiedParameters:
     """Read params.json, check it, and convert every link to its own frame."""
     path = Path(path)
     try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
+        raw = json.loads(path.read_text(encoding="utf-8-sig"))  # a BOM, as some editors save, is not content
     except FileNotFoundError:
         raise DvrkDartError(f"{path}: parameter file not found") from None
     except IsADirectoryError:

@@ -242,7 +242,8 @@ NOT_FOLLOWING_SHARE = 0.25
 def not_following_notes(q: np.ndarray, q_measured: np.ndarray, recorded: np.ndarray) -> list[str]:
     """A note naming the recorded joints whose simulated motion does not follow the measured one."""
     error, motion = rms(q - q_measured), rms(q_measured - q_measured.mean(axis=0))
-    lost = [j for j in range(len(error)) if recorded[j] and motion[j] > 0 and error[j] > NOT_FOLLOWING_SHARE * motion[j]]
+    moving = spanning_columns(q_measured)  # a still joint's 1e-14 of round-off is no motion to follow
+    lost = [j for j in range(len(error)) if recorded[j] and moving[j] and error[j] > NOT_FOLLOWING_SHARE * motion[j]]
     if not lost:
         return []
     return [f"{', '.join(JOINT_NAMES[j] for j in lost)}: the simulation does not follow the measured motion (position error RMS "
