@@ -145,8 +145,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), "
                   f"projection fitted on the run's {result['whole_periods']} whole periods, "
                   f"{result['harmonics']} harmonics ({'--harmonics' if args.harmonics else 'the smallest cutoff of the moving joints'}; "
-                  f"design {result['design_harmonics']} "
-                  f"from {result['design_from']})")
+                  f"the trajectory's own {result['design_harmonics']}, read from {result['design_from']})")
         if result.get("rate_note"):
             print(f"note: {result['rate_note']}")
         for note in _band_notes(args.harmonics, result):

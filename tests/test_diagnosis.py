@@ -545,7 +545,7 @@ def test_the_answer_sentence_says_what_how_far_and_what_is_left():
               "gap_split": {"runs": "holdout", "joints": split}, "units": ["N·m", "N·m", "N", "N·m", "N·m", "N·m", "N·m"]}
     sentence = answer_sentence(result)
     assert "friction of q3 (friction_q3, size 0.5 N) with 1 more effect (offset_q1)" in sentence
-    assert "held-out" in sentence and "q3 0.65 -> 0.18 N" in sentence
+    assert "held-out" in sentence and "q3 0.650 -> 0.180 N" in sentence
     # a friction's viscous part is its size too (a blind viscous change of 0.2 N/(m/s) read "size 0 N")
     viscous = {**friction, "parameters": {"coulomb": 0.0, "viscous": 0.2, "reversal": "sign"},
                "units": {"coulomb": "N", "viscous": "N/(m/s)"}, "size": 0.0}

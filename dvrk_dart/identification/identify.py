@@ -298,11 +298,12 @@ def _reference_where_no_fitted_joint(consistent: ConsistentFit, regressor: Regre
     for i in alone:
         link, name = regressor.layout.names[i].split(".", 1)
         by_link.setdefault(link, []).append(name)
-    said = "; ".join(f"{link} {' '.join(names)}" for link, names in by_link.items())
+    said = "; ".join(f"{link} ({model.links[int(link.removeprefix('link'))].name}) {' '.join(names)}" for link, names in by_link.items())
     held = np.full(len(theta), np.nan)
     held[alone] = reference[alone]
     return replace(consistent, theta=theta), [f"{len(alone)} parameters act on no fitted joint ({said}): "
-                                              f"not determined by these runs, params.json holds {source}'s values"], held
+                                              f"not determined by these runs, params.json holds {source}'s values "
+                                              "(Fc Coulomb, Fv viscous, Fo offset, Im motor inertia, K spring)"], held
 
 
 def _with_law(run: RunData, regressor: Regressor) -> RunData:

@@ -242,12 +242,14 @@ def insertion_sentence(study: dict) -> str:
     carried = "" if study["gap_holdout_simulated"] < study["gap_holdout_identified"] else (
         ": they do not carry to the held-out runs, and what J3's gap is made of is not determined by these runs")
     if study["gap_holdout_terms"] >= study["gap_holdout_own_friction"]:  # the terms add nothing: J3's own friction is the finding
-        o = study["own_friction_coefficients"]  # fitted alone: beside the terms, q2's cosine load took part of the offset
+        # fitted alone: beside the terms, q2's cosine load took part of the offset (rounded first: -1e-5 printed "-0.000")
+        o = {key: round(value, 3) + 0.0 for key, value in study["own_friction_coefficients"].items()}
         return (f"J3's own friction refitted on the training runs (on top of the identified: offset {o['offset']:+.3f} N, viscous "
                 f"{o['viscous']:+.3f} N/(m/s), Coulomb {o['coulomb_sign']:+.3f} N sharp and {o['coulomb_dahl']:+.3f} N pre-sliding) leaves J3 "
                 f"at {study['gap_holdout_own_friction']:.3f} N on the held-out runs (identified model {study['gap_holdout_identified']:.3f} N); "
                 f"terms along the stroke, in ddq3·sign(dq3) and in q2 {terms_beside_own_friction(study)} there "
-                f"({study['gap_holdout_terms']:.3f} N with them, {study['gap_holdout_simulated']:.3f} N simulated in DART{removed}){carried}.")
+                f"({study['gap_holdout_terms']:.3f} N with them in the least-squares fit, {study['gap_holdout_simulated']:.3f} N simulated "
+                f"in DART{removed}){carried}.")
     return ("J3's repeatable gap: a Coulomb level that changes along the stroke (bumps a few mm wide), an effort in ddq3·sign(dq3) "
             f"({c['acceleration_along_motion_kg']:+.3f} kg: {less} effort than the model while speeding up, {more} while slowing down) and "
             f"a load in q2 ({c['pitch_load_sin_q2']:+.3f} N sin q2 {c['pitch_load_cos_q2']:+.3f} N cos q2), fitted on the training runs "

@@ -10,7 +10,7 @@ from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
 from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
 from dvrk_dart.diagnosis.output.effect_words import plain_name, size_words
-from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, joints_apart, percent,
+from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, gap_change, joints_apart, percent,
                                                  share_above_floor)
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -239,7 +239,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     joints = [JOINT_NAMES[j] for j in shown]
     # "not explained" already says the best effects remove less than a fifth: no lead to weigh
     effects = _effects_words(result, selected, explained["words"] != "not explained") if selected else "no effect"
-    gaps = "; ".join(f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in zip(joints, before, after))
+    gaps = "; ".join(gap_change(j, b, a, effort_unit(result, j)) for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     if result.get("payload_not_distinguished"):
         where = (f"no payload is distinguished from none (the payload-shaped fit's mass is under {MIN_PAYLOAD_KG * 1e3:g} g: a session "

@@ -11,7 +11,7 @@ import numpy as np
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.clauses import ANSWER_JOINTS, main_joints
 from dvrk_dart.diagnosis.output.effect_words import size_words
-from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, PARTLY_SHARE, joints_apart, percent, share_above_floor, words_for
+from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, PARTLY_SHARE, gap_change, joints_apart, percent, share_above_floor, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
@@ -72,7 +72,7 @@ def beyond_identified_sentence(result: dict) -> str:
     halved = [j for j in found["recorded"] if bar[j] > EFFORT_RESOLUTION and after[j] < 0.5 * bar[j]]
     shown = sorted(set(main_joints(found["recorded"])) | set(worse) | set(halved))
     past_main = set(halved) - set(main_joints(found["recorded"]))  # no share of the rule's there: what was removed, said
-    gaps = ", ".join(f"{JOINT_NAMES[j]} {bar[j]:.3g} -> {after[j]:.3g} {result['units'][j]}"
+    gaps = ", ".join(gap_change(JOINT_NAMES[j], bar[j], after[j], result["units"][j])
                      + (f" ({1.0 - after[j] / bar[j]:.0%} removed)" if j in past_main else "") for j in shown)
     if worse:
         gaps += "; worse than the identified model on " + _worse_words(result, found, worse)

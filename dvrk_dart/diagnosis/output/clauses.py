@@ -5,7 +5,7 @@ joints an answer speaks of)."""
 
 from __future__ import annotations
 
-from dvrk_dart.diagnosis.output.wording import terms_beside_own_friction, words_for
+from dvrk_dart.diagnosis.output.wording import gap_change, terms_beside_own_friction, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the joints the answer sentence speaks of (the arm's main joints)
@@ -85,7 +85,7 @@ def refit_clause(result: dict) -> str:
     if not refit:
         return ""
     pairs = list(zip(JOINT_NAMES[:ANSWER_JOINTS], refit["gap_holdout_arm_params"], refit["gap_holdout_refit"]))
-    biased = [f"{j} {b:.3g} -> {a:.3g} {effort_unit(result, j)}" for j, b, a in pairs if a * a <= 0.5 * b * b]
+    biased = [gap_change(j, b, a, effort_unit(result, j)) for j, b, a in pairs if a * a <= 0.5 * b * b]
     if not biased:
         return " Refitting the identified parameters on the training runs does not halve any held-out gap in squares."
     return f" The published fit's bias: the identified parameters refitted on the training runs leave {'; '.join(biased)} on the held-out runs."

@@ -94,6 +94,12 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
             "by_joint": {name: {"removed_share": s, "words": words_for(s)} for name, s in shares.items()}}
 
 
+def gap_change(joint: str, before: float, after: float, unit: str) -> str:
+    """'q2 0.0952 -> 0.100 N·m': three significant digits each, kept when they are zeros ('0.1' beside '0.0952'
+    read as a rounder figure than it is)."""
+    return f"{joint} {before:#.3g} -> {after:#.3g} {unit}"
+
+
 def percent(share: float) -> str:
     """A share as a percentage, with a decimal where the whole number would sit on a boundary of the words
     (0.5008 printed "50 %" beside "mostly explained")."""
