@@ -19,10 +19,12 @@ def print_diagnosis(result: dict) -> None:
     for joint, runs in (result.get("not_recorded_by") or {}).items():
         print(f"{joint}: not recorded by {', '.join(runs)} (its simulation holds it where the log does, at zero without a column): no figure, weight or "
               f"effect on {joint}; what the effects do to {joint} is not checked")
-    for key in ("gap_before", "gap_after"):
+    for key, stage in (("gap_before", "before"), ("gap_after", "after")):
         for split, values in (result.get(key) or {}).items():
-            if values is not None:
-                print(f"{key} ({split}): " + ", ".join(f"{j} {v:.4f} {u}" for j, v, u in zip(JOINT_NAMES, values, result["units"]) if v is not None))
+            if values is not None:  # diagnosis.json's key beside the words
+                runs = "held-out" if split == "holdout" else "training"
+                print(f"gap {stage} the effects, {runs} runs ({key}): "
+                      + ", ".join(f"{j} {v:.4f} {u}" for j, v, u in zip(JOINT_NAMES, values, result["units"]) if v is not None))
     selected = [e["name"] + (" (a gravity mismatch: no baseline isolates a payload)" if e.get("kind") == "gravity_mismatch" else "")
                 for e in result["effects"] if e.get("selected")]
     print(f"selected effects: {', '.join(selected) or 'none'}")
