@@ -31,10 +31,11 @@ from dvrk_dart.diagnosis.payload.payload import (
     point_mass_parameters,
 )
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
-from dvrk_dart.diagnosis.output.answer import answer_sentence
+from dvrk_dart.diagnosis.output.answer import answer_paragraphs, answer_sentence
 from dvrk_dart.diagnosis.output.effect_words import plain_name
 from dvrk_dart.diagnosis.output.regimes import residual_regimes
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, prepare_run
+from dvrk_dart.diagnosis.fit.identified_terms import identified_joint_term
 from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement, time_scaled
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process, zero_phase_lowpass
@@ -200,6 +201,14 @@ def test_what_is_beyond_the_identified_terms_is_put_on_the_effect_it_looks_like(
     assert {"offset_q1", "friction_q1"} <= {name.split("_presliding")[0].split("_smooth")[0] for name in result["selection"]["selected"]}
     carried = result["identified_terms"]
     assert carried["beyond_carried_by"]["q1"] == "offset_q1" and carried["beyond_rms"]["q1"] == pytest.approx(0.2, rel=0.1), carried
+    # every selected one-joint effect has the model's own values beside it, the lead too (a q1 friction at the published
+    # values led an answer as if it were found)
+    friction_q1 = next(name for name in result["selection"]["selected"] if name.startswith("friction_q1"))
+    coulomb, _ = identified_joint_term(arm, 0, "friction")
+    assert carried["identified_values"][friction_q1]["coulomb"] == pytest.approx(coulomb)
+    story = answer_paragraphs(result)[-1]
+    lead = min((name for name in result["selection"]["selected"] if f"({name}" in story), key=lambda name: story.index(f"({name}"))
+    assert (lead in carried["identified_values"]) == ("the identified model's" in story.split(f"({lead}")[1].split(" with ")[0]), story
 
 
 def test_with_a_baseline_the_model_errors_shared_with_it_are_said_to_be_the_identified_models(arm, segment, noise_rms):
@@ -533,7 +542,7 @@ def test_payload_j1_effort_at_zero_with_a_session_offset_on_j2(arm, segment, noi
 
 
 def test_the_answer_sentence_says_what_how_far_and_what_is_left():
-    from dvrk_dart.diagnosis.output.answer import answer_sentence
+    from dvrk_dart.diagnosis.output.answer import answer_paragraphs, answer_sentence
 
     friction = {"name": "friction_q3", "kind": "friction", "joints": ["q3"], "parameters": {"coulomb": 0.5, "reversal": "sign"},
                 "units": {"coulomb": "N"}, "size": 0.5}

@@ -40,8 +40,8 @@ DEFINITION = ("per joint, 1 - |selected effects' efforts - the closest subset (e
               "`share`: their mean over the joints the selected effects act on (each joint in its own unit); `beyond_rms`: per "
               "joint, the RMS of the selected effects' efforts minus all those terms (how far what was found is from them); "
               "`beyond_carried_by`: per joint, the selected effect whose effort there is most like that difference "
-              f"(cosine of the two series, uncentred, at least {CARRIER_MIN_COSINE:g}), and `carrier_identified_values` the identified model's "
-              "own values of its parameters where it has such a term")
+              f"(cosine of the two series, uncentred, at least {CARRIER_MIN_COSINE:g}); `identified_values`: per selected effect, the "
+              "identified model's own values of its parameters where it has such a term")
 
 
 def identified_terms_share(problem, selection, base_config: SimConfig) -> dict | None:
@@ -91,9 +91,9 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
         return None
     # the share weighs efforts in energy: J1's viscous raised from 0.09 to 0.24 beside its Coulomb still read 92 %
     effects = {problem.effects[i].name: problem.effects[i] for i in selection.selected}
-    counterparts = {name: identified_counterpart(problem.arm, effects[name]) for name in set(carrier.values()) if name}
+    counterparts = {name: identified_counterpart(problem.arm, effect) for name, effect in effects.items()}
     return {"share": float(np.mean(list(by_joint.values()))), "by_joint": by_joint, "beyond_rms": beyond, "beyond_carried_by": carrier,
-            "carrier_identified_values": {name: values for name, values in counterparts.items() if values},
+            "identified_values": {name: values for name, values in counterparts.items() if values},
             "terms": list(left_out),
             "runs": "baseline" if problem.has_baseline else "train",
             "definition": DEFINITION}

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
-from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence
+from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence, identified_values_words
 from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
 from dvrk_dart.diagnosis.output.effect_words import plain_name, size_words
 from dvrk_dart.diagnosis.output.wording import (EFFORT_RESOLUTION, NOT_DETERMINED, PARTLY_SHARE, explanation, gap_change, joints_apart, percent,
@@ -136,7 +136,7 @@ def _lead_words(result: dict, selected: list[str]) -> str:
                 "an attached mass not told apart without a baseline)")
     if selected:
         first = next((e for e in result.get("effects", []) if e["name"] == selected[0]), {"name": selected[0]})
-        return f"{plain_name(first)} ({selected[0]}{size_words(first)})"
+        return f"{plain_name(first)} ({selected[0]}{size_words(first)}{identified_values_words(result, first)})"
     return "no effect"
 
 

@@ -115,14 +115,20 @@ def _leading_effects(result: dict, joints: list[int]) -> str:
         if entry.get("kind") == "gravity_mismatch":
             words.append(f"{joint}: {entry['name']} (a gravity mismatch: the arm's mass distribution, not a payload)")
             continue
-        size = size_words(entry)[2:]
-        own = (carried.get("carrier_identified_values") or {}).get(entry["name"])
-        if own:
-            units = entry.get("units") or {}
-            size += "; the identified model's " + ", ".join(f"{name.replace('coulomb', 'Coulomb')} {value:.3g} {units.get(name, '')}".rstrip()
-                                                            for name, value in own.items())
+        size = size_words(entry)[2:] + identified_values_words(result, entry)
         words.append(f"{joint}: {entry['name']}" + (f" ({size})" if size else ""))
     return "; ".join(words)
+
+
+def identified_values_words(result: dict, entry: dict) -> str:
+    """'; the identified model's Coulomb 0.3 N·m, viscous 0.218 N·m/(rad/s)': beside an effect's fitted values, the
+    model's own where it has such a term (a q1 friction at the published values led an answer as if it were found)."""
+    own = ((result.get("identified_terms") or {}).get("identified_values") or {}).get(entry["name"])
+    if not own:
+        return ""
+    units = entry.get("units") or {}
+    return "; the identified model's " + ", ".join(f"{name.replace('coulomb', 'Coulomb')} {value:.3g} {units.get(name, '')}".rstrip()
+                                                   for name, value in own.items())
 
 
 def _worse_words(result: dict, found: dict, worse: list[int]) -> str:
