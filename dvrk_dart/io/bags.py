@@ -12,7 +12,6 @@ the map). Writing them: `bag_writer.py`.
 from __future__ import annotations
 
 import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -219,9 +218,7 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
             raise DvrkDartError(f"{path}: topic {topic}: {field} of {names[j]} is {values[k, j]} at t = {(received[k] - bag_start) / NS:.3f} s into the bag")
     stamps_ns = np.array(stamps, dtype=np.int64)
     receive_time = not stamps_ns.any()
-    if receive_time:
-        # a recorder that leaves header stamps empty: the bag's receive times are all there is
-        print(f"dvrk-dart: note: {path}: topic {topic} has no header stamps; using the bag's receive times", file=sys.stderr)
+    if receive_time:  # a recorder that leaves header stamps empty: the bag's receive times are all there is (said once read)
         stamps_ns = np.array(received, dtype=np.int64)
     return TopicSamples(topic, stamps_ns, arrays["position"], arrays["velocity"], arrays["effort"], receive_time)
 
@@ -229,6 +226,9 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
 def _check_times(path: Path, samples: TopicSamples) -> None:
     seconds = (samples.stamps_ns - samples.stamps_ns[0]) / NS
     steps = np.diff(seconds)
+    unset = np.flatnonzero(samples.stamps_ns == 0)
+    if len(unset):  # a stamp left at zero among set ones read "backwards at t = -1700000000 s"
+        raise DvrkDartError(f"{path}: topic {samples.topic}: message {unset[0] + 1} has no header stamp (0) among stamped ones")
     if (steps <= 0).any():
         k = int(np.argmax(steps <= 0))
         raise DvrkDartError(f"{path}: topic {samples.topic}: stamps go backwards (or repeat) at t = {seconds[k + 1]:.4f} s from its first message")
@@ -263,6 +263,7 @@ def load_bag_run(path: str | os.PathLike, model: PsmModel, topics: BagTopics = B
                             "two clocks cannot be aligned (record both with header stamps)")
     for samples in read:
         _check_times(path, samples)
+    say_once([f"{path}: topic {s.topic} has no header stamps; using the bag's receive times" for s in read if s.receive_time])
     # the grid: multiples of the period on the bag's clock, so that a bag stamped
     # on a regular grid is sampled at its own stamps (no interpolation at all)
     first_ns = max(int(samples.stamps_ns[0]) for samples in read)
