@@ -226,7 +226,7 @@ def _read_topic(reader, path: Path, topic: str, names: tuple[str, ...]) -> Topic
 def _check_times(path: Path, samples: TopicSamples) -> None:
     seconds = (samples.stamps_ns - samples.stamps_ns[0]) / NS
     steps = np.diff(seconds)
-    unset = np.flatnonzero(samples.stamps_ns == 0)
+    unset = np.flatnonzero(samples.stamps_ns[1:] == 0) + 1  # (a first stamp of 0 is a simulated clock's start)
     if len(unset):  # a stamp left at zero among set ones read "backwards at t = -1700000000 s"
         raise DvrkDartError(f"{path}: topic {samples.topic}: message {unset[0] + 1} has no header stamp (0) among stamped ones")
     if (steps <= 0).any():
