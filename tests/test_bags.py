@@ -293,6 +293,10 @@ def _bad_bags(tmp_path, run):
     back[arm.topic] = stamps[arm.topic].copy()
     back[arm.topic][400] = back[arm.topic][398]
     bags["backwards"] = (write_bag(tmp_path / "back", topics, stamps_ns=back), ["/PSM1/measured_js", "stamps go backwards", "t = 1.9"])
+    unset = dict(stamps)
+    unset[jaw.topic] = stamps[jaw.topic].copy()
+    unset[jaw.topic][10] = 0  # read "backwards at t = -1700000000 s"
+    bags["unset stamp"] = (write_bag(tmp_path / "unset", topics, stamps_ns=unset), ["/PSM1/jaw/measured_js", "message 11 has no header stamp"])
     t, s = _modified(run)
     t[0].effort[300, 0] = 1000.0
     bags["glitch"] = (write_bag(tmp_path / "glitch", t, stamps_ns=s), ["glitch (on its 200 Hz grid): row", "column tau1", "glitched value"])
