@@ -284,6 +284,22 @@ def test_a_glitched_or_reordered_csv_is_refused_with_its_row(tmp_path, capsys, d
     assert code == 2 and len(lines) == 1 and fragment in lines[0], lines
 
 
+def test_a_noise_free_coulomb_step_is_no_glitch(tmp_path, capsys):
+    """A simulated effort without noise (the tool's own exports): q4's Coulomb step of 0.005 N·m at a reversal stood
+    out of a 99th percentile of 0 and every such run was refused "a glitched value"; below the effort resolution's
+    30 times it is no glitch, a spike of 0.1 N·m still is."""
+    values = _two_rows()
+    values[:, 17] = np.where(np.arange(len(values)) < 1000, 0.0025, -0.0025)  # tau4: q4's Coulomb friction, reversing once
+    path = tmp_path / "noise_free.csv"
+    np.savetxt(path, values, delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", path, "--processing", "upstream")
+    assert code == 0, lines
+    values[1200, 17] += 0.1
+    np.savetxt(path, values, delimiter=",", fmt="%.17g")
+    code, lines, _ = cli(capsys, "model-errors", "--measured", path, "--processing", "upstream")
+    assert code == 2 and "row 1201, column tau4" in lines[0], lines
+
+
 def test_the_rate_a_half_rate_file_names_is_its_rate(tmp_path, capsys):
     path = tmp_path / "half_rate.csv"
     np.savetxt(path, np.loadtxt(resolve_run("two"), delimiter=",")[::2], delimiter=",", fmt="%.17g")

@@ -113,11 +113,15 @@ def check_velocity_columns(q: np.ndarray, dq: np.ndarray, rate_hz: float, where:
 #: a row stands out as a glitch when its disagreement is this many times the
 #: 99th percentile of the column's (the reference runs' largest: 3.7 times)
 GLITCH_RATIO = 30.0
+#: the effort resolution (N·m or N): a gap, a constant or a residual below it is nothing to explain (the
+#: diagnosis's joint weights' floor and words), nor a glitch (a noise-free simulated effort's Coulomb step of
+#: 0.005 N·m stood out of a 99th percentile of 0)
+EFFORT_RESOLUTION = 1e-3
 
 
-def _outlier_row(x: np.ndarray) -> tuple[int, int] | None:
-    """(row, column) of the largest value of |x| if it exceeds GLITCH_RATIO times its column's 99th percentile."""
-    scale = np.maximum(np.percentile(x, 99, axis=0), np.finfo(float).tiny)
+def _outlier_row(x: np.ndarray, floor: float = np.finfo(float).tiny) -> tuple[int, int] | None:
+    """(row, column) of the largest value of |x| if it exceeds GLITCH_RATIO times its column's 99th percentile (at least `floor`)."""
+    scale = np.maximum(np.percentile(x, 99, axis=0), floor)
     rows = np.argmax(x, axis=0)  # each column's worst row, then the column that stands out most
     with np.errstate(over="ignore"):
         ratio = x[rows, np.arange(x.shape[1])] / scale
@@ -125,18 +129,19 @@ def _outlier_row(x: np.ndarray) -> tuple[int, int] | None:
     return (int(rows[column]), column) if ratio[column] > GLITCH_RATIO else None
 
 
-def check_glitches(values: np.ndarray, rate_hz: float, where: str) -> None:
+def check_glitches(values: np.ndarray, rate_hz: float, where: str, velocities: bool = True) -> None:
     """One bad row (a glitched value, rows out of order) refused with its row
-    number: a velocity that disagrees with the positions' finite differences,
-    or an effort that stands out of its neighbours, far more than anywhere else."""
+    number: a velocity that disagrees with the positions' finite differences
+    (`velocities`), or an effort that stands out of its neighbours, far more
+    than anywhere else."""
     q, dq, tau = values[:, :N_JOINTS], values[:, N_JOINTS : 2 * N_JOINTS], values[:, 2 * N_JOINTS :]
-    velocity = _outlier_row(np.abs(dq - np.gradient(q, 1.0 / rate_hz, axis=0)))
+    velocity = _outlier_row(np.abs(dq - np.gradient(q, 1.0 / rate_hz, axis=0))) if velocities else None
     if velocity is not None:
         row, j = velocity
         raise DvrkDartError(f"{where}: row {row + 1}: the velocity column {CSV_COLUMNS[N_JOINTS + j]} ({dq[row, j]:.6g}) and the finite "
                             f"differences of {CSV_COLUMNS[j]} disagree {GLITCH_RATIO:g} times more than on 99 % of the rows "
                             "(a glitched value, or rows out of order)")
-    effort = _outlier_row(np.abs(tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])))
+    effort = _outlier_row(np.abs(tau[1:-1] - 0.5 * (tau[:-2] + tau[2:])), EFFORT_RESOLUTION)
     if effort is not None:
         row, j = effort
         raise DvrkDartError(f"{where}: row {row + 2}, column {CSV_COLUMNS[2 * N_JOINTS + j]}: {tau[row + 1, j]:.6g} stands out of its "

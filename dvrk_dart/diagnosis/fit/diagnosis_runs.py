@@ -24,9 +24,6 @@ from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.sim.config import SimConfig
 
-#: the effort resolution (N·m or N): a gap, a constant or a residual below it is nothing to explain (the joint
-#: weights' floor, `problem.joint_weights`; the words', output/wording.py)
-EFFORT_RESOLUTION = 1e-3
 #: a payload's mass is printed to the gram, and a lighter one is none: a fit held at its bound of zero
 #: (3.55e-19 kg, beside a baseline of another motion of the same arm) was named "a payload ... (3.55e-19 kg)"
 MIN_PAYLOAD_KG = 1e-3

@@ -12,7 +12,8 @@ from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, MAX_BLOCKS_PER_RUN,
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
 from dvrk_dart.diagnosis.fit.problem import Problem
-from dvrk_dart.diagnosis.fit.diagnosis_runs import EFFORT_RESOLUTION, DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.diagnosis.fit.selection import (
     BOOTSTRAP_RESAMPLES,
     GAIN_FAILURE_QUANTILE,

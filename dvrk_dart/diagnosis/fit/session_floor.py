@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import EFFORT_RESOLUTION, DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunProcessing, RunRole, loaded_states, motion_offset, on_rate, same_motion
+from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import not_comparable_sample_by_sample

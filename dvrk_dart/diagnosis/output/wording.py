@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import EFFORT_RESOLUTION
+from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO, above_floor, repeatable_share
 
 MOSTLY_SHARE = 0.5
