@@ -22,7 +22,6 @@ from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload
 from dvrk_dart.diagnosis.effects.joint_effects import JointOffset, PositionFriction
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
-    EFFORT_RESOLUTION,
     DiagnosisRun,
     RunProcessing,
     RunRole,
@@ -40,6 +39,7 @@ from dvrk_dart.io.reference_data import distinct_inputs, distinct_labels
 from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
+from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.io.signal import spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
