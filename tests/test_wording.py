@@ -32,6 +32,21 @@ def test_only_the_joints_the_effects_act_on_count():
     assert answer_sentence(result).startswith("The gap is not explained")
 
 
+def test_without_a_session_floor_a_gap_within_the_noise_does_not_count():
+    """A blind q5 friction change with a baseline (periodic, no repeat): 95 % of q5 removed read "partly explained"
+    beside q3's 9 % of 0.0022 N at its noise (0.0026 N for the run minus its baseline); with a session floor the floor
+    decides, and with neither every joint counts."""
+    before = {"train": [0.00074, 0.00137, 0.00216, 3e-05, 0.0152, 0.00056, 0.00072], "holdout": None}
+    after = {"train": [0.00065, 0.00124, 0.00198, 3e-05, 0.000704, 0.00056, 0.00072], "holdout": None}
+    entries = [{"name": n, "joints": [j], "selected": True} for n, j in (("friction_q5", "q5"), ("armature_q2", "q2"), ("armature_q3", "q3"))]
+    noise = [0.00067, 0.00071, 0.0026, 1.5e-05, 0.00023, 5.7e-05, 7.4e-05]
+    words = explanation(before, after, JOINTS, entries, noise=noise)
+    assert words["within_noise"] == ["q3"] and words["joints"] == ["q2", "q5"] and words["words"] == "mostly explained"
+    assert explanation(before, after, JOINTS, entries)["words"] == "partly explained"
+    floor = [None, 0.0005, 0.0005, None, 0.0005, None, None]
+    assert explanation(before, after, JOINTS, entries, floor, noise)["within_noise"] == []
+
+
 def test_a_joint_with_no_gap_to_explain_does_not_count():
     """A held wrist a simulated run models exactly (gap 5e-12 before, 4e-7 after) is not a joint the effects failed on."""
     gap_before = {"train": [0.116, 0.066, 0.275, 5e-12, 0.0, 0.0, 0.0], "holdout": None}

@@ -38,6 +38,7 @@ from dvrk_dart.diagnosis.fit.result import (
     effect_entries,
     gaps,
     holdout_fraction,
+    noise_gaps,
     resimulate,
     select,
     train_fraction,
@@ -359,7 +360,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         payload_not_distinguished=not_distinguished,
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")],
-                                per_measured_joint(split_floor, recorded) if split_floor is not None else None),
+                                per_measured_joint(split_floor, recorded) if split_floor is not None else None,
+                                noise_gaps(holdout_runs or train_runs, recorded)),
         identified_terms=carried,
     )
 

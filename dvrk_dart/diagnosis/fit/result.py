@@ -193,6 +193,19 @@ def gaps(residuals: list[np.ndarray], recorded: np.ndarray | None = None) -> lis
     return values.tolist() if recorded is None else per_measured_joint(values, recorded)
 
 
+def noise_gaps(runs: list[DiagnosisRun], recorded: np.ndarray) -> list[float | None] | None:
+    """Per joint, the noise the periodic projection leaves on the runs' gaps, as `gaps` pools them (a run minus its
+    baseline carries both's): what a gap cannot go under without a session floor; None upstream or without runs."""
+    energy, samples = np.zeros(len(recorded)), 0
+    for run in runs:
+        parts = [run.state, run.baseline.state] if run.role is RunRole.DIFFERENCE else [run.state]
+        if not parts or any(p.periodic is None for p in parts):
+            return None
+        energy += len(run.state.t) * sum(np.nan_to_num(p.periodic.effort_noise.projected_rms) ** 2 for p in parts)
+        samples += len(run.state.t)
+    return per_measured_joint(np.sqrt(energy / samples), recorded) if samples else None
+
+
 # ------------------------------------------------------------------- result
 @dataclass(frozen=True)
 class Diagnosis:

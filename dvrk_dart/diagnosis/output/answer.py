@@ -289,9 +289,11 @@ def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str
         return (f"{gap} is {NOT_DETERMINED}: before any effect it is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N) on "
                 f"every joint the effects act on, nothing to explain; {figures}")
     if explained["words"] == NOT_DETERMINED:
-        return (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x the session floor"
-                f"{_floor_source(result)} on {', '.join(explained.get('within_floor') or [])}, which a session's change alone can "
-                f"leave; the effects selected, {effects}: {figures}")
+        level, leaves = (("the session floor" + _floor_source(result), "a session's change") if explained.get("within_floor")
+                         else ("the noise the periodic projection leaves", "the noise"))
+        within = explained.get("within_floor") or explained.get("within_noise") or []
+        return (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x {level} on "
+                f"{', '.join(within)}, which {leaves} alone can leave; the effects selected, {effects}: {figures}")
     if explained["words"] == "not explained":
         return f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {figures}"
     return f"{gap} is {words} by {effects}: {figures}"
