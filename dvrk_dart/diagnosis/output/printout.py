@@ -39,7 +39,9 @@ def print_diagnosis(result: dict) -> None:
     if result.get("payload"):
         p = result["payload"]
         mass = "mass not determined" if p["mass_kg"] is None or not p.get("mass_identified", True) else f"{p['mass_kg']:.3f} kg"
-        print(f"payload: {mass} on {p['link']} ({p['group']})")
+        found = p.get("found") is not False  # the harmonic test's: "mass not determined on yaw" read as a payload found
+        print(f"payload: {mass} on {p['link']} ({p['group']})" if found else
+              f"payload: none stands out from the session scatter (p = {p['payload_p_value']:.2g}); its fit:")
         for sentence in p.get("words", []):
             print(f"  {sentence}")
     if result.get("payload_not_distinguished"):

@@ -270,7 +270,9 @@ def _words(report: dict, model) -> list[str]:
         words.append(f"No payload stands out from the session-to-session scatter (p = {report['payload_p_value']:.2g}, not under the test's "
                      f"level {PAYLOAD_TEST_LEVEL:g}): in the payload's shape, what the runs differ by from their baseline is what two "
                      "sessions differ by.")
-    words.append(f"The efforts choose a payload on {report['link']} ({report['group']})" + (
+    # where none stands out, the link is where one would be, not a finding (it read as one beside "no payload stands out")
+    chosen_words = "The efforts choose a payload on" if report["found"] else "Were there one, the efforts would put it on"
+    words.append(f"{chosen_words} {report['link']} ({report['group']})" + (
         f"; payloads on {', '.join(report['tied_links'])} explain them as well (within {TIED_BIC:g} of BIC), and every interval "
         "spans theirs" if report["tied_links"] else "") + ".")
     chosen = {report["link"], *report["tied_links"]}
