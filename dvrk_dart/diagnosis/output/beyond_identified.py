@@ -78,8 +78,10 @@ def beyond_identified_sentence(result: dict) -> str:
         gaps += "; worse than the identified model on " + _worse_words(result, found, worse)
     if found["at_floor"]:
         level_words = "the session floor, where a session's change" if floor else "the noise, where the noise"
+        # a joint there may still be made worse (beyond the level): the share alone is what is not counted
+        also_worse = ", though made worse (above)" if set(found["at_floor"]) & set(found["made_worse"]) else ""
         gaps += (f"; the identified model's gap is within {AT_FLOOR_RATIO:g}x {level_words} alone can leave it, on "
-                 f"{', '.join(found['at_floor'])}: no share counted there")
+                 f"{', '.join(found['at_floor'])}: no share counted there{also_worse}")
     removed = found["removed_share"]
     if removed is not None:
         gap = "the identified model's gap" + (" above the session floor" if floor else "")
