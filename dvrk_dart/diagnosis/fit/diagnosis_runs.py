@@ -150,6 +150,11 @@ class DiagnosisRun:
         return len(self.state)
 
     @property
+    def noisy_states(self) -> list[ProcessedRun]:
+        """The measured states whose noise the run's residual carries (a run minus its baseline: both)."""
+        return [self.state, self.baseline.state] if self.role is RunRole.DIFFERENCE else [self.state]
+
+    @property
     def gap(self) -> np.ndarray:
         """measured - simulated (N, 7); zero on a joint the run did not record (nothing to explain)."""
         return np.where(self.state.measured, self.state.tau - self.simulated, 0.0)

@@ -166,10 +166,8 @@ def direction_noise(run: DiagnosisRun) -> np.ndarray | None:
             return None
         return (p.kept[1] - p.kept[0]) * np.nan_to_num(p.effort_noise.projected_rms) ** 2 / (2 * p.harmonics + 1)
 
-    own = of(run.state)
-    if own is None:
-        return None
-    return own + of(run.baseline.state) if run.role is RunRole.DIFFERENCE else own
+    energies = [of(state) for state in run.noisy_states]
+    return None if any(e is None for e in energies) else sum(energies)
 
 
 def _joint_weights(residual: np.ndarray) -> np.ndarray:

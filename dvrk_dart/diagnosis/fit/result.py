@@ -198,10 +198,9 @@ def noise_gaps(runs: list[DiagnosisRun], recorded: np.ndarray) -> list[float | N
     baseline carries both's): what a gap cannot go under without a session floor; None upstream or without runs."""
     energy, samples = np.zeros(len(recorded)), 0
     for run in runs:
-        parts = [run.state, run.baseline.state] if run.role is RunRole.DIFFERENCE else [run.state]
-        if not parts or any(p.periodic is None for p in parts):
+        if any(state.periodic is None for state in run.noisy_states):
             return None
-        energy += len(run.state.t) * sum(np.nan_to_num(p.periodic.effort_noise.projected_rms) ** 2 for p in parts)
+        energy += len(run.state.t) * sum(np.nan_to_num(s.periodic.effort_noise.projected_rms) ** 2 for s in run.noisy_states)
         samples += len(run.state.t)
     return per_measured_joint(np.sqrt(energy / samples), recorded) if samples else None
 

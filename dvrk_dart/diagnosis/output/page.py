@@ -30,7 +30,8 @@ _ROLE_WORDS = {"finding": "finding", "common_model_error": "model error common t
 
 #: what the table's "after" is (diagnosis.json's gap_after_source)
 AFTER_WORDS = {"simulation": "every selected effect simulated in DART",
-               "simulation+regressor": "the selected effects simulated in DART; those it has no physics for (not_in_simulation) by their fitted efforts",
+               "simulation+regressor": ("the selected effects simulated in DART; those it has no physics for (not_in_simulation) "
+                                        "by their fitted efforts"),
                "regressor": "the selected effects' fitted efforts (no re-simulation)"}
 
 
@@ -170,7 +171,9 @@ def diagnosis_html(result: dict, image_sources: list[str], title: str) -> Markup
     offset_joints = result.get("nuisance_offset_joints")
     return render("diagnosis/fragment.html", title=title, answer=answer_paragraphs(result), period_figures=period, period_figure=PERIOD_FIGURE,
                   floor_measured=result.get("session_floor") is not None,
-                  gap_table=_gap_table(result), gap_after_source=AFTER_WORDS.get(result.get("gap_after_source"), str(result.get("gap_after_source", ""))), refit=result.get("refit"),
+                  gap_table=_gap_table(result),
+                  gap_after_source=AFTER_WORDS.get(result.get("gap_after_source"), str(result.get("gap_after_source", ""))),
+                  refit=result.get("refit"),
                   beyond_words=[result[key]["words"] for key in ("insertion_terms", "one_configuration") if result.get(key)],
                   n_selected=len([x for x in result.get("effects", []) if x.get("selected")]), n_shown=len(shown),
                   n_effects=len(result.get("effects", [])), joint_words=result.get("joint_words", ""), effects_table=effects_table,
