@@ -53,12 +53,12 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 def _model_of_run(run_dir: Path) -> Path:
     """The arm model a run folder was simulated with (its config.json's model_file), else the PSM's."""
-    from dvrk_dart.model.description import resolve_arm_model
+    from dvrk_dart.model.description import DEFAULT_ARM, resolve_arm_model
 
     try:
         name = Path(json.loads((run_dir / "config.json").read_text())["model_file"]).stem
     except (OSError, ValueError, KeyError, TypeError):
-        return resolve_arm_model("psm")
+        return resolve_arm_model(DEFAULT_ARM)
     try:
         return resolve_arm_model(name)
     except DvrkDartError:

@@ -66,11 +66,11 @@ def _check_outputs_apart_from_inputs(args: argparse.Namespace) -> None:
 def _check_arm_of_reference_runs(args: argparse.Namespace) -> None:
     """A reference run of another arm than --arm-model (mtm-one without --arm-model mtm) is named, not read as this arm's."""
     from dvrk_dart.io.reference_data import RUNS, reference_run_arm
-    from dvrk_dart.model.description import resolve_arm_model
+    from dvrk_dart.model.description import DEFAULT_ARM, resolve_arm_model
 
     if not hasattr(args, "arm_model"):
         return
-    asked = resolve_arm_model(args.arm_model or "psm")
+    asked = resolve_arm_model(args.arm_model or DEFAULT_ARM)
     for dest in RUN_OPTIONS:
         for value in _values(args, dest):
             if isinstance(value, str) and value in RUNS and not _same_arm(resolve_arm_model(reference_run_arm(value)), asked):

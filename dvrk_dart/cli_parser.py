@@ -182,7 +182,7 @@ def _session_floor_command(sub, commands) -> None:
 def _identify_command(sub, commands) -> None:
     p = sub.add_parser("identify", help="identify the dynamic parameters of an arm from measured runs")
     p.add_argument("--runs", type=measured_run, nargs="+", required=True, help=f"training runs: paths, or {PSM_RUN_NAMES}")
-    p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs, scored only")
+    p.add_argument("--holdout", type=measured_run, nargs="+", default=[], help="held-out runs, scored only")
     p.add_argument("--out", required=True, help="output folder (params.json, params_covariance.json, identification.json/.html)")
     p.add_argument("--joints", nargs="+", default=list(JOINT_NAMES), help="joints whose efforts are fitted (default: all)")
     p.add_argument("--friction-law", default="presliding", choices=("presliding", "sign", "tanh"),
@@ -307,8 +307,8 @@ def _diagnose_command(sub, commands) -> None:
     p.add_argument("--measured", type=measured_run, required=True, nargs="+",
                    help=f"measured run(s): path, or {PSM_RUN_NAMES}; several: one set of effects for all")
     p.add_argument("--baseline", type=measured_run, help="same trajectory without the withheld effect (isolates a payload)")
-    p.add_argument("--train", type=measured_run, nargs="*", default=[], help="training runs (default: the measured run)")
-    p.add_argument("--holdout", type=measured_run, nargs="*", default=[], help="held-out runs scored with the effects fitted on training")
+    p.add_argument("--train", type=measured_run, nargs="+", default=[], help="further training runs, fitted beside the measured run (which always trains)")
+    p.add_argument("--holdout", type=measured_run, nargs="+", default=[], help="held-out runs scored with the effects fitted on training")
     p.add_argument("--repeat", type=measured_run, help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")
     p.add_argument("--payload-at", help="LINK:x,y,z, a hand-measured payload position (link frame, m): the payload's mass with its interval")
     p.add_argument("--parameter-band", help="a `dvrk-dart uncertainty` folder of one of the runs: effects are reported as unmodelled "

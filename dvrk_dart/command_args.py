@@ -11,9 +11,9 @@ from pathlib import Path
 
 def arm_model_file(args: argparse.Namespace) -> Path:
     """The command's arm: its --arm-model, else the PSM."""
-    from dvrk_dart.model.description import resolve_arm_model
+    from dvrk_dart.model.description import DEFAULT_ARM, resolve_arm_model
 
-    return resolve_arm_model(getattr(args, "arm_model", None) or "psm")
+    return resolve_arm_model(getattr(args, "arm_model", None) or DEFAULT_ARM)
 
 
 def command_arm(args: argparse.Namespace):

@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 
-def rms(error: np.ndarray, axis: int = 0) -> np.ndarray:
-    """Root mean square along `axis` (per joint for an (N, 7) array)."""
+def rms(error: np.ndarray, axis: int | None = 0) -> np.ndarray:
+    """Root mean square along `axis` (per joint for an (N, 7) array; None: over every element)."""
     error = np.asarray(error, dtype=float)
     return np.sqrt(np.mean(error**2, axis=axis))
 

@@ -15,7 +15,8 @@ from dvrk_dart.command_args import command_arm, reading_options
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
-from dvrk_dart.io.signal import CUT_SAMPLES, spanning_columns
+from dvrk_dart.io.signal import CUT_SAMPLES
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES
 
 
@@ -39,7 +40,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     from dvrk_dart.io.reference_data import load_run, resolve_run
     from dvrk_dart.io.signal import chosen_because, process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
-    from dvrk_dart.model.identified import parse_terms
+    from dvrk_dart.model.identified import parse_terms, terms_label
     from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 
     terms = parse_terms(config.terms)
@@ -67,7 +68,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "unrecorded_joint_notes": unrecorded_joint_notes(arm.identified, processed, rms(predicted - measured)),
         "coordinates_note": _coordinates_note(arm, processed, terms, relative_error(predicted, measured), config.first_period),
         "params": file_record(arm.params.source),
-        "terms": config.terms,
+        "terms": terms_label(config.terms),
         **processed.summary(),
         "chosen_because": why,
     }
@@ -139,7 +140,7 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
         print(json_text(result), end="")
     else:
         periodic = result["processing"] == "periodic"
-        print(f"identified model ({args.terms}, parameters {result['params']['path']}) vs {args.measured}: "
+        print(f"identified model ({result['terms']}, parameters {result['params']['path']}) vs {args.measured}: "
               f"{result['samples']} samples ({result['scored_on']}), {result['processing']} processing ({why})")
         if periodic:
             print(f"period {result['period_s']:.4f} s (+- {result['period_standard_error_s']:.1e}), "

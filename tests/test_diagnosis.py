@@ -98,8 +98,8 @@ SYNTHETIC_CASES = [
     ("payload_on_tool_roll", lambda arm: PointPayload(arm.model, 10), [0.10, 0.02, 0.0, -0.30], 0, 1.0),
     ("offset_q3", lambda arm: JointOffset(arm.model, "q3"), [-0.3], 0, 1.0),
     ("armature_q3", lambda arm: JointArmature(arm.model, "q3"), [0.5], 0, 1.0),
-    ("cable_elasticity_q1", lambda arm: JointStiffness(arm.model, "q1"), [0.3], 0, 1.0),
-    ("torsion_spring_q4", lambda arm: JointStiffness(arm.model, "q4"), [0.01], 0, 1.0),
+    ("cable_elasticity_q1", lambda arm: JointStiffness(arm.model, "q1", "cable_elasticity"), [0.3], 0, 1.0),
+    ("torsion_spring_q4", lambda arm: JointStiffness(arm.model, "q4", "torsion_spring"), [0.01], 0, 1.0),
     ("offset_q1", lambda arm: JointOffset(arm.model, "q1"), [-0.15], 0, 1.0),
     ("armature_q1", lambda arm: JointArmature(arm.model, "q1"), [0.02], 0, 1.0),
     ("gravity_tilt", lambda arm: GravityTilt(arm), [0.030, -0.025], None, TILT_NOISE_SCALE),
@@ -413,7 +413,7 @@ SESSION_NOISE_FRACTION = 0.1
 
 def _session_noise(arm, state, noise_rms, seed):
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape), arm.model.processing.cutoff_parameter_hz)
+    noise = zero_phase_lowpass(rng.standard_normal(state.tau.shape), arm.model.processing)
     return noise / rms(noise) * SESSION_NOISE_FRACTION * np.asarray(noise_rms)
 
 

@@ -72,7 +72,7 @@ def test_effects_to_sim_config_maps_each_field(arm):
     chosen = [
         (JointFriction(arm.model, "q2"), np.array([0.1, 0.2])),
         (JointOffset(arm.model, "q3"), np.array([-0.3])),
-        (JointStiffness(arm.model, "q4"), np.array([0.002])),
+        (JointStiffness(arm.model, "q4", "torsion_spring"), np.array([0.002])),
         (JointArmature(arm.model, "q1"), np.array([0.01])),
         (GravityTilt(arm), np.array([0.01, -0.02])),
         (PointPayload(arm.model, 4), np.array([0.105, 0.2, 0.0, 0.01])),

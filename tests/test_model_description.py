@@ -135,6 +135,7 @@ def test_a_repeat_pair_names_two_files(tmp_path):
     ("cutoff_parameter_hz = 5.4", "cutoff_parameter_hz = 0.0", r"cutoff_parameter_hz must be in \(0, 31.8\)"),
     ("cutoff_parameter_hz = 5.4", "cutoff_parameter_hz = 5000.0", r"cutoff_parameter_hz must be in \(0, 31.8\)"),
     ("first_period_samples = 1111", "first_period_samples = 0", r"first_period_samples must be a positive"),
+    ("filter_rate_hz = 200.0", "filter_rate_hz = 0.0", r"filter_rate_hz must be a positive rate"),
     ("identification_mass_bounds_kg = { 2 = 10.0,", 'identification_mass_bounds_kg = { 2 = "x",', r"identification_mass_bounds_kg: 2 = 'x'"),
     ('namespace = "PSM1"', 'namespace = "PSM 1"', r"namespace 'PSM 1' is not a ROS name"),
     ("ratio = 1.0", "ratio = 0.0", r"\[counterweight\] ratio must be a finite non-zero"),
@@ -142,6 +143,9 @@ def test_a_repeat_pair_names_two_files(tmp_path):
     ("kinematic_gain = 15.0", "kinematic_gain = -15.0", r"\[controllers\] kinematic_gain must be a positive number"),
     ("counterweight_pid = [2000.0, 0.0, 60.0]", "counterweight_pid = [2000.0]", r"counterweight_pid must be \[Kp, Ki, Kd\]"),
     ("min_lever_m = 0.05", "min_lever_m = -1", r"min_lever_m must be a positive length"),
+    ('q4 = "torsion_spring" }', 'q9 = "torsion_spring" }', r"\[diagnosis\]: unknown joint q9"),
+    ('q4 = "torsion_spring" }', 'q4 = "spring" }', r"\[diagnosis\] elastic: q4 = 'spring'"),
+    ('position_friction = ["q1", "q2", "q3"]', 'position_friction = "q1"', r"\[diagnosis\] elastic is a table"),
 ])
 def test_a_card_value_no_command_could_use_is_refused_in_one_line(tmp_path, entry, edited, message):
     """Shapes and signs of the card's values, checked when it is read (they ended in tracebacks deep in a command)."""
@@ -165,3 +169,15 @@ def test_the_tool_tip_and_the_force_point_name_what_the_card_has(tmp_path):
     bad.write_text(re.sub(r'(\[force_point\][^\[]*?joints = )\[[^\]]*\]', r'\1["q1", "q9"]', card))
     with pytest.raises(DvrkDartError, match=r"\[force_point\] joints: unknown q9"):
         load_model(bad)
+
+
+def test_a_card_without_its_identification_file_is_told_so_not_blamed_on_bounds(tmp_path):
+    """The arm's own bounds (no --bounds given) missing: the message named --bounds, an option the user never gave."""
+    from dvrk_dart.identification.fit import load_bounds
+
+    card = tmp_path / "psm.toml"
+    card.write_text(PSM.source.read_text())
+    with pytest.raises(DvrkDartError, match=r"^the arm's identification file \(psm.toml's folder\): .*identification.toml: bounds file not found"):
+        load_bounds(None, load_model(card))
+    with pytest.raises(DvrkDartError, match=r"^--bounds: .*nothing.toml: bounds file not found"):
+        load_bounds(tmp_path / "nothing.toml", load_model(card))

@@ -20,6 +20,7 @@ from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, with_p
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.payload.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import (
+    MASS_ON_SESSION_JOINTS,
     describe_payload,
     effort_not_determined,
     flag_payload_at_link,
@@ -311,8 +312,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
     payload_fits, mismatch = (fits, None) if problem.has_baseline else (
         [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried, problem.recorded)) if fits else None)
     not_distinguished = None
-    if payload_fits and not payload_distinguished(payload_fits[0]):  # every interval holds zero: the data show no payload
-        not_distinguished = {**payload_fits[0], "meaning": NOT_DISTINGUISHED}
+    if payload_fits and (why := not_a_payload_because(payload_fits[0])):  # a session change read as a payload
+        not_distinguished = {**payload_fits[0], "meaning": f"the payload-shaped fit is not a payload: {why}", "why": why}
         payload_fits = []
     gap_before = {split: gaps([problem.before_residual(r) for r in runs], recorded) for split, runs in (("train", train_runs), ("holdout", holdout_runs))}
     gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
@@ -361,22 +362,24 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")],
                                 per_measured_joint(split_floor, recorded) if split_floor is not None else None,
-                                noise_gaps(holdout_runs or train_runs, recorded)),
+                                noise_gaps(holdout_runs or train_runs, recorded, problem.arm)),
         identified_terms=carried,
     )
 
 
-NOT_DISTINGUISHED = ("the payload-shaped fit is not a payload: the mass it gives (at the --payload-at position, or its own "
-                     f"where the data identify one) is under {MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
-
-
-def payload_distinguished(fit: dict) -> bool:
-    """A payload is named unless the mass it gives is under a gram: at the hand
-    position when one was given, else its own mass where the data identify one
-    (a mass at or below zero is a session change read as a payload)."""
+def not_a_payload_because(fit: dict) -> str | None:
+    """Why a payload-shaped fit is no payload, or None: the mass it gives (at the hand position when one was given, else its
+    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or its mass at
+    the hand position told from zero only by the joints whose gravity shape sessions change, no --repeat measuring that."""
     at = fit.get("payload_at") or {}
+    if (at.get("not_determined") or {}).get("mass_kg") == MASS_ON_SESSION_JOINTS:
+        return ("its mass at the --payload-at position stands out of zero only on joints whose gravity shape sessions change, and no "
+                "--repeat pair measures that change: a session change read as a payload")
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
-    return mass is None or mass >= MIN_PAYLOAD_KG
+    if mass is not None and mass < MIN_PAYLOAD_KG:
+        return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
+                f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
+    return None
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,

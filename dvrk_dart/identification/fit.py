@@ -40,18 +40,17 @@ import cvxpy as cp
 import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.metrics import integrated_autocorrelation_time  # noqa: F401 (here since the fits use it)
+from dvrk_dart.metrics import integrated_autocorrelation_time, rms  # noqa: F401 (integrated_autocorrelation_time: here since the fits use it)
 from dvrk_dart.identification.base import ZERO_COLUMN_TOLERANCE, BaseParameters
 from dvrk_dart.identification.regressor import PARAMETER_CLASSES, ParameterLayout
 from dvrk_dart.identification.presliding import PreslidingCandidates
-from dvrk_dart.model.description import PsmModel
+from dvrk_dart.model.description import DEFAULT_MODEL_FILE, PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.pseudo_inertia import PSEUDO_INERTIA_BASIS
-from dvrk_dart.paths import MODELS_DIR
 
 #: the bounds and prior file of an arm: beside its description, in models/<arm>/
 BOUNDS_FILE_NAME = "identification.toml"
-DEFAULT_BOUNDS_FILE = MODELS_DIR / "psm" / BOUNDS_FILE_NAME
+DEFAULT_BOUNDS_FILE = DEFAULT_MODEL_FILE.parent / BOUNDS_FILE_NAME
 #: a base regressor (unit-norm columns) worse conditioned than this does not
 #: excite the base parameters: the fit would be noise. The reference run
 #: "one" is at ~1e3; a constant pose is singular (infinite).
@@ -80,14 +79,15 @@ class Bounds:
 
 
 def load_bounds(path: Path | str | None, model: PsmModel) -> Bounds:
-    """The identification bounds file (default models/psm/identification.toml)."""
+    """The identification bounds file (`path`: the user's --bounds; None: the arm's own, its model folder's)."""
+    given = "--bounds: " if path is not None else f"the arm's identification file ({model.source.name}'s folder): "
     path = Path(path) if path is not None else model.folder / BOUNDS_FILE_NAME
     if path.is_dir():
-        raise DvrkDartError(f"--bounds: {path} is a folder, not a bounds file")
+        raise DvrkDartError(f"{given}{path} is a folder, not a bounds file")
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise DvrkDartError(f"--bounds: {path}: bounds file not found") from None
+        raise DvrkDartError(f"{given}{path}: bounds file not found") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise DvrkDartError(f"{path}: not a valid TOML file ({exc})") from None
     masses: dict[int, tuple[float, float]] = {}
@@ -195,7 +195,7 @@ def fit_weighted(Yb: np.ndarray, tau: np.ndarray, joints: np.ndarray, what: str)
     weights = np.empty(len(joints))
     for i, j in enumerate(joints):
         dof = max(n_samples - int(np.count_nonzero(np.abs(A[:, i, :]).sum(axis=0))), 1)
-        floor = SIGMA_FLOOR * max(float(np.sqrt(np.mean(tau[:, j] ** 2))), 1e-300)
+        floor = SIGMA_FLOOR * max(float(rms(tau[:, j])), 1e-300)
         sigma[j] = max(float(np.sqrt(np.sum(residual[:, i] ** 2) / dof)), floor)
         tau_int[j] = integrated_autocorrelation_time(residual[:, i])
         weights[i] = 1.0 / sigma[j]

@@ -149,7 +149,7 @@ class IdentificationResult:
     def overfit_warnings(self) -> list[str]:
         """A fitted joint whose held-out RMS is far above its training RMS: too little data for the parameters."""
         def pooled(runs):
-            return np.sqrt(np.mean([np.square(np.array(self.errors(run)["rms"], dtype=float)) for run in runs], axis=0))
+            return rms([self.errors(run)["rms"] for run in runs])
 
         if not self.holdout:
             return []

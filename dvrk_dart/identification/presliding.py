@@ -47,7 +47,7 @@ def choose_distances(train: list, regressor, base, joints: np.ndarray, candidate
     def residual(runs) -> np.ndarray:
         beta = fit(runs).beta
         errors = [rms(run.processed.tau - run.Y[:, :, base.independent] @ beta) for run in runs]
-        return np.sqrt(np.mean(np.square(errors), axis=0))[joints]
+        return rms(errors)[joints]
 
     law = regressor.friction_law
     reference = residual(train)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.io.signal import spanning_columns
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.model.identified import IdentifiedModel
 from dvrk_dart.model.joints import JOINT_NAMES
 

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.period import moving_joints, spanning_columns
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, column_names
@@ -89,9 +90,6 @@ def check_velocity_columns(q: np.ndarray, dq: np.ndarray, rate_hz: float, where:
     a zero or sign-flipped column is refused, one that hardly follows its
     positions gets a note (returned). A held joint (servo error, encoder
     counts: io/period.moving_joints) is not checked: its velocity is noise."""
-    from dvrk_dart.io.period import moving_joints
-    from dvrk_dart.io.signal import spanning_columns
-
     differences = np.gradient(q, 1.0 / rate_hz, axis=0)
     notes = []
     for j in np.flatnonzero(moving_joints(q) & spanning_columns(q)):

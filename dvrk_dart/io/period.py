@@ -15,6 +15,8 @@ import scipy.optimize
 
 from dvrk_dart.errors import DvrkDartError
 
+#: a position span at or below this (rad or m) is a still joint's round-off, far below any encoder's step
+STILL_SPAN = 1e-9
 #: the fewest whole periods a run must hold (the noise is their scatter)
 MIN_PERIODS = 2
 #: a run is periodic when its positions' harmonic series at the fitted period
@@ -169,6 +171,11 @@ def _fit_frequency(t: np.ndarray, x: np.ndarray, rate_hz: float, start_hz: float
         if abs(step) < 0.01 * standard_error:
             break
     return frequency, standard_error
+
+
+def spanning_columns(q: np.ndarray) -> np.ndarray:
+    """(n,) bool: the columns of positions that move at all (beyond STILL_SPAN)."""
+    return np.ptp(q, axis=0) > STILL_SPAN
 
 
 def moving_joints(q: np.ndarray, measured: np.ndarray | None = None) -> np.ndarray:

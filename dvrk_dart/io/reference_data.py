@@ -34,7 +34,8 @@ from dvrk_dart.io.measured_run import (  # noqa: F401  (re-exported: the readers
     sample_rate_hz,
 )
 from dvrk_dart.io.provenance import file_record, sha256_of  # noqa: F401  (sha256_of re-exported)
-from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, forget_analyses, spanning_columns
+from dvrk_dart.io.signal import CUT_SAMPLES, MIN_ROWS, forget_analyses
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.paths import PROJECT_DIR
 

@@ -27,6 +27,8 @@ import scipy.signal
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.periodic import PeriodicAnalysis, analyse
 from dvrk_dart.io.measured_run import MeasuredRun, sample_rate_hz
+from dvrk_dart.metrics import rms
+from dvrk_dart.model.description import UpstreamProcessing
 
 FILTER_ORDER = 6
 CUT_SAMPLES = 200
@@ -36,16 +38,9 @@ MIN_KEPT_SAMPLES = 10
 MIN_ROWS = 2 * CUT_SAMPLES + MIN_KEPT_SAMPLES
 #: the processings a measured run can go through
 PROCESSINGS = ("upstream", "periodic")
-#: a position span at or below this (rad or m) is a still joint's round-off, far below any encoder's step
-STILL_SPAN = 1e-9
 #: periodic analyses kept by the content they were made of (a replay chooses its processing, then processes)
 _ANALYSES: OrderedDict[tuple, PeriodicAnalysis] = OrderedDict()
 _ANALYSES_KEPT = 8
-
-
-def spanning_columns(q: np.ndarray) -> np.ndarray:
-    """(n,) bool: the columns of positions that move at all (beyond STILL_SPAN)."""
-    return np.ptp(q, axis=0) > STILL_SPAN
 
 
 @dataclass(frozen=True)
@@ -153,13 +148,13 @@ def central_difference(x: np.ndarray, h: float) -> np.ndarray:
     return d
 
 
-def zero_phase_lowpass(x: np.ndarray, cutoff_parameter_hz: float) -> np.ndarray:
+def zero_phase_lowpass(x: np.ndarray, upstream: UpstreamProcessing) -> np.ndarray:
     """Upstream's filtfilt: odd extension of 3 * ntaps samples, lfilter_zi start, along axis 0.
     Its Wn is upstream's at the reference rate whatever the run's: a run at
     another rate (the half-speed run's 100 Hz rows) keeps its cut-off at the
-    same multiple of its excitation's base frequency. `cutoff_parameter_hz`:
-    the arm's fc (the model card's [processing]; the PSM's 5.4)."""
-    b, a = scipy.signal.butter(FILTER_ORDER, cutoff_parameter_hz * 2 * math.pi / sample_rate_hz())
+    same multiple of its excitation's base frequency. `upstream`: the arm's
+    fc and that rate (the model card's [processing]; the PSM's 5.4 Hz, 200 Hz)."""
+    b, a = scipy.signal.butter(FILTER_ORDER, upstream.cutoff_parameter_hz * 2 * math.pi / upstream.filter_rate_hz)
     edge = 3 * max(len(a), len(b))
     zi = scipy.signal.lfilter_zi(b, a)[:, None]
     s = np.concatenate([2 * x[0] - x[edge:1:-1], x, 2 * x[-1] - x[-1:-edge:-1]])
@@ -182,11 +177,10 @@ def process(run: MeasuredRun, processing: str = "upstream", harmonics=None, desi
         raise DvrkDartError(f"{run.path}: {len(run)} rows, at least {MIN_ROWS} needed for processing")
     model = run.model
     upstream = model.processing
-    fc = upstream.cutoff_parameter_hz
-    q = zero_phase_lowpass(run.q, fc)
-    dq = zero_phase_lowpass(run.dq, fc)
-    ddq = zero_phase_lowpass(central_difference(run.dq, h), fc)
-    tau = zero_phase_lowpass(run.tau - model.cable_efforts(run.q), fc)
+    q = zero_phase_lowpass(run.q, upstream)
+    dq = zero_phase_lowpass(run.dq, upstream)
+    ddq = zero_phase_lowpass(central_difference(run.dq, h), upstream)
+    tau = zero_phase_lowpass(run.tau - model.cable_efforts(run.q), upstream)
     keep = slice(CUT_SAMPLES, -CUT_SAMPLES)
     return ProcessedRun(run.t[keep], q[keep], dq[keep], ddq[keep], tau[keep], upstream_first_period=upstream.first_period_samples,
                         measured=run.measured_mask, first_row=CUT_SAMPLES)
@@ -290,6 +284,6 @@ def same_motion(a: ProcessedRun, b: ProcessedRun) -> bool:
     both = a.measured & b.measured  # a joint one log does not have is held there: it says nothing of the motion
     if not both.any():
         return False
-    position = float(np.sqrt(np.mean((a.q[:, both] - b.q[:, both]) ** 2)))
-    velocity = float(np.sqrt(np.mean((a.dq[:, both] - b.dq[:, both]) ** 2)) / max(np.sqrt(np.mean(b.dq[:, both] ** 2)), 1e-12))
+    position = float(rms(a.q[:, both] - b.q[:, both], axis=None))
+    velocity = float(rms(a.dq[:, both] - b.dq[:, both], axis=None) / max(rms(b.dq[:, both], axis=None), 1e-12))
     return position < SAME_MOTION_POSITION_RMS and velocity < SAME_MOTION_VELOCITY_FRACTION

@@ -13,8 +13,6 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS
 
-#: the upstream filter's normalised cut-off is 2 pi fc / (its 200 Hz): a filter needs it in (0, 1)
-UPSTREAM_FILTER_RATE_HZ = 200.0
 #: an arm's ROS namespace (PSM1, MTML): one name, a letter first
 ARM_NAMESPACE = r"[A-Za-z][A-Za-z0-9_]*"
 #: a coupling this close to singular turns a log's values into noise
@@ -59,10 +57,14 @@ def _coupling(model: PsmModel) -> None:
 
 
 def _processing(model: PsmModel) -> None:
-    highest = UPSTREAM_FILTER_RATE_HZ / (2 * math.pi)
+    # the filter's normalised cut-off, 2 pi fc / filter_rate_hz, must be in (0, 1)
+    rate = model.processing.filter_rate_hz
+    if not (math.isfinite(rate) and rate > 0):
+        raise DvrkDartError(f"{model.source}: [processing] filter_rate_hz must be a positive rate, not {rate:g}")
+    highest = rate / (2 * math.pi)
     if not 0 < model.processing.cutoff_parameter_hz < highest:
         raise DvrkDartError(f"{model.source}: [processing] cutoff_parameter_hz must be in (0, {highest:.1f}) "
-                            f"(the filter's 2 pi fc / {UPSTREAM_FILTER_RATE_HZ:g} below 1)")
+                            f"(the filter's 2 pi fc / {rate:g} below 1)")
     if model.processing.first_period_samples < 1:
         raise DvrkDartError(f"{model.source}: [processing] first_period_samples must be a positive number of samples")
 

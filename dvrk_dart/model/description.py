@@ -24,8 +24,9 @@ from dvrk_dart.model.joints import (
 )
 from dvrk_dart.paths import MODELS_DIR
 
-#: the arm a command models when --arm-model is not given
-DEFAULT_MODEL_FILE = MODELS_DIR / "psm" / "psm.toml"
+#: the arm a command models when --arm-model is not given (a folder of models/)
+DEFAULT_ARM = "psm"
+DEFAULT_MODEL_FILE = MODELS_DIR / DEFAULT_ARM / f"{DEFAULT_ARM}.toml"
 
 
 
@@ -53,6 +54,8 @@ class UpstreamProcessing:
 
     cutoff_parameter_hz: float
     first_period_samples: int
+    #: the rate its filter's normalised cut-off was set at (2 pi fc / this rate), whatever a run's own
+    filter_rate_hz: float
 
 
 @dataclass(frozen=True)
@@ -115,6 +118,9 @@ class PsmModel:
     #: what the diagnosis simulates before adding effects ([diagnosis] base): the identified
     #: inertia only ("inertial"), or every identified term ("identified": effects then correct it)
     diagnosis_base: str = "inertial"
+    #: the diagnosis's elastic candidates, (joint, kind) ([diagnosis] elastic), and its position-dependent friction's joints
+    elastic_joints: tuple[tuple[str, str], ...] = ()
+    position_friction_joints: tuple[str, ...] = ()
     #: where `dvrk-dart force` estimates the external force ([force_point]): None when the card names none
     force_point: "ForcePoint | None" = None
 
@@ -140,10 +146,6 @@ class PsmModel:
 
     def effort_unit(self, name: str) -> str:
         return "N" if name in self.prismatic_coordinates else "N·m"
-
-    @property
-    def body_links(self) -> list[Link]:
-        return [link for link in self.links.values() if link.body]
 
     def children(self, key: int) -> list[Link]:
         return [link for link in self.links.values() if link.parent == key]
@@ -179,10 +181,6 @@ class PsmModel:
             if link.cable_polynomial:
                 out += np.outer(np.polyval(link.cable_polynomial, q @ link.variable.coeffs), link.variable.coeffs)
         return out
-
-    def tool_tip_transform(self, q: np.ndarray, frames: dict[int, np.ndarray] | None = None) -> np.ndarray:
-        frames = frames if frames is not None else self.forward_kinematics(q)
-        return frames[self.tool_tip.parent] @ self.tool_tip.transform(q)
 
     @cached_property
     def rotations_at_zero(self) -> dict[int, np.ndarray]:

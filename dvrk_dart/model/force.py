@@ -76,11 +76,11 @@ class ForceEstimate:
         known = np.all(np.isfinite(self.force), axis=1)
         norm = np.linalg.norm(self.force[known], axis=1)
         return {
-            "rms_n": float(np.sqrt(np.mean(norm**2))) if known.any() else None,
+            "rms_n": float(rms(norm)) if known.any() else None,
             "p95_n": float(np.percentile(norm, PERCENTILE)) if known.any() else None,
             "rms_per_axis_n": rms(self.force[known]).tolist() if known.any() else None,
             "determined_fraction": float(known.mean()),
-            "determined_part_rms_n": float(np.sqrt(np.mean(np.sum(self.determined**2, axis=1)))),
+            "determined_part_rms_n": float(rms(np.linalg.norm(self.determined, axis=1))),
         }
 
 

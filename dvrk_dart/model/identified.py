@@ -50,6 +50,13 @@ def parse_terms(spec: str) -> tuple[str, ...]:
     return tuple(names)
 
 
+def terms_label(spec: str) -> str:
+    """--terms in its own words: a group's name where the terms are one ('all,inertial' is all), else the parts given."""
+    names = parse_terms(spec)
+    parts = dict.fromkeys(p.strip() for p in spec.split(","))
+    return next((group for group, members in TERM_GROUPS.items() if set(members) == set(names)), ",".join(parts))
+
+
 def spring_torque(stiffness: float, x: np.ndarray, linkage: dict[str, float] | None) -> np.ndarray:
     """A spring's effort on its variable x: +K x (the PSM's J4, rest at x = 0),
     or through a linkage (the MTM's wrist pitch, upstream main_mtm.ipynb): a
@@ -300,18 +307,11 @@ class IdentifiedModel:
     def potential_energy(self, q: np.ndarray) -> float:
         return float(pin.computePotentialEnergy(self.pin_model, self.data, self.tree_q(q)))
 
-    def kinetic_energy(self, q: np.ndarray, dq: np.ndarray) -> float:
-        return float(pin.computeKineticEnergy(self.pin_model, self.data, self.tree_q(q), self.tree_v(dq)))
-
     # ---------------------------------------------------------- kinematics
     def tool_tip_pose(self, q: np.ndarray) -> np.ndarray:
         """4x4 base-frame pose of the tool tip."""
         pin.framesForwardKinematics(self.pin_model, self.data, self.tree_q(q))
         return self.data.oMf[self.tip_frame_id].homogeneous.copy()
-
-    def tool_tip_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """6x7 Jacobian (linear; angular) of the tool tip, base-frame axes, w.r.t. q."""
-        return self.tool_tip_pose_and_jacobian(q)[1]
 
     def tool_tip_pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The tool tip's pose and Jacobian from one kinematics pass (a controller's step asks for both)."""

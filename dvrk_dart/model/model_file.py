@@ -56,6 +56,8 @@ def _require(table: dict, key: str, path: Path, where: str):
 
 
 DIAGNOSIS_BASES = ("inertial", "identified")
+#: what an elastic joint of [diagnosis] elastic may be
+ELASTIC_KINDS = ("cable_elasticity", "torsion_spring")
 
 
 def _force_point(raw: dict, path: Path, links: dict) -> ForcePoint | None:
@@ -81,12 +83,26 @@ def _diagnosis_base(raw: dict, path: Path) -> str:
     return base
 
 
+def _diagnosis_joints(raw: dict, path: Path) -> tuple[tuple[tuple[str, str], ...], tuple[str, ...]]:
+    """[diagnosis] elastic (joint -> its elasticity's kind) and position_friction (joints): the arm's own candidates."""
+    table = raw.get("diagnosis", {})
+    elastic, position_friction = table.get("elastic", {}), table.get("position_friction", [])
+    if not isinstance(elastic, dict) or not isinstance(position_friction, list):
+        raise DvrkDartError(f"{path}: [diagnosis] elastic is a table (joint = kind), position_friction a list of joints")
+    if unknown := [str(j) for j in [*elastic, *position_friction] if j not in JOINT_NAMES]:
+        raise DvrkDartError(f"{path}: [diagnosis]: unknown joint {', '.join(unknown)} (known: {', '.join(JOINT_NAMES)})")
+    if wrong := [f"{j} = {k!r}" for j, k in elastic.items() if k not in ELASTIC_KINDS]:
+        raise DvrkDartError(f"{path}: [diagnosis] elastic: {', '.join(wrong)} (a kind is one of {', '.join(ELASTIC_KINDS)})")
+    return tuple((str(j), str(k)) for j, k in elastic.items()), tuple(str(j) for j in position_friction)
+
+
 def _upstream_processing(raw: dict, path: Path) -> UpstreamProcessing:
     table = _require(raw, "processing", path, "file")
     try:
-        return UpstreamProcessing(float(table["cutoff_parameter_hz"]), int(table["first_period_samples"]))
+        return UpstreamProcessing(float(table["cutoff_parameter_hz"]), int(table["first_period_samples"]), float(table["filter_rate_hz"]))
     except (KeyError, TypeError, ValueError):
-        raise DvrkDartError(f"{path}: [processing] needs cutoff_parameter_hz (a number) and first_period_samples (an integer)") from None
+        raise DvrkDartError(f"{path}: [processing] needs cutoff_parameter_hz and filter_rate_hz (numbers) and first_period_samples "
+                            "(an integer)") from None
 
 
 def load_model(path: Path | str) -> PsmModel:
@@ -120,6 +136,7 @@ def _model(raw: dict, path: Path) -> PsmModel:
     limits = _require(raw, "joint_limits", path, "file")
     coupling = _require(raw, "dvrk_coupling", path, "file")
     checks = raw.get("parameter_checks", {})
+    elastic, position_friction = _diagnosis_joints(raw, path)
     model = PsmModel(
         name=raw.get("name", path.stem),
         source=path,
@@ -151,6 +168,7 @@ def _model(raw: dict, path: Path) -> PsmModel:
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
         diagnosis_base=_diagnosis_base(raw, path),
+        elastic_joints=elastic, position_friction_joints=position_friction,
         force_point=_force_point(raw, path, links),
     )
     check_model_values(model, cw)

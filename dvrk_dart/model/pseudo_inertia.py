@@ -25,21 +25,6 @@ def pseudo_inertia(mass_kg: float, com_m: np.ndarray, inertia_com: np.ndarray) -
     return J
 
 
-def from_pseudo_inertia(J: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """(mass, centre of mass, inertia about the centre of mass) of a pseudo-inertia
-    matrix; the centre of mass is undefined (zeros) for a massless body."""
-    mass = float(J[3, 3])
-    com = J[:3, 3] / mass if mass > 0.0 else np.zeros(3)
-    sigma_com = J[:3, :3] - mass * np.outer(com, com)
-    inertia_com = np.trace(sigma_com) * np.eye(3) - sigma_com
-    return mass, com, inertia_com
-
-
-def smallest_eigenvalue(mass_kg: float, com_m: np.ndarray, inertia_com: np.ndarray) -> float:
-    """The pseudo-inertia's smallest eigenvalue: >= 0 for a physical body."""
-    return float(np.linalg.eigvalsh(pseudo_inertia(mass_kg, com_m, inertia_com))[0])
-
-
 def _dynamic_parameter_basis() -> np.ndarray:
     """B (10, 4, 4) with J = sum_i p_i B_i for Pinocchio's dynamic parameters
     p = (m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz), inertia about the

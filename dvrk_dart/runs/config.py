@@ -33,6 +33,8 @@ MAX_STEP_S = 0.01
 #: the smallest simulation step: 100 kHz, ten times any servo rate of the arm (a 1 ns step
 #: would hold 10^9 states per simulated second, more than the machine's memory)
 MIN_STEP_S = 1e-5
+#: the simulation step of every run that does not choose one (1 kHz, the dVRK servo rate)
+DEFAULT_STEP_S = 1e-3
 #: the fewest simulated steps a run compares anything over
 MIN_STEPS = 10
 #: the most simulation steps of one run (the hour at 1 kHz above)
@@ -45,7 +47,7 @@ class RunConfig:
     mode: str
     counterweight: str = "on"
     dynamics: str = "inertial"  # inertial | identified | path of a diagnosis.json
-    dt_s: float = 1e-3
+    dt_s: float = DEFAULT_STEP_S
     duration_s: float | None = None  # None: the scenario's (or the whole measured run)
     params_file: str | None = None  # None: the upstream params.json, resolved at run time
     measured: str | None = None  # overrides a replay scenario's measured run
@@ -100,12 +102,17 @@ class RunConfig:
     @property
     def name_parts(self) -> tuple:
         """What tells this run's name from another's beyond its scenario and mode (run_name's last arguments)."""
-        return self.counterweight, self.dynamics_label, self.processing, self.params_label, self.duration_label
+        return self.counterweight, self.dynamics_label, self.processing, self.params_label, self.duration_label, self.step_label
 
     @property
     def duration_label(self) -> str | None:
         """first-<s>s for a --duration: a part of a run is not the whole run (the report would hold two of one name)."""
         return None if self.duration_s is None else f"first-{self.duration_s:g}s"
+
+    @property
+    def step_label(self) -> str | None:
+        """dt-<ms>ms for a step other than the default: runs of two steps are two runs (the report refused them as one)."""
+        return None if self.dt_s == DEFAULT_STEP_S else f"dt-{self.dt_s * 1e3:g}ms"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -120,11 +127,11 @@ class RunConfig:
 
 
 def run_name(scenario: str, mode: str, counterweight: str, dynamics_label: str = "inertial", processing: str = "upstream",
-             params_label: str | None = None, duration_label: str | None = None) -> str:
+             params_label: str | None = None, duration_label: str | None = None, step_label: str | None = None) -> str:
     """The run folder's name; the paper's arm (inertial, the published parameters) and processing (upstream) keep the historical name."""
     parts = [f"{scenario}_{mode}_cw-{counterweight}"]
     parts += [label for label, usual in ((dynamics_label, "inertial"), (params_label, None), (processing, "upstream"),
-                                          (duration_label, None)) if label != usual]
+                                          (duration_label, None), (step_label, None)) if label != usual]
     return "_".join(parts)
 
 

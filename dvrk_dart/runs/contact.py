@@ -103,4 +103,4 @@ def contact_check(arm: Arm, run: ContactRun, model_efforts: np.ndarray, real_res
 
 def _norm_rms(force: np.ndarray, where: np.ndarray) -> float | None:
     """RMS of a force's norm over the samples `where` (None where there are none)."""
-    return float(np.sqrt(np.mean(np.sum(force[where] ** 2, axis=1)))) if where.any() else None
+    return float(rms(np.linalg.norm(force[where], axis=1))) if where.any() else None

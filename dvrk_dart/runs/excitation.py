@@ -30,6 +30,7 @@ from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.provenance import arm_model_record, file_record, software_versions
 from dvrk_dart.model.description import PsmModel, resolve_arm_model
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
+from dvrk_dart.metrics import rms
 
 #: the identification's excitation (data README): nominal base frequency and harmonics
 EXCITATION_BASE_HZ = 0.18
@@ -80,7 +81,7 @@ def fourier_basis(t: np.ndarray, base_hz: float = EXCITATION_BASE_HZ, harmonics:
 def _fit_residual(t: np.ndarray, q: np.ndarray, base_hz: float) -> float:
     basis, _ = fourier_basis(t, base_hz)
     coefficients, *_ = np.linalg.lstsq(basis, q, rcond=None)
-    return float(np.sqrt(np.mean((basis @ coefficients - q) ** 2)))
+    return float(rms(basis @ coefficients - q, axis=None))
 
 
 def fitted_base_frequency(t: np.ndarray, q: np.ndarray) -> float:
@@ -122,8 +123,8 @@ def fitted_excitation(name: str, rate_hz: float, model: PsmModel) -> Excitation:
         "joints": list(model.dvrk_topics.joint_names),
         # rows: constant, sin(l w t) for l = 1..6, cos(l w t) for l = 1..6; columns: dVRK joints
         "coefficients": coefficients.tolist(),
-        "fit_rms_position": np.sqrt(np.mean((basis @ coefficients - q_dvrk) ** 2, axis=0)).tolist(),
-        "fit_rms_velocity": np.sqrt(np.mean((dbasis @ coefficients - dq_dvrk) ** 2, axis=0)).tolist(),
+        "fit_rms_position": rms(basis @ coefficients - q_dvrk).tolist(),
+        "fit_rms_velocity": rms(dbasis @ coefficients - dq_dvrk).tolist(),
     }
     return Excitation(name, t, q, dq, source)
 

@@ -24,7 +24,8 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
-from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process, spanning_columns
+from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.metrics import per_measured_joint, rms
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.model.description import PsmModel

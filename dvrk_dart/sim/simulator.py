@@ -207,11 +207,6 @@ class PsmSimulator(ClosedChainReadout, TorqueMode):
         """DART's dof positions (shared: do not modify)."""
         return self._positions()
 
-    @property
-    def counterweight_position_m(self) -> float | None:
-        cw = self.psm.counterweight_dof
-        return None if cw is None else float(self._positions()[cw])
-
     # DART's state (dofs x, v) and the coordinates (q, dq), read once per state:
     # DART's state only changes in a step, reset or set_kinematic (_state_changed)
     def _state_changed(self) -> None:

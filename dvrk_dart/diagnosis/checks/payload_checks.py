@@ -29,8 +29,6 @@ from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS
 
-#: hand-measurement reference points
-REFERENCES = ("pitch_shaft", "rcm")
 #: the hand measurement a payload estimate is checked against, beside its diagnosis.json
 HAND_CHECK_FILE = "hand_check.json"
 

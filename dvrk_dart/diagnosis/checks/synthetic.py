@@ -45,7 +45,7 @@ def synthesize_measurement(
     if extra_effort is not None:
         tau = tau + np.asarray(extra_effort, dtype=float)
     rng = np.random.default_rng(seed)
-    noise = zero_phase_lowpass(rng.standard_normal(tau.shape), arm.model.processing.cutoff_parameter_hz)
+    noise = zero_phase_lowpass(rng.standard_normal(tau.shape), arm.model.processing)
     noise = noise / np.maximum(rms(noise), 1e-300) * np.asarray(noise_rms, dtype=float)
     return ProcessedRun(state.t, state.q, state.dq, state.ddq, tau + noise, upstream_first_period=state.upstream_first_period)
 

@@ -42,7 +42,7 @@ from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measur
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.arm import Arm, load_arm
-from dvrk_dart.model.description import DEFAULT_MODEL_FILE, resolve_arm_model
+from dvrk_dart.model.description import DEFAULT_ARM, DEFAULT_MODEL_FILE, resolve_arm_model
 from dvrk_dart.model.joints import JOINT_NAMES
 from dvrk_dart.paths import PIPELINES_DIR
 
@@ -58,7 +58,7 @@ def _effect(arm: Arm, case: dict):
     factories = {
         "friction": lambda: JointFriction(arm.model, case["joint"]),
         "offset": lambda: JointOffset(arm.model, case["joint"]),
-        "stiffness": lambda: JointStiffness(arm.model, case["joint"]),
+        "stiffness": lambda: JointStiffness(arm.model, case["joint"], dict(arm.model.elastic_joints)[case["joint"]]),
         "armature": lambda: JointArmature(arm.model, case["joint"]),
         "payload": lambda: PointPayload(arm.model, int(case["link"]), equivalent_keys=equivalent_payload_links(arm)[int(case["link"])]),
         "tilt": lambda: GravityTilt(arm),
@@ -207,7 +207,7 @@ def _withheld_step(task: tuple[str, Path, Path | None]) -> tuple[list[dict], flo
     extra = {"parameter_band": parameter_band} if name == "holdout" and parameter_band is not None else {}
     tables = tomllib.loads(WITHHELD_FILE.read_text())
     spec = {**tables["blind_suite"], **tables.get(name, {}), **BLIND_SUITE_STEPS[name]} if name in BLIND_SUITE_STEPS else tables[name]
-    _, found = step(load_arm(resolve_arm_model(spec.get("arm_model", "psm"))), spec, out_dir / name, **extra)
+    _, found = step(load_arm(resolve_arm_model(spec.get("arm_model", DEFAULT_ARM))), spec, out_dir / name, **extra)
     return found, time.perf_counter() - start
 
 

@@ -23,10 +23,6 @@ STRIBECK_VELOCITY = 0.02
 #: Stribeck term comes out *negative* on J1-J3 (less friction near zero
 #: velocity), the signature of such a smooth reversal, not of stiction.
 REVERSAL_VELOCITIES = (0.01, 0.03, 0.1, 0.3)
-#: the links whose bending cables make an elastic effort (J1, J2); J4 has the
-#: tool's torsion spring (identified upstream)
-CABLE_ELASTICITY_JOINTS = ("q1", "q2")
-TORSION_SPRING_JOINT = "q4"
 
 
 def _unit_column(features: TrajectoryFeatures, joint: int, values: np.ndarray) -> np.ndarray:
@@ -312,16 +308,16 @@ class JointOffset(Effect):
 
 
 class JointStiffness(Effect):
-    """An elastic effort K q on one coordinate, rest at q = 0 (the tool's torsion
-    spring on J4, the bending cables on J1 and J2); a shifted rest position is
-    a stiffness plus an offset."""
+    """An elastic effort K q on one coordinate, rest at q = 0, of the kind the arm's card gives the joint (the PSM's:
+    the tool's torsion spring on J4, the bending cables on J1 and J2); a shifted rest position is a stiffness plus an
+    offset."""
 
     kind = "elastic"
 
-    def __init__(self, model, joint: str):
+    def __init__(self, model, joint: str, elasticity: str):
         self.joint_index = JOINT_NAMES.index(joint)
         self.joints = (joint,)
-        self.name = f"{'torsion_spring' if joint == TORSION_SPRING_JOINT else 'cable_elasticity'}_{joint}"
+        self.name = f"{elasticity}_{joint}"
         self.parameters = (Parameter("stiffness", f"{model.effort_unit(joint)}/{model.position_unit(joint)}", 0.0),)
 
     def columns(self, features):

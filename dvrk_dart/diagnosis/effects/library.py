@@ -19,10 +19,8 @@ from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.effects.geometry import ENVELOPE_MARGIN_M, link_envelope
 from dvrk_dart.diagnosis.effects.joint_effects import (
-    CABLE_ELASTICITY_JOINTS,
     AngleLoad,
     REVERSAL_VELOCITIES,
-    TORSION_SPRING_JOINT,
     JointArmature,
     JointFriction,
     JointOffset,
@@ -47,10 +45,6 @@ from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
 from dvrk_dart.sim.config import SimConfig, position_load_effort, position_load_table, simulated_terms
 
-#: the joints whose friction may change along their range (the arm joints: a
-#: guide or a capstan; the wrist's cables run over pulleys at fixed radius)
-POSITION_FRICTION_JOINTS = ("q1", "q2", "q3")
-
 #: the payload models of `candidate_effects`
 PAYLOAD_MODELS = ("point", "first_moment")
 
@@ -70,7 +64,7 @@ def candidate_effects(
     effects += [JointFriction(arm.model, j) for j in JOINT_NAMES]
     effects += [JointFriction(arm.model, j, reversal_velocity=v) for j in JOINT_NAMES for v in reversal_velocities]
     effects += [JointFriction(arm.model, j, presliding=d) for j in JOINT_NAMES for d in presliding_distances(arm.model, j)]
-    effects += [PositionFriction(arm.model, j, d) for j in POSITION_FRICTION_JOINTS for d in presliding_distances(arm.model, j)]
+    effects += [PositionFriction(arm.model, j, d) for j in arm.model.position_friction_joints for d in presliding_distances(arm.model, j)]
     effects += [LinkFriction(arm.model, key, d) for key in coupling_friction_links(arm.model)
                 for d in presliding_distances(arm.model, link=arm.model.links[key])]
     if base.friction:
@@ -80,7 +74,7 @@ def candidate_effects(
     if stribeck:
         effects += [JointFriction(arm.model, j, stribeck=True) for j in JOINT_NAMES]
     effects += [JointOffset(arm.model, j) for j in JOINT_NAMES]
-    effects += [JointStiffness(arm.model, j) for j in CABLE_ELASTICITY_JOINTS + (TORSION_SPRING_JOINT,)]
+    effects += [JointStiffness(arm.model, j, kind) for j, kind in arm.model.elastic_joints]
     effects += [JointArmature(arm.model, j) for j in JOINT_NAMES]
     if JOINT_NAMES[INSERTION] in arm.model.prismatic_coordinates:  # a load on the insertion set by the pitch (the PSM's; the MTM has no insertion)
         effects.append(AngleLoad(arm.model, JOINT_NAMES[INSERTION], JOINT_NAMES[PITCH]))

@@ -10,14 +10,15 @@ from typing import Callable
 
 import numpy as np
 
+from dvrk_dart.analysis.residual_floor import residual_noise
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.library import (
     config_effort_by_formula,
 )
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import load_run, resolve_run, run_label
-from dvrk_dart.io.signal import (  # noqa: F401
-    SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, same_motion, same_rate, spanning_columns)
+from dvrk_dart.io.signal import SAME_MOTION_POSITION_RMS, ProcessedRun, not_periodic_reason, process, same_motion, same_rate
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.model.description import PsmModel
@@ -31,6 +32,8 @@ MIN_PAYLOAD_KG = 1e-3
 #: one): the baseline is aligned on the run by whole samples within it, then both
 #: cut to their common span (at least half the shorter run)
 MAX_START_OFFSET_SHARE = 0.25
+#: draws of the positions' noise a run's noise energy averages (`residual_noise`; ~0.5 s a run of 6000 samples)
+NOISE_DRAWS = 4
 
 
 Simulate = Callable[[SimConfig, ProcessedRun], np.ndarray]
@@ -135,6 +138,8 @@ class DiagnosisRun:
     alignment: str | None = None
     #: the run's regressor features, made once (`features`)
     _features: TrajectoryFeatures | None = field(default=None, repr=False, compare=False)
+    #: its own state's noise energy per sample (`noise_energy`), made once
+    _noise: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         self.simulated = np.asarray(self.simulated, dtype=float)
@@ -149,10 +154,19 @@ class DiagnosisRun:
     def __len__(self) -> int:
         return len(self.state)
 
-    @property
-    def noisy_states(self) -> list[ProcessedRun]:
-        """The measured states whose noise the run's residual carries (a run minus its baseline: both)."""
-        return [self.state, self.baseline.state] if self.role is RunRole.DIFFERENCE else [self.state]
+    def noise_energy(self, arm: Arm) -> np.ndarray | None:
+        """(7,) periodic processing: the noise energy per sample the run's residual carries, its efforts' and its
+        positions' through the arm's model (`residual_noise`), a run minus its baseline carrying both's;
+        None upstream."""
+        parts = [self._own_noise(arm), *([self.baseline._own_noise(arm)] if self.role is RunRole.DIFFERENCE else [])]
+        return None if any(part is None for part in parts) else sum(parts)
+
+    def _own_noise(self, arm: Arm) -> np.ndarray | None:
+        if self.state.periodic is None:
+            return None
+        if self._noise is None:
+            self._noise = residual_noise(arm, self.state, draws=NOISE_DRAWS) ** 2
+        return self._noise
 
     @property
     def gap(self) -> np.ndarray:
@@ -181,9 +195,6 @@ class DiagnosisRun:
     def residual(self) -> np.ndarray:
         """The residual to explain: the gap, minus the baseline's gap if any."""
         return self.gap - self.baseline_effort
-
-
-RunSpec = "str | Path | ProcessedRun | DiagnosisRun"
 
 
 def _load_state(spec, model: PsmModel, processing: RunProcessing) -> tuple[str, ProcessedRun]:

@@ -24,6 +24,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.model.identified import NON_INERTIAL_TERMS
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig, simulated_terms
+from dvrk_dart.metrics import rms
 
 
 #: an effect carries what the selected effects add to the identified terms on a joint only if its effort there is
@@ -84,7 +85,7 @@ def identified_terms_share(problem, selection, base_config: SimConfig) -> dict |
             by_joint[JOINT_NAMES[j]] = 1.0 - residual / energy
             # all the terms, not the closest subset: J1's offset moved from -0.3 to -0.1 N·m is 0.2 from the model's,
             # though leaving the offset out is closer (0.1)
-            beyond[JOINT_NAMES[j]] = float(np.sqrt(np.mean((found[:, j] - terms[:, j, :].sum(axis=1)) ** 2)))
+            beyond[JOINT_NAMES[j]] = float(rms(found[:, j] - terms[:, j, :].sum(axis=1)))
             carrier[JOINT_NAMES[j]] = _carrier(found[:, j] - terms[:, j, :].sum(axis=1), by_effect[:, j, :],
                                                [problem.effects[i].name for i in selection.selected])
     if not by_joint:

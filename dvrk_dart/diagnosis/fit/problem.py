@@ -40,7 +40,7 @@ from dvrk_dart.metrics import rms
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
-from dvrk_dart.io.signal import spanning_columns
+from dvrk_dart.io.period import spanning_columns
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import SimConfig
 
@@ -152,22 +152,15 @@ class Problem:
 
     def grams_of(self, run: DiagnosisRun, columns: np.ndarray, folds: int) -> Grams:
         grams = Grams.of_run(self.design, self.features_of(run), run.residual, folds, self.demean_of(run), columns)
-        noise = direction_noise(run)
+        noise = direction_noise(run, self.arm)
         return grams if noise is None else replace(grams, noise=np.tile(noise, (len(grams.s), 1)))
 
 
-def direction_noise(run: DiagnosisRun) -> np.ndarray | None:
+def direction_noise(run: DiagnosisRun, arm: Arm) -> np.ndarray | None:
     """(7,) periodic processing: the noise energy of the run's residual along one
-    direction of its band (N sigma_proj^2 / (2H+1) per joint, the baseline's
-    added for a run minus its baseline); None upstream."""
-    def of(state):
-        p = state.periodic
-        if p is None:
-            return None
-        return (p.kept[1] - p.kept[0]) * np.nan_to_num(p.effort_noise.projected_rms) ** 2 / (2 * p.harmonics + 1)
-
-    energies = [of(state) for state in run.noisy_states]
-    return None if any(e is None for e in energies) else sum(energies)
+    direction of its band (N sigma^2 / (2H+1) per joint, `DiagnosisRun.noise_energy`); None upstream."""
+    energy = run.noise_energy(arm)
+    return None if energy is None else len(run) * energy / (2 * run.state.periodic.harmonics + 1)
 
 
 def _joint_weights(residual: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simul
 from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
 from dvrk_dart.diagnosis.fit.problem import Problem
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
+from dvrk_dart.io.arm import Arm
 from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.diagnosis.fit.selection import (
     BOOTSTRAP_RESAMPLES,
@@ -193,16 +194,14 @@ def gaps(residuals: list[np.ndarray], recorded: np.ndarray | None = None) -> lis
     return values.tolist() if recorded is None else per_measured_joint(values, recorded)
 
 
-def noise_gaps(runs: list[DiagnosisRun], recorded: np.ndarray) -> list[float | None] | None:
-    """Per joint, the noise the periodic projection leaves on the runs' gaps, as `gaps` pools them (a run minus its
-    baseline carries both's): what a gap cannot go under without a session floor; None upstream or without runs."""
-    energy, samples = np.zeros(len(recorded)), 0
-    for run in runs:
-        if any(state.periodic is None for state in run.noisy_states):
-            return None
-        energy += len(run.state.t) * sum(np.nan_to_num(s.periodic.effort_noise.projected_rms) ** 2 for s in run.noisy_states)
-        samples += len(run.state.t)
-    return per_measured_joint(np.sqrt(energy / samples), recorded) if samples else None
+def noise_gaps(runs: list[DiagnosisRun], recorded: np.ndarray, arm: Arm) -> list[float | None] | None:
+    """Per joint, the noise the periodic projection leaves on the runs' gaps (`DiagnosisRun.noise_energy`), as `gaps`
+    pools them: what a gap cannot go under without a session floor; None upstream or without runs."""
+    energies = [run.noise_energy(arm) for run in runs]
+    if not runs or any(energy is None for energy in energies):
+        return None
+    samples = sum(len(run) for run in runs)
+    return per_measured_joint(np.sqrt(sum(len(run) * e for run, e in zip(runs, energies)) / samples), recorded)
 
 
 # ------------------------------------------------------------------- result

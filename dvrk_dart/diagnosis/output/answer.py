@@ -5,7 +5,6 @@ a `diagnosis.json` dict, so the words can be rebuilt from the file alone."""
 
 from __future__ import annotations
 
-from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG
 from dvrk_dart.diagnosis.fit.session_floor import AT_FLOOR_RATIO
 from dvrk_dart.diagnosis.output.beyond_identified import beyond_identified_sentence, identified_values_words
 from dvrk_dart.diagnosis.output.clauses import constants_clause, effort_unit, identified_terms_clause, insertion_clause, main_joints, refit_clause
@@ -242,8 +241,7 @@ def answer_paragraphs(result: dict) -> list[str]:
     gaps = "; ".join(gap_change(j, b, a, effort_unit(result, j)) for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     if result.get("payload_not_distinguished"):
-        where = (f"no payload is distinguished from none (the payload-shaped fit's mass is under {MIN_PAYLOAD_KG * 1e3:g} g: a session "
-                 "change read as a payload); " + where)
+        where = f"no payload is distinguished from none ({result['payload_not_distinguished']['why']}); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
     # the words below are against the paper's simulation, not the identified model: their subject says so
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \

@@ -13,6 +13,7 @@ from dvrk_dart.diagnosis.output.clauses import ANSWER_JOINTS, main_joints
 from dvrk_dart.diagnosis.output.effect_words import size_words
 from dvrk_dart.diagnosis.output.wording import EFFORT_RESOLUTION, PARTLY_SHARE, gap_change, joints_apart, percent, share_above_floor, words_for
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.metrics import rms
 
 
 def beyond_identified(result: dict) -> dict | None:
@@ -165,5 +166,5 @@ def _held_out_level(result: dict, floor: list | None) -> list:
     if not noise:
         return [None] * len(JOINT_NAMES)
     rows = np.array([[np.nan if x is None else x for x in run] for run in noise], dtype=float)  # None: a joint not recorded
-    level = np.sqrt(np.mean(np.square(rows), axis=0))
+    level = rms(rows)
     return [None if np.isnan(x) else float(x) for x in level]

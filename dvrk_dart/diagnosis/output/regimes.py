@@ -11,6 +11,7 @@ import pandas as pd
 from dvrk_dart.io.signal import ProcessedRun
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
+from dvrk_dart.metrics import rms
 
 #: |dq| below this fraction of the run's largest |dq| counts as "near zero"
 NEAR_ZERO_VELOCITY_FRACTION = 0.05
@@ -66,7 +67,7 @@ def residual_regimes(state: ProcessedRun, residual: np.ndarray, model: PsmModel)
                         "samples": int(mask.sum()),
                         "mean": float(x.mean()) if len(x) else math.nan,
                         "std": float(x.std()) if len(x) else math.nan,
-                        "rms": float(np.sqrt(np.mean(x**2))) if len(x) else math.nan,
+                        "rms": float(rms(x)) if len(x) else math.nan,
                     }
                 )
     return pd.DataFrame(rows)

@@ -52,6 +52,23 @@ def effort_not_determined(report: dict, joint: int, reason: str) -> None:
     reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
 
 
+#: why the mass at a --payload-at position is not determined without a --repeat pair when only joints whose gravity shape
+#: sessions change tell it from zero (the real null pair, one against one-no-weight, at the tool roll's origin: +0.007 kg,
+#: interval +0.003 to +0.011, all of it q3's gravity)
+MASS_ON_SESSION_JOINTS = ("its gravity stands out of zero only on joints whose gravity shape sessions change (above), and without a "
+                          "--repeat pair nothing measures that change: give --repeat (the baseline's motion in another session)")
+
+
+def mass_only_on_session_joints(at: dict) -> None:
+    """The mass at the position not determined where every gravity figure left (the efforts at q = 0 on the other joints,
+    J1's slope) holds zero: its interval excluding zero then rests on the joints `effort_not_determined` took out."""
+    intervals = [i for i in at.get("gravity_efforts_at_q0_interval") or [] if i is not None] + [at.get(f"{YAW_SLOPE}_interval")]
+    if at["mass_kg"] is None or any(i is not None and (i[0] > 0 or i[1] < 0) for i in intervals):
+        return
+    at["mass_kg"] = at["mass_kg_interval"] = None
+    at.setdefault("not_determined", {})["mass_kg"] = MASS_ON_SESSION_JOINTS
+
+
 #: why a payload's gravity effort is not given on a joint the runs did not record
 NOT_RECORDED = "not recorded by the runs: no figure on it"
 
@@ -68,8 +85,9 @@ J1_SLOPE_SENTENCE = "J1's effort changes with q1 at "
 def at_position_sentence(at: dict, mass_text: str) -> str:
     """The mass a point at the hand position reads (`mass_text`: it with its interval), not determined where that holds zero."""
     zero = at["mass_kg"] is not None and at["mass_kg_interval"] is not None and at["mass_kg_interval"][0] <= 0.0
+    why = (at.get("not_determined") or {}).get("mass_kg") if at["mass_kg"] is None else None
     return (f"At the given position ({at['link']}, {np.round(at['position_m'], 3).tolist()} m in its frame) the mass is {mass_text}"
-            + (": not determined, its interval holds zero" if zero else "") + ".")
+            + (": not determined, its interval holds zero" if zero else f": {why}" if why else "") + ".")
 
 
 def renew_sentences(report: dict, fresh: list[str]) -> None:

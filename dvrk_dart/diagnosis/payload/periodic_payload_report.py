@@ -16,6 +16,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     J1_SLOPE_SENTENCE,
     SWAMPED,
     WITHOUT_REPEAT,
+    mass_only_on_session_joints,
     at_position_sentence,
     effort_not_determined,
     pitch_shaft_offsets,
@@ -237,8 +238,11 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
         report["position_m"] = at.position.tolist()
         session["mass_kg_at_position"] = session_at["mass_kg"]
     if repeat is None:  # nothing measures a session's change of these joints' gravity shape: their intervals do not hold it
-        for j in np.flatnonzero(np.asarray(offset_joints)[:3]):
-            effort_not_determined(report, int(j), SESSION_SHAPE_NOT_COUNTED)
+        for part in [report, *([report["payload_at"]] if at is not None else [])]:
+            for j in np.flatnonzero(np.asarray(offset_joints)[:3]):
+                effort_not_determined(part, int(j), SESSION_SHAPE_NOT_COUNTED)
+        if at is not None:
+            mass_only_on_session_joints(report["payload_at"])
     if repeat is not None:
         # what the --repeat pair alone reads as this payload: a session change of its shape, counted in every interval
         report["session_change_as_payload"] = {key: session[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0",
