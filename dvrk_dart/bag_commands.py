@@ -38,6 +38,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                             "write the CSV elsewhere")
     if out.is_dir() or str(args.out).endswith(("/", "\\")):  # Path drops a trailing slash: bags/new/ named a file 'new'
         raise DvrkDartError(f"--out: {args.out} is a folder, not the CSV file to write")
+    if out.suffix.lower() != ".csv":  # a measured run's CSV under another name (imp.json) read as something else later
+        raise DvrkDartError(f"--out: {out} is not a .csv name: import writes a measured-run CSV")
     if out.exists() and not out.is_file():
         raise DvrkDartError(f"--out: {out} is not a regular file (a device, a pipe): refusing to replace it")
     if out.exists() and not args.force:

@@ -306,7 +306,8 @@ def _diagnose_command(sub, commands) -> None:
     p = sub.add_parser("diagnose", help="diagnose the sim-to-real gap of a measured run")
     p.add_argument("--measured", type=measured_run, required=True, nargs="+",
                    help=f"measured run(s): path, or {PSM_RUN_NAMES}; several: one set of effects for all")
-    p.add_argument("--baseline", type=measured_run, help="same trajectory without the withheld effect (isolates a payload)")
+    p.add_argument("--baseline", type=measured_run, help="a run of the same arm without the withheld effect (isolates a payload): the same "
+                   "trajectory (subtracted sample by sample) or another (fitted beside the runs: it must lack the effect, which is not checked)")
     p.add_argument("--train", type=measured_run, nargs="+", default=[], help="further training runs, fitted beside the measured run (which always trains)")
     p.add_argument("--holdout", type=measured_run, nargs="+", default=[], help="held-out runs scored with the effects fitted on training")
     p.add_argument("--repeat", type=measured_run, help="the same trajectory recorded in another session: the session-to-session floor and each joint's gap split")

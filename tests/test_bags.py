@@ -16,6 +16,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bag_writer import arm_joint_states, write_bag
 from dvrk_dart.io.bags import NS, BagTopics, load_bag_run
 from dvrk_dart.io.mcap_read import read_mcap
+from dvrk_dart.io.provenance import sha256_of
 from dvrk_dart.io.reference_data import load_run, resolve_run
 from dvrk_dart.model.joints import MotorCoordinateMap
 from arms import PSM
@@ -205,6 +206,12 @@ def test_export_import_round_trip(tmp_path, simulated_run, capsys):
         assert tuple(msg.name) == PSM.dvrk_topics.arm_joints and len(msg.effort) == 6
         assert msg.header.stamp.sec * NS + msg.header.stamp.nanosec == round(record.t[0] * NS)
     assert any(p.suffix == ".mcap" for p in bag.iterdir())
+    # what it was made from, in its metadata (custom_data was null)
+    metadata = (bag / "metadata.yaml").read_text()
+    assert f"dvrk_dart.source_sha256: {sha256_of(simulated_run / 'run.mcap')}" in " ".join(metadata.split())
+    # the CSV is named as one (a CSV written as imp.json)
+    assert main(["import", str(bag), "--out", str(tmp_path / "imp.json")]) == 2
+    assert "not a .csv name" in capsys.readouterr().err and not (tmp_path / "imp.json").exists()
 
 
 def test_replay_of_a_bag(tmp_path, simulated_run, capsys):

@@ -167,3 +167,12 @@ def test_a_scenario_files_measured_file_is_read_beside_it_and_its_processing_sai
     assert main(["run", str(scenario), "--duration", "0.05", "--out", str(tmp_path / "out")]) == 0
     assert capsys.readouterr().out.startswith("processing: upstream")
     assert list(json.loads((tmp_path / "out" / "config.json").read_text())["inputs"]) == [str(tmp_path / "scenarios" / ".." / "data" / "run.csv")]
+
+
+def test_a_step_other_than_the_default_is_in_the_run_s_name():
+    """Two replays of one run at 1 ms and 1.3 ms had one name, and the report refused them as one run held twice."""
+    from dvrk_dart.runs.config import run_name
+
+    usual, finer = RunConfig("replay", "velocity"), RunConfig("replay", "velocity", dt_s=0.0013)
+    assert usual.step_label is None and finer.step_label == "dt-1.3ms"
+    assert run_name("replay-one", "velocity", *usual.name_parts) != run_name("replay-one", "velocity", *finer.name_parts)

@@ -74,11 +74,13 @@ def _stream(order: int, connection, receive_ns: np.ndarray, messages) -> Iterato
         yield int(received), order, connection, msg
 
 
-def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = "mcap", stamps_ns: dict[str, np.ndarray] | None = None) -> Path:
+def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = "mcap", stamps_ns: dict[str, np.ndarray] | None = None,
+              custom_data: dict[str, str] | None = None) -> Path:
     """Write joint-state topics as a bag: a ROS 2 folder (mcap or sqlite3
     storage) or a ROS 1 .bag file. Built beside `out` and moved there whole;
     `out` must not exist (a bag is never replaced). `stamps_ns` overrides the
-    header stamps per topic (receive times stay t)."""
+    header stamps per topic (receive times stay t); `custom_data`: what the bag
+    was made from, in a ROS 2 bag's metadata.yaml (a ROS 1 bag has no place for it)."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
@@ -102,6 +104,8 @@ def write_bag(out: str | os.PathLike, topics: list[JointStates], storage: str = 
             plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
             writer = Writer2(target, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
         serialize = typestore.serialize_ros1 if ros1 else typestore.serialize_cdr
+        for key, value in (custom_data or {}).items() if not ros1 else ():
+            writer.set_custom_data(key, value)
         with writer:
             streams = []
             for order, states in enumerate(topics):
@@ -128,6 +132,7 @@ def export_run(run_dir: Path, out: Path, model: PsmModel, arm: str | None = None
     publishes: measured_js (position, velocity, the *simulated* effort) and
     jaw/measured_js, stamped with the simulated time."""
     from dvrk_dart.io.mcap_read import read_mcap
+    from dvrk_dart.io.provenance import sha256_of, software_versions
 
     log = Path(run_dir) / "run.mcap"
     if not log.is_file():
@@ -149,4 +154,6 @@ def export_run(run_dir: Path, out: Path, model: PsmModel, arm: str | None = None
             raise DvrkDartError(f"{log}: {label}{j + 1} is {values[k, j]} at t = {record.t[k]:.3f} s: nothing to export there")
     if storage == "ros1" and out.suffix != ".bag":
         raise DvrkDartError(f"--bag: a ROS 1 bag is a .bag file, not {out}")
-    return write_bag(out, arm_joint_states(model, arm, record.t, record.q, record.dq, record.effort_sim), storage)
+    made_from = {"dvrk_dart.source_run": str(log.resolve()), "dvrk_dart.source_sha256": sha256_of(log),
+                 **{f"dvrk_dart.{key}": str(value) for key, value in software_versions().items()}}
+    return write_bag(out, arm_joint_states(model, arm, record.t, record.q, record.dq, record.effort_sim), storage, custom_data=made_from)

@@ -114,7 +114,7 @@ def band_statistics(band_low: np.ndarray, band_high: np.ndarray, values: np.ndar
 def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str | None = None) -> dict:
     from dvrk_dart.identification.sampling import sample_parameters
     from dvrk_dart.io.provenance import file_record, software_versions
-    from dvrk_dart.io.reference_data import input_record, resolve_run, sha256_of
+    from dvrk_dart.io.reference_data import input_record, resolve_run
     from dvrk_dart.io.signal import process
     from dvrk_dart.io.arm import load_arm
     from dvrk_dart.runs.replay import replay_duration
@@ -142,8 +142,8 @@ def run_uncertainty(config: UncertaintyConfig, out: str | Path, ray_address: str
             "versions": software_versions(),
             "processing": {"processing": processing, "chosen_because": processing_why},
             "parameters": drawn.source,
-            "params": file_record(arm.params.source),
-            "params_cov_sha256": sha256_of(Path(config.params_cov)) if config.params_cov else None,
+            # the file the nominal and the draws came from: a --params-cov file holds its own nominal (not the arm's --params)
+            "params": file_record(Path(config.params_cov) if config.params_cov else arm.params.source),
             "projected_bodies": drawn.projected_bodies,
             "clipped_friction_coefficients": drawn.clipped_friction,
             "samples_replayed": len(sims),

@@ -96,4 +96,4 @@ def band_sentence(result: dict) -> str | None:
     partial = duration and band["replayed_s"] < duration - TRIMMED_ENDS_S
     span = f" (over its first {band['replayed_s']:.1f} s of {duration:.1f} s)" if partial else ""
     return (f"parameter band of '{band['run']}'{span}: measured efforts outside it on {outside}; "
-            f"unmodelled effects: {unmodelled}; within the band the drawn parameters span (an assumed spread where no covariance was given): {within}")
+            f"unmodelled effects: {unmodelled}; within the band the drawn parameters span ({band.get('parameters') or 'drawn parameters'}): {within}")
