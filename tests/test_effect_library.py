@@ -11,7 +11,7 @@ from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_di
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness
 from dvrk_dart.diagnosis.effects.library import candidate_effects, config_effort_by_formula, effects_to_sim_config
-from dvrk_dart.diagnosis.payload.payload import PointPayload
+from dvrk_dart.diagnosis.effects.payload import PointPayload
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process
 from dvrk_dart.sim.config import JointEffects, SimConfig
@@ -105,8 +105,8 @@ def test_a_payload_on_the_yaw_link_has_its_inertia_in_j1(arm, segment):
     the yaw axis is tied to it as a point mass's: 0.2 kg on the yaw link gives
     J1 the point mass's whole effort (its only joint), the coefficients'
     Jacobian matches finite differences."""
-    from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
-    from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+    from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload
+    from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 
     state = segment.head(200)
     ref = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")

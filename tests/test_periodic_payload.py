@@ -6,9 +6,9 @@ the mass at the hand position lands where the scale says."""
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
 from dvrk_dart.diagnosis.payload.intervals import INTERVAL_PROBABILITY
 from dvrk_dart.diagnosis.payload.periodic_payload import (

@@ -9,7 +9,7 @@ from dvrk_dart.diagnosis.checks.payload_checks import hand_position_on_link
 from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
-from dvrk_dart.diagnosis.payload.payload import PointPayload
+from dvrk_dart.diagnosis.effects.payload import PointPayload
 from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
 
 #: the 105 g runs' hand placement on the pitch link (pipelines/withheld.toml [payload])

@@ -97,7 +97,7 @@ def test_a_run_minus_its_baseline_is_split_against_two_sessions_floor(arm, segme
     session's (q3 0.0374 N left, floor 0.021: 1.8x) a synthetic point mass read
     "an unmodelled effect remains there"."""
     from dvrk_dart.diagnosis.output.answer import answer_sentence
-    from dvrk_dart.diagnosis.payload.payload import PointPayload
+    from dvrk_dart.diagnosis.effects.payload import PointPayload
 
     carriage = arm.model.link_by_name("insertion_carriage").key
     mass = [(PointPayload(arm.model, carriage), np.r_[0.1, -0.02, -0.02, -0.0995])]

@@ -240,11 +240,11 @@ def test_a_mass_held_at_zero_is_no_payload():
     """A fit at its bound of zero (3.55e-19 kg, 2018 test1 against test2 as its baseline: the same arm, no weight) was
     named "a payload on intermediate (parallelogram, 3.55e-19 kg)"; a gram is the least a payload weighs."""
     from dvrk_dart.diagnosis.diagnose import not_a_payload_because
-    from dvrk_dart.diagnosis.payload.payload_report import MASS_ON_SESSION_JOINTS
+    from dvrk_dart.diagnosis.payload.payload_report import AT_POSITION_WITHOUT_REPEAT
 
     assert "under 1 g" in not_a_payload_because({"mass_kg": 3.55e-19, "mass_identified": True})
     assert "under 1 g" in not_a_payload_because({"mass_kg": 0.2, "payload_at": {"mass_kg": 4e-4}})
     assert not_a_payload_because({"mass_kg": 0.098, "mass_identified": True}) is None
     assert not_a_payload_because({"mass_kg": 0.0, "mass_identified": False}) is None  # no mass to judge: its first moment speaks
-    # the real null pair at the tool roll's origin, no --repeat: +0.007 kg (+0.003 to +0.011), all of it q3's gravity
-    assert "sessions change" in not_a_payload_because({"payload_at": {"mass_kg": None, "not_determined": {"mass_kg": MASS_ON_SESSION_JOINTS}}})
+    # the real null pair, no --repeat: up to 54 g at a hand position, intervals excluding zero
+    assert "--repeat" in not_a_payload_because({"payload_at": {"mass_kg": None, "not_determined": {"mass_kg": AT_POSITION_WITHOUT_REPEAT}}})

@@ -15,12 +15,12 @@ import pandas as pd
 
 from dvrk_dart.diagnosis.fit.design import Grams
 from dvrk_dart.diagnosis.effects.effect import Effect
-from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, with_point_ties
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
-from dvrk_dart.diagnosis.payload.payload import PointPayload
+from dvrk_dart.diagnosis.effects.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import (
-    MASS_ON_SESSION_JOINTS,
+    AT_POSITION_WITHOUT_REPEAT,
     describe_payload,
     effort_not_determined,
     flag_payload_at_link,
@@ -369,12 +369,12 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
 
 def not_a_payload_because(fit: dict) -> str | None:
     """Why a payload-shaped fit is no payload, or None: the mass it gives (at the hand position when one was given, else its
-    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or its mass at
-    the hand position told from zero only by the joints whose gravity shape sessions change, no --repeat measuring that."""
+    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or a hand position
+    given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`)."""
     at = fit.get("payload_at") or {}
-    if (at.get("not_determined") or {}).get("mass_kg") == MASS_ON_SESSION_JOINTS:
-        return ("its mass at the --payload-at position stands out of zero only on joints whose gravity shape sessions change, and no "
-                "--repeat pair measures that change: a session change read as a payload")
+    if (at.get("not_determined") or {}).get("mass_kg") == AT_POSITION_WITHOUT_REPEAT:
+        return ("no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position "
+                "(two sessions without any weight read up to 54 g at such positions)")
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
     if mass is not None and mass < MIN_PAYLOAD_KG:
         return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "

@@ -28,7 +28,7 @@ import numpy as np
 from dvrk_dart.diagnosis.api import simulation_hook
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measurement
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic

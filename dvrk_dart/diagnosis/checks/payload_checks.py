@@ -24,7 +24,7 @@ from dvrk_dart.diagnosis.fit.session_floor import repeatable_share
 from dvrk_dart.diagnosis.output.answer import answer_sentence, split_floors
 from dvrk_dart.diagnosis.output.wording import share_words
 from dvrk_dart.diagnosis.payload.identifiable import reference_first_moment
-from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 from dvrk_dart.io.atomic import write_json_atomic
 from dvrk_dart.io.arm import Arm
 from dvrk_dart.model.joints import N_JOINTS

@@ -35,7 +35,7 @@ from dvrk_dart.diagnosis.output.beyond_identified import joints_at_level
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE, diagnosis_html
 from dvrk_dart.io.html import render, table, text_cell
 from dvrk_dart.diagnosis.output.wording import share_words
-from dvrk_dart.diagnosis.payload.payload import PointPayload, equivalent_payload_links
+from dvrk_dart.diagnosis.effects.payload import PointPayload, equivalent_payload_links
 from dvrk_dart.diagnosis.checks.payload_checks import validate_null_pair, validate_payload_speeds, validate_real_payload
 from dvrk_dart.diagnosis.checks.blind_suite import validate_blind_suite
 from dvrk_dart.diagnosis.checks.synthetic import real_segment, synthesize_measurement

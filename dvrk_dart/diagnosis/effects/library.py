@@ -16,7 +16,7 @@ from dvrk_dart.diagnosis.effects.arm_effects import (
 )
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload.first_moment import FirstMomentPayload
+from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload
 from dvrk_dart.diagnosis.effects.geometry import ENVELOPE_MARGIN_M, link_envelope
 from dvrk_dart.diagnosis.effects.joint_effects import (
     AngleLoad,
@@ -31,7 +31,7 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     coupling_friction_links,
     presliding_distances,
 )
-from dvrk_dart.diagnosis.payload.payload import (
+from dvrk_dart.diagnosis.effects.payload import (
     PointPayload,
     equivalent_payload_links,
     mass_seen_by_gravity,

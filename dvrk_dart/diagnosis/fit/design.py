@@ -12,7 +12,7 @@ import scipy.optimize
 
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
+from dvrk_dart.diagnosis.effects.first_moment import YAW_PATH_JOINT
 from dvrk_dart.model.joints import N_JOINTS
 
 #: block length for the folds and the bootstrap (s): much longer than the

@@ -10,7 +10,7 @@ import numpy as np
 
 from dvrk_dart.diagnosis.fit.design import BLOCK_DURATION_S, MAX_BLOCKS_PER_RUN, WITHHELD_KINDS, Fit, per_joint_fraction, sse, weighted_fraction
 from dvrk_dart.diagnosis.effects.library import effects_to_sim_config, not_simulated, unsimulated_effort
-from dvrk_dart.diagnosis.payload.payload_report import choose_within_families
+from dvrk_dart.diagnosis.fit.families import choose_within_families
 from dvrk_dart.diagnosis.fit.problem import Problem
 from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.io.arm import Arm

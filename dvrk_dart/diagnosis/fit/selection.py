@@ -71,7 +71,7 @@ from dvrk_dart.diagnosis.fit.design import (
     weighted_fraction,
 )
 from dvrk_dart.diagnosis.fit.periodic_noise import BEYOND_NOISE_LEVEL, PeriodicNoise
-from dvrk_dart.diagnosis.payload.payload import PointPayload
+from dvrk_dart.diagnosis.effects.payload import PointPayload
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: contiguous folds of the held-out scoring: a fold of a 28 s run is ~1 base

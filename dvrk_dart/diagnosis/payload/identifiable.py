@@ -14,13 +14,13 @@ from typing import Callable
 import numpy as np
 
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload.first_moment import (
+from dvrk_dart.diagnosis.effects.first_moment import (
     FIRST_MOMENT_COLUMNS,
     YAW_PATH_JOINT,
     FirstMomentPayload,
     PayloadAtPosition,
 )
-from dvrk_dart.diagnosis.payload.payload import (
+from dvrk_dart.diagnosis.effects.payload import (
     first_moment_map,
     mass_seen_by_gravity,
     point_mass_parameters,
@@ -32,6 +32,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     WITHOUT_REPEAT,
     at_position_sentence,
     effort_not_determined,
+    position_figures_without_repeat,
     pitch_shaft_offsets,
     swamp,
 )
@@ -222,6 +223,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
         report["payload_at"] = _at_position(arm, selector, chosen, index, at_index, session_fit)
         report["position_m"] = report["payload_at"]["position_m"]
         at = report["payload_at"]
+        if session_fit is None:
+            position_figures_without_repeat(at)
         words.append(at_position_sentence(at, _text(at['mass_kg'], at['mass_kg_interval'], 'kg', '.3f')))
     if session_fit is None:
         words.append("Without --repeat (the baseline's motion in another session) the intervals come from time segments of the runs, "

@@ -1,4 +1,4 @@
-"""What a selected payload is: its member among equivalent links, its mass profile, its report."""
+"""What a selected payload is: its mass profile, its report (its member among equivalent links: fit/families.py)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from dvrk_dart.diagnosis.fit.design import PAYLOAD_MASS_PRIOR_PER_KG2, Fit
+from dvrk_dart.diagnosis.fit.families import best_fit, family_members, swap
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.payload.payload import PointPayload, point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import PointPayload, point_mass_parameters
 from dvrk_dart.diagnosis.fit.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.arm import Arm
@@ -52,21 +52,25 @@ def effort_not_determined(report: dict, joint: int, reason: str) -> None:
     reasons["gravity_efforts_at_q0"] = f"{reasons['gravity_efforts_at_q0']}; {text}" if "gravity_efforts_at_q0" in reasons else text
 
 
-#: why the mass at a --payload-at position is not determined without a --repeat pair when only joints whose gravity shape
-#: sessions change tell it from zero (the real null pair, one against one-no-weight, at the tool roll's origin: +0.007 kg,
-#: interval +0.003 to +0.011, all of it q3's gravity)
-MASS_ON_SESSION_JOINTS = ("its gravity stands out of zero only on joints whose gravity shape sessions change (above), and without a "
-                          "--repeat pair nothing measures that change: give --repeat (the baseline's motion in another session)")
+#: why a --payload-at position's figures are not determined without a --repeat pair: a session's change of gravity's
+#: shape reads as a mass there (the real null pair, two sessions without a weight, both orders, at the pitch link's hand
+#: position and the origins of tool_roll, insertion_carriage and pitch_top: upstream, 4 of 8 diagnoses read 12 to 54 g,
+#: intervals excluding zero, the other 4 a negative mass; periodic, the tool roll's origin read 7 g, 3 to 11 g)
+AT_POSITION_WITHOUT_REPEAT = ("without a --repeat pair (the baseline's motion in another session) nothing measures how sessions change "
+                              "gravity's shape (a joint's zero, the base's tilt), which reads as a mass at the position (two sessions "
+                              "without any weight read up to 54 g, intervals excluding zero): give --repeat")
 
 
-def mass_only_on_session_joints(at: dict) -> None:
-    """The mass at the position not determined where every gravity figure left (the efforts at q = 0 on the other joints,
-    J1's slope) holds zero: its interval excluding zero then rests on the joints `effort_not_determined` took out."""
-    intervals = [i for i in at.get("gravity_efforts_at_q0_interval") or [] if i is not None] + [at.get(f"{YAW_SLOPE}_interval")]
-    if at["mass_kg"] is None or any(i is not None and (i[0] > 0 or i[1] < 0) for i in intervals):
-        return
+def position_figures_without_repeat(at: dict) -> None:
+    """A --payload-at report's mass, gravity efforts at q = 0 and J1 slope not determined (AT_POSITION_WITHOUT_REPEAT)."""
     at["mass_kg"] = at["mass_kg_interval"] = None
-    at.setdefault("not_determined", {})["mass_kg"] = MASS_ON_SESSION_JOINTS
+    at["gravity_efforts_at_q0"] = [None] * len(at["gravity_efforts_at_q0"])
+    at["gravity_efforts_at_q0_interval"] = [None] * len(at["gravity_efforts_at_q0"])
+    keys = ["mass_kg", "gravity_efforts_at_q0"]
+    if YAW_SLOPE in at:
+        at[YAW_SLOPE] = at[f"{YAW_SLOPE}_interval"] = None
+        keys.append(YAW_SLOPE)
+    at["not_determined"] = {**at.get("not_determined", {}), **dict.fromkeys(keys, AT_POSITION_WITHOUT_REPEAT)}
 
 
 #: why a payload's gravity effort is not given on a joint the runs did not record
@@ -131,51 +135,6 @@ def flag_payload_at_link(report: dict, at_link: str, same_efforts: tuple[str, ..
 PROFILE_MASSES_KG = tuple(float(m) for m in np.geomspace(0.01, 2.0, 24))
 
 
-def _penalised_cost(selector: "Selector", chosen: list[int], fit: Fit) -> float:
-    """Weighted training squared residual (up to a constant) plus the payloads' Occam prior."""
-    masses = [fit.params[i][0] for i in chosen if isinstance(selector.design.effects[i], PointPayload)]
-    prior = PAYLOAD_MASS_PRIOR_PER_KG2 * selector.energy_total
-    A, g = selector.A_total, selector.g_total
-    return float(fit.beta @ A @ fit.beta - 2 * fit.beta @ g + prior * np.sum(np.square(masses)))
-
-
-def _best_fit(selector: "Selector", chosen: list[int], cv: "CvResult | None" = None) -> Fit:
-    """Fit on all training data from the effects' own starting points and from
-    the folds' mean parameters; keep the better (nonlinear fits have local minima)."""
-    candidates = [selector.fit_all(chosen)]
-    folds = [p for p in cv.fold_params if all(i in p for i in chosen)] if cv is not None else []
-    if folds and chosen:
-        warm = {i: np.mean([p[i] for p in folds], axis=0) for i in chosen}
-        candidates.append(selector.fit_all(chosen, warm))
-    return min(candidates, key=lambda fit: _penalised_cost(selector, chosen, fit))
-
-
-def _family_members(selector: "Selector", payload: int) -> list[int]:
-    family = selector.design.effects[payload].family
-    return [j for j, e in enumerate(selector.design.effects) if isinstance(e, PointPayload) and e.family == family]
-
-
-def _swap(chosen: list[int], old: int, new: int) -> list[int]:
-    return [new if i == old else i for i in chosen]
-
-
-def choose_within_families(selector: "Selector", selected: list[int], cv: "CvResult") -> tuple[list[int], Fit, "CvResult"]:
-    """A payload family (links the efforts cannot tell apart) is one hypothesis
-    over the union of its links' envelopes: its member is the one with the
-    lowest penalised cost, the Occam prior deciding as it does within one link,
-    not the held-out score, whose differences among members are noise."""
-    final, swapped = _best_fit(selector, selected, cv), False
-    for payload in [i for i in selected if isinstance(selector.design.effects[i], PointPayload)]:
-        for member in _family_members(selector, payload):
-            if member in selected:
-                continue
-            trial = _swap(selected, payload, member)
-            fit = _best_fit(selector, trial)
-            if _penalised_cost(selector, trial, fit) < _penalised_cost(selector, selected, final):
-                selected, final, payload, swapped = trial, fit, member, True
-    return selected, final, (selector.cross_validate(selected) if swapped else cv)
-
-
 def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
     """Cross-validated score of the selected set with the payload's mass fixed
     on a grid (its position free in the envelopes of its family's links): where
@@ -183,9 +142,9 @@ def mass_profile(selector: "Selector", chosen: list[int], payload: int) -> dict:
     tell the masses apart (for a link turning about a fixed axis, gravity only
     sees m c; m alone comes from the weak inertial terms)."""
     best_scores: dict[float, CvResult] = {}
-    for member in _family_members(selector, payload):
-        members_set = _swap(chosen, payload, member)
-        fit = _best_fit(selector, members_set)
+    for member in family_members(selector, payload):
+        members_set = swap(chosen, payload, member)
+        fit = best_fit(selector, members_set)
         effect = selector.design.effects[member]
         original = effect.parameters
         try:

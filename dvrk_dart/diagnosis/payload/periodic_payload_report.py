@@ -10,13 +10,13 @@ import numpy as np
 
 from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
-from dvrk_dart.diagnosis.payload.payload import equivalents_of, mass_seen_by_gravity, point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import equivalents_of, mass_seen_by_gravity, point_mass_parameters
 from dvrk_dart.diagnosis.payload.payload_report import (
     J1_EFFORTS_SENTENCE,
     J1_SLOPE_SENTENCE,
     SWAMPED,
     WITHOUT_REPEAT,
-    mass_only_on_session_joints,
+    position_figures_without_repeat,
     at_position_sentence,
     effort_not_determined,
     pitch_shaft_offsets,
@@ -238,11 +238,10 @@ def periodic_payload_report(arm, candidates, runs, repeat_run, features_of, offs
         report["position_m"] = at.position.tolist()
         session["mass_kg_at_position"] = session_at["mass_kg"]
     if repeat is None:  # nothing measures a session's change of these joints' gravity shape: their intervals do not hold it
-        for part in [report, *([report["payload_at"]] if at is not None else [])]:
-            for j in np.flatnonzero(np.asarray(offset_joints)[:3]):
-                effort_not_determined(part, int(j), SESSION_SHAPE_NOT_COUNTED)
+        for j in np.flatnonzero(np.asarray(offset_joints)[:3]):
+            effort_not_determined(report, int(j), SESSION_SHAPE_NOT_COUNTED)
         if at is not None:
-            mass_only_on_session_joints(report["payload_at"])
+            position_figures_without_repeat(report["payload_at"])
     if repeat is not None:
         # what the --repeat pair alone reads as this payload: a session change of its shape, counted in every interval
         report["session_change_as_payload"] = {key: session[key] for key in ("first_moment_base_at_q0_kg_m", "gravity_efforts_at_q0",

@@ -29,11 +29,11 @@ from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_C
 from dvrk_dart.diagnosis.effects.geometry import joints_moving_link
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
-from dvrk_dart.diagnosis.payload.first_moment import YAW_PATH_JOINT
+from dvrk_dart.diagnosis.effects.first_moment import YAW_PATH_JOINT
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _yaw_slope, j1_sentences
 from dvrk_dart.diagnosis.payload.payload_report import renew_sentences
 from dvrk_dart.diagnosis.payload.periodic_payload_report import j1_sentences as periodic_j1_sentences
-from dvrk_dart.diagnosis.payload.payload import point_mass_parameters
+from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the J1 figures a path gives: (report key, index in it or None for a scalar)
