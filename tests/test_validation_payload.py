@@ -239,8 +239,7 @@ def test_a_verdict_on_a_mass_the_answer_calls_not_determined_is_its_intervals():
 def test_a_mass_held_at_zero_is_no_payload():
     """A fit at its bound of zero (3.55e-19 kg, 2018 test1 against test2 as its baseline: the same arm, no weight) was
     named "a payload on intermediate (parallelogram, 3.55e-19 kg)"; a gram is the least a payload weighs."""
-    from dvrk_dart.diagnosis.diagnose import not_a_payload_because
-    from dvrk_dart.diagnosis.payload.payload_report import AT_POSITION_WITHOUT_REPEAT
+    from dvrk_dart.diagnosis.payload.payload_report import AT_POSITION_WITHOUT_REPEAT, not_a_payload_because
 
     assert "under 1 g" in not_a_payload_because({"mass_kg": 3.55e-19, "mass_identified": True})
     assert "under 1 g" in not_a_payload_because({"mass_kg": 0.2, "payload_at": {"mass_kg": 4e-4}})

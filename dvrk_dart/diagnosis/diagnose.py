@@ -20,10 +20,10 @@ from dvrk_dart.diagnosis.payload.identifiable import first_moment_report, with_p
 from dvrk_dart.diagnosis.output.page import PERIOD_FIGURE
 from dvrk_dart.diagnosis.effects.payload import PointPayload
 from dvrk_dart.diagnosis.payload.payload_report import (
-    AT_POSITION_WITHOUT_REPEAT,
     describe_payload,
     effort_not_determined,
     flag_payload_at_link,
+    not_a_payload_because,
     mass_profile,
     without_unrecorded_joints,
 )
@@ -46,7 +46,7 @@ from dvrk_dart.diagnosis.fit.result import (
     without_last_effect,
 )
 from dvrk_dart.errors import DvrkDartError
-from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG, DiagnosisRun, RunRole, Simulate
+from dvrk_dart.diagnosis.fit.diagnosis_runs import DiagnosisRun, RunRole, Simulate
 from dvrk_dart.diagnosis.fit.selection import CV_FOLDS
 from dvrk_dart.diagnosis.fit.session_floor import card_repeat, constants_beyond_session, gap_split, session_floor
 from dvrk_dart.diagnosis.output.gravity_mismatch import gravity_mismatch_of, offsets_left_out
@@ -365,21 +365,6 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
                                 noise_gaps(holdout_runs or train_runs, recorded, problem.arm)),
         identified_terms=carried,
     )
-
-
-def not_a_payload_because(fit: dict) -> str | None:
-    """Why a payload-shaped fit is no payload, or None: the mass it gives (at the hand position when one was given, else its
-    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or a hand position
-    given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`)."""
-    at = fit.get("payload_at") or {}
-    if (at.get("not_determined") or {}).get("mass_kg") == AT_POSITION_WITHOUT_REPEAT:
-        return ("no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position "
-                "(two sessions without any weight read up to 54 g at such positions)")
-    mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
-    if mass is not None and mass < MIN_PAYLOAD_KG:
-        return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
-                f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
-    return None
 
 
 def _write_outputs(out_dir: Path, run: DiagnosisRun, before: np.ndarray, after: np.ndarray, figures: bool, period: tuple,

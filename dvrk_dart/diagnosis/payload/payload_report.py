@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from dvrk_dart.diagnosis.fit.diagnosis_runs import MIN_PAYLOAD_KG
 from dvrk_dart.diagnosis.fit.families import best_fit, family_members, swap
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.payload import PointPayload, point_mass_parameters
@@ -71,6 +72,21 @@ def position_figures_without_repeat(at: dict) -> None:
         at[YAW_SLOPE] = at[f"{YAW_SLOPE}_interval"] = None
         keys.append(YAW_SLOPE)
     at["not_determined"] = {**at.get("not_determined", {}), **dict.fromkeys(keys, AT_POSITION_WITHOUT_REPEAT)}
+
+
+def not_a_payload_because(fit: dict) -> str | None:
+    """Why a payload-shaped fit is no payload, or None: the mass it gives (at the hand position when one was given, else its
+    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or a hand position
+    given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`)."""
+    at = fit.get("payload_at") or {}
+    if (at.get("not_determined") or {}).get("mass_kg") == AT_POSITION_WITHOUT_REPEAT:
+        return ("no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position "
+                "(two sessions without any weight read up to 54 g at such positions)")
+    mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
+    if mass is not None and mass < MIN_PAYLOAD_KG:
+        return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
+                f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
+    return None
 
 
 #: why a payload's gravity effort is not given on a joint the runs did not record
