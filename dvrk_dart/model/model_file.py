@@ -91,6 +91,8 @@ def _diagnosis_joints(raw: dict, path: Path) -> tuple[tuple[tuple[str, str], ...
         raise DvrkDartError(f"{path}: [diagnosis] elastic is a table (joint = kind), position_friction a list of joints")
     if unknown := [str(j) for j in [*elastic, *position_friction] if j not in JOINT_NAMES]:
         raise DvrkDartError(f"{path}: [diagnosis]: unknown joint {', '.join(unknown)} (known: {', '.join(JOINT_NAMES)})")
+    if len(set(position_friction)) < len(position_friction):
+        raise DvrkDartError(f"{path}: [diagnosis] position_friction names a joint twice: {position_friction}")
     if wrong := [f"{j} = {k!r}" for j, k in elastic.items() if k not in ELASTIC_KINDS]:
         raise DvrkDartError(f"{path}: [diagnosis] elastic: {', '.join(wrong)} (a kind is one of {', '.join(ELASTIC_KINDS)})")
     return tuple((str(j), str(k)) for j, k in elastic.items()), tuple(str(j) for j in position_friction)

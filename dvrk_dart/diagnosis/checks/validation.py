@@ -53,12 +53,21 @@ WITHHELD_FILE = PIPELINES_DIR / "withheld.toml"
 REPORT_FIGURE_JOINTS = ("q1", "q2", "q3")
 
 
+def _elasticity(arm: Arm, joint: str) -> str:
+    """The kind of elasticity the arm's card gives `joint` ([diagnosis] elastic), or a one-line error."""
+    kinds = dict(arm.model.elastic_joints)
+    if joint not in kinds:
+        raise DvrkDartError(f"{WITHHELD_FILE}: a stiffness case on {joint}, which {arm.model.source.name}'s [diagnosis] elastic does not "
+                            f"name (it names {', '.join(kinds) or 'none'})")
+    return kinds[joint]
+
+
 def _effect(arm: Arm, case: dict):
     kind = case["effect"]
     factories = {
         "friction": lambda: JointFriction(arm.model, case["joint"]),
         "offset": lambda: JointOffset(arm.model, case["joint"]),
-        "stiffness": lambda: JointStiffness(arm.model, case["joint"], dict(arm.model.elastic_joints)[case["joint"]]),
+        "stiffness": lambda: JointStiffness(arm.model, case["joint"], _elasticity(arm, case["joint"])),
         "armature": lambda: JointArmature(arm.model, case["joint"]),
         "payload": lambda: PointPayload(arm.model, int(case["link"]), equivalent_keys=equivalent_payload_links(arm)[int(case["link"])]),
         "tilt": lambda: GravityTilt(arm),

@@ -32,7 +32,8 @@ MIN_PAYLOAD_KG = 1e-3
 #: one): the baseline is aligned on the run by whole samples within it, then both
 #: cut to their common span (at least half the shorter run)
 MAX_START_OFFSET_SHARE = 0.25
-#: draws of the positions' noise a run's noise energy averages (`residual_noise`; ~0.5 s a run of 6000 samples)
+#: draws of the positions' noise a run's noise energy averages (`residual_noise`; ~0.5 s a run of 6000 samples): fewer
+#: than the session floor's (made twice a validation; a diagnosis makes it for every run, a campaign for hundreds)
 NOISE_DRAWS = 4
 
 

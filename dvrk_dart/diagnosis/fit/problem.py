@@ -204,7 +204,7 @@ def _one_body_on_these_runs(arm: Arm, effects: list[Effect], runs: list) -> list
     """The payload candidates with the links these runs do not move apart from theirs as equivalent links (the
     joints between held in every run: a 3-joint log's wrist moves the tool with the insertion carriage), as the
     parallelogram's links are for any motion: the efforts cannot tell them apart. They become one family: at
-    most one of them is selected, the member by its penalised cost (payload_report.choose_within_families)."""
+    most one of them is selected, the member by its penalised cost (families.choose_within_families)."""
     q = np.vstack([r.state.q for r in runs if r is not None])
     held = {j: float(q[0, j]) for j in np.flatnonzero(~spanning_columns(q))}
     if not held:

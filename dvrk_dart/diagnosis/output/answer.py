@@ -241,7 +241,8 @@ def answer_paragraphs(result: dict) -> list[str]:
     gaps = "; ".join(gap_change(j, b, a, effort_unit(result, j)) for j, b, a in zip(joints, before, after))
     where = "on the held-out runs" if split == "holdout" else "on the training runs"
     if result.get("payload_not_distinguished"):
-        where = f"no payload is distinguished from none ({result['payload_not_distinguished']['why']}); " + where
+        not_one = result["payload_not_distinguished"]
+        where = f"no payload is distinguished from none ({not_one.get('why') or not_one['meaning']}); " + where
     beyond = beyond_identified_sentence(result)  # what the data show beyond the identified model, first
     # the words below are against the paper's simulation, not the identified model: their subject says so
     gap = "The gap to the simulation of the identified inertia alone" if beyond and result.get("diagnosis_base", "inertial") == "inertial" \

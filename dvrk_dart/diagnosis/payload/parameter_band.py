@@ -95,5 +95,6 @@ def band_sentence(result: dict) -> str | None:
     duration = band.get("run_duration_s")
     partial = duration and band["replayed_s"] < duration - TRIMMED_ENDS_S
     span = f" (over its first {band['replayed_s']:.1f} s of {duration:.1f} s)" if partial else ""
+    drawn = f" ({band['parameters']})" if band.get("parameters") else ""
     return (f"parameter band of '{band['run']}'{span}: measured efforts outside it on {outside}; "
-            f"unmodelled effects: {unmodelled}; within the band the drawn parameters span ({band.get('parameters') or 'drawn parameters'}): {within}")
+            f"unmodelled effects: {unmodelled}; within the band the drawn parameters span{drawn}: {within}")

@@ -58,8 +58,8 @@ def effort_not_determined(report: dict, joint: int, reason: str) -> None:
 #: position and the origins of tool_roll, insertion_carriage and pitch_top: upstream, 4 of 8 diagnoses read 12 to 54 g,
 #: intervals excluding zero, the other 4 a negative mass; periodic, the tool roll's origin read 7 g, 3 to 11 g)
 AT_POSITION_WITHOUT_REPEAT = ("without a --repeat pair (the baseline's motion in another session) nothing measures how sessions change "
-                              "gravity's shape (a joint's zero, the base's tilt), which reads as a mass at the position (two sessions "
-                              "without any weight read up to 54 g, intervals excluding zero): give --repeat")
+                              "gravity's shape (a joint's zero, the base's tilt), which reads as a mass at the position (docs/diagnosis.md: "
+                              "the PSM's two sessions without any weight read tens of grams, intervals excluding zero): give --repeat")
 
 
 def position_figures_without_repeat(at: dict) -> None:
@@ -80,8 +80,7 @@ def not_a_payload_because(fit: dict) -> str | None:
     given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`)."""
     at = fit.get("payload_at") or {}
     if (at.get("not_determined") or {}).get("mass_kg") == AT_POSITION_WITHOUT_REPEAT:
-        return ("no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position "
-                "(two sessions without any weight read up to 54 g at such positions)")
+        return "no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position"
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
     if mass is not None and mass < MIN_PAYLOAD_KG:
         return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
