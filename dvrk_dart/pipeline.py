@@ -145,6 +145,8 @@ def _contact_section(out_dir: Path) -> tuple[tuple[str, str], dict]:
 
 
 UNCERTAINTY_FILE = PIPELINES_DIR / "uncertainty.toml"
+#: what `validate` records of itself in its --out folder
+VALIDATE_SUMMARY = "validate.json"
 
 
 def _uncertainty_section(out_dir: Path, jobs: int, executor: str, ray_address: str | None):
@@ -172,11 +174,15 @@ def validate(out_dir: Path, report_dir: Path, jobs: int = 2, force: bool = False
     check_shared_folder(out_dir, VALIDATION_KIND)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
-    start = time.perf_counter()
+    start, code = time.perf_counter(), None
     try:
-        return _validate(out_dir, report_dir, jobs, force, dynamics, executor, ray_address)
+        code = _validate(out_dir, report_dir, jobs, force, dynamics, executor, ray_address)
+        return code
     finally:  # what this run wrote is the tool's, even when a stage failed: the next run may replace it
-        print(f"validate: {time.perf_counter() - start:.0f} s")
+        wall = time.perf_counter() - start
+        print(f"validate: {wall:.0f} s")
+        # the whole campaign's time (make bench reads it; campaign.json's is the simulation runs' alone)
+        write_json_atomic(out_dir / VALIDATE_SUMMARY, {"wall_time_s": wall, "jobs": jobs, "completed": code is not None})
         write_marker(out_dir, VALIDATION_KIND, skip_marked=True)
 
 

@@ -140,3 +140,15 @@ def test_campaign_skips_unchanged_runs_and_lists_failures(tmp_path):
     assert not (tmp_path / config_name(bad) / "inputs.sha256").exists()
     second = run_campaign([good], tmp_path, jobs=1)
     assert second["skipped_up_to_date"] == [config_name(good)] and second["ran"] == []
+
+
+def test_the_bench_reads_the_whole_validation_s_time(tmp_path):
+    """make bench's campaign figure read campaign.json, the simulation runs alone (36 s of a 345 s validation), against
+    the target of the whole: the whole is validate.json's, a validation that did not complete none."""
+    from dvrk_dart.bench import bench_campaign
+
+    (tmp_path / "campaign.json").write_text(json.dumps({"wall_time_s": 36.0}))
+    (tmp_path / "validate.json").write_text(json.dumps({"wall_time_s": 345.0, "completed": True}))
+    assert bench_campaign(tmp_path) == {"validate_s": 345.0, "campaign_runs_s": 36.0}
+    (tmp_path / "validate.json").write_text(json.dumps({"wall_time_s": 12.0, "completed": False}))
+    assert bench_campaign(tmp_path) == {"campaign_runs_s": 36.0}
