@@ -13,6 +13,8 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.atomic import write_json_atomic
+from dvrk_dart.io.outputs import check_shared_folder, mark_written
+from dvrk_dart.pipeline import VALIDATION_KIND
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import central_difference
 from dvrk_dart.io.arm import load_arm
@@ -193,6 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="out/bench.json")
     args = parser.parse_args(argv)
     out = Path(args.out)
+    check_shared_folder(out.parent, VALIDATION_KIND)  # make validate's --out: the bench's file is one of its own
     figures = {}
     # the in-process timings first, then the end-to-end replay: nothing else (Ray's daemons, worker pools, a replay's
     # log writers) runs beside them yet (after the replay, one model query read 10.3 µs where alone it reads 6.7)
@@ -217,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         if key in figures:
             print(f"{key:<29} {figures[key]:10.3f} {'-':>8}  {'':>6}  {unit}: {meaning}")
     write_json_atomic(out, figures)
+    mark_written(out.parent, VALIDATION_KIND, out.name)
     print(f"written {out}")
     return 0
 

@@ -216,3 +216,16 @@ def test_an_output_folder_that_cannot_be_made_is_named_as_given(tmp_path):
             pytest.fail("the folder cannot be built there")
     message = str(caught.value)
     assert message.startswith("/proc/dvrk-dart-test-out: the output folder cannot be made there") and ".building" not in message
+
+
+def test_a_file_the_bench_writes_in_the_validation_folder_is_the_tool_s(tmp_path):
+    """make bench writes out/bench.json: make validate then refused out/ ("not what dvrk-dart wrote there")."""
+    from dvrk_dart.io.outputs import check_shared_folder, mark_written
+    from dvrk_dart.pipeline import VALIDATION_KIND
+
+    (tmp_path / "bench.json").write_text("{}")
+    mark_written(tmp_path, VALIDATION_KIND, "bench.json")
+    assert check_shared_folder(tmp_path, VALIDATION_KIND) == tmp_path
+    (tmp_path / "mine.txt").write_text("a user's")  # a file of the user's is still refused
+    with pytest.raises(DvrkDartError, match="mine.txt is not what dvrk-dart wrote there"):
+        check_shared_folder(tmp_path, VALIDATION_KIND)

@@ -94,6 +94,14 @@ def write_marker(folder: Path, kind: str, skip_marked: bool = False) -> None:
     (folder / MARKER).write_text(json.dumps({"kind": kind, "files": files}, indent=1) + "\n", encoding="utf-8")
 
 
+def mark_written(folder: Path, kind: str, relative: str) -> None:
+    """One more file the tool wrote in a `kind` folder, added to its marker (made when the folder has none): a
+    later command of that kind finds it its own (make validate refused the out/ that make bench wrote bench.json in)."""
+    marker = read_marker(folder) or Marker(kind, {})
+    files = {**marker.files, relative: sha256_of(folder / relative)}
+    (folder / MARKER).write_text(json.dumps({"kind": marker.kind, "files": files}, indent=1) + "\n", encoding="utf-8")
+
+
 def _nearest_existing(path: Path) -> Path:
     for candidate in (path, *path.parents):
         if candidate.exists() or candidate.is_symlink():
