@@ -200,7 +200,19 @@ def session_floor(arm: Arm, config: SessionFloorConfig) -> dict:
     except DvrkDartError as exc:
         raise DvrkDartError(f"--repeat {config.repeat}: {exc}") from None
     return {"measured": config.measured, "repeat": config.repeat, **table,
-            "runs": {config.measured: a.summary(), config.repeat: b.summary()}}
+            "runs": {config.measured: a.summary(), config.repeat: b.summary()}, "note": _weights_note(config)}
+
+
+def _weights_note(config: SessionFloorConfig) -> str | None:
+    """Where the reference data say the two recordings carry different weights (one-105g against one, read as "a session
+    effect beyond the noise" on every joint), that their difference holds the weight's efforts, not only a session's."""
+    from dvrk_dart.io.reference_data import attached_mass_kg, resolve_run
+
+    masses = [attached_mass_kg(resolve_run(name)) for name in (config.measured, config.repeat)]
+    if None in masses or masses[0] == masses[1]:
+        return None
+    return (f"{config.measured} carries {masses[0]:g} kg on the arm and {config.repeat} {masses[1]:g} kg (the reference data's "
+            "facts): their difference holds the weight's efforts, not a session's alone")
 
 
 def cmd_session_floor(args: argparse.Namespace) -> int:
@@ -214,6 +226,8 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
     why = f"--processing {args.processing}" if args.processing else ("the default: both runs are periodic excitations" if processing == "periodic"
                                                                      else "the default where a run is not a periodic excitation")
     print(f"identified model's residual, {args.measured} vs {args.repeat} ({processing} processing, {why})")
+    if table["note"]:
+        print(f"note: {table['note']}")
     print(f"{'joint':>6} {'unit':>4} {'rms diff':>9} {'demeaned':>9} {'noise':>9} {'one sess.':>9}  verdict")
     def cell(value) -> str:
         return f"{'-':>9}" if value is None else f"{value:9.4f}"

@@ -158,3 +158,12 @@ def test_a_repeat_that_starts_elsewhere_in_the_motion_is_paired_as_it_was_aligne
     a, b = paired_gaps(reference, repeat)
     assert np.array_equal(a, reference.gap[290:]) and np.array_equal(b, repeat.gap)
     assert np.all(session_floor(reference, repeat) < 1e-9)
+
+
+def test_a_weight_one_run_carries_is_no_session_change():
+    """session-floor of one against one-105g read "a session effect beyond the noise" on every joint: the reference
+    data know one of them carries 105 g, and the floor says so."""
+    from dvrk_dart.model_commands import SessionFloorConfig, _weights_note
+
+    assert "one-105g 0.105 kg" in _weights_note(SessionFloorConfig("one", "one-105g"))
+    assert _weights_note(SessionFloorConfig("one", "one-no-weight")) is None

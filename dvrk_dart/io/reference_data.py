@@ -57,6 +57,14 @@ RUNS = {
     "2018-test1": "2018/psm1_fourier_test1.csv",
     "2018-test2": "2018/psm1_fourier_test2.csv",
 }
+def attached_mass_kg(path: Path) -> float | None:
+    """The weight a reference recording carries (the manifest's attached_mass_kg, 0 where it gives none), by content;
+    None for a file the manifest does not list."""
+    digest = sha256_of(path)
+    entry = next((e for e in manifest()["files"].values() if e.get("sha256") == digest), None)
+    return None if entry is None else float(entry.get("attached_mass_kg", 0.0))
+
+
 def reference_run_arm(name: str) -> str:
     """The arm model a reference run was recorded on (its data folder: mtm/... is the MTM's)."""
     folder = RUNS[name].split("/")[0] if "/" in RUNS[name] else "psm"
