@@ -146,6 +146,8 @@ def test_a_repeat_pair_names_two_files(tmp_path):
     ('q4 = "torsion_spring" }', 'q9 = "torsion_spring" }', r"\[diagnosis\]: unknown joint q9"),
     ('q4 = "torsion_spring" }', 'q4 = "spring" }', r"\[diagnosis\] elastic: q4 = 'spring'"),
     ('position_friction = ["q1", "q2", "q3"]', 'position_friction = "q1"', r"\[diagnosis\] elastic is a table"),
+    ("q1_slope_at_q0 = 0.197 }", "q1_slope_at_q0 = -0.197 }", r"\[sessions\] payload_reading: \{q1_effort_at_q0 = a non-negative"),
+    ("q1_effort_at_q0 = 0.039, ", "", r"\[sessions\] payload_reading: "),
 ])
 def test_a_card_value_no_command_could_use_is_refused_in_one_line(tmp_path, entry, edited, message):
     """Shapes and signs of the card's values, checked when it is read (they ended in tracebacks deep in a command)."""

@@ -247,3 +247,27 @@ def test_a_mass_held_at_zero_is_no_payload():
     assert not_a_payload_because({"mass_kg": 0.0, "mass_identified": False}) is None  # no mass to judge: its first moment speaks
     # the real null pair, no --repeat: up to 54 g at a hand position, intervals excluding zero
     assert "--repeat" in not_a_payload_because({"payload_at": {"mass_kg": None, "not_determined": {"mass_kg": AT_POSITION_WITHOUT_REPEAT}}})
+
+
+def test_without_a_repeat_a_payload_needs_more_than_two_sessions_read():
+    """The real null pair without --repeat read a payload on pitch (periodic: "partly explained by a payload on pitch",
+    its J1 figures holding zero; upstream: J1 at q = 0 -0.025 N·m in [-0.034, -0.0003]). Without a --repeat, a
+    payload is named only where J1's effort at q = 0 or its slope is beyond the card's reading of its repeat pair, or
+    its mass is identified from the inertia; with one, its intervals count the session change and the rule is not asked."""
+    from dvrk_dart.diagnosis.payload.payload_report import not_a_payload_because
+    from dvrk_dart.model.description import SessionPayloadReading
+
+    read = SessionPayloadReading(q1_effort_at_q0=0.039, q1_slope_at_q0=0.197)
+    null_upstream = {"mass_kg": 0.161, "mass_identified": False, "gravity_efforts_at_q0_interval": [[-0.034, -0.0003], None, [0.0, 0.0]],
+                     "q1_gravity_slope_at_q0_nm_per_rad_interval": [-0.165, 0.002]}
+    assert "--repeat" in not_a_payload_because(null_upstream, read)
+    assert not_a_payload_because(null_upstream) is None  # a --repeat was given: its intervals count the sessions
+    yaw = {**null_upstream, "gravity_efforts_at_q0_interval": [[-0.103, -0.088], None, None]}  # a 0.2 kg payload on yaw (suite)
+    assert not_a_payload_because(yaw, read) is None
+    slope = {**null_upstream, "q1_gravity_slope_at_q0_nm_per_rad_interval": [-0.31, -0.21]}  # beyond the sessions' 0.197
+    assert not_a_payload_because(slope, read) is None
+    just_inside = {**null_upstream, "q1_gravity_slope_at_q0_nm_per_rad_interval": [-0.31, -0.19]}
+    assert not_a_payload_because(just_inside, read) is not None
+    weighed = {**null_upstream, "mass_kg": 0.2, "mass_identified": True}  # a mass from the inertia: no session change gives it
+    assert not_a_payload_because(weighed, read) is None
+    assert not_a_payload_because({}, read) is not None  # no figure at all: nothing beyond the sessions

@@ -101,8 +101,8 @@ def diagnose(
         payload's mass at that (hand-measured) position, with its interval;
     nuisance_offsets: a constant per run fitted as a nuisance term and
         reported (default: with a baseline or several runs), on the joints
-        whose constant effort moves between sessions: measured on `repeat`
-        when given, else the model card's ([sessions]); a constant the same in
+        whose constant effort moves between sessions: the model card's
+        ([sessions]) and those `repeat` shows moved; a constant the same in
         every session is an effect (`JointOffset`);
     payload_model: "first_moment" (default with a baseline: the identifiable
         quantity) or "point" (`library.candidate_effects`);
@@ -302,19 +302,27 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
                      if j in recorded} for r, c in zip(runs, columns)}
 
 
+def _payload_findings(problem: Problem, fits: list[dict], carried: dict | None) -> tuple[list[dict], dict | None, dict | None]:
+    """(the payloads named, the gravity mismatch, the payload-shaped fit that is no payload): a payload-shaped fit names a
+    payload only where a baseline run without it isolates it, and not where it is what sessions change (a session change
+    read as a payload: `not_a_payload_because`, with the model card's repeat pair's reading where no --repeat was given)."""
+    if not fits:
+        return [], None, None
+    if not problem.has_baseline:
+        return [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried, problem.recorded)), None
+    sessions_read = problem.arm.model.session_payload_reading if problem.repeat_run is None else None
+    why = not_a_payload_because(fits[0], sessions_read)
+    if why is None:
+        return fits, None, None
+    return [], None, {**fits[0], "meaning": f"the payload-shaped fit is not a payload: {why}", "why": why}
+
+
 def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: list[dict], floors, split, first_moments: list[dict],
                points: list[dict], simulated: bool, dropped: list[dict], carried: dict | None) -> Diagnosis:
     train_runs, holdout_runs = problem.train_runs, problem.holdout_runs
     offsets, recorded = problem.offset_joints, problem.recorded
     floor, split_floor = floors  # one session's deviation; the floor of the gaps split (runs minus a baseline: two sessions')
-    # a payload-shaped fit names a payload only where a baseline run without it isolates it
-    fits = first_moments + points
-    payload_fits, mismatch = (fits, None) if problem.has_baseline else (
-        [], gravity_mismatch_of(fits[0], problem.arm.model, offsets_left_out(problem.arm, carried, problem.recorded)) if fits else None)
-    not_distinguished = None
-    if payload_fits and (why := not_a_payload_because(payload_fits[0])):  # a session change read as a payload
-        not_distinguished = {**payload_fits[0], "meaning": f"the payload-shaped fit is not a payload: {why}", "why": why}
-        payload_fits = []
+    payload_fits, mismatch, not_distinguished = _payload_findings(problem, first_moments + points, carried)
     gap_before = {split: gaps([problem.before_residual(r) for r in runs], recorded) for split, runs in (("train", train_runs), ("holdout", holdout_runs))}
     gap_after = {"train": gaps(after.train_after, recorded), "holdout": gaps(after.holdout_after, recorded)}
     return Diagnosis(

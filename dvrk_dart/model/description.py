@@ -74,6 +74,16 @@ class DvrkTopics:
 
 
 @dataclass(frozen=True)
+class SessionPayloadReading:
+    """What the payload-shaped fit reads between two sessions of the arm without
+    a weight ([sessions] payload_reading): J1's gravity effort at q = 0 (N·m) and
+    its slope with q1 there (N·m/rad)."""
+
+    q1_effort_at_q0: float
+    q1_slope_at_q0: float
+
+
+@dataclass(frozen=True)
 class LoopClosure:
     name: str
     link: int
@@ -108,6 +118,8 @@ class PsmModel:
     #: two reference recordings of one motion in two sessions ([sessions] repeat_pair: manifest names)
     session_repeat_pair: tuple[str, ...] = ()
     session_constant_change: tuple[float, ...] | None = None  # how far each joint's constant moved between the repeat pair's sessions
+    #: what the payload-shaped fit reads between the repeat pair's sessions ([sessions] payload_reading)
+    session_payload_reading: SessionPayloadReading | None = None
     #: the controllers' and the counterweight PID's gains ([controllers]: name -> value)
     controller_gains: dict[str, object] = field(default_factory=dict)
     groups: tuple[str, ...] = ()

@@ -12,7 +12,7 @@ import numpy as np
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model.card_checks import check_model_values
-from dvrk_dart.model.description import DvrkTopics, ForcePoint, LoopClosure, PsmModel, UpstreamProcessing
+from dvrk_dart.model.description import DvrkTopics, ForcePoint, LoopClosure, PsmModel, SessionPayloadReading, UpstreamProcessing
 from dvrk_dart.model.dh import DHFrame, LinearExpr, Link
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 
@@ -163,6 +163,7 @@ def _model(raw: dict, path: Path) -> PsmModel:
         session_offset_joints=_session_offset_joints(raw, path),
         session_repeat_pair=_session_repeat_pair(raw, path),
         session_constant_change=_session_constant_change(raw, path),
+        session_payload_reading=_session_payload_reading(raw, path),
         controller_gains=dict(raw.get("controllers", {})),
         groups=groups,
         joint_words=str(raw.get("joint_words", "")),
@@ -317,3 +318,14 @@ def _session_constant_change(raw: dict, path: Path) -> tuple[float, ...] | None:
     if len(values) != len(JOINT_NAMES) or not all(isinstance(v, (int, float)) and v >= 0 for v in values):
         raise DvrkDartError(f"{path}: [sessions] constant_change: {len(JOINT_NAMES)} non-negative numbers expected (q1..q7)")
     return tuple(float(v) for v in values)
+
+
+def _session_payload_reading(raw: dict, path: Path) -> SessionPayloadReading | None:
+    """[sessions] payload_reading: {q1_effort_at_q0, q1_slope_at_q0}, non-negative, or none."""
+    table = raw.get("sessions", {}).get("payload_reading")
+    if table is None:
+        return None
+    keys = ("q1_effort_at_q0", "q1_slope_at_q0")
+    if not isinstance(table, dict) or set(table) != set(keys) or not all(isinstance(table[k], (int, float)) and table[k] >= 0 for k in keys):
+        raise DvrkDartError(f"{path}: [sessions] payload_reading: {{{', '.join(f'{k} = a non-negative number' for k in keys)}}} expected")
+    return SessionPayloadReading(*(float(table[k]) for k in keys))

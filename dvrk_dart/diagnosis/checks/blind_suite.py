@@ -92,15 +92,19 @@ def write_run(path: Path, state: ProcessedRun, efforts: np.ndarray, noise: dict,
 def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, noise: dict, folder: Path, seed: int) -> dict:
     """The case's measured run (effect, noise) and its baseline (no effect,
     other noise, the other session's constant efforts), as CSV files, and the
-    case's physics."""
+    case's physics; with `repeat` in the case, a --repeat run too: the
+    baseline's motion again in the measured run's session (no effect, its own noise)."""
     base = SimConfig()
     rng = np.random.default_rng(seed)
     config = case_physics(case, base)
     clean = simulated_efforts(arm, motion, simulate, config)
-    clean_baseline = simulated_efforts(arm, motion, simulate, base) + noise["session_offsets"]
+    effect_free = simulated_efforts(arm, motion, simulate, base)
     folder.mkdir(parents=True, exist_ok=True)
-    return {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
-            "baseline": write_run(folder / f"{case['name']}_baseline.csv", motion, clean_baseline, noise, rng)}
+    runs = {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
+            "baseline": write_run(folder / f"{case['name']}_baseline.csv", motion, effect_free + noise["session_offsets"], noise, rng)}
+    if case.get("repeat"):
+        runs["repeat"] = write_run(folder / f"{case['name']}_repeat.csv", motion, effect_free, noise, rng)
+    return runs
 
 
 def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunProcessing, with_baseline: bool,
@@ -143,7 +147,8 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
         reports = [*(result.get("payloads") or ()), result.get("gravity_mismatch") or {}]
         fit = next((r for r in reports if r.get("link") == found.get("link")), {})  # the top effect's own report
         groups = {found.get("group"), *(found.get("equivalent_link_groups") or ()), *(fit.get("tied_groups") or ())}
-        named = top.get("kind") in ("payload", "payload_at_position", "gravity_mismatch") and expected.split(":", 1)[1] in groups
+        named = (top.get("kind") in ("payload", "payload_at_position", "gravity_mismatch") and expected.split(":", 1)[1] in groups
+                 and not result.get("payload_not_distinguished"))
     else:
         named = top["family"] == expected
     size_error = None
@@ -156,8 +161,9 @@ def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) ->
 def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, processing: str, with_baseline: bool,
              known: dict | None = None) -> dict:
     """One diagnosis of the suite, judged (`known`: `true_physics_gap`'s)."""
+    repeat = str(runs["repeat"]) if with_baseline and "repeat" in runs else None
     result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
-                      figures=False, profile_payload_mass=False, processing=processing)
+                      figures=False, profile_payload_mass=False, processing=processing, repeat=repeat)
     used = RunProcessing(processing, result["processing"].get("harmonics"))
     floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), known)
     verdict = judge_case(case, result, floor, spec["gap_tolerance"])

@@ -169,23 +169,34 @@ def validate_payload_speeds(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, 
 
 
 def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[dict]]:
-    """Two sessions of one motion, no weight in either (the issue's null pair):
-    no payload reported, the answer's first sentence names none, and every
-    J1/J2 gravity effort at q = 0 that the payload-shaped fit gives (its own
-    and at the hand position) has an interval holding zero, or none with the reason."""
+    """Two sessions of one motion, no weight in either (the issue's null pair),
+    diagnosed with the hand position of a suspected weight (--payload-at) and
+    without it: no payload reported, the answer's first sentence names none,
+    and every J1/J2 gravity effort at q = 0 that the payload-shaped fit gives
+    (its own and at the hand position) has an interval holding zero, or none
+    with the reason. Returns the first diagnosis and the verdicts of both."""
     key, position = hand_position_on_link(arm, spec)
-    result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], payload_at=(key, position), logs=False, figures=False,
-                                                processing=spec.get("processing")), out_dir)
+    results, verdicts = [], []
+    for payload_at, folder, label in (((key, position), out_dir, "with --payload-at"), (None, out_dir / "no_payload_at", "without --payload-at")):
+        result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], payload_at=payload_at, logs=False, figures=False,
+                                                    processing=spec.get("processing")), folder)
+        results.append(result)
+        verdicts += _null_pair_verdicts(result, label)
+    return results[0], verdicts
+
+
+def _null_pair_verdicts(result: dict, label: str) -> list[dict]:
+    """No payload, none in the first sentence, every J1/J2 gravity effort at q = 0 holding zero or null with the reason."""
     first = answer_sentence(result).split(":")[0]
     fit = result.get("payload") or result.get("payload_not_distinguished") or {}
     rows = [("the payload-shaped fit", fit), ("at the hand position", fit.get("payload_at") or {})]
     intervals = [(f"{where}, q{j + 1}", (part.get("gravity_efforts_at_q0_interval") or [None, None])[j], part.get("not_determined"))
-                 for where, part in rows for j in (0, 1)]
+                 for where, part in rows if part for j in (0, 1)]
     open_intervals = [f"{name} [{i[0]:+.3f}, {i[1]:+.3f}]" if i else f"{name}: none" for name, i, _ in intervals]
     holds = all((i is not None and i[0] <= 0.0 <= i[1]) or (i is None and bool(reasons)) for _, i, reasons in intervals)
-    verdicts = [{"check": "null pair (one-no-weight against one, no weight in either): no payload reported", "passed": result.get("payload") is None,
-                 "value": "none" if result.get("payload") is None else f"a payload on {result['payload']['link']}"},
-                {"check": "null pair: the answer's first sentence names no payload", "passed": "a payload on" not in first, "value": first},
-                {"check": "null pair: every J1/J2 gravity effort at q = 0 holds zero in its interval, or is null with the reason", "passed": holds,
-                 "value": "; ".join(open_intervals) or "no payload-shaped fit"}]
-    return result, verdicts
+    return [{"check": f"null pair (one-no-weight against one, no weight in either; {label}): no payload reported",
+             "passed": result.get("payload") is None,
+             "value": "none" if result.get("payload") is None else f"a payload on {result['payload']['link']}"},
+            {"check": f"null pair ({label}): the answer's first sentence names no payload", "passed": "a payload on" not in first, "value": first},
+            {"check": f"null pair ({label}): every J1/J2 gravity effort at q = 0 holds zero in its interval, or is null with the reason",
+             "passed": holds, "value": "; ".join(open_intervals) or "no payload-shaped fit"}]

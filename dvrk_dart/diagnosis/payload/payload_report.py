@@ -13,6 +13,7 @@ from dvrk_dart.diagnosis.effects.payload import PointPayload, point_mass_paramet
 from dvrk_dart.diagnosis.fit.selection import CvResult, Selector
 from dvrk_dart.io.reference_data import sample_rate_hz
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.model.description import SessionPayloadReading
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PITCH
 
 #: a payload's mass counts as identified when its interval's ends are within
@@ -74,10 +75,11 @@ def position_figures_without_repeat(at: dict) -> None:
     at["not_determined"] = {**at.get("not_determined", {}), **dict.fromkeys(keys, AT_POSITION_WITHOUT_REPEAT)}
 
 
-def not_a_payload_because(fit: dict) -> str | None:
+def not_a_payload_because(fit: dict, sessions_read: SessionPayloadReading | None = None) -> str | None:
     """Why a payload-shaped fit is no payload, or None: the mass it gives (at the hand position when one was given, else its
-    own where the data identify one) under a gram (at or below zero: a session change read as a payload), or a hand position
-    given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`)."""
+    own where the data identify one) under a gram (at or below zero: a session change read as a payload), a hand position
+    given without a --repeat pair to tell a mass there from a session's change (`position_figures_without_repeat`), or,
+    without a --repeat pair (`sessions_read`: what the model card's repeat pair reads, given then), nothing beyond it."""
     at = fit.get("payload_at") or {}
     if (at.get("not_determined") or {}).get("mass_kg") == AT_POSITION_WITHOUT_REPEAT:
         return "no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position"
@@ -85,7 +87,18 @@ def not_a_payload_because(fit: dict) -> str | None:
     if mass is not None and mass < MIN_PAYLOAD_KG:
         return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
                 f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
+    if sessions_read is not None and mass is None and not _beyond_sessions(fit, sessions_read):
+        return (f"without a --repeat pair, nothing it shows is beyond what two sessions of this arm without a weight read as one "
+                f"(the model card's repeat pair: J1 {sessions_read.q1_effort_at_q0:.3f} N·m at q = 0, {sessions_read.q1_slope_at_q0:.3f} "
+                "N·m/rad with q1 there), nor is its mass identified from the inertia: give --repeat (the baseline's motion in another session)")
     return None
+
+
+def _beyond_sessions(fit: dict, sessions_read: SessionPayloadReading) -> bool:
+    """Whether J1's gravity effort at q = 0 or its slope with q1 has an interval beyond (excluding) +-what the sessions read."""
+    figures = (((fit.get("gravity_efforts_at_q0_interval") or [None])[0], sessions_read.q1_effort_at_q0),
+               (fit.get(f"{YAW_SLOPE}_interval"), sessions_read.q1_slope_at_q0))
+    return any(interval is not None and (interval[0] > size or interval[1] < -size) for interval, size in figures)
 
 
 #: why a payload's gravity effort is not given on a joint the runs did not record
