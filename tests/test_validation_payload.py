@@ -253,7 +253,7 @@ def test_without_a_repeat_a_payload_needs_more_than_two_sessions_read():
     """The real null pair without --repeat read a payload on pitch (periodic: "partly explained by a payload on pitch",
     its J1 figures holding zero; upstream: J1 at q = 0 -0.025 N·m in [-0.034, -0.0003]). Without a --repeat, a
     payload is named only where J1's effort at q = 0 or its slope is beyond the card's reading of its repeat pair, or
-    its mass is identified from the inertia; with one, its intervals count the session change and the rule is not asked."""
+    it identifies a mass (interval excluding zero: the pair identified none); with one, its intervals count the session change and the rule is not asked."""
     from dvrk_dart.diagnosis.payload.payload_report import not_a_payload_because
     from dvrk_dart.model.description import SessionPayloadReading
 
@@ -268,6 +268,7 @@ def test_without_a_repeat_a_payload_needs_more_than_two_sessions_read():
     assert not_a_payload_because(slope, read) is None
     just_inside = {**null_upstream, "q1_gravity_slope_at_q0_nm_per_rad_interval": [-0.31, -0.19]}
     assert not_a_payload_because(just_inside, read) is not None
-    weighed = {**null_upstream, "mass_kg": 0.2, "mass_identified": True}  # a mass from the inertia: no session change gives it
+    weighed = {**null_upstream, "mass_kg": 0.2, "mass_kg_interval": [0.19, 0.21], "mass_identified": True}  # the pair identified none
     assert not_a_payload_because(weighed, read) is None
-    assert not_a_payload_because({}, read) is not None  # no figure at all: nothing beyond the sessions
+    assert not_a_payload_because({**weighed, "mass_kg_interval": [0.0, 0.4]}, read) is not None
+    assert "q1 not recorded" in not_a_payload_because({}, read)  # no J1 figure at all: nothing beyond the sessions

@@ -25,18 +25,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
+from dvrk_dart.model.body_regressor import BODY_PARAMETER_NAMES, BODY_PARAMETERS, body_columns, body_regressor
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.identified import IdentifiedModel, body_inertia, spring_torque
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.model.parameters import IdentifiedParameters, LinkParameters
 
-#: Pinocchio's order of a body's 10 dynamic parameters
-BODY_PARAMETER_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
-BODY_PARAMETERS = len(BODY_PARAMETER_NAMES)
 FRICTION_NAMES = ("Fc", "Fv", "Fo")
 #: the class of each parameter name (keys of [prior_std] in the bounds file)
 PARAMETER_CLASSES = {
@@ -191,24 +188,14 @@ class Regressor:
         self.layout = parameter_layout(model)
         self.friction_law = friction_law
         self.evaluator = IdentifiedModel(model, zero_parameters(model))
-        tree_joint = {link.key: i + 1 for i, link in enumerate(self.evaluator.tree_links) if hasattr(link, "key")}
-        missing = [k for k in self.layout.inertial_links if k not in tree_joint]
-        if missing:
-            raise DvrkDartError(f"{model.source}: links {missing} have inertia but no joint in the tree model")
-        # Pinocchio's regressor has 10 columns per joint, joint 1 first
-        self._body_columns = np.concatenate(
-            [np.arange(BODY_PARAMETERS * (tree_joint[k] - 1), BODY_PARAMETERS * tree_joint[k]) for k in self.layout.inertial_links]
-        )
+        self._body_columns = np.r_[tuple(body_columns(self.evaluator, k) for k in self.layout.inertial_links)]
 
     def __call__(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
         q, dq, ddq = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, dq, ddq))
-        ev, layout = self.evaluator, self.layout
+        layout = self.layout
         Y = np.zeros((len(q), N_JOINTS, len(layout)))
         n_body = BODY_PARAMETERS * len(layout.inertial_links)
-        qt, vt, at = ev.tree_q(q), ev.tree_v(dq), ev.tree_v(ddq)
-        GT, cols, pm, data = ev.G.T, self._body_columns, ev.pin_model, ev.data
-        for k in range(len(q)):
-            Y[k, :, :n_body] = GT @ pin.computeJointTorqueRegressor(pm, data, qt[k], vt[k], at[k])[:, cols]
+        Y[:, :, :n_body] = body_regressor(self.evaluator, q, dq, ddq, self._body_columns)
         c = n_body
         links = self.model.links
         for key in layout.friction_links:  # f = Fc s(v) + Fv v + Fo on the link's own rate v, projected by dv/dq

@@ -165,7 +165,8 @@ def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, p
     result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
                       figures=False, profile_payload_mass=False, processing=processing, repeat=repeat)
     used = RunProcessing(processing, result["processing"].get("harmonics"))
-    floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, arm.model.session_offset_joints or ()), known)
+    nuisance = (result.get("nuisance_offset_joints") or {}).get("joints", arm.model.session_offset_joints or ())  # as the diagnosis demeaned
+    floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, nuisance), known)
     verdict = judge_case(case, result, floor, spec["gap_tolerance"])
     return {"case": case["name"], "processing": processing, "baseline": with_baseline, **verdict,
             "words": (result.get("explanation") or {}).get("words")}

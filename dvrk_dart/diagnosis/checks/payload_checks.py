@@ -181,17 +181,18 @@ def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
         result = run_diagnosis(arm, DiagnosisConfig(spec["measured"], spec["baseline"], payload_at=payload_at, logs=False, figures=False,
                                                     processing=spec.get("processing")), folder)
         results.append(result)
-        verdicts += _null_pair_verdicts(result, label)
+        verdicts += _null_pair_verdicts(result, label, payload_at is not None)
     return results[0], verdicts
 
 
-def _null_pair_verdicts(result: dict, label: str) -> list[dict]:
-    """No payload, none in the first sentence, every J1/J2 gravity effort at q = 0 holding zero or null with the reason."""
+def _null_pair_verdicts(result: dict, label: str, payload_at: bool) -> list[dict]:
+    """No payload, none in the first sentence, every J1/J2 gravity effort at q = 0 holding zero or null with the reason
+    (at the hand position too, given `payload_at`)."""
     first = answer_sentence(result).split(":")[0]
     fit = result.get("payload") or result.get("payload_not_distinguished") or {}
-    rows = [("the payload-shaped fit", fit), ("at the hand position", fit.get("payload_at") or {})]
+    rows = [("the payload-shaped fit", fit)] + ([("at the hand position", fit.get("payload_at") or {})] if payload_at else [])
     intervals = [(f"{where}, q{j + 1}", (part.get("gravity_efforts_at_q0_interval") or [None, None])[j], part.get("not_determined"))
-                 for where, part in rows if part for j in (0, 1)]
+                 for where, part in rows if part or payload_at for j in (0, 1)]
     open_intervals = [f"{name} [{i[0]:+.3f}, {i[1]:+.3f}]" if i else f"{name}: none" for name, i, _ in intervals]
     holds = all((i is not None and i[0] <= 0.0 <= i[1]) or (i is None and bool(reasons)) for _, i, reasons in intervals)
     return [{"check": f"null pair (one-no-weight against one, no weight in either; {label}): no payload reported",

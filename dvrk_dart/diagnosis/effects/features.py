@@ -9,11 +9,9 @@ import pinocchio as pin
 
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.model.body_regressor import body_columns, body_regressor, tree_joint
 from dvrk_dart.model.joints import N_JOINTS
 
-#: coordinates of the 10 dynamic parameters of a body in Pinocchio's regressor
-#: (m, m cx, m cy, m cz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz about the joint frame origin)
-BODY_PARAMETERS = 10
 #: (m, m cx, m cy, m cz): the first four of them, what gravity sees
 FIRST_MOMENT_COLUMNS = 4
 
@@ -35,21 +33,9 @@ class TrajectoryFeatures:
     def __len__(self) -> int:
         return len(self.q)
 
-    @cached_property
-    def _pin_joint_of_link(self) -> dict[int, int]:
-        im = self.arm.identified
-        out = {}
-        for link in im.tree_links:
-            if hasattr(link, "key") and link.key in self.arm.model.links:
-                out[link.key] = im.pin_model.getJointId(f"link{link.key}_{link.name}")
-        return out
-
     def body_columns(self, key: int) -> slice:
         """Columns of `body_regressor` belonging to a moving link's body."""
-        if key not in self._pin_joint_of_link:
-            raise DvrkDartError(f"link {key} has no joint of its own in the identified model tree")
-        j = self._pin_joint_of_link[key]
-        return slice(BODY_PARAMETERS * (j - 1), BODY_PARAMETERS * j)
+        return body_columns(self.arm.identified, key)
 
     def first_moment_columns(self, key: int) -> np.ndarray:
         """(N, 7, 4) efforts per unit (m, m c) of a link's body."""
@@ -59,14 +45,7 @@ class TrajectoryFeatures:
     def body_regressor(self) -> np.ndarray:
         """(N, 7, 10 n_joints): efforts per unit dynamic parameter of every tree body,
         projected onto the 7 coordinates (tau = G^T tau_tree)."""
-        im = self.arm.identified
-        pm, data = im.pin_model, im.pin_model.createData()
-        qt, vt, at = im.tree_q(self.q), im.tree_v(self.dq), im.tree_v(self.ddq)
-        out = np.empty((len(qt), N_JOINTS, BODY_PARAMETERS * (pm.njoints - 1)))
-        GT = im.G.T
-        for k in range(len(qt)):
-            out[k] = GT @ pin.computeJointTorqueRegressor(pm, data, qt[k], vt[k], at[k])
-        return out
+        return body_regressor(self.arm.identified, self.q, self.dq, self.ddq)
 
     @cached_property
     def unit_gravity_efforts(self) -> np.ndarray:
@@ -92,7 +71,7 @@ class TrajectoryFeatures:
 
     def identified_body_parameters(self, key: int) -> np.ndarray:
         """The 10 dynamic parameters of one link's body in the identified model."""
-        return self.arm.identified.pin_model.inertias[self._pin_joint_of_link[key]].toDynamicParameters()
+        return self.arm.identified.pin_model.inertias[tree_joint(self.arm.identified, key)].toDynamicParameters()
 
     def body_effort(self, key: int) -> np.ndarray:
         """(N, 7) efforts due to one link's body alone (its identified inertia)."""

@@ -48,10 +48,11 @@ import math
 import numpy as np
 
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS, TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, arm_reach_m, joints_moving_link, link_envelope
 from dvrk_dart.diagnosis.effects.payload import PAYLOAD_MAX_MASS_KG, equivalents_of, point_mass_parameters, point_mass_parameters_jacobian
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.body_regressor import BODY_PARAMETERS
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS
 from dvrk_dart.sim.config import Payload

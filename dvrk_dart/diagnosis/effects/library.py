@@ -41,6 +41,7 @@ from dvrk_dart.diagnosis.effects.payload import (
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.model import friction
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.model.body_regressor import tree_joint
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import INSERTION, JOINT_NAMES, N_JOINTS, PITCH
 from dvrk_dart.sim.config import SimConfig, position_load_effort, position_load_table, simulated_terms
@@ -204,7 +205,7 @@ def _body_gravity_correction(arm: Arm, features: TrajectoryFeatures, key: int, p
     """Gravity efforts of a body on link `key` (its 10 dynamic parameters) under tilted minus nominal gravity (N, 7)."""
     im = arm.identified
     model = pin.Model(im.pin_model)
-    j = features._pin_joint_of_link[key]
+    j = tree_joint(im, key)
     for i in range(1, model.njoints):
         model.inertias[i] = pin.Inertia.Zero()
     model.inertias[j] = pin.Inertia.FromDynamicParameters(np.asarray(parameters, dtype=float))

@@ -5,14 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_dart.diagnosis.effects.effect import Effect, Parameter, SimContribution
-from dvrk_dart.diagnosis.effects.features import (
-    BODY_PARAMETERS,
-    FIRST_MOMENT_COLUMNS,
-    TrajectoryFeatures,
-)
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.geometry import LinkEnvelope, joints_moving_link, link_envelope
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.arm import Arm
+from dvrk_dart.model.body_regressor import BODY_PARAMETERS
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import N_JOINTS
 from dvrk_dart.sim.config import Payload

@@ -87,18 +87,28 @@ def not_a_payload_because(fit: dict, sessions_read: SessionPayloadReading | None
     if mass is not None and mass < MIN_PAYLOAD_KG:
         return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
                 f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
-    if sessions_read is not None and mass is None and not _beyond_sessions(fit, sessions_read):
-        return (f"without a --repeat pair, nothing it shows is beyond what two sessions of this arm without a weight read as one "
-                f"(the model card's repeat pair: J1 {sessions_read.q1_effort_at_q0:.3f} N·m at q = 0, {sessions_read.q1_slope_at_q0:.3f} "
-                "N·m/rad with q1 there), nor is its mass identified from the inertia: give --repeat (the baseline's motion in another session)")
+    if sessions_read is not None and not _beyond_sessions(fit, sessions_read):
+        return _within_sessions_reason(fit, sessions_read)
     return None
 
 
 def _beyond_sessions(fit: dict, sessions_read: SessionPayloadReading) -> bool:
-    """Whether J1's gravity effort at q = 0 or its slope with q1 has an interval beyond (excluding) +-what the sessions read."""
+    """Whether J1's gravity effort at q = 0 or its slope with q1 has an interval beyond (excluding) +-what the sessions
+    read, or the fit identifies a mass whose interval excludes zero (the sessions' pair identified none)."""
     figures = (((fit.get("gravity_efforts_at_q0_interval") or [None])[0], sessions_read.q1_effort_at_q0),
-               (fit.get(f"{YAW_SLOPE}_interval"), sessions_read.q1_slope_at_q0))
+               (fit.get(f"{YAW_SLOPE}_interval"), sessions_read.q1_slope_at_q0),
+               (fit.get("mass_kg_interval") if fit.get("mass_identified") else None, 0.0))
     return any(interval is not None and (interval[0] > size or interval[1] < -size) for interval, size in figures)
+
+
+def _within_sessions_reason(fit: dict, sessions_read: SessionPayloadReading) -> str:
+    """Why a fit without a --repeat is no payload: nothing of it beyond what the model card's sessions read."""
+    if fit.get(YAW_SLOPE) is None and (fit.get("gravity_efforts_at_q0") or [None])[0] is None:
+        return ("without a --repeat pair, only J1's figures and an identified mass tell a payload from a session's change, and "
+                "this fit has neither (q1 not recorded or not determined): give --repeat")
+    return (f"without a --repeat pair, neither J1's effort at q = 0 nor its slope with q1 is beyond "
+            f"+-{sessions_read.q1_effort_at_q0:.3f} N·m and +-{sessions_read.q1_slope_at_q0:.3f} N·m/rad, what two sessions of "
+            "the model card's arm without a weight read, and no mass is identified: give --repeat")
 
 
 #: why a payload's gravity effort is not given on a joint the runs did not record

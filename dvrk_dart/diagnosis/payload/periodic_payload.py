@@ -40,12 +40,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS, TrajectoryFeatures
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS, TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.first_moment import YAW_PATH_JOINT
 from dvrk_dart.diagnosis.payload.intervals import central_interval, with_session_change
 from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.signal import ProcessedRun
+from dvrk_dart.model.body_regressor import BODY_PARAMETERS
 from dvrk_dart.model.joints import N_JOINTS
 
 #: the session term's variance at a harmonic is the residual power within this

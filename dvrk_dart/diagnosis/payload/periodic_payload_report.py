@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _gravity_efforts, _quantities, _yaw_slope
 from dvrk_dart.diagnosis.effects.payload import equivalents_of, mass_seen_by_gravity, point_mass_parameters
 from dvrk_dart.diagnosis.payload.payload_report import (
@@ -37,6 +37,7 @@ from dvrk_dart.diagnosis.payload.periodic_payload import (
 )
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.model.body_regressor import BODY_PARAMETERS
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the payload is found when its gravity signature stands out of the session

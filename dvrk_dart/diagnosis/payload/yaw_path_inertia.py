@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dvrk_dart.diagnosis.effects.features import BODY_PARAMETERS, FIRST_MOMENT_COLUMNS
+from dvrk_dart.diagnosis.effects.features import FIRST_MOMENT_COLUMNS
 from dvrk_dart.diagnosis.effects.geometry import joints_moving_link
 from dvrk_dart.diagnosis.fit.diagnosis_runs import RunRole
 from dvrk_dart.diagnosis.fit.design import WITHHELD_KINDS
@@ -34,6 +34,7 @@ from dvrk_dart.diagnosis.payload.identifiable import _gravity_at_zero, _yaw_slop
 from dvrk_dart.diagnosis.payload.payload_report import renew_sentences
 from dvrk_dart.diagnosis.payload.periodic_payload_report import j1_sentences as periodic_j1_sentences
 from dvrk_dart.diagnosis.effects.payload import point_mass_parameters
+from dvrk_dart.model.body_regressor import BODY_PARAMETERS
 from dvrk_dart.model.joints import JOINT_NAMES
 
 #: the J1 figures a path gives: (report key, index in it or None for a scalar)
