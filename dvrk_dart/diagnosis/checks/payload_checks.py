@@ -182,7 +182,23 @@ def validate_null_pair(arm: Arm, spec: dict, out_dir: Path) -> tuple[dict, list[
                                                     processing=spec.get("processing")), folder)
         results.append(result)
         verdicts += _null_pair_verdicts(result, label, payload_at is not None)
+    verdicts += _card_reading_verdict(arm, results[1])
     return results[0], verdicts
+
+
+def _card_reading_verdict(arm: Arm, result: dict) -> list[dict]:
+    """The model card's [sessions] payload_reading (what its repeat pair reads as a payload, which the rule without a
+    --repeat compares with) at least what the null pair, the card's pair, reads now: a stale card after a change of the fit."""
+    read = arm.model.session_payload_reading
+    fit = result.get("payload") or result.get("payload_not_distinguished") or {}
+    if read is None or not fit:
+        return []
+    effort, slope = (fit.get("gravity_efforts_at_q0") or [None])[0], fit.get("q1_gravity_slope_at_q0_nm_per_rad")
+    now = [abs(v) if v is not None else 0.0 for v in (effort, slope)]
+    return [{"check": "the model card's [sessions] payload_reading holds what its repeat pair (the null pair) reads now: J1's effort "
+                      "at q = 0 and its slope with q1",
+             "passed": now[0] <= read.q1_effort_at_q0 and now[1] <= read.q1_slope_at_q0,
+             "value": f"read {now[0]:.3f} N·m, {now[1]:.3f} N·m/rad; card {read.q1_effort_at_q0:.3f}, {read.q1_slope_at_q0:.3f}"}]
 
 
 def _null_pair_verdicts(result: dict, label: str, payload_at: bool) -> list[dict]:
