@@ -85,10 +85,14 @@ def moved_constants(difference: np.ndarray, rate_hz: float) -> np.ndarray:
     return np.abs(difference.mean(axis=0)) > SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)
 
 
+def constant_move_bound(difference: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Per joint, the largest constant move two sessions' mean difference leaves possible: its size plus
+    SESSION_OFFSET_STANDARD_ERRORS standard errors."""
+    return np.abs(difference.mean(axis=0)) + SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)
+
+
 def moves_ruled_out(difference: np.ndarray, rate_hz: float, sizes) -> np.ndarray:
-    """Per joint, whether two sessions' mean difference rules out a constant move of `sizes` (the mean plus
-    SESSION_OFFSET_STANDARD_ERRORS standard errors below it); nowhere when no sizes are given."""
+    """Per joint, whether two sessions' mean difference rules out a constant move of `sizes`; nowhere without sizes."""
     if sizes is None:
         return np.zeros(difference.shape[1], dtype=bool)
-    bound = np.abs(difference.mean(axis=0)) + SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz)
-    return bound < np.asarray(sizes, dtype=float)
+    return constant_move_bound(difference, rate_hz) < np.asarray(sizes, dtype=float)

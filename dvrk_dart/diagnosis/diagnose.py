@@ -101,8 +101,9 @@ def diagnose(
         payload's mass at that (hand-measured) position, with its interval;
     nuisance_offsets: a constant per run fitted as a nuisance term and
         reported (default: with a baseline or several runs), on the joints
-        whose constant effort moves between sessions: the model card's
-        ([sessions]) and those `repeat` shows moved; a constant the same in
+        whose constant effort moves between sessions: those `repeat` shows
+        moved, and the model card's ([sessions]) unless it rules their move
+        out (`session_floor.session_offset_joints`); a constant the same in
         every session is an effect (`JointOffset`);
     payload_model: "first_moment" (default with a baseline: the identifiable
         quantity) or "point" (`library.candidate_effects`);

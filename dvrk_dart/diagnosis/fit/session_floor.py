@@ -31,7 +31,7 @@ from dvrk_dart.io.measured_run import EFFORT_RESOLUTION
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import RUNS, manifest, resolve_run, run_label, sha256_of
 from dvrk_dart.io.signal import not_comparable_sample_by_sample
-from dvrk_dart.metrics import SESSION_OFFSET_STANDARD_ERRORS, mean_standard_error, moved_constants, moves_ruled_out, rms
+from dvrk_dart.metrics import constant_move_bound, moved_constants, moves_ruled_out, rms
 from dvrk_dart.model.description import PsmModel
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -153,8 +153,7 @@ def _pair_session_change(difference: np.ndarray, rate_hz: float, model: PsmModel
     if model.session_offset_joints is None or model.session_constant_change is None:
         return change
     unseen = np.isin(JOINT_NAMES, model.session_offset_joints) & ~moved_constants(difference, rate_hz)
-    bound = np.maximum(change + SESSION_OFFSET_STANDARD_ERRORS * mean_standard_error(difference, rate_hz), model.session_constant_change)
-    return np.where(unseen, bound, change)
+    return np.where(unseen, np.maximum(constant_move_bound(difference, rate_hz), model.session_constant_change), change)
 
 
 def gap_split(before: np.ndarray, after: np.ndarray, floor: np.ndarray | None, model: PsmModel) -> list[dict]:
