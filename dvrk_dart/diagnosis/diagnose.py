@@ -303,6 +303,10 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
                      if j in recorded} for r, c in zip(runs, columns)}
 
 
+#: why a --payload-at position reads nothing: no payload-shaped effect was selected
+PAYLOAD_AT_UNUSED = "no payload-shaped effect is selected: the --payload-at position reads no mass"
+
+
 def _payload_findings(problem: Problem, fits: list[dict], carried: dict | None) -> tuple[list[dict], dict | None, dict | None]:
     """(the payloads named, the gravity mismatch, the payload-shaped fit that is no payload): a payload-shaped fit names a
     payload only where a baseline run without it isolates it, and not where it is what sessions change (a session change
@@ -368,6 +372,8 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         not_recorded_by=problem.not_recorded_by, unrecorded_joint_notes=problem.unrecorded_joint_notes(),
         gravity_mismatch=mismatch,
         payload_not_distinguished=not_distinguished,
+        payload_at_unused=(PAYLOAD_AT_UNUSED if problem.at_index is not None and problem.has_baseline and not (payload_fits or not_distinguished)
+                           else None),
         dropped_effects=dropped,
         explanation=explanation(gap_before, gap_after, list(JOINT_NAMES), [e for e in entries if e.get("selected")],
                                 per_measured_joint(split_floor, recorded) if split_floor is not None else None,

@@ -250,6 +250,8 @@ class Diagnosis:
     gravity_mismatch: dict | None
     #: with a baseline, a payload-shaped fit whose intervals all hold zero: no payload is named
     payload_not_distinguished: dict | None
+    #: a --payload-at given where no payload-shaped effect is selected: why it reads nothing (else null)
+    payload_at_unused: str | None
     #: selected effects whose re-simulation failed or drifted: dropped, with the reason
     dropped_effects: list
     #: how much of the gap the selected effects remove, in the one rule's words (diagnosis/output/wording.py)

@@ -46,6 +46,8 @@ def print_diagnosis(result: dict) -> None:
             print(f"  {sentence}")
     if result.get("payload_not_distinguished"):
         print(f"no payload: {result['payload_not_distinguished']['meaning']}")
+    if result.get("payload_at_unused"):
+        print(f"no payload: {result['payload_at_unused']}")
     if result.get("gravity_mismatch") and not (result.get("explanation") or {}).get("below_resolution"):
         for sentence in result["gravity_mismatch"]["words"]:
             print(sentence)

@@ -85,8 +85,8 @@ def not_a_payload_because(fit: dict, sessions_read: SessionPayloadReading | None
         return "no --repeat pair measures how sessions change gravity's shape, which reads as a mass at the --payload-at position"
     mass = at.get("mass_kg") if at.get("mass_kg") is not None else (fit.get("mass_kg") if fit.get("mass_identified") else None)
     if mass is not None and mass < MIN_PAYLOAD_KG:
-        return (f"the mass it gives (at the --payload-at position, or its own where the data identify one) is under "
-                f"{MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload")
+        where = "at the --payload-at position" if at.get("mass_kg") is not None else "the fit identifies"
+        return f"the mass {where} is under {MIN_PAYLOAD_KG * 1e3:g} g: a session change read as a payload"
     if sessions_read is not None and not _beyond_sessions(fit, sessions_read):
         return _within_sessions_reason(fit, sessions_read)
     return None
