@@ -90,6 +90,8 @@ def test_every_combination_ends_in_a_result_or_one_line(runs, combination, capsy
     result = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert result["explanation"]["words"] in ("mostly explained", "partly explained", "not explained")
     assert (tmp_path / "out" / "diagnosis.html").is_file()
+    if combination["payload_at"]:  # a friction change, no weight: no payload, and the position says why it reads none
+        assert result["payload"] is None and (result["payload_not_distinguished"] or result["payload_at_unused"]), result["payload"]
 
 
 def test_a_payload_between_two_three_joint_logs_is_named_on_its_link(tmp_path):

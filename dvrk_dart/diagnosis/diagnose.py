@@ -23,6 +23,7 @@ from dvrk_dart.diagnosis.payload.payload_report import (
     describe_payload,
     effort_not_determined,
     flag_payload_at_link,
+    PAYLOAD_AT_UNUSED,
     not_a_payload_because,
     mass_profile,
     without_unrecorded_joints,
@@ -301,10 +302,6 @@ def _nuisance_report(problem: Problem, s: Selection) -> dict | None:
     recorded = [j for j, on in zip(JOINT_NAMES, problem.recorded) if on]  # no offset on a joint the runs did not record
     return {r.name: {j: v for j, v in zip(JOINT_NAMES, (problem.demean_of(r) * (r.residual.mean(0) - (c @ s.final.beta).mean(0))).tolist())
                      if j in recorded} for r, c in zip(runs, columns)}
-
-
-#: why a --payload-at position reads nothing: no payload-shaped effect was selected
-PAYLOAD_AT_UNUSED = "no payload-shaped effect is selected: the --payload-at position reads no mass"
 
 
 def _payload_findings(problem: Problem, fits: list[dict], carried: dict | None) -> tuple[list[dict], dict | None, dict | None]:

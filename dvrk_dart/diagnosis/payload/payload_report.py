@@ -63,6 +63,10 @@ AT_POSITION_WITHOUT_REPEAT = ("without a --repeat pair (the baseline's motion in
                               "the PSM's two sessions without any weight read tens of grams, intervals excluding zero): give --repeat")
 
 
+#: why a --payload-at position reads nothing: no payload-shaped effect was selected
+PAYLOAD_AT_UNUSED = "no payload-shaped effect is selected: the --payload-at position reads no mass"
+
+
 def position_figures_without_repeat(at: dict) -> None:
     """A --payload-at report's mass, gravity efforts at q = 0 and J1 slope not determined (AT_POSITION_WITHOUT_REPEAT)."""
     at["mass_kg"] = at["mass_kg_interval"] = None
