@@ -256,7 +256,7 @@ def test_without_a_repeat_a_payload_needs_more_than_two_sessions_read():
     its J1 figures holding zero; upstream: J1 at q = 0 -0.025 N·m in [-0.034, -0.0003]). Without a --repeat, a
     payload is named only where J1's effort at q = 0 or its slope is beyond the card's reading of its repeat pair, or
     it identifies a mass (interval excluding zero: the pair identified none); with one, its intervals count the session change and the rule is not asked."""
-    from dvrk_dart.diagnosis.payload.payload_report import not_a_payload_because
+    from dvrk_dart.diagnosis.payload.payload_report import _beyond_sessions, not_a_payload_because
     from dvrk_dart.model.description import SessionPayloadReading
 
     read = SessionPayloadReading(q1_effort_at_q0=0.039, q1_slope_at_q0=0.197)
@@ -273,4 +273,6 @@ def test_without_a_repeat_a_payload_needs_more_than_two_sessions_read():
     weighed = {**null_upstream, "mass_kg": 0.2, "mass_kg_interval": [0.19, 0.21], "mass_identified": True}  # the pair identified none
     assert not_a_payload_because(weighed, read) is None
     assert not_a_payload_because({**weighed, "mass_kg_interval": [0.0, 0.4]}, read) is not None
+    held_at_zero = {**null_upstream, "mass_identified": True, "mass_kg_interval": [3.5e-19, 3.5e-19]}  # 2018 test1 vs test2
+    assert not _beyond_sessions(held_at_zero, read)
     assert "q1 not recorded" in not_a_payload_because({}, read)  # no J1 figure at all: nothing beyond the sessions

@@ -98,10 +98,11 @@ def not_a_payload_because(fit: dict, sessions_read: SessionPayloadReading | None
 
 def _beyond_sessions(fit: dict, sessions_read: SessionPayloadReading) -> bool:
     """Whether J1's gravity effort at q = 0 or its slope with q1 has an interval beyond (excluding) +-what the sessions
-    read, or the fit identifies a mass whose interval excludes zero (the sessions' pair identified none)."""
+    read, or the fit identifies a mass whose interval is above a gram (the sessions' pair identified none; 2018 test1
+    against test2, no weight, read 3.5e-19 kg "identified" at its bound)."""
     figures = (((fit.get("gravity_efforts_at_q0_interval") or [None])[0], sessions_read.q1_effort_at_q0),
                (fit.get(f"{YAW_SLOPE}_interval"), sessions_read.q1_slope_at_q0),
-               (fit.get("mass_kg_interval") if fit.get("mass_identified") else None, 0.0))
+               (fit.get("mass_kg_interval") if fit.get("mass_identified") else None, MIN_PAYLOAD_KG))
     return any(interval is not None and (interval[0] > size or interval[1] < -size) for interval, size in figures)
 
 
