@@ -43,6 +43,9 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
         if isinstance(value, bool) != (known[option].nargs == 0):
             raise DvrkDartError(f"--config {path}: {key} " + ("is a switch: true or false" if known[option].nargs == 0 else
                                                                f"takes a value, not {str(value).lower()}"))
+        choices = known[option].choices
+        if choices is not None and known[option].type is None and any(str(v) not in choices for v in (value if isinstance(value, list) else [value])):
+            raise DvrkDartError(f"--config {path}: {key} = {value!r}: not one of {', '.join(map(str, choices))}")
         if option in OUTPUT_OPTIONS and not isinstance(value, str):
             raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
         if option not in {token.split("=", 1)[0] for token in rest}:  # the command line's own value wins, --opt=value too

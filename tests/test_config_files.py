@@ -19,7 +19,9 @@ def test_a_bad_config_file_is_one_line_naming_it(tmp_path, capsys):
                         ('measured = "no-such-run"\n', "no-such-run"),
                         # argparse read these as options: "expected one argument", help printed with exit 0, "unrecognized 3"
                         ('measured = "--help"\n', "a value does not start with '-'"), ('help = true\n', "help is not an option"),
-                        ('duration = [2, 3]\n', "duration takes one value, not a list")):
+                        ('duration = [2, 3]\n', "duration takes one value, not a list"),
+                        # argparse's "argument --processing: invalid choice" named no file
+                        ('processing = "sideways"\n', "processing = 'sideways': not one of upstream, periodic")):
         config = tmp_path / "bad.toml"
         config.write_text(text)
         capsys.readouterr()

@@ -237,6 +237,17 @@ def test_a_dvrk_name_header_without_the_jaw_gives_the_joints_it_can(tmp_path, ca
     assert figures["rms"][4:] == [None] * 3 and np.allclose(figures["rms"][:4], whole["rms"][:4], rtol=1e-6), figures["rms"]
 
 
+def test_model_coordinates_without_the_jaw_say_what_the_wrist_shares_with_it(tmp_path, capsys):
+    """q1..q6 in the model's names: q5 and q6 read 0.26 and 0.33 (relative) against the full file's 0.18 and 0.17 with
+    no word; their identified friction (the jaw's blades) follows q7's motion, which the file does not give."""
+    one = load_run(resolve_run("one"), PSM)
+    path = write_header_csv(tmp_path / "one_q1q6.csv", one, [f"{f}{j}" for f in ("q", "dq", "tau") for j in range(1, 7)])
+    figures = cli_json(capsys, "model-errors", "--measured", str(path))
+    notes = " ".join(figures["unrecorded_joint_notes"])
+    assert "q7 is not recorded and held at 0 rad: q5, q6 share the identified friction of tool_yaw_jaw_2, jaw_coupling" in notes, notes
+    assert not cli_json(capsys, "model-errors", "--measured", "one")["unrecorded_joint_notes"]
+
+
 def test_a_held_joints_velocity_is_noise_and_is_not_checked(tmp_path):
     """q4 held by its servo (encoder counts around 0.1 rad, a noisy velocity):
     its velocity does not follow its positions, and the file is read without a note."""

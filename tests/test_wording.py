@@ -4,6 +4,7 @@ answer sentence, the page and diagnosis.json."""
 import pytest
 
 from dvrk_dart.diagnosis.output.answer import answer_sentence
+from dvrk_dart.diagnosis.output.printout import constant_lines
 from dvrk_dart.diagnosis.output.wording import explanation, words_for
 from arms import PSM
 
@@ -45,6 +46,22 @@ def test_without_a_session_floor_a_gap_within_the_noise_does_not_count():
     assert explanation(before, after, JOINTS, entries)["words"] == "partly explained"
     floor = [None, 0.0005, 0.0005, None, 0.0005, None, None]
     assert explanation(before, after, JOINTS, entries, floor, noise)["within_noise"] == []
+
+
+def test_with_no_effect_selected_a_gap_within_the_noise_everywhere_is_nothing_to_explain():
+    """A run minus its copy with J3's offset changed by 0.3 N (the nuisance offset takes it out): 0.002 N left on q3,
+    within the noise, read "not explained: no effect of the library was selected"; a gap beyond the noise on one joint
+    still is not explained."""
+    before = {"train": [0.00037, 0.00039, 0.00185], "holdout": None}
+    noise = [0.004, 0.005, 0.02]
+    names = JOINTS[:3]
+    quiet = explanation(before, before, names, [], noise=noise)
+    assert quiet["words"] == "not determined" and quiet["within_noise"] == names and quiet["removed_share"] is None
+    result = {"gap_before": before, "gap_after": before, "selection": {"selected": []}, "effects": [], "explanation": quiet,
+              "units": [PSM.effort_unit(j) for j in names]}
+    assert answer_sentence(result).startswith("The gap is not determined by these runs: before any effect it is within 1.5x the noise")
+    loud = explanation({"train": [0.00037, 0.00039, 0.3]}, {"train": [0.00037, 0.00039, 0.3]}, names, [], noise=noise)
+    assert loud["words"] == "not explained" and loud["removed_share"] is None
 
 
 def test_a_joint_with_no_gap_to_explain_does_not_count():
@@ -322,6 +339,18 @@ def test_a_constant_beyond_a_sessions_change_is_said_where_no_effect_accounts_fo
     assert sentence.startswith("Beyond a session's change (as the model card's repeat pair shows it), the runs' constant effort differs "
                                "from their baseline's: q3 +0.346 N in O3_A (42.7x that change): a changed offset"), sentence
     assert "not explained" in sentence
+
+
+def test_a_constant_beside_an_effect_with_a_constant_part_is_not_compared_with_a_sessions_change():
+    """The null pair with --payload-at: q2's offset of +0.235 N·m beside a declined payload's mean gravity was printed
+    as 3.2x the constant change of the card's repeat pair, which is that very pair."""
+    result = _result([0.3, 0.25, 0.6], [0.0644, 0.101, 0.159], ["q2"])
+    result["effects"][0].update(kind="payload", name="payload_on_pitch_top")
+    result["constants_beyond_session"] = [{"run": "one", "joint": "q2", "offset": 0.235, "session_change": 0.073,
+                                           "session_change_source": "the model card's repeat pair", "unit": "N·m"}]
+    printed = "\n".join(constant_lines(result))
+    assert "q2: the fit takes +0.235 N·m out of one as a session's offset beside payload_on_pitch_top" in printed, printed
+    assert "3.2x" not in printed
 
 
 def test_the_answer_says_where_the_simulated_payload_sits_when_the_harmonic_fit_chose_another_link():

@@ -389,6 +389,18 @@ class IdentifiedModel:
         terms = parse_terms(terms) if isinstance(terms, str) else terms
         return self.efforts(q, dq, ddq, terms).total(terms)
 
+    def friction_partners(self, joint: int) -> dict[int, list[str]]:
+        """The other joints that share an identified friction with `joint` (a link moved by several
+        coordinates: the PSM's jaw blades), each with those links' names."""
+        partners: dict[int, list[str]] = {}
+        for link in self._friction_links:
+            coeffs = link.variable.coeffs
+            if coeffs[joint] != 0.0:
+                for k in np.flatnonzero(coeffs):
+                    if k != joint:
+                        partners.setdefault(int(k), []).append(link.name)
+        return partners
+
     def held_joint_change(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, joint: int) -> np.ndarray:
         """Per joint, the largest change of the rigid-body efforts (inertia,
         Coriolis, gravity) at the states (q, dq, ddq) when `joint` goes from

@@ -282,17 +282,18 @@ def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str
     qualifiers += [f"on average over {', '.join(explained['joints'])}; {apart}"] if apart else []
     if qualifiers:
         words += f" ({'; '.join(qualifiers)})"
-    if effects == "no effect":
+    if effects == "no effect" and explained["words"] != NOT_DETERMINED:
         return f"{gap} is not explained: no effect of the library was selected; {figures}"
     if explained.get("below_resolution"):
         return (f"{gap} is {NOT_DETERMINED}: before any effect it is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N) on "
-                f"every joint the effects act on, nothing to explain; {figures}")
+                f"every joint{'' if effects == 'no effect' else ' the effects act on'}, nothing to explain; {figures}")
     if explained["words"] == NOT_DETERMINED:
         level, leaves = (("the session floor" + _floor_source(result), "a session's change") if explained.get("within_floor")
                          else ("the noise the periodic projection leaves", "the noise"))
         within = explained.get("within_floor") or explained.get("within_noise") or []
+        chosen = "no effect of the library was selected" if effects == "no effect" else f"the effects selected, {effects}"
         return (f"{gap} is {NOT_DETERMINED} by these runs: before any effect it is within {AT_FLOOR_RATIO:g}x {level} on "
-                f"{', '.join(within)}, which {leaves} alone can leave; the effects selected, {effects}: {figures}")
+                f"{', '.join(within)}, which {leaves} alone can leave; {chosen}: {figures}")
     if explained["words"] == "not explained":
         return f"{gap} is {words}: the best effects, {effects}, remove less than a fifth of it: {figures}"
     return f"{gap} is {words} by {effects}: {figures}"

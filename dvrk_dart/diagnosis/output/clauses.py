@@ -33,10 +33,16 @@ CARRIED_WORDS = {"mostly explained": ("most of", "mostly what the identified mod
 NO_CONSTANT_KINDS = ("friction", "armature", "time_shift")
 
 
+def effects_with_constant_on(result: dict, joint: str) -> list[str]:
+    """The selected effects with a constant part of their own on `joint`: the run's constant there is split between them
+    and its nuisance offset, a split the efforts do not determine."""
+    return [e["name"] for e in result.get("effects", [])
+            if e.get("selected") and e.get("kind") not in NO_CONSTANT_KINDS and joint in e.get("joints", ())]
+
+
 def constants_beyond(result: dict) -> list[dict]:
     """The runs' constants beyond a session's change on joints no selected effect with a constant part acts on."""
-    acted = {j for e in result.get("effects", []) if e.get("selected") and e.get("kind") not in NO_CONSTANT_KINDS for j in e.get("joints", ())}
-    return [c for c in result.get("constants_beyond_session") or [] if c["joint"] not in acted]
+    return [c for c in result.get("constants_beyond_session") or [] if not effects_with_constant_on(result, c["joint"])]
 
 
 def constants_clause(result: dict, lead: bool = False) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dvrk_dart.diagnosis.output.answer import answer_paragraphs, offset_joints_sentence
+from dvrk_dart.diagnosis.output.clauses import effects_with_constant_on
 from dvrk_dart.diagnosis.payload.parameter_band import band_sentence
 from dvrk_dart.model.joints import JOINT_NAMES
 
@@ -38,7 +39,9 @@ def print_diagnosis(result: dict) -> None:
         print(band_sentence(result))
     if result.get("payload"):
         p = result["payload"]
-        mass = "mass not determined" if p["mass_kg"] is None or not p.get("mass_identified", True) else f"{p['mass_kg']:.3f} kg"
+        at = p.get("payload_at") or {}
+        mass = (f"{at['mass_kg']:.3f} kg at the --payload-at position" if at.get("mass_kg") is not None else
+                "mass not determined" if p["mass_kg"] is None or not p.get("mass_identified", True) else f"{p['mass_kg']:.3f} kg")
         found = p.get("found") is not False  # the harmonic test's: "mass not determined on yaw" read as a payload found
         print(f"payload: {mass} on {p['link']} ({p['group']})" if found else
               f"payload: none stands out from the session scatter (p = {p['payload_p_value']:.2g}); its fit:")
@@ -57,12 +60,27 @@ def print_diagnosis(result: dict) -> None:
         for run, offsets in result["nuisance_offsets"].items():
             joints = (result.get("nuisance_offset_joints") or {}).get("joints") or list(offsets)
             print(f"nuisance offsets of {run}: " + ", ".join(f"{j} {offsets[j]:+.3f} {result['units'][JOINT_NAMES.index(j)]}" for j in joints if j in offsets))
-    for c in result.get("constants_beyond_session") or []:
-        print(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} ({'against the identified offset ' + format(c['expected'], '+.3f') if c.get('against') == 'the identified offset' else 'minus its baseline'}) as a session's "
-              f"offset, on top of the effects: {abs(c['offset'] - c.get('expected', 0.0)) / max(c['session_change'], 1e-12):.1f}x the constant change "
-              f"{c.get('session_change_source', 'the repeat pair')} shows between sessions ({c['session_change']:.3f}); it may be a "
-              "changed offset or part of an effect (a load, a payload's mean gravity), not diagnosed")
+    for line in constant_lines(result):
+        print(line)
     for row in (result.get("gap_split") or {}).get("joints", [])[:3]:
         if row.get("session_to_session") is not None:
             print(f"gap split {row['joint']}: before {row['before']:.3f} = explained {row['explained']:.3f} + session-to-session "
                   f"{row['session_to_session']:.3f} + left over {row['left_over']:.3f} {row['unit']} (RMS, added in squares)")
+
+
+def constant_lines(result: dict) -> list[str]:
+    """A line per constant the fit took out of a run beyond a session's change (constants_beyond_session)."""
+    lines = []
+    for c in result.get("constants_beyond_session") or []:
+        beside = effects_with_constant_on(result, c["joint"])
+        if beside:  # the null pair's q2 offset of +0.235 N·m beside a declined payload's mean read as 3.2x a session's change
+            lines.append(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} as a session's offset beside "
+                         f"{', '.join(beside)}, whose effort has a constant part on {c['joint']}: the runs do not split the constant "
+                         "between them, so it is not compared with a session's change")
+            continue
+        against = f"against the identified offset {c['expected']:+.3f}" if c.get("against") == "the identified offset" else "minus its baseline"
+        lines.append(f"{c['joint']}: the fit takes {c['offset']:+.3f} {c['unit']} out of {c['run']} ({against}) as a session's offset, on "
+                     f"top of the effects: {abs(c['offset'] - c.get('expected', 0.0)) / max(c['session_change'], 1e-12):.1f}x the constant "
+                     f"change {c.get('session_change_source', 'the repeat pair')} shows between sessions ({c['session_change']:.3f}); it may "
+                     "be a changed offset or part of an effect (a load, a payload's mean gravity), not diagnosed")
+    return lines

@@ -72,28 +72,31 @@ def explanation(gap_before: dict, gap_after: dict, joint_names: list[str], selec
     split = "holdout" if gap_after.get("holdout") else "train"
     acted = {j for entry in selected_entries for j in entry.get("joints", ())}
     before, after = list(gap_before.get(split) or []), list(gap_after.get(split) or [])
-    at_floor = []  # the acted joints whose gap before is within AT_FLOOR_RATIO of the floor: nothing repeatable shown there
+    # with no effect selected every joint is weighed: a gap left within the noise on each is nothing to explain (a run
+    # minus its copy with J3's offset changed, 0.002 N left, read "not explained")
+    weighed = acted or {name for j, name in enumerate(joint_names) if j < len(before) and before[j] is not None}
+    at_floor = []  # the weighed joints whose gap before is within AT_FLOOR_RATIO of the floor: nothing repeatable shown there
     for j, f in enumerate(floor or []):
         if f is not None and j < len(before) and before[j] is not None and after[j] is not None:
-            if before[j] <= AT_FLOOR_RATIO * f and joint_names[j] in acted:
+            if before[j] <= AT_FLOOR_RATIO * f and joint_names[j] in weighed:
                 at_floor.append(joint_names[j])
             before[j], after[j] = float(above_floor(before[j], f)), float(above_floor(after[j], f))
     # without a floor, a gap within the noise is the noise (a blind q5 friction change, 95 % removed, read "partly
     # explained" beside q2's and q3's 9-10 % of their 0.0014 and 0.0022 at the noise); the shares stay raw
-    at_noise = [name for j, name in enumerate(joint_names) if floor is None and noise and name in acted and j < len(before)
+    at_noise = [name for j, name in enumerate(joint_names) if floor is None and noise and name in weighed and j < len(before)
                 and before[j] is not None and noise[j] is not None and before[j] <= AT_FLOOR_RATIO * noise[j]]
     largest = max((b for b in before if b is not None), default=0.0)
     joints = [j for j, name in enumerate(joint_names)
-              if name in acted and name not in at_floor + at_noise and j < len(before) and before[j] is not None and after[j] is not None
+              if name in weighed and name not in at_floor + at_noise and j < len(before) and before[j] is not None and after[j] is not None
               and max(before[j], after[j]) > NOTHING_TO_EXPLAIN * largest]
     # a joint whose gap is below the effort resolution before and after has nothing to explain (a blind q2 friction
     # change, 99 % removed, read "partly explained" beside the 6-10 % of four joints at 5e-4 N·m); none above it:
     # round-off of a replayed simulated run (1e-6 N·m read "partly explained by a gravity mismatch")
     resolved = [j for j in joints if max(gap_before[split][j], gap_after[split][j]) > EFFORT_RESOLUTION]
     unresolved = bool(joints) and not resolved
-    shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in resolved}
+    shares = {joint_names[j]: float(1.0 - after[j] / before[j]) for j in resolved} if acted else {}
     share = float(np.mean(list(shares.values()))) if shares else None
-    words = NOT_DETERMINED if share is None and (at_floor or at_noise or unresolved) else words_for(share)
+    words = NOT_DETERMINED if not resolved and (at_floor or at_noise or unresolved) else words_for(share)
     return {"words": words, "removed_share": share, "joints": list(shares), "runs": split, "rule": RULE,
             "above_session_floor": floor is not None and any(f is not None for f in floor), "within_floor": at_floor,
             "within_noise": at_noise, "below_resolution": unresolved,

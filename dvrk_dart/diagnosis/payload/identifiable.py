@@ -28,6 +28,7 @@ from dvrk_dart.diagnosis.effects.payload import (
 from dvrk_dart.diagnosis.payload.payload_report import (
     J1_SLOPE_SENTENCE,
     MASS_IDENTIFIED_RATIO,
+    PAYLOAD_AT_HINT,
     SWAMPED,
     WITHOUT_REPEAT,
     at_position_sentence,
@@ -280,7 +281,7 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
                 else f"interval {max(lo, 0.0):.3f}-{hi:.3f} kg")
         words.append(f"The mass is not identified ({span}): gravity on a link turning about a fixed axis sees m·c only, "
                      "and the inertia of a small mass is below the noise" + ("" if at_given else
-                                                                             "; give --payload-at LINK:x,y,z to turn the first moment into a mass") + ".")
+                                                                             f"; {PAYLOAD_AT_HINT}") + ".")
     words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
                  "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
                  "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "

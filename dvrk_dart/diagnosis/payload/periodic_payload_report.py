@@ -14,6 +14,7 @@ from dvrk_dart.diagnosis.effects.payload import equivalents_of, mass_seen_by_gra
 from dvrk_dart.diagnosis.payload.payload_report import (
     J1_EFFORTS_SENTENCE,
     J1_SLOPE_SENTENCE,
+    PAYLOAD_AT_HINT,
     SWAMPED,
     WITHOUT_REPEAT,
     position_figures_without_repeat,
@@ -59,7 +60,7 @@ SESSION_CHANGE_COUNTED = ("plus the session change of the payload's shape that t
                           "shown on simulated pairs at the measured noise, session scatter and session change")
 SESSION_CHANGE_NOT_COUNTED = "no session change of the payload's shape: without a --repeat pair nothing measures it"
 MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
-                 "mass is below the noise: give --payload-at LINK:x,y,z to turn the first moment into a mass")
+                 "mass is below the noise")
 
 
 def _pairs(pair_runs, differences, columns) -> list[Pair]:
@@ -288,11 +289,12 @@ def _words(report: dict, model) -> list[str]:
     words.append("First moment m·c (base frame, q = 0, as a body on " + report["first_moment_reference_link"] + "): "
                  + ", ".join(f"{a} {_interval_text(v, i, 'kg·m', 4, say_zero=True)}" for a, v, i in zip("xyz", moment, intervals)) + ".")
     words += j1_sentences(report, model)
+    at = report.get("payload_at")
     if report["mass_kg"] is None:
-        words.append(f"The mass is not determined: {report['not_determined'].get('mass_kg', '')}.")
+        reason = report["not_determined"].get("mass_kg", "")
+        words.append(f"The mass is not determined: {reason}" + (f": {PAYLOAD_AT_HINT}." if reason == MASS_NOT_SEEN and not at else "."))
     else:
         words.append(f"Mass {_interval_text(report['mass_kg'], report['mass_kg_interval'], 'kg')}.")
-    at = report.get("payload_at")
     if at:
         words.append(at_position_sentence(at, _interval_text(at['mass_kg'], at['mass_kg_interval'], 'kg')))
     words.append(f"Intervals: {report['interval_method']}.")
