@@ -22,9 +22,9 @@ MASS_IDENTIFIED_RATIO = 1.7
 #: what a payload report without --repeat (the baseline's motion in another session) says of its intervals
 WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) reads as a "
                   "payload, and the intervals do not count it.")
-#: why a quantity the session change swamps is not determined
 #: what turns the first moment into a mass, said where no --payload-at was given
 PAYLOAD_AT_HINT = "give --payload-at LINK:x,y,z to turn the first moment into a mass"
+#: why a quantity the session change swamps is not determined
 SWAMPED = ("a session change alone (the --repeat pair: the same motion in two sessions, no weight) reads it at least as large: "
            "the runs do not tell the payload's share from a session's")
 
