@@ -248,16 +248,20 @@ LONE_BAND_FACTOR = 3
 
 
 def _say_lone_band(cutoffs: np.ndarray, deciding: np.ndarray, band: int, floor: int, where: str) -> None:
-    """One joint near the design's harmonics, far under every other deciding joint, sets every joint's band:
-    said (a weak or noisy channel of the wrist cut "two"'s band from 35 to 6 harmonics, and q2's figure by half)."""
-    others = [(int(k), j) for j, k in enumerate(cutoffs) if deciding[j]]
-    if len(others) < 2:
+    """Joints near the design's harmonics, far under other deciding joints, set every joint's band: said (a weak or
+    noisy channel of the wrist cut "two"'s band from 35 to 6 harmonics, and q2's figure by half; four noisy wrist
+    channels cut "one"'s from 33 to 8, unsaid, since no one of them was alone)."""
+    others = {j: int(k) for j, k in enumerate(cutoffs) if deciding[j]}
+    above = [j for j, k in others.items() if k > LONE_BAND_FACTOR * band]
+    if band > LONE_BAND_FACTOR * floor or not above:
         return
-    (lowest, joint), rest = min(others), sorted(k for k, j in others)[1:]
-    if lowest == band and lowest <= LONE_BAND_FACTOR * floor and LONE_BAND_FACTOR * lowest < rest[0]:
-        say_once([f"{where}: the band ({band} harmonics) is q{joint + 1}'s own cutoff alone, the other moving joints' are "
-                  f"{rest[0]}-{rest[-1]}: its efforts sink into their noise early (a weak or noisy channel?) and cut every "
-                  "joint's figures there; --harmonics compares at another band"])
+    setting = [j for j in others if j not in above]
+    names = ", ".join(f"q{j + 1}" for j in setting)
+    lone = len(setting) == 1
+    say_once([f"{where}: the band ({band} harmonics) is {names}'s own cutoff{'' if lone else 's'} alone, "
+              f"{', '.join(f'q{j + 1}' for j in above)} reach {min(others[j] for j in above)}-{max(others[j] for j in above)}: "
+              f"{'its' if lone else 'their'} efforts sink into their noise early (a weak or noisy channel?) and cut every "
+              "joint's figures there; --harmonics compares at another band"])
 
 
 def _say_silent(silent: np.ndarray, where: str) -> None:
