@@ -9,7 +9,8 @@ import pytest
 
 from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_directions
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness
+from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness, PositionFriction
+from dvrk_dart.diagnosis.output.effect_words import size_words
 from dvrk_dart.diagnosis.effects.library import candidate_effects, config_effort_by_formula, effects_to_sim_config
 from dvrk_dart.diagnosis.effects.payload import PointPayload
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
@@ -152,3 +153,15 @@ def test_a_lighter_carriage_is_simulated_as_its_regressor_says(arm, segment):
         with pytest.raises(DvrkDartError, match="link_mass_scale"):  # no mass left; not a link; no error; no counterweight
             simulate_efforts(arm, SimConfig(counterweight=counterweight, extra=JointEffects(link_mass_scale=wrong)), state)
     assert "mass_scale_counterweight" not in {e.name for e in candidate_effects(arm, base=SimConfig(counterweight="pid"))}
+
+
+def test_a_friction_table_says_what_the_runs_do_not_reach():
+    """A blind round's Fc = 0.1 + 0.5 q3 on "one" (q3 0.092..0.235 m): the knot at 0 m, whose hat no sample reaches, read
+    coulomb_at_0 = 0.0 beside a true 0.1, and the answer quoted the largest knot alone ("Coulomb 0.209 N")."""
+    effect = PositionFriction(PSM, "q3", 3e-5).within(0.0924, 0.235)
+    entry = {"kind": "friction", "size": 0.2089, "units": {"coulomb_at_0": "N", "viscous": "N/(m/s)"},
+             "parameters": effect.describe([0.0, 0.1338, 0.1847, 0.2089, 0.0038])}
+    assert list(entry["parameters"]["not_determined"]) == ["coulomb_at_0"]
+    assert entry["parameters"]["coulomb_within_runs"] == pytest.approx([0.1417, 0.2074], abs=1e-4)  # the truth: 0.146..0.218
+    assert size_words(entry).startswith(", Coulomb 0.142 to 0.207 N along the runs' range")
+    assert "not_determined" not in PositionFriction(PSM, "q3", 3e-5).describe([0.1] * 5)  # no training span given: nothing said

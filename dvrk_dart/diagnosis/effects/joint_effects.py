@@ -196,7 +196,18 @@ class PositionFriction(Effect):
         out = super().describe(p)
         out["reversal"] = f"Dahl over {self.presliding:g} {self.position_unit}, Fc piecewise linear in {self.joints[0]}" + (
             "" if self.span is None else f", simulated held beyond the training runs' {self.span[0]:.3g}..{self.span[1]:.3g} {self.position_unit}")
+        if self.span is not None:
+            levels = self._simulated_table(p)[1]
+            out["coulomb_within_runs"] = [float(levels.min()), float(levels.max())]
+            out["not_determined"] = {f"coulomb_at_{x:.3g}": f"no training sample within its reach (the runs span {self.span[0]:.3g}.."
+                                     f"{self.span[1]:.3g} {self.position_unit}): the fit's prior, not the data (simulated held at the range's end)"
+                                     for x, reach in zip(self.knots, self._reaches()) if reach[1] < self.span[0] or reach[0] > self.span[1]}
         return out
+
+    def _reaches(self) -> list[tuple[float, float]]:
+        """Each knot's hat function's support (the end knots' reach on past the range: Fc is constant beyond)."""
+        edges = np.r_[-np.inf, self.knots, np.inf]
+        return [(float(edges[k]), float(edges[k + 2])) for k in range(len(self.knots))]
 
     def size(self, p) -> float:
         """The largest Coulomb level along the range (the first knot's may be nil where the largest is not)."""
