@@ -90,9 +90,9 @@ def _parameter_words(name: str, value, unit: str) -> str:
     """'coulomb = 0.25 N·m'; a flag as yes/no (not 1/0), a dimensionless value without its unit '1'."""
     if isinstance(value, bool):
         return f"{name}: {'yes' if value else 'no'}"
-    if isinstance(value, dict):  # not_determined: each parameter's reason
+    if isinstance(value, dict) and all(isinstance(why, str) for why in value.values()):  # not_determined: each parameter's reason
         return f"{name}: " + "; ".join(f"{key} ({why})" for key, why in value.items())
-    if isinstance(value, list):  # a range: coulomb_within_runs
+    if isinstance(value, list) and len(value) == 2 and all(isinstance(x, (int, float)) for x in value):  # a range: coulomb_within_runs
         return f"{name} = " + " to ".join(fmt(x) for x in value)
     shown = fmt(value) if isinstance(value, (int, float)) else value
     return f"{name} = {shown} {'' if unit == '1' else unit}".rstrip()
