@@ -171,7 +171,7 @@ def datasets_section(arm: Arm, out_dir: Path, diagnosis_dir: Path, identified: d
         shown.append({"title": dataset.title, "name": dataset.name, "train": dataset.train, "holdout": dataset.holdout,
                       "rms_table": _table(dataset, figures, arm.model), "force_table": _force_table(dataset, figures["phantom_force"]),
                       "point": first["point"], "min_lever_m": first["min_lever_m"], "figure": staged.name})
-    body = render("sections/datasets.html", datasets=shown, figures_file=FIGURES_FILE)
+    body = render("sections/datasets.html", datasets=shown, figures_folder=out_dir.name, figures_file=FIGURES_FILE)
     return "Every real dataset: held-out figures side by side", body, files
 
 

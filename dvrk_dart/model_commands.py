@@ -241,7 +241,8 @@ def cmd_session_floor(args: argparse.Namespace) -> int:
         print(f"{name:>6} {arm.model.effort_unit(name):>4} {cell(table['rms_difference'][j])} {cell(table['rms_difference_demeaned'][j])} "
               f"{cell(noise[j])} {cell(table['one_session'][j])}  {verdicts[j]}")
     print("one sess.: one session's deviation, rms diff / sqrt(2) (the difference carries two sessions'): the floor diagnose --repeat "
-          "uses, from the demeaned difference on joints whose constant it fits per run")
+          "uses; on the joints whose constant it fits per run (a nuisance offset: the model card's [sessions] joints, and those "
+          "the pair shows moved) it uses the demeaned column / sqrt(2) instead")
     return 0
 
 

@@ -21,7 +21,7 @@ SCENARIO, MODE, COUNTERWEIGHT = "replay-two", "velocity", "on"
 #: the order the arms are shown in: from the paper's to the most realistic
 DYNAMICS_ORDER = ("inertial", "identified")
 SHOWN_JOINTS = JOINT_NAMES[:3]
-#: where the set-valued (simulated) and sign(dq) (model) Coulomb reversals differ
+#: where the servo's sign(target velocity) and the model's sign(dq) Coulomb reversals differ
 REGIMES_SHOWN = (REGIME_ALL, REGIME_NEAR_ZERO_VELOCITY, REGIME_HIGH_ACCELERATION)
 
 
