@@ -43,14 +43,19 @@ def expand_config(argv: list[str], parser: argparse.ArgumentParser) -> list[str]
         if isinstance(value, bool) != (known[option].nargs == 0):
             raise DvrkDartError(f"--config {path}: {key} " + ("is a switch: true or false" if known[option].nargs == 0 else
                                                                f"takes a value, not {str(value).lower()}"))
-        choices = known[option].choices
-        if choices is not None and known[option].type is None and any(str(v) not in choices for v in (value if isinstance(value, list) else [value])):
-            raise DvrkDartError(f"--config {path}: {key} = {value!r}: not one of {', '.join(map(str, choices))}")
         if option in OUTPUT_OPTIONS and not isinstance(value, str):
             raise DvrkDartError(f"--config {path}: {key} must be a folder path (a string), not {value!r}")
         if option not in {token.split("=", 1)[0] for token in rest}:  # the command line's own value wins, --opt=value too
+            _check_choice(known[option], key, value, path)
             tokens += _tokens(option, value, path)
     return [argv[0], *tokens, *rest[1:]]
+
+
+def _check_choice(action: argparse.Action, key: str, value, config: Path) -> None:
+    """A value outside its option's choices, named with the file (argparse's own message does not name it)."""
+    values = value if isinstance(value, list) else [value]
+    if action.choices is not None and action.type is None and any(str(v) not in action.choices for v in values):
+        raise DvrkDartError(f"--config {config}: {key} = {value!r}: not one of {', '.join(map(str, action.choices))}")
 
 
 def _option_actions(parser: argparse.ArgumentParser, command: str) -> dict[str, argparse.Action]:

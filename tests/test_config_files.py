@@ -2,7 +2,7 @@
 
 import json
 
-from dvrk_dart.cli import main
+from dvrk_dart.cli import _parse, main
 
 
 def test_a_config_file_gives_the_options_and_the_command_line_wins(tmp_path, capsys):
@@ -76,3 +76,9 @@ def test_config_with_an_equals_sign_is_read_and_a_path_not_beside_it_is_refused(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no such file beside the config file" in err[0] and str(config) in err[0], err
     assert not (tmp_path / "never").exists()
+
+
+def test_a_config_value_outside_its_choices_is_named_unless_the_command_line_gives_the_option(tmp_path):
+    config = tmp_path / "bad.toml"
+    config.write_text('measured = "two"\nprocessing = "sideways"\n')
+    assert _parse(["replay", "--config", str(config), "--processing", "upstream"]).processing == "upstream"

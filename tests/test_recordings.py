@@ -231,7 +231,7 @@ def test_a_session_floor_needs_the_same_joints_recorded(tmp_path, capsys):
     one = load_run(resolve_run("one"), PSM)
     only_q2 = write_header_csv(tmp_path / "only_q2.csv", one, columns_of(2))
     line = refusal(capsys, "session-floor", "--measured", str(only_q2), "--repeat", "one-no-weight")
-    assert "--repeat one-no-weight: its positions move q1, q2, q3, q4, q5, q6, q7 but the measured run's move q2" in line, line
+    assert "--repeat one-no-weight: its positions move q1, q2, q3, q4, q5, q6, q7 but the measured run's positions move q2" in line, line
 
 
 def test_a_session_floor_gives_no_figure_on_a_joint_without_its_effort(tmp_path, capsys):

@@ -4,7 +4,7 @@ answer sentence, the page and diagnosis.json."""
 import pytest
 
 from dvrk_dart.diagnosis.output.answer import answer_sentence
-from dvrk_dart.diagnosis.output.printout import constant_lines
+from dvrk_dart.diagnosis.output.printout import _heading_mass, constant_lines
 from dvrk_dart.diagnosis.output.wording import explanation, words_for
 from arms import PSM
 
@@ -481,3 +481,13 @@ def test_with_a_baseline_a_second_change_has_its_size():
     assert "with 2 more effects (friction_q3, armature_q2)" in answer_sentence(result)  # no baseline: the names
     result["baseline"] = "base"
     assert "with 2 more effects (friction_q3 (Coulomb 0.2 N, viscous 0 N/(m/s)), armature_q2)" in answer_sentence(result)
+
+
+def test_the_payload_line_gives_the_hand_positions_mass_where_the_answer_does():
+    """A 210 g run with --payload-at: "payload: mass not determined on pitch_top" beside the answer's 0.231 kg at the
+    hand position; the line follows the answer's rule (a size only on a link the efforts choose, its interval above zero)."""
+    at = {"mass_kg": 0.231, "mass_kg_interval": [0.061, 0.402], "link": "pitch", "link_chosen_by_the_efforts": True}
+    payload = {"mass_kg": None, "mass_identified": False, "payload_at": at}
+    assert _heading_mass(payload) == "0.231 kg at the --payload-at position (pitch)"
+    assert _heading_mass({**payload, "payload_at": {**at, "mass_kg_interval": [-0.091, 0.531]}}) == "mass not determined"
+    assert _heading_mass({**payload, "payload_at": {**at, "link_chosen_by_the_efforts": False}}) == "mass not determined"

@@ -165,7 +165,7 @@ def check_repeat(a: ProcessedRun, b: ProcessedRun) -> None:
     moving = [spanning_columns(run.q) for run in (a, b)]
     if not np.array_equal(*moving):
         joints = [", ".join(n for n, on in zip(JOINT_NAMES, m) if on) or "none" for m in moving]
-        raise DvrkDartError(f"its positions move {joints[1]} but the measured run's move {joints[0]}: two sessions are compared "
+        raise DvrkDartError(f"its positions move {joints[1]} but the measured run's positions move {joints[0]}: two sessions are compared "
                             "on runs that record the same joints' positions (a joint one run holds at 0 reads as a session change)")
     if a.periodic is not None:
         pa, pb = a.periodic.period, b.periodic.period

@@ -248,20 +248,18 @@ LONE_BAND_FACTOR = 3
 
 
 def _say_lone_band(cutoffs: np.ndarray, deciding: np.ndarray, band: int, floor: int, where: str) -> None:
-    """Joints near the design's harmonics, far under other deciding joints, set every joint's band: said (a weak or
-    noisy channel of the wrist cut "two"'s band from 35 to 6 harmonics, and q2's figure by half; four noisy wrist
-    channels cut "one"'s from 33 to 8, unsaid, since no one of them was alone)."""
-    others = {j: int(k) for j, k in enumerate(cutoffs) if deciding[j]}
-    above = [j for j, k in others.items() if k > LONE_BAND_FACTOR * band]
-    if band > LONE_BAND_FACTOR * floor or not above:
+    """A band near the design's harmonics that cuts other moving joints under a third of their own cutoffs: said,
+    with the joints that set it (a weak or noisy channel of the wrist cut "two"'s band from 35 to 6 harmonics, and
+    q2's figure by half; noisy wrist channels cut "one"'s from 33 to 8-10, unsaid while q4 was not alone)."""
+    own = {j: int(k) for j, k in enumerate(cutoffs) if deciding[j]}
+    cut = [j for j, k in own.items() if k > LONE_BAND_FACTOR * band]
+    if band > LONE_BAND_FACTOR * floor or not cut:
         return
-    setting = [j for j in others if j not in above]
-    names = ", ".join(f"q{j + 1}" for j in setting)
-    lone = len(setting) == 1
-    say_once([f"{where}: the band ({band} harmonics) is {names}'s own cutoff{'' if lone else 's'} alone, "
-              f"{', '.join(f'q{j + 1}' for j in above)} reach {min(others[j] for j in above)}-{max(others[j] for j in above)}: "
-              f"{'its' if lone else 'their'} efforts sink into their noise early (a weak or noisy channel?) and cut every "
-              "joint's figures there; --harmonics compares at another band"])
+    setting = ", ".join(f"q{j + 1}" for j, k in own.items() if k <= band)
+    reach = sorted({min(own[j] for j in cut), max(own[j] for j in cut)})
+    say_once([f"{where}: the band ({band} harmonics) is {setting}'s own cutoff; {', '.join(f'q{j + 1}' for j in cut)} reach "
+              f"{'-'.join(map(str, reach))} on their own, and every joint's figures are cut at the band (a weak or noisy "
+              f"channel on {setting}?); --harmonics compares at another band"])
 
 
 def _say_silent(silent: np.ndarray, where: str) -> None:

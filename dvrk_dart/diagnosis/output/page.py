@@ -93,7 +93,7 @@ def _parameter_words(name: str, value, unit: str) -> str:
     if isinstance(value, dict) and all(isinstance(why, str) for why in value.values()):  # not_determined: each parameter's reason
         return f"{name}: " + "; ".join(f"{key} ({why})" for key, why in value.items())
     if isinstance(value, list) and len(value) == 2 and all(isinstance(x, (int, float)) for x in value):  # a range: coulomb_within_runs
-        return f"{name} = " + " to ".join(fmt(x) for x in value)
+        return f"{name} = " + " to ".join(fmt(x) for x in value) + ("" if unit in ("", "1") else f" {unit}")
     shown = fmt(value) if isinstance(value, (int, float)) else value
     return f"{name} = {shown} {'' if unit == '1' else unit}".rstrip()
 

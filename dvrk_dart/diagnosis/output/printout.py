@@ -39,9 +39,7 @@ def print_diagnosis(result: dict) -> None:
         print(band_sentence(result))
     if result.get("payload"):
         p = result["payload"]
-        at = p.get("payload_at") or {}
-        mass = (f"{at['mass_kg']:.3f} kg at the --payload-at position" if at.get("mass_kg") is not None else
-                "mass not determined" if p["mass_kg"] is None or not p.get("mass_identified", True) else f"{p['mass_kg']:.3f} kg")
+        mass = _heading_mass(p)
         found = p.get("found") is not False  # the harmonic test's: "mass not determined on yaw" read as a payload found
         print(f"payload: {mass} on {p['link']} ({p['group']})" if found else
               f"payload: none stands out from the session scatter (p = {p['payload_p_value']:.2g}); its fit:")
@@ -84,3 +82,13 @@ def constant_lines(result: dict) -> list[str]:
                      f"change {c.get('session_change_source', 'the repeat pair')} shows between sessions ({c['session_change']:.3f}); it may "
                      "be a changed offset or part of an effect (a load, a payload's mean gravity), not diagnosed")
     return lines
+
+
+def _heading_mass(payload: dict) -> str:
+    """The payload line's mass: at the --payload-at position where it is a size there (on a link the efforts choose,
+    its interval above zero: the answer's rule, _payload_size_words), else the fit's where identified."""
+    at = payload.get("payload_at") or {}
+    interval = at.get("mass_kg_interval")
+    if at.get("mass_kg") is not None and at.get("link_chosen_by_the_efforts") is not False and interval is not None and interval[0] > 0.0:
+        return f"{at['mass_kg']:.3f} kg at the --payload-at position ({at['link']})"
+    return "mass not determined" if payload["mass_kg"] is None or not payload.get("mass_identified", True) else f"{payload['mass_kg']:.3f} kg"

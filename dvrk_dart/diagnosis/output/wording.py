@@ -4,12 +4,15 @@ selected effects remove, on the joints they act on.
 
 - "mostly explained": they remove more than half of the gap there;
 - "partly explained": 20 % to 50 %;
-- "not explained": less than 20 %, or no effect selected;
+- "not explained": less than 20 %, or no effect selected where some joint
+  has a gap beyond the floor, the noise and the resolution below;
 - "not determined": where a --repeat measured the session floor, every joint
   they act on had a gap within 1.5x that floor before them (AT_FLOOR_RATIO):
   a session's change alone can leave such a gap, so what they remove of it
   says nothing (a joint at 1.34x its floor read "100 % removed, mostly
-  explained" once the effects took it under the floor).
+  explained" once the effects took it under the floor); with no effect
+  selected, every joint's gap within the floor, the noise or the resolution
+  (nothing to explain).
 
 The share is 1 - after / before of the gap's RMS, averaged over the joints the
 selected effects act on (each joint in its own unit), on the held-out runs
@@ -49,7 +52,8 @@ RULE = (f"1 - after/before of the gap's RMS (above the session floor where a --r
         f"count (a session's change alone can leave it), nor, without a session floor, one within {AT_FLOOR_RATIO:g}x the noise the "
         f"periodic projection leaves, and where no joint is left, '{NOT_DETERMINED}'; nor does a joint whose gap "
         f"before and after is below the effort resolution ({EFFORT_RESOLUTION:g} N·m or N), and where every such joint's is, "
-        f"'{NOT_DETERMINED}' (a simulated run replayed)")
+        f"'{NOT_DETERMINED}' (a simulated run replayed); with no effect selected every joint is weighed so, and "
+        f"'{NOT_DETERMINED}' where none is left, else 'not explained'")
 
 
 def words_for(share: float | None) -> str:

@@ -292,7 +292,8 @@ def _words(report: dict, model) -> list[str]:
     at = report.get("payload_at")
     if report["mass_kg"] is None:
         reason = report["not_determined"].get("mass_kg", "")
-        alone = " by the efforts alone (the position below gives one)" if at else ""
+        at_size = at and at.get("mass_kg") is not None and at["mass_kg_interval"][0] > 0.0  # the position's mass is a size
+        alone = " by the efforts alone (the position below gives one)" if at_size else ""
         words.append(f"The mass is not determined{alone}: {reason}" + (f": {PAYLOAD_AT_HINT}." if reason == MASS_NOT_SEEN and not at else "."))
     else:
         words.append(f"Mass {_interval_text(report['mass_kg'], report['mass_kg_interval'], 'kg')}.")
