@@ -28,6 +28,7 @@ from dvrk_dart.diagnosis.effects.payload import (
 from dvrk_dart.diagnosis.payload.payload_report import (
     J1_SLOPE_SENTENCE,
     MASS_IDENTIFIED_RATIO,
+    MASS_NOT_SEEN,
     PAYLOAD_AT_HINT,
     SWAMPED,
     WITHOUT_REPEAT,
@@ -167,16 +168,26 @@ def _span_tied_links(report: dict, arm: Arm, selector: Selector, ties: list[tupl
     others = [(selector.design.effects[j], q) for j, q in ties]
     report["tied_links"] = [e.link_name for e, _ in others]
     report["tied_groups"] = sorted({e.group for e, _ in [(effect, None), *others]})
-    if any(_mass_unseen(arm, selector, j) for j, _ in ties):  # a tied link whose efforts do not see m: any mass
-        report["mass_kg_interval"] = [0.0, float(effect.upper[0])]
+    unseen = [e.link_name for (j, _), (e, _) in zip(ties, others) if _mass_unseen(arm, selector, j)]
+    if report["mass_kg"] is not None and unseen:  # a tied link whose efforts do not see m: any mass
+        _mass_not_determined(report, f"a link that explains the efforts as well ({', '.join(unseen)}) turns about fixed axes: gravity "
+                                     "sees m·c only there, and the inertia of a small mass is below the noise")
     for e, q in others:
         for key, v in _quantities(arm, e, q, _gravity_at_zero(arm, e.link_key)).items():
+            if report[f"{key}_interval"] is None:  # not determined already
+                continue
             interval = np.asarray(report[f"{key}_interval"], dtype=float)
             v = np.asarray(v, dtype=float)
             if interval.ndim == 1:
                 report[f"{key}_interval"] = [float(min(interval[0], v)), float(max(interval[1], v))]
             else:
                 report[f"{key}_interval"] = np.stack([np.minimum(interval[:, 0], v), np.maximum(interval[:, 1], v)], axis=1).tolist()
+
+
+def _mass_not_determined(report: dict, reason: str) -> None:
+    """The mass and its interval null, with the reason (any mass the search allows fit: its bound is no interval)."""
+    report["mass_kg"] = report["mass_kg_interval"] = None
+    report.setdefault("not_determined", {})["mass_kg"] = reason
 
 
 def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: int, fit_params: dict, fold_params: list[dict],
@@ -203,8 +214,8 @@ def first_moment_report(arm: Arm, selector: Selector, chosen: list[int], index: 
                                   session))
     if session:
         report["session_to_session"] = {key: v.tolist() for key, v in session.items()}
-    if mass_unseen:
-        report["mass_kg_interval"] = [0.0, float(effect.upper[0])]  # the efforts do not depend on m at all (a link about a fixed axis)
+    if mass_unseen:  # the efforts do not depend on m at all (a link about a fixed axis): any mass the search allows fits
+        _mass_not_determined(report, MASS_NOT_SEEN)
     ties = tied_payloads(selector, chosen, index)
     if ties:  # the link is not determined: every interval spans the tied links' estimates
         _span_tied_links(report, arm, selector, ties, effect)
@@ -274,14 +285,14 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
         words.append(f"The mass is identified: {_text(report['mass_kg'], report['mass_kg_interval'], 'kg', '.3f')}, "
                      "seen through the link's translation or the inertia at several speeds.")
     elif report["mass_kg"] is None:
-        words.append(f"The mass is not determined: {SWAMPED}.")
+        reason = (report.get("not_determined") or {}).get("mass_kg", SWAMPED)
+        words.append(f"The mass is not determined{' by the efforts alone' if at_given else ''}: {reason}"
+                     + ("" if at_given or reason == SWAMPED else f"; {PAYLOAD_AT_HINT}") + ".")
     else:
         lo, hi = report["mass_kg_interval"]
-        span = (f"any mass the search allows, {max(lo, 0.0):.3f}-{hi:.3f} kg, fits" if lo <= 0.0 and hi >= effect.upper[0]
-                else f"interval {max(lo, 0.0):.3f}-{hi:.3f} kg")
-        words.append(f"The mass is not identified ({span}): gravity on a link turning about a fixed axis sees m·c only, "
-                     "and the inertia of a small mass is below the noise" + ("" if at_given else
-                                                                             f"; {PAYLOAD_AT_HINT}") + ".")
+        words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed "
+                     "axis sees m·c only, and the inertia of a small mass is below the noise" + ("" if at_given else
+                                                                                               f"; {PAYLOAD_AT_HINT}") + ".")
     words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
                  "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
                  "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "

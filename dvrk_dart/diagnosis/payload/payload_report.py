@@ -22,6 +22,9 @@ MASS_IDENTIFIED_RATIO = 1.7
 #: what a payload report without --repeat (the baseline's motion in another session) says of its intervals
 WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) reads as a "
                   "payload, and the intervals do not count it.")
+#: why the mass of a payload on a link turning about fixed axes is not determined
+MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
+                 "mass is below the noise")
 #: what turns the first moment into a mass, said where no --payload-at was given
 PAYLOAD_AT_HINT = "give --payload-at LINK:x,y,z to turn the first moment into a mass"
 #: why a quantity the session change swamps is not determined

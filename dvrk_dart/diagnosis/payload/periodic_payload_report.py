@@ -14,6 +14,7 @@ from dvrk_dart.diagnosis.effects.payload import equivalents_of, mass_seen_by_gra
 from dvrk_dart.diagnosis.payload.payload_report import (
     J1_EFFORTS_SENTENCE,
     J1_SLOPE_SENTENCE,
+    MASS_NOT_SEEN,
     PAYLOAD_AT_HINT,
     SWAMPED,
     WITHOUT_REPEAT,
@@ -59,8 +60,6 @@ INTERVAL_METHOD = (f"{INTERVAL_PROBABILITY:.0%} intervals: generalised least squ
 SESSION_CHANGE_COUNTED = ("plus the session change of the payload's shape that the --repeat pair reads (one degree of freedom); coverage "
                           "shown on simulated pairs at the measured noise, session scatter and session change")
 SESSION_CHANGE_NOT_COUNTED = "no session change of the payload's shape: without a --repeat pair nothing measures it"
-MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
-                 "mass is below the noise")
 
 
 def _pairs(pair_runs, differences, columns) -> list[Pair]:
