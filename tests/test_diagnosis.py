@@ -592,7 +592,7 @@ def test_a_friction_along_a_joint_is_simulated_as_fitted_within_the_runs(arm, se
     read 9.2 N·m, which the simulation extrapolated to a held-out run reaching
     past the training range. Within the runs' range, the simulated table is the
     fitted one; beyond it, Fc is held at its value at the range's end."""
-    from dvrk_dart.diagnosis.effects.joint_effects import PositionFriction
+    from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
 
     effect = PositionFriction(arm.model, "q1", 0.01).within(-0.55, 0.95)
     p = np.array([9.2, 0.1, 0.2, 0.3, 0.05])  # Fc at -1.6, -0.533, 0.533, 1.6 rad, viscous

@@ -9,7 +9,8 @@ import pytest
 
 from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_directions
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness, PositionFriction
+from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness
+from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
 from dvrk_dart.diagnosis.output.effect_words import size_words
 from dvrk_dart.diagnosis.effects.library import candidate_effects, config_effort_by_formula, effects_to_sim_config
 from dvrk_dart.diagnosis.effects.payload import PointPayload

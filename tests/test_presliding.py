@@ -90,7 +90,7 @@ def test_friction_along_the_range_is_simulated_as_the_regressor_says(arm):
     """PositionFriction (Fc piecewise linear in q2, reversing over 0.01 rad): the
     regressor, the SimConfig's formula and DART's replay give the same effort."""
     from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
-    from dvrk_dart.diagnosis.effects.joint_effects import PositionFriction
+    from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
     from dvrk_dart.diagnosis.effects.library import config_effort_by_formula, effects_to_sim_config
     from dvrk_dart.diagnosis.api import simulation_hook
     from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz

@@ -26,11 +26,11 @@ from dvrk_dart.diagnosis.effects.joint_effects import (
     JointOffset,
     JointStiffness,
     LinkFriction,
-    PositionFriction,
     PreslidingOfIdentifiedFriction,
     coupling_friction_links,
     presliding_distances,
 )
+from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
 from dvrk_dart.diagnosis.effects.payload import (
     PointPayload,
     equivalent_payload_links,

@@ -19,7 +19,8 @@ from dvrk_dart.diagnosis.effects.arm_effects import LinkMassScale
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload, PayloadAtPosition, check_mass_determinable, parse_payload_at
 from dvrk_dart.diagnosis.effects.payload import PointPayload, equivalent_payload_links
-from dvrk_dart.diagnosis.effects.joint_effects import JointOffset, PositionFriction
+from dvrk_dart.diagnosis.effects.joint_effects import JointOffset
+from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
 from dvrk_dart.diagnosis.effects.library import candidate_effects
 from dvrk_dart.diagnosis.fit.diagnosis_runs import (
     DiagnosisRun,
