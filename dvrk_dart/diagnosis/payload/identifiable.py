@@ -286,7 +286,7 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
                      "seen through the link's translation or the inertia at several speeds.")
     elif report["mass_kg"] is None:
         reason = (report.get("not_determined") or {}).get("mass_kg", SWAMPED)
-        words.append(f"The mass is not determined{' by the efforts alone' if at_given else ''}: {reason}"
+        words.append(f"The mass is not determined{' by the efforts alone' if at_given and reason != SWAMPED else ''}: {reason}"
                      + ("" if at_given or reason == SWAMPED else f"; {PAYLOAD_AT_HINT}") + ".")
     else:
         lo, hi = report["mass_kg_interval"]
