@@ -9,7 +9,7 @@ from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.reference_data import resolve
 from dvrk_dart.model.model_file import load_model
 from dvrk_dart.model.parameters import load_parameters
-from arms import PSM
+from arms import MTM, PSM
 
 
 def test_every_link_has_a_group_and_the_tree_is_ordered(arm):
@@ -183,3 +183,15 @@ def test_a_card_without_its_identification_file_is_told_so_not_blamed_on_bounds(
         load_bounds(None, load_model(card))
     with pytest.raises(DvrkDartError, match=r"^--bounds: .*nothing.toml: bounds file not found"):
         load_bounds(tmp_path / "nothing.toml", load_model(card))
+
+
+def test_the_base_frame_in_words_is_the_cards(tmp_path):
+    """The MTM's payload words quoted the PSM's pitch shaft and remote centre of motion (a blind round): the frame's
+    words are the card's, and a card without them says none."""
+    assert "remote centre of motion" in PSM.frame_words and MTM.frame_words == ""
+    text = PSM.source.read_text()
+    line = next(l for l in text.splitlines() if l.startswith("frame_words = "))
+    bad = tmp_path / "psm.toml"
+    bad.write_text(text.replace(line, "frame_words = 3"))
+    with pytest.raises(DvrkDartError, match=r"\[diagnosis\] frame_words is a text"):
+        load_model(bad)

@@ -133,6 +133,8 @@ class PsmModel:
     #: the diagnosis's elastic candidates, (joint, kind) ([diagnosis] elastic), and its position-dependent friction's joints
     elastic_joints: tuple[tuple[str, str], ...] = ()
     position_friction_joints: tuple[str, ...] = ()
+    #: the base frame at q = 0 in words ([diagnosis] frame_words), beside a payload's first moment; "" where the card has none
+    frame_words: str = ""
     #: where `dvrk-dart force` estimates the external force ([force_point]): None when the card names none
     force_point: "ForcePoint | None" = None
 

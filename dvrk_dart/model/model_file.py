@@ -98,6 +98,13 @@ def _diagnosis_joints(raw: dict, path: Path) -> tuple[tuple[tuple[str, str], ...
     return tuple((str(j), str(k)) for j, k in elastic.items()), tuple(str(j) for j in position_friction)
 
 
+def _frame_words(raw: dict, path: Path) -> str:
+    words = raw.get("diagnosis", {}).get("frame_words", "")
+    if not isinstance(words, str):
+        raise DvrkDartError(f"{path}: [diagnosis] frame_words is a text (the base frame at q = 0 in words), not {words!r}")
+    return words
+
+
 def _upstream_processing(raw: dict, path: Path) -> UpstreamProcessing:
     table = _require(raw, "processing", path, "file")
     try:
@@ -171,7 +178,7 @@ def _model(raw: dict, path: Path) -> PsmModel:
         dvrk_topics=_dvrk_topics(raw, path),
         project_unphysical_bodies=bool(checks.get("project_unphysical_bodies", False)),
         diagnosis_base=_diagnosis_base(raw, path),
-        elastic_joints=elastic, position_friction_joints=position_friction,
+        elastic_joints=elastic, position_friction_joints=position_friction, frame_words=_frame_words(raw, path),
         force_point=_force_point(raw, path, links),
     )
     check_model_values(model, cw)

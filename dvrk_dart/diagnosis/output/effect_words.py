@@ -55,6 +55,7 @@ def size_words(entry: dict) -> str:
         # a part the bounded fit holds at zero comes back as round-off (4.83e-40): zero
         size, viscous = (0.0 if abs(x) < ROUND_OFF else x for x in (size, viscous))
         along = (entry.get("parameters") or {}).get("coulomb_within_runs")  # a table along the range: its span, not its largest knot
-        coulomb = f"{along[0]:.3g} to {along[1]:.3g} {unit} along the runs' range" if along else f"{size:.3g} {unit}"
+        low, high = (0.0 if abs(x) < ROUND_OFF else x for x in along) if along else (None, None)  # 7.92e-30 read as a level
+        coulomb = f"{low:.3g} to {high:.3g} {unit} along the runs' range" if along else f"{size:.3g} {unit}"
         return f", Coulomb {coulomb}, viscous {viscous:.3g} {units.get('viscous', '')}".rstrip()
     return f", {size:.0%} of the identified term" if unit == "1" else f", size {size:.3g} {unit}".rstrip()

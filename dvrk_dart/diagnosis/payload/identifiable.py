@@ -269,8 +269,7 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
     efforts = ", ".join(f"{j} {'not determined' if v is None else f'{v:+.3f} {u}'}" for j, v, u in zip(JOINT_NAMES[:3], report["gravity_efforts_at_q0"], units))
     words = [
         ("The best-fitting payload's first moment" if tied else "The efforts determine the payload's first moment") + f" m·c = ({moment}) kg·m "
-        f"(base frame, q = 0, as a body on {report['first_moment_reference_link']}; pitch shaft centre at the base origin, shaft along base x, "
-        "+y towards the remote centre of motion, +z up) "
+        f"(base frame, q = 0, as a body on {report['first_moment_reference_link']}{'; ' + arm.model.frame_words if arm.model.frame_words else ''}) "
         f"and its gravity efforts at q = 0: {efforts}.",
         *j1_sentences(report),
     ]
@@ -293,10 +292,10 @@ def _first_moment_words(report: dict, arm: Arm, effect: FirstMomentPayload, tied
         words.append(f"The mass is not identified (interval {max(lo, 0.0):.3f}-{hi:.3f} kg): gravity on a link turning about a fixed "
                      "axis sees m·c only, and the inertia of a small mass is below the noise" + ("" if at_given else
                                                                                                f"; {PAYLOAD_AT_HINT}") + ".")
-    words.append("In the model's base frame the yaw axis is horizontal (base -y), so J1's gravity load depends on how the real yaw axis lies "
-                 "relative to gravity: J1's efforts get a first moment of their own (the yaw path), fitted with the payload so that a J1 effort "
-                 "scaling with the weight is counted as the payload's whatever its path (a mount otherwise, a coupling in the transmission); "
-                 "the first moment and the mass above are read from the other joints, where the model's geometry holds.")
+    words.append("J1's gravity load depends on how the real first axis lies relative to gravity, which the model fixes: J1's efforts get a "
+                 "first moment of their own (the yaw path), fitted with the payload so that a J1 effort scaling with the weight is counted as "
+                 "the payload's whatever its path (a tilted mount, a coupling in the transmission); the first moment and the mass above are "
+                 "read from the other joints, where the model's geometry holds.")
     return words
 
 

@@ -20,7 +20,7 @@ from dvrk_dart.model.joints import JOINT_NAMES, N_JOINTS, PITCH
 #: this ratio (1.3 / 0.77: within +-30 % of the interval's geometric middle)
 MASS_IDENTIFIED_RATIO = 1.7
 #: what a payload report without --repeat (the baseline's motion in another session) says of its intervals
-WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of q2's zero, the counterweight's cable) reads as a "
+WITHOUT_REPEAT = ("a change between the sessions shaped like gravity (an offset of a joint's zero, a cable's tension) reads as a "
                   "payload, and the intervals do not count it.")
 #: why the mass of a payload on a link turning about fixed axes is not determined
 MASS_NOT_SEEN = ("gravity sees m·c only on this link (it turns about fixed axes with the parallelogram) and the inertia of a small "
