@@ -10,10 +10,9 @@ from dvrk_dart.diagnosis.checks.synthetic import synthesize_measurement
 from dvrk_dart.diagnosis.diagnose import diagnose
 from dvrk_dart.diagnosis.fit.diagnosis_runs import prepare_run
 from dvrk_dart.diagnosis.effects.payload import PointPayload
+from arms import HAND_PITCH
 from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
 
-#: the 105 g runs' hand placement on the pitch link (pipelines/withheld.toml [payload])
-HAND_PITCH = {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_horizontal_m": 0.165, "check_height_m": 0.020}
 
 
 def test_a_session_change_that_reads_as_a_lighter_weight_widens_the_mass_interval(arm, segment, noise_rms):

@@ -13,10 +13,9 @@ from dvrk_dart.diagnosis.payload.payload_report import AT_POSITION_WITHOUT_REPEA
 from dvrk_dart.diagnosis.payload.yaw_path_inertia import BARE_PATH, RIGID_PATH, path_readings, span_both_path_models, span_readings
 from dvrk_dart.io.reference_data import load_run, resolve_run, sample_rate_hz
 from dvrk_dart.io.signal import process
+from arms import HAND_PITCH
 from one_segment import noise_rms, segment  # noqa: F401 (fixtures)
 
-#: the 105 g runs' hand placement on the pitch link (pipelines/withheld.toml [payload])
-HAND_PITCH = {"hand_link": "pitch", "hand_reference": "pitch_shaft", "check_horizontal_m": 0.165, "check_height_m": 0.020}
 
 
 def test_a_reading_outside_an_interval_widens_it_and_one_inside_does_not():
