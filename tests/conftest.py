@@ -12,7 +12,7 @@ from arms import PSM, PSM_ARM  # noqa: F401
 #: the modules that keep a worker longest (measured totals 26-90 s each): collected
 #: first, so that `make test`'s workers (xdist, a module each) start them
 #: first and do not end waiting on one of them
-LONGEST_FIRST = ("test_validation.py", "test_validation_payload.py", "test_diagnosis.py", "test_blind_suite.py", "test_periodic_payload.py",
+LONGEST_FIRST = ("test_validation.py", "test_validation_payload.py", "test_diagnosis.py", "test_payload_weights.py", "test_blind_suite.py", "test_periodic_payload.py",
                  "test_identification.py", "test_diagnose_combinations.py", "test_pipeline.py", "test_periodic_designs.py")
 
 
