@@ -144,7 +144,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from dvrk_dart.io.outputs import building_folder, check_output_folder
 
     config = DiagnosisConfig(args.measured, args.baseline, args.train, args.holdout, args.repeat, args.payload_at, args.parameter_band,
-                             args.refit, args.processing, args.executor, args.jobs, args.ray_address, topics=reading_options(args))
+                             args.refit, args.processing, args.executor, args.jobs, args.ray_address, topics=reading_options(args),
+                             effort_scale=args.effort_scale)
     check_output_folder(args.out, "diagnosis", writes=files_written(config))
     with building_folder(args.out, "diagnosis") as folder:
         print_diagnosis(run_diagnosis(command_arm(args), config, folder))

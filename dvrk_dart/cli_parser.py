@@ -316,6 +316,9 @@ def _diagnose_command(sub, commands) -> None:
                                             "only on joints whose measured efforts leave the parameters' band")
     p.add_argument("--refit", action="store_true", help="also refit the identified parameters on the training runs (OUT/refit/) and "
                                                           "replay the held-out runs with them: is a held-out gap the published fit's bias?")
+    p.add_argument("--effort-scale", action="store_true", help="also weigh a scale of every measured effort (the controller's torque "
+                   "constants or effort scale off, e.g. after a configuration change); not by default: between real sessions it takes "
+                   "what the sessions change")
     p.add_argument("--jobs", type=positive_int, default=2, help="re-simulations run side by side")
     _executor_options(p)
     _add_processing_option(p, None)

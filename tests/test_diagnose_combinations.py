@@ -117,3 +117,21 @@ def test_a_payload_between_two_three_joint_logs_is_named_on_its_link(tmp_path):
     payload = json.loads((out / "diagnosis.json").read_text())["payload"]
     assert payload["group"] == "insertion", payload["link"]
     assert payload["mass_kg"] == pytest.approx(0.2, rel=0.2)
+
+
+def test_a_scale_of_the_measured_efforts_is_weighed_when_asked(tmp_path):
+    """Every effort of a run read 8 % high against the same motion (a configuration's effort scale changed between
+    them): with --effort-scale the scale is the finding, at its size; without it, no scale is a candidate."""
+    state, base = design_run(PSM_ARM, 2, 0.5, 5, MOVING, 200.0, 11)
+    paths = {name: _write(tmp_path / f"{name}.csv", state, efforts, seed) for name, efforts, seed in
+             (("scaled", base * 1.08, 1), ("baseline", base, 2))}
+    for flag in ([], ["--effort-scale"]):
+        out = tmp_path / f"out{len(flag)}"
+        assert main(["diagnose", "--measured", paths["scaled"], "--baseline", paths["baseline"], "--processing", "periodic",
+                     "--out", str(out), "--jobs", "1", *flag]) == 0
+        effects = json.loads((out / "diagnosis.json").read_text())["effects"]
+        scales = [e for e in effects if e["kind"] == "effort_scale"]
+        if flag:
+            assert effects[0]["name"] == "effort_scale" and effects[0]["size"] == pytest.approx(0.08, abs=0.01), effects[0]
+        else:
+            assert not scales

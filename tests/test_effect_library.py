@@ -166,3 +166,20 @@ def test_a_friction_table_says_what_the_runs_do_not_reach():
     assert entry["parameters"]["coulomb_within_runs"] == pytest.approx([0.1417, 0.2074], abs=1e-4)  # the truth: 0.146..0.218
     assert size_words(entry).startswith(", Coulomb 0.142 to 0.207 N along the runs' range")
     assert "not_determined" not in PositionFriction(PSM, "q3", 3e-5).describe([0.1] * 5)  # no training span given: nothing said
+
+
+def test_an_effort_scale_reads_the_scale_of_the_measured_efforts(arm, segment):
+    """Efforts measured times 1 + s: the effect on the exerted effort removes the gap exactly at the size s, in the
+    words with its sign."""
+    from dvrk_dart.diagnosis.effects.arm_effects import EffortScale
+
+    state = segment.head(100)
+    simulated = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
+    measured = simulated * 1.08
+    features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated, sample_rate_hz(), exerted_effort=simulated)
+    scale = EffortScale()
+    column = scale.columns(features)[:, :, 0]
+    share = np.sum(column * (measured - simulated)) / np.sum(column * column)
+    assert np.max(np.abs(measured - simulated - scale.effort(features, np.array([share])))) < 1e-12
+    assert scale.size(np.array([share])) == pytest.approx(0.08, rel=1e-9)
+    assert size_words({"kind": "effort_scale", "size": -0.05, "units": {"scale_error": "1"}}) == ", 5.0% low"

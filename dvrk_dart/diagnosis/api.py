@@ -50,7 +50,8 @@ class DiagnosisConfig:
         training runs and judge them on the held-out ones; processing:
         upstream, periodic, or None (periodic where every run is periodic);
         logs: the replays before and after as MCAP and Rerun logs; figures:
-        the residual's figures (diagnosis.html's, the report's)."""
+        the residual's figures (diagnosis.html's, the report's); effort_scale:
+        a scale of every measured effort among the candidates."""
 
     measured: tuple[str, ...]
     baseline: str | None = None
@@ -67,6 +68,7 @@ class DiagnosisConfig:
     logs: bool = True
     figures: bool = True
     topics: BagTopics = BagTopics()
+    effort_scale: bool = False
 
     def __post_init__(self) -> None:
         for name in ("measured", "train", "holdout"):  # a single run given as its name
@@ -152,7 +154,7 @@ def run_diagnosis(arm: Arm, config: DiagnosisConfig, out_dir: Path) -> dict:
     found = diagnose(c.measured_spec, baseline=c.baseline, train=list(c.train) or None, holdout=holdout or None,
                      simulate=simulation_hook(arm, c.executor, c.jobs, c.ray_address), out_dir=out_dir, arm=arm, repeat=c.repeat,
                      payload_at=c.payload_at, processing=c.processing, base_config=base_sim_config(arm), topics=c.topics, write_json=False,
-                     figures=c.figures)
+                     figures=c.figures, effort_scale=c.effort_scale)
     if band is not None:
         found = apply_band(found, band)
     studies = (arm, training, holdout, found, c.executor, c.jobs, c.ray_address, c.topics)

@@ -86,6 +86,7 @@ def diagnose(
     processing: str | None = "upstream",
     topics: BagTopics = BagTopics(),
     write_json: bool = True,
+    effort_scale: bool = False,
 ) -> dict:
     """Diagnose the gap of `measured` (a run name such as 'two', a path, a
     ProcessedRun or a DiagnosisRun carrying its simulated efforts), or of
@@ -122,7 +123,8 @@ def diagnose(
     out_dir: where diagnosis.json, the regime tables and the figures go
         (write_json False: not diagnosis.json, which the caller writes with what it adds: api.run_diagnosis);
     arm: the arm the runs were recorded on (its model and identified parameters);
-    topics: how runs that are bags are read (--arm, --topic, --jaw-topic) and CSVs' --rate.
+    topics: how runs that are bags are read (--arm, --topic, --jaw-topic) and CSVs' --rate;
+    effort_scale: a scale of every measured effort among the candidates (`library.candidate_effects`).
     Returns the diagnosis dict (the contract of diagnosis.json)."""
     measured_list = list(measured) if isinstance(measured, (list, tuple)) else [measured]
     several = baseline is not None or len(measured_list) > 1
@@ -132,7 +134,7 @@ def diagnose(
     problem = build_problem(arm, measured_list, baseline, train, holdout, repeat, simulate=simulate, base_config=base_config,
                             effects=effects, payload_model=payload_model or ("first_moment" if baseline is not None else "point"),
                             payload_at=payload_at, nuisance=several if nuisance_offsets is None else bool(nuisance_offsets),
-                            processing=processing, folds=folds, topics=topics, repeat_source=repeat_source)
+                            processing=processing, folds=folds, topics=topics, repeat_source=repeat_source, effort_scale=effort_scale)
     selection, after, dropped = _resimulated(problem, select(problem, max_effects), simulate, base_config)
     entries = effect_entries(problem, selection)
     nuisance_joints = problem.offset_joints if problem.nuisance else None  # the floor without the constants the fit takes out

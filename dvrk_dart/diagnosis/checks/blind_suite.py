@@ -11,7 +11,8 @@ equivalent effect as close (`pipelines/withheld.toml` [blind_suite]).
 
 Classes the simulation has no physics for (the counterweight tendon's
 transmission error, a Stribeck drop, a time shift) are not in the suite: a run
-made with their regressor would test the regressor against itself.
+made with their regressor would test the regressor against itself. An effort
+scale is a sensor's: DART's efforts read times 1 + s (`measured_scale`).
 """
 
 from __future__ import annotations
@@ -57,6 +58,11 @@ def case_physics(case: dict, base: SimConfig) -> SimConfig:
     return replace(base, extra=base.extra.plus(JointEffects(**fields)), payloads=base.payloads + payloads)
 
 
+def measured_scale(case: dict) -> float:
+    """What the case's sensor multiplies DART's efforts by: 1 + its `measured_scale`."""
+    return 1.0 + float(case.get("measured_scale", 0.0))
+
+
 def suite_motion(spec: dict, real: ProcessedRun) -> ProcessedRun:
     """`periods` whole periods of the spec's real run (processed periodic), its
     positions as the periodic layer's series (exactly periodic: both processings apply)."""
@@ -98,10 +104,10 @@ def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, no
     base = SimConfig()
     rng = np.random.default_rng(seed)
     config = case_physics(case, base)
-    clean = simulated_efforts(arm, motion, simulate, config)
+    clean = simulated_efforts(arm, motion, simulate, config) * measured_scale(case)
     effect_free = simulated_efforts(arm, motion, simulate, base)
     folder.mkdir(parents=True, exist_ok=True)
-    runs = {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config,
+    runs = {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config, "scale": measured_scale(case),
             "baseline": write_run(folder / f"{case['name']}_baseline.csv", motion, effect_free + noise["session_offsets"], noise, rng)}
     if case.get("repeat"):
         runs["repeat"] = write_run(folder / f"{case['name']}_repeat.csv", motion, effect_free, noise, rng)
@@ -119,16 +125,16 @@ def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunPr
     same with and without a baseline when the band is)."""
     known = {} if known is None else known
 
-    def gap(role: str, config: SimConfig) -> np.ndarray:
+    def gap(role: str, config: SimConfig, scale: float) -> np.ndarray:
         key = (str(runs[role]), processing.name, processing.harmonics)
         if key not in known:
             state = loaded_states([str(runs[role])], arm.model, processing)[0]
-            known[key] = state.tau - simulated_efforts(arm, state, simulate, config)
+            known[key] = state.tau - simulated_efforts(arm, state, simulate, config) * scale
         return known[key]
 
-    residual = gap("measured", runs["config"])
+    residual = gap("measured", runs["config"], runs["scale"])
     if with_baseline:
-        difference = residual - gap("baseline", SimConfig())
+        difference = residual - gap("baseline", SimConfig(), 1.0)
         residual = difference - session_joints * difference.mean(axis=0)
     return rms(residual)
 
@@ -164,7 +170,8 @@ def run_case(arm: Arm, spec: dict, case: dict, runs: dict, simulate: Simulate, p
     """One diagnosis of the suite, judged (`known`: `true_physics_gap`'s)."""
     repeat = str(runs["repeat"]) if with_baseline and "repeat" in runs else None
     result = diagnose(str(runs["measured"]), baseline=str(runs["baseline"]) if with_baseline else None, simulate=simulate, arm=arm,
-                      figures=False, profile_payload_mass=False, processing=processing, repeat=repeat)
+                      figures=False, profile_payload_mass=False, processing=processing, repeat=repeat,
+                      effort_scale=bool(case.get("effort_scale")))
     used = RunProcessing(processing, result["processing"].get("harmonics"))
     nuisance = (result.get("nuisance_offset_joints") or {}).get("joints", arm.model.session_offset_joints or ())  # as the diagnosis demeaned
     floor = true_physics_gap(arm, runs, simulate, used, with_baseline, np.isin(JOINT_NAMES, nuisance), known)

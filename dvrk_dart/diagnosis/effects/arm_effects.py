@@ -1,4 +1,5 @@
-"""Effects of the whole arm or of the measurement: base tilt, time shift, counterweight transmission, a link's own mass."""
+"""Effects of the whole arm or of the measurement: base tilt, time shift, effort scale, counterweight transmission,
+a link's own mass."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ TILT_LIMIT_RAD = 0.05
 #: the largest time shift between positions and efforts considered (s):
 #: 10 samples at 200 Hz, far beyond any controller latency of the dVRK
 TIME_SHIFT_LIMIT_S = 0.05
+#: a joint's effort measured off by more than 30 % is a wrong configuration file, not a calibration to diagnose
+EFFORT_SCALE_LIMIT = 0.3
 #: the counterweight tendon cannot transmit more than +-50 % of its force wrongly
 COUNTERWEIGHT_SCALE_LIMIT = 0.5
 #: a tension-proportional tendon loss beyond 50 % is not a transmission
@@ -45,6 +48,22 @@ class TimeShift(Effect):
 
     def columns(self, features):
         return -features.reference_rate[:, :, None]
+
+    def sim_contribution(self, p):
+        return None  # a property of the measurement, not of the physics
+
+
+class EffortScale(Effect):
+    """Every joint's efforts measured times (1 + s): tau_meas = (1 + s) tau, a gap of s tau, tau what the arm exerts
+    (`TrajectoryFeatures.exerted_effort`)."""
+
+    kind = "effort_scale"
+    name = "effort_scale"
+    joints = JOINT_NAMES
+    parameters = (Parameter("scale_error", "1", -EFFORT_SCALE_LIMIT, EFFORT_SCALE_LIMIT),)
+
+    def columns(self, features):
+        return features.exerted_effort[:, :, None]
 
     def sim_contribution(self, p):
         return None  # a property of the measurement, not of the physics

@@ -20,14 +20,19 @@ class TrajectoryFeatures:
     """Per-sample quantities of one trajectory that the regressors are built from.
 
     `reference_effort` is the simulated effort at the measured samples (the
-    time-shift effect differentiates it)."""
+    time-shift effect differentiates it); `exerted_effort` what the arm exerts
+    as well as the runs tell it, what a scale of the measurement multiplies
+    (`EffortScale`): the reference effort unless given"""
 
-    def __init__(self, arm: Arm, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, reference_effort: np.ndarray, sample_rate_hz: float):
+    def __init__(self, arm: Arm, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, reference_effort: np.ndarray, sample_rate_hz: float,
+                 exerted_effort: np.ndarray | None = None):
         self.arm = arm
         self.q, self.dq, self.ddq = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, dq, ddq))
         self.reference_effort = np.asarray(reference_effort, dtype=float)
-        if self.reference_effort.shape != self.q.shape:
-            raise DvrkDartError(f"reference efforts {self.reference_effort.shape} do not match the states {self.q.shape}")
+        self.exerted_effort = self.reference_effort if exerted_effort is None else np.asarray(exerted_effort, dtype=float)
+        for name, effort in (("reference", self.reference_effort), ("exerted", self.exerted_effort)):
+            if effort.shape != self.q.shape:
+                raise DvrkDartError(f"{name} efforts {effort.shape} do not match the states {self.q.shape}")
         self.sample_rate_hz = float(sample_rate_hz)
 
     def __len__(self) -> int:

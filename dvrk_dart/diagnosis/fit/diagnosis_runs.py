@@ -189,8 +189,16 @@ class DiagnosisRun:
         """The regressor features of the run's samples (made once per run)."""
         if self._features is None:
             s = self.state
-            self._features = TrajectoryFeatures(arm, s.q, s.dq, s.ddq, self.simulated, s.rate_hz)
+            self._features = TrajectoryFeatures(arm, s.q, s.dq, s.ddq, self.simulated, s.rate_hz, self._exerted_effort())
         return self._features
+
+    def _exerted_effort(self) -> np.ndarray:
+        """What the arm exerts as well as the runs tell it (a scale of the measurement multiplies it): the simulated
+        effort, or the measured one of the baseline of the same motion, which a change of scale in the run has not
+        touched (the run's own would put its noise and its session's gap in the column that is to explain them)."""
+        if self.role is RunRole.DIFFERENCE:
+            return np.where(self.baseline.state.measured, self.baseline.state.tau, self.simulated)
+        return self.simulated
 
     @property
     def residual(self) -> np.ndarray:

@@ -191,9 +191,10 @@ def roles(measured_list, baseline, train, holdout, repeat) -> list[tuple[str, st
             and not (option == "--train" and str(s) in measured)]  # --train may repeat the measured run (it always trains)
 
 
-def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payload_at) -> tuple[list[Effect], int | None]:
+def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payload_at, effort_scale: bool) -> tuple[list[Effect], int | None]:
     """The candidate effects, and a payload at a given position appended (its index)."""
-    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, base=base_config)
+    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, base=base_config,
+                                                                          effort_scale=effort_scale)
     if payload_at is None:
         return effects, None
     key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
@@ -278,10 +279,10 @@ def _held_out(run: DiagnosisRun, baseline: DiagnosisRun | None) -> DiagnosisRun:
 def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | None, holdout: Sequence | None, repeat, *,
                   simulate: Simulate | None, base_config: SimConfig, effects, payload_model: str, payload_at,
                   nuisance: bool, processing: str | None, folds: int, topics: BagTopics = BagTopics(),
-                  repeat_source: str | None = None) -> Problem:
+                  repeat_source: str | None = None, effort_scale: bool = False) -> Problem:
     """The runs prepared by role (simulated, aligned on their baseline), the
     design of the candidate effects and the Gram blocks of every run."""
-    effects, at_index = _effects(arm, effects, payload_model, base_config, payload_at)
+    effects, at_index = _effects(arm, effects, payload_model, base_config, payload_at, effort_scale)
     all_specs = [baseline, *measured_list, *(train or []), *(holdout or []), repeat]
     inputs = distinct_inputs(roles(measured_list, baseline, train, holdout, repeat), arm.model, topics)
     # every command's default (None): periodic where every run is a periodic excitation, else upstream

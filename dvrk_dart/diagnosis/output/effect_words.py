@@ -7,6 +7,7 @@ _KIND_WORDS = {
     "armature": "extra reflected motor inertia on {joints}",
     "gravity_tilt": "gravity tilted against the model (base not level)",
     "time_shift": "efforts recorded late against the positions",
+    "effort_scale": "the efforts measured to a wrong scale (the controller's effort scale off)",
     "counterweight_transmission": "an error in the counterweight cable's transmission to {joints}",
 }
 
@@ -48,6 +49,8 @@ def size_words(entry: dict) -> str:
     unit = next(iter(units.values()), "")
     if not isinstance(size, (int, float)):
         return ""
+    if entry.get("kind") == "effort_scale":
+        return f", {abs(size):.1%} {'low' if size < 0 else 'high'}"
     if entry.get("kind") == "mass_scale":
         return f", {abs(size):.0%} {'lighter' if size < 0 else 'heavier'}"
     viscous = (entry.get("parameters") or {}).get("viscous")
