@@ -121,7 +121,8 @@ def test_a_payload_between_two_three_joint_logs_is_named_on_its_link(tmp_path):
 
 def test_a_scale_of_the_measured_efforts_is_weighed_when_asked(tmp_path):
     """Every effort of a run read 8 % high against the same motion (a configuration's effort scale changed between
-    them): with --effort-scale the scale is the finding, at its size; without it, no scale is a candidate."""
+    them): with --effort-scale the scale is the finding, at its size; without it, no scale is a candidate. Beside a
+    run of another motion, which the baseline's measured efforts do not describe, a one-line refusal."""
     state, base = design_run(PSM_ARM, 2, 0.5, 5, MOVING, 200.0, 11)
     paths = {name: _write(tmp_path / f"{name}.csv", state, efforts, seed) for name, efforts, seed in
              (("scaled", base * 1.08, 1), ("baseline", base, 2))}
@@ -135,3 +136,7 @@ def test_a_scale_of_the_measured_efforts_is_weighed_when_asked(tmp_path):
             assert effects[0]["name"] == "effort_scale" and effects[0]["size"] == pytest.approx(0.08, abs=0.01), effects[0]
         else:
             assert not scales
+    other, other_efforts = design_run(PSM_ARM, 2, 0.45, 5, MOVING, 200.0, 12)
+    code = main(["diagnose", "--measured", paths["scaled"], _write(tmp_path / "other.csv", other, other_efforts, 3), "--baseline",
+                 paths["baseline"], "--effort-scale", "--out", str(tmp_path / "mixed"), "--jobs", "1"])
+    assert code == 2 and not (tmp_path / "mixed").exists()

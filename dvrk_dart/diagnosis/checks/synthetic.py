@@ -40,8 +40,7 @@ def synthesize_measurement(
     tau = simulated_efforts(arm, state, simulate, config)
     extra = not_simulated(list(injected))
     if extra:
-        features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), state.rate_hz,
-                                      exerted_effort=tau)  # an effort scale multiplies the physics the run has
+        features = TrajectoryFeatures(arm, state.q, state.dq, state.ddq, simulated_efforts(arm, state, simulate, base_config), state.rate_hz)
         tau = tau + unsimulated_effort(extra, features)
     if extra_effort is not None:
         tau = tau + np.asarray(extra_effort, dtype=float)

@@ -16,7 +16,7 @@ TILT_LIMIT_RAD = 0.05
 #: the largest time shift between positions and efforts considered (s):
 #: 10 samples at 200 Hz, far beyond any controller latency of the dVRK
 TIME_SHIFT_LIMIT_S = 0.05
-#: a joint's effort measured off by more than 30 % is a wrong configuration file, not a calibration to diagnose
+#: efforts measured off by more than 30 % are another arm's configuration, not a scale to look for in a gap
 EFFORT_SCALE_LIMIT = 0.3
 #: the counterweight tendon cannot transmit more than +-50 % of its force wrongly
 COUNTERWEIGHT_SCALE_LIMIT = 0.5

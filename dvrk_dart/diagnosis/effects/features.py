@@ -22,7 +22,7 @@ class TrajectoryFeatures:
     `reference_effort` is the simulated effort at the measured samples (the
     time-shift effect differentiates it); `exerted_effort` what the arm exerts
     as well as the runs tell it, what a scale of the measurement multiplies
-    (`EffortScale`): the reference effort unless given"""
+    (`EffortScale`): the reference effort unless given."""
 
     def __init__(self, arm: Arm, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, reference_effort: np.ndarray, sample_rate_hz: float,
                  exerted_effort: np.ndarray | None = None):

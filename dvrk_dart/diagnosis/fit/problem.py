@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from dvrk_dart.diagnosis.fit.design import Design, Grams
-from dvrk_dart.diagnosis.effects.arm_effects import LinkMassScale
+from dvrk_dart.diagnosis.effects.arm_effects import EffortScale, LinkMassScale
 from dvrk_dart.diagnosis.effects.effect import Effect
 from dvrk_dart.diagnosis.effects.first_moment import FirstMomentPayload, PayloadAtPosition, check_mass_determinable, parse_payload_at
 from dvrk_dart.diagnosis.effects.payload import PointPayload, equivalent_payload_links
@@ -193,8 +193,10 @@ def roles(measured_list, baseline, train, holdout, repeat) -> list[tuple[str, st
 
 def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payload_at, effort_scale: bool) -> tuple[list[Effect], int | None]:
     """The candidate effects, and a payload at a given position appended (its index)."""
-    effects = list(effects) if effects is not None else candidate_effects(arm, payload_model=payload_model, base=base_config,
-                                                                          effort_scale=effort_scale)
+    if effects is None:
+        effects = candidate_effects(arm, payload_model=payload_model, base=base_config, effort_scale=effort_scale)
+    else:
+        effects = list(effects) + ([EffortScale()] if effort_scale and not any(isinstance(e, EffortScale) for e in effects) else [])
     if payload_at is None:
         return effects, None
     key, position = parse_payload_at(payload_at, arm.model) if isinstance(payload_at, str) else payload_at
@@ -319,6 +321,10 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
     if every_effect_a_change:
         effects, at_index = _without_kind(effects, at_index, LinkMassScale.kind)
+    elif baseline_run is not None and any(isinstance(e, EffortScale) for e in effects):
+        other = next(r.name for r in train_runs if r.role is RunRole.OTHER_MOTION)
+        raise DvrkDartError(f"--effort-scale: with --baseline only runs of the baseline's motion (a change of scale is read against "
+                            f"the baseline's measured efforts); {other} is another motion: diagnose it with a baseline of its own")
     effects = [_on_training_range(e, train_runs) for e in effects]
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     effects = _one_body_on_these_runs(arm, effects, [*train_runs, *holdout_runs, baseline_run, repeat_run])
