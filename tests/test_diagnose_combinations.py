@@ -89,6 +89,7 @@ def test_every_combination_ends_in_a_result_or_one_line(runs, combination, capsy
     assert code == 0, captured.err  # every other combination is diagnosed
     result = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert result["explanation"]["words"] in ("mostly explained", "partly explained", "not explained")
+    assert result["effort_scale_rival"] is None  # a friction change is not read as a scale of the efforts
     assert (tmp_path / "out" / "diagnosis.html").is_file()
     if combination["payload_at"]:  # a friction change, no weight: no payload, and the position says why it reads none
         assert result["payload"] is None and (result["payload_not_distinguished"] or result["payload_at_unused"]), result["payload"]
@@ -121,8 +122,9 @@ def test_a_payload_between_two_three_joint_logs_is_named_on_its_link(tmp_path):
 
 def test_a_scale_of_the_measured_efforts_is_weighed_when_asked(tmp_path):
     """Every effort of a run read 8 % high against the same motion (a configuration's effort scale changed between
-    them): with --effort-scale the scale is the finding, at its size; without it, no scale is a candidate. Beside a
-    run of another motion, which the baseline's measured efforts do not describe, a one-line refusal."""
+    them): with --effort-scale the scale is the finding, at its size; without it, no scale is a candidate, and where
+    the effects selected instead explain no more than the scale alone, the answer says so. Beside a run of another
+    motion, which the baseline's measured efforts do not describe, a one-line refusal."""
     state, base = design_run(PSM_ARM, 2, 0.5, 5, MOVING, 200.0, 11)
     paths = {name: _write(tmp_path / f"{name}.csv", state, efforts, seed) for name, efforts, seed in
              (("scaled", base * 1.08, 1), ("baseline", base, 2))}
@@ -130,12 +132,14 @@ def test_a_scale_of_the_measured_efforts_is_weighed_when_asked(tmp_path):
         out = tmp_path / f"out{len(flag)}"
         assert main(["diagnose", "--measured", paths["scaled"], "--baseline", paths["baseline"], "--processing", "periodic",
                      "--out", str(out), "--jobs", "1", *flag]) == 0
-        effects = json.loads((out / "diagnosis.json").read_text())["effects"]
-        scales = [e for e in effects if e["kind"] == "effort_scale"]
+        result = json.loads((out / "diagnosis.json").read_text())
+        effects, rival = result["effects"], result["effort_scale_rival"]
         if flag:
             assert effects[0]["name"] == "effort_scale" and effects[0]["size"] == pytest.approx(0.08, abs=0.01), effects[0]
         else:
-            assert not scales
+            assert not [e for e in effects if e["kind"] == "effort_scale"]
+            assert len([e for e in effects if e["selected"]]) > 1  # several effects for one scale: the answer names it
+            assert rival["scale_error"] == pytest.approx(0.08, abs=0.01) and "--effort-scale" in rival["words"], rival
     other, other_efforts = design_run(PSM_ARM, 2, 0.45, 5, MOVING, 200.0, 12)
     code = main(["diagnose", "--measured", paths["scaled"], _write(tmp_path / "other.csv", other, other_efforts, 3), "--baseline",
                  paths["baseline"], "--effort-scale", "--out", str(tmp_path / "mixed"), "--jobs", "1"])

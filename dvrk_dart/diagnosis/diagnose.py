@@ -32,6 +32,7 @@ from dvrk_dart.diagnosis.payload.periodic_payload_report import periodic_payload
 from dvrk_dart.diagnosis.payload.yaw_path_inertia import span_both_path_models
 from dvrk_dart.diagnosis.fit.identified_terms import identified_terms_share
 from dvrk_dart.diagnosis.fit.problem import Problem, build_problem
+from dvrk_dart.diagnosis.fit.scale_rival import effort_scale_rival
 from dvrk_dart.diagnosis.output.regimes import plot_period, plot_residuals, residual_regimes
 from dvrk_dart.diagnosis.fit.result import (
     Diagnosis,
@@ -146,6 +147,7 @@ def diagnose(
     carried = identified_terms_share(problem, selection, base_config)
     result = _diagnosis(problem, selection, after, entries, (floor, split_floor), split, first_moments, points, simulate is not None, dropped,
                         carried).to_json()
+    result["effort_scale_rival"] = effort_scale_rival(problem, selection)
     # runs minus their baseline, else runs of their own (against the identified offsets the simulation leaves out)
     differences = [r for r in problem.train_runs if r.role is RunRole.DIFFERENCE]
     own = [r for r in problem.train_runs if r.role is RunRole.RAW] if not problem.has_baseline else []

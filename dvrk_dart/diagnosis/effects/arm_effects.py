@@ -55,12 +55,16 @@ class TimeShift(Effect):
 
 class EffortScale(Effect):
     """Every joint's efforts measured times (1 + s): tau_meas = (1 + s) tau, a gap of s tau, tau what the arm exerts
-    (`TrajectoryFeatures.exerted_effort`)."""
+    (`TrajectoryFeatures.exerted_effort`). candidate=False: never selected, only weighed against what the selected
+    effects explain (`scale_rival`)."""
 
     kind = "effort_scale"
     name = "effort_scale"
     joints = JOINT_NAMES
     parameters = (Parameter("scale_error", "1", -EFFORT_SCALE_LIMIT, EFFORT_SCALE_LIMIT),)
+
+    def __init__(self, candidate: bool = True):
+        self.candidate = candidate
 
     def columns(self, features):
         return features.exerted_effort[:, :, None]

@@ -9,7 +9,6 @@ import pinocchio as pin
 
 from dvrk_dart.diagnosis.effects.arm_effects import (
     CounterweightTransmission,
-    EffortScale,
     GravityTilt,
     LinkMassScale,
     TimeShift,
@@ -53,13 +52,10 @@ PAYLOAD_MODELS = ("point", "first_moment")
 
 def candidate_effects(
     arm: Arm, stribeck: bool = False, payload_margin_m: float = ENVELOPE_MARGIN_M, reversal_velocities: tuple[float, ...] = REVERSAL_VELOCITIES,
-    payload_model: str = "point", base: SimConfig = SimConfig(), effort_scale: bool = False,
+    payload_model: str = "point", base: SimConfig = SimConfig(),
 ) -> list[Effect]:
     """The library of candidate effects, in a fixed order; a `base` that
     simulates the identified friction adds its pre-sliding variants.
-
-    effort_scale: a scale of every measured effort too (`EffortScale`), only when asked: on the real session pairs it
-    takes what sessions change (docs/diagnosis-method.md).
 
     payload_model: "point" (a point mass inside the link's envelope, simulated
     as a body) or "first_moment" (what the efforts determine, `first_moment`)."""
@@ -93,8 +89,6 @@ def candidate_effects(
         effects += [FirstMomentPayload(arm.model, k, envelopes[k], equivalent_keys=equivalents[k],
                                        mass_seen=mass_seen_by_gravity(arm, k)) for k in payload_links(arm.model)]
     effects += [GravityTilt(arm), TimeShift()]
-    if effort_scale:
-        effects.append(EffortScale())
     if arm.model.counterweight_link is not None:  # an arm with a counterweight tendon (the PSM's)
         effects.append(CounterweightTransmission(arm))
     effects += [LinkMassScale(arm, key) for key in prismatic_bodies(arm)  # the counterweight's reaches J3 by the ideal tendon

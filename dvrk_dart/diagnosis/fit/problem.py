@@ -193,8 +193,9 @@ def roles(measured_list, baseline, train, holdout, repeat) -> list[tuple[str, st
 
 def _effects(arm: Arm, effects, payload_model: str, base_config: SimConfig, payload_at, effort_scale: bool) -> tuple[list[Effect], int | None]:
     """The candidate effects, and a payload at a given position appended (its index)."""
-    if effects is None:
-        effects = candidate_effects(arm, payload_model=payload_model, base=base_config, effort_scale=effort_scale)
+    if effects is None:  # a scale of the measured efforts is a candidate only when asked: on the real session pairs it takes
+        # what sessions change (docs/diagnosis-method.md); else it is weighed against the selection only (`scale_rival`)
+        effects = candidate_effects(arm, payload_model=payload_model, base=base_config) + [EffortScale(candidate=effort_scale)]
     else:
         effects = list(effects) + ([EffortScale()] if effort_scale and not any(isinstance(e, EffortScale) for e in effects) else [])
     if payload_at is None:
@@ -321,10 +322,12 @@ def build_problem(arm: Arm, measured_list: list, baseline, train: Sequence | Non
     every_effect_a_change = baseline_run is not None and not any(r.role is RunRole.OTHER_MOTION for r in train_runs)
     if every_effect_a_change:
         effects, at_index = _without_kind(effects, at_index, LinkMassScale.kind)
-    elif baseline_run is not None and any(isinstance(e, EffortScale) for e in effects):
+    elif baseline_run is not None and any(isinstance(e, EffortScale) and e.candidate for e in effects):
         other = next(r.name for r in train_runs if r.role is RunRole.OTHER_MOTION)
         raise DvrkDartError(f"--effort-scale: with --baseline only runs of the baseline's motion (a change of scale is read against "
                             f"the baseline's measured efforts); {other} is another motion: diagnose it with a baseline of its own")
+    elif baseline_run is not None:  # nor weighed: its column would be the baseline's gap
+        effects, at_index = _without_kind(effects, at_index, EffortScale.kind)
     effects = [_on_training_range(e, train_runs) for e in effects]
     effects, at_index = _on_recorded_joints(effects, at_index, [*train_runs, *holdout_runs, baseline_run, repeat_run])
     effects = _one_body_on_these_runs(arm, effects, [*train_runs, *holdout_runs, baseline_run, repeat_run])

@@ -272,7 +272,9 @@ def answer_paragraphs(result: dict) -> list[str]:
     held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
     caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
     constant = constants_clause(result, lead=True) if constants_first else ""
-    return [paragraph for paragraph in (caution, beyond.strip(), constant, sentence + refit_clause(result) + insertion_clause(result)) if paragraph]
+    scale = (result.get("effort_scale_rival") or {}).get("words", "")
+    return [paragraph for paragraph in (caution, beyond.strip(), constant, sentence + refit_clause(result) + insertion_clause(result), scale)
+            if paragraph]
 
 
 def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str) -> str:
