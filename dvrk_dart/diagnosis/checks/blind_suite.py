@@ -10,9 +10,11 @@ in the library ("none") must not be claimed: "not explained", or an
 equivalent effect as close (`pipelines/withheld.toml` [blind_suite]).
 
 Classes the simulation has no physics for (the counterweight tendon's
-transmission error, a Stribeck drop, a time shift) are not in the suite: a run
-made with their regressor would test the regressor against itself. An effort
-scale is a sensor's: DART's efforts read times 1 + s (`measured_scale`).
+transmission error, a Stribeck drop) are not in the suite: a run made with
+their regressor would test the regressor against itself. An effort scale and
+a time shift are the sensor's: DART's efforts read times 1 + s
+(`measured_scale`), or late (`measured_delay_s`, whole samples of the
+periodic motion, rolled).
 """
 
 from __future__ import annotations
@@ -58,9 +60,11 @@ def case_physics(case: dict, base: SimConfig) -> SimConfig:
     return replace(base, extra=base.extra.plus(JointEffects(**fields)), payloads=base.payloads + payloads)
 
 
-def measured_scale(case: dict) -> float:
-    """What the case's sensor multiplies DART's efforts by: 1 + its `measured_scale`."""
-    return 1.0 + float(case.get("measured_scale", 0.0))
+def sensor_reading(case: dict, efforts: np.ndarray, rate_hz: float) -> np.ndarray:
+    """DART's efforts as the case's sensor reads them: times 1 + its `measured_scale`, `measured_delay_s` late (the
+    suite's motion is whole periods: a roll is a delay)."""
+    late = int(round(float(case.get("measured_delay_s", 0.0)) * rate_hz))
+    return np.roll(efforts * (1.0 + float(case.get("measured_scale", 0.0))), late, axis=0)
 
 
 def suite_motion(spec: dict, real: ProcessedRun) -> ProcessedRun:
@@ -104,10 +108,10 @@ def case_runs(arm: Arm, motion: ProcessedRun, simulate: Simulate, case: dict, no
     base = SimConfig()
     rng = np.random.default_rng(seed)
     config = case_physics(case, base)
-    clean = simulated_efforts(arm, motion, simulate, config) * measured_scale(case)
+    clean = sensor_reading(case, simulated_efforts(arm, motion, simulate, config), motion.rate_hz)
     effect_free = simulated_efforts(arm, motion, simulate, base)
     folder.mkdir(parents=True, exist_ok=True)
-    runs = {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config, "scale": measured_scale(case),
+    runs = {"measured": write_run(folder / f"{case['name']}.csv", motion, clean, noise, rng), "config": config, "case": case,
             "baseline": write_run(folder / f"{case['name']}_baseline.csv", motion, effect_free + noise["session_offsets"], noise, rng)}
     if case.get("repeat"):
         runs["repeat"] = write_run(folder / f"{case['name']}_repeat.csv", motion, effect_free, noise, rng)
@@ -125,16 +129,16 @@ def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunPr
     same with and without a baseline when the band is)."""
     known = {} if known is None else known
 
-    def gap(role: str, config: SimConfig, scale: float) -> np.ndarray:
+    def gap(role: str, config: SimConfig, case: dict) -> np.ndarray:
         key = (str(runs[role]), processing.name, processing.harmonics)
         if key not in known:
             state = loaded_states([str(runs[role])], arm.model, processing)[0]
-            known[key] = state.tau - simulated_efforts(arm, state, simulate, config) * scale
+            known[key] = state.tau - sensor_reading(case, simulated_efforts(arm, state, simulate, config), state.rate_hz)
         return known[key]
 
-    residual = gap("measured", runs["config"], runs["scale"])
+    residual = gap("measured", runs["config"], runs["case"])
     if with_baseline:
-        difference = residual - gap("baseline", SimConfig(), 1.0)
+        difference = residual - gap("baseline", SimConfig(), {})
         residual = difference - session_joints * difference.mean(axis=0)
     return rms(residual)
 

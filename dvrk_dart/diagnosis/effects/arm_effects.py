@@ -39,7 +39,9 @@ def gravity_tilt_directions(gravity: np.ndarray) -> np.ndarray:
 
 class TimeShift(Effect):
     """Efforts recorded late (delta > 0) relative to the positions:
-    tau_meas(t) = tau(t - delta) ~ tau(t) - delta dtau/dt, tau the simulated effort."""
+    tau_meas(t) = tau(t - delta) ~ tau(t) - delta dtau/dt, tau what the arm exerts
+    (`TrajectoryFeatures.exerted_effort`: against a baseline of the same motion its measured effort, whose friction
+    reversals the simulation lacks)."""
 
     kind = "time_shift"
     name = "time_shift"
@@ -47,7 +49,7 @@ class TimeShift(Effect):
     parameters = (Parameter("delay_s", "s", -TIME_SHIFT_LIMIT_S, TIME_SHIFT_LIMIT_S),)
 
     def columns(self, features):
-        return -features.reference_rate[:, :, None]
+        return -features.exerted_rate[:, :, None]
 
     def sim_contribution(self, p):
         return None  # a property of the measurement, not of the physics

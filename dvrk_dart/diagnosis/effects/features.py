@@ -19,10 +19,10 @@ FIRST_MOMENT_COLUMNS = 4
 class TrajectoryFeatures:
     """Per-sample quantities of one trajectory that the regressors are built from.
 
-    `reference_effort` is the simulated effort at the measured samples (the
-    time-shift effect differentiates it); `exerted_effort` what the arm exerts
-    as well as the runs tell it, what a scale of the measurement multiplies
-    (`EffortScale`): the reference effort unless given."""
+    `reference_effort` is the simulated effort at the measured samples;
+    `exerted_effort` what the arm exerts as well as the runs tell it, what a
+    scale of the measurement multiplies (`EffortScale`) and a time shift
+    delays (`TimeShift`): the reference effort unless given."""
 
     def __init__(self, arm: Arm, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, reference_effort: np.ndarray, sample_rate_hz: float,
                  exerted_effort: np.ndarray | None = None):
@@ -68,11 +68,11 @@ class TrajectoryFeatures:
         return out
 
     @cached_property
-    def reference_rate(self) -> np.ndarray:
-        """d/dt of the simulated effort (N, 7), per second."""
+    def exerted_rate(self) -> np.ndarray:
+        """d/dt of the exerted effort (N, 7), per second."""
         if len(self) < 2:
-            return np.zeros_like(self.reference_effort)
-        return np.gradient(self.reference_effort, 1.0 / self.sample_rate_hz, axis=0)
+            return np.zeros_like(self.exerted_effort)
+        return np.gradient(self.exerted_effort, 1.0 / self.sample_rate_hz, axis=0)
 
     def identified_body_parameters(self, key: int) -> np.ndarray:
         """The 10 dynamic parameters of one link's body in the identified model."""
