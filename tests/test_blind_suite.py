@@ -29,7 +29,7 @@ SUBSET = [("coulomb_q2", "upstream", True), ("offset_q1", "upstream", False), ("
           ("lighter_carriage", "upstream", False),
           # every effort read 8 % high (asked for with --effort-scale): seven small effects were named before a scale was one
           ("effort_scale", "periodic", True),
-          # efforts read 10 ms late, against a baseline: upstream the simulated effort's rate read a third of a real delay
+          # efforts read 10 ms late, against a baseline: the sensor's path (the column's: test_measurement_effects.py)
           ("time_shift", "upstream", True)]
 #: on another excitation design: the 2018 arm's, joints 1..3 logged, the wrist held (its runs write q1..q3 only)
 OTHER_DESIGN = [("stroke_friction_q3", "periodic", True),

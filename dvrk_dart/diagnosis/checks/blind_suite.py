@@ -60,11 +60,15 @@ def case_physics(case: dict, base: SimConfig) -> SimConfig:
     return replace(base, extra=base.extra.plus(JointEffects(**fields)), payloads=base.payloads + payloads)
 
 
+def delay_samples(case: dict, rate_hz: float) -> int:
+    """The case's sensor delay (`measured_delay_s`) in whole samples."""
+    return int(round(float(case.get("measured_delay_s", 0.0)) * rate_hz))
+
+
 def sensor_reading(case: dict, efforts: np.ndarray, rate_hz: float) -> np.ndarray:
-    """DART's efforts as the case's sensor reads them: times 1 + its `measured_scale`, `measured_delay_s` late (the
-    suite's motion is whole periods: a roll is a delay)."""
-    late = int(round(float(case.get("measured_delay_s", 0.0)) * rate_hz))
-    return np.roll(efforts * (1.0 + float(case.get("measured_scale", 0.0))), late, axis=0)
+    """DART's efforts as the case's sensor reads them: times 1 + its `measured_scale`, `measured_delay_s` late (rolled:
+    the first samples read the motion's end, about a period later; `true_physics_gap` leaves them out)."""
+    return np.roll(efforts * (1.0 + float(case.get("measured_scale", 0.0))), delay_samples(case, rate_hz), axis=0)
 
 
 def suite_motion(spec: dict, real: ProcessedRun) -> ProcessedRun:
@@ -140,7 +144,8 @@ def true_physics_gap(arm: Arm, runs: dict, simulate: Simulate, processing: RunPr
     if with_baseline:
         difference = residual - gap("baseline", SimConfig(), {})
         residual = difference - session_joints * difference.mean(axis=0)
-    return rms(residual)
+    rate_hz = loaded_states([str(runs["measured"])], arm.model, processing)[0].rate_hz
+    return rms(residual[delay_samples(runs["case"], rate_hz):])
 
 
 def judge_case(case: dict, result: dict, floor: np.ndarray, tolerance: float) -> dict:
