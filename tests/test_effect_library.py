@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dvrk_dart.diagnosis.effects.arm_effects import GravityTilt, gravity_tilt_directions
+from dvrk_dart.diagnosis.effects.arm_effects import EffortScale, GravityTilt, gravity_tilt_directions
 from dvrk_dart.diagnosis.effects.features import TrajectoryFeatures
 from dvrk_dart.diagnosis.effects.joint_effects import AngleLoad, JointArmature, JointFriction, JointOffset, JointStiffness
 from dvrk_dart.diagnosis.effects.position_friction import PositionFriction
@@ -171,8 +171,6 @@ def test_a_friction_table_says_what_the_runs_do_not_reach():
 def test_an_effort_scale_reads_the_scale_of_the_measured_efforts(arm, segment):
     """Efforts measured times 1 + s: the effect on the exerted effort removes the gap exactly at the size s, in the
     words with its sign."""
-    from dvrk_dart.diagnosis.effects.arm_effects import EffortScale
-
     state = segment.head(100)
     simulated = arm.identified.predict(state.q, state.dq, state.ddq, "inertial")
     measured = simulated * 1.08

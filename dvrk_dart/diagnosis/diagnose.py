@@ -125,7 +125,7 @@ def diagnose(
         (write_json False: not diagnosis.json, which the caller writes with what it adds: api.run_diagnosis);
     arm: the arm the runs were recorded on (its model and identified parameters);
     topics: how runs that are bags are read (--arm, --topic, --jaw-topic) and CSVs' --rate;
-    effort_scale: a scale of every measured effort among the candidates (`library.candidate_effects`).
+    effort_scale: a scale of every measured effort among the candidates (else weighed against the selection: `scale_rival`).
     Returns the diagnosis dict (the contract of diagnosis.json)."""
     measured_list = list(measured) if isinstance(measured, (list, tuple)) else [measured]
     several = baseline is not None or len(measured_list) > 1
