@@ -364,3 +364,26 @@ def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_re
     # 20 draws: a standard deviation is known to ~16 %; the median over the 49 parameters to a few %
     assert 1 / 1.5 < np.median(ratio) < 1.5, np.median(ratio)
     assert np.mean((ratio > 1 / 1.5) & (ratio < 1.5)) > 0.9, np.sort(ratio)
+
+
+def test_the_reference_data_facts_of_the_runs_are_said(tmp_path):
+    """Training runs the manifest says carry different weights, or come from different datasets, get a warning; a
+    held-out run with another weight than the training's too; runs of one state and a file it does not list, none."""
+    from types import SimpleNamespace
+
+    from dvrk_dart.identification.identify import IdentificationResult
+
+    def warnings(train, holdout=()):
+        def runs(names):
+            return [SimpleNamespace(name=name, path=resolve_run(name)) for name in names]
+        return IdentificationResult.recording_warnings(SimpleNamespace(train=runs(train), holdout=runs(holdout)))
+
+    mixed = warnings(["one", "one-105g"], ["two"])
+    assert len(mixed) == 1 and "one-105g 0.105 kg" in mixed[0] and "one no weight" in mixed[0]
+    held = warnings(["one-105g", "one-105g-half"], ["two", "one-105g-insertion"])
+    assert len(held) == 1 and held[0].startswith("two carries no weight, the training runs 0.105 kg")
+    datasets = warnings(["one", "2018-test1"])
+    assert len(datasets) == 1 and "radiang/dvrk_parameter_identification" in datasets[0]
+    copy = tmp_path / "mine.csv"  # not the manifest's content: no facts
+    copy.write_text(resolve_run("one-105g").read_text() + "\n")
+    assert warnings(["one", "one-no-weight"], ["two"]) == [] and warnings(["one", str(copy)], ["two"]) == []

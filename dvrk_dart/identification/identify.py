@@ -146,6 +146,34 @@ class IdentificationResult:
                 f"{', '.join(others)} rest on the inertia these runs leave free, about zero with --prior none (the default); "
                 "--prior default keeps the published values there"]
 
+    def recording_warnings(self) -> list[str]:
+        """What the reference data's facts say of the runs: training runs with different weights on the arm, or from
+        different datasets (another session, perhaps another arm), get one parameter set that describes none of
+        their states; a held-out run with another weight than the training's holds that weight's efforts in its error."""
+        from dvrk_dart.io.reference_data import attached_mass_kg, recording_source
+
+        def weight(mass: float) -> str:
+            return f"{mass:g} kg" if mass else "no weight"
+
+        masses = {run.name: attached_mass_kg(run.path) for run in self.train + self.holdout}
+        trained = {masses[run.name] for run in self.train}
+        notes = []
+        if len(trained - {None}) > 1:
+            notes.append("the training runs carry different weights on the arm (" + ", ".join(
+                f"{run.name} {weight(masses[run.name])}" for run in self.train if masses[run.name] is not None)
+                + "; the reference data's facts): one parameter set fitted to several states of the arm describes "
+                "none of them; identify the runs of one state together")
+        elif len(trained) == 1 and None not in trained:
+            notes += [f"{run.name} carries {weight(masses[run.name])}, the training runs {weight(next(iter(trained)))} (the "
+                      "reference data's facts): its held-out error holds the weight's efforts, not the fit's alone"
+                      for run in self.holdout if masses[run.name] not in (None, *trained)]
+        sources = {run.name: recording_source(run.path) for run in self.train}
+        if len(set(sources.values()) - {None}) > 1:
+            notes.append("the training runs come from different datasets (" + ", ".join(
+                f"{name} {source}" for name, source in sources.items() if source) + "): other sessions, perhaps "
+                "another arm; one parameter set fitted to them describes none of them alone")
+        return notes
+
     def overfit_warnings(self) -> list[str]:
         """A fitted joint whose held-out RMS is far above its training RMS: too little data for the parameters."""
         def pooled(runs):

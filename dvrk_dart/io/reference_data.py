@@ -57,12 +57,24 @@ RUNS = {
     "2018-test1": "2018/psm1_fourier_test1.csv",
     "2018-test2": "2018/psm1_fourier_test2.csv",
 }
+def _manifest_entry(path: Path) -> dict | None:
+    """The manifest's entry of a file, by content; None for a file it does not list."""
+    digest = sha256_of(path)
+    return next((e for e in manifest()["files"].values() if e.get("sha256") == digest), None)
+
+
 def attached_mass_kg(path: Path) -> float | None:
     """The weight a reference recording carries (the manifest's attached_mass_kg, 0 where it gives none), by content;
     None for a file the manifest does not list."""
-    digest = sha256_of(path)
-    entry = next((e for e in manifest()["files"].values() if e.get("sha256") == digest), None)
+    entry = _manifest_entry(path)
     return None if entry is None else float(entry.get("attached_mass_kg", 0.0))
+
+
+def recording_source(path: Path) -> str | None:
+    """The repository a reference recording comes from (a dataset: another session, perhaps another arm), by
+    content; None for a file the manifest does not list."""
+    entry = _manifest_entry(path)
+    return None if entry is None else str(entry.get("repository", manifest()["repository"]))
 
 
 def reference_run_arm(name: str) -> str:
