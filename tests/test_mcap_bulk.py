@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import Writer
 
-from dvrk_dart.io.mcap_bulk import BulkChannel, write_bulk
+from dvrk_dart.io.mcap_bulk import BulkChannel, read_bulk, write_bulk
 from dvrk_dart.io.mcap_log import _json_numbers
 
 SCHEMAS = {"a": (SchemaEncoding.JSONSchema, b'{"type": "object"}'), "b": (SchemaEncoding.JSONSchema, b'{"type": "object", "x": 1}')}
@@ -30,10 +30,10 @@ def _channels(n: int, seed: int) -> list[BulkChannel]:
     return channels
 
 
-def _with_library(channels: list[BulkChannel], times: np.ndarray, chunk_size: int) -> bytes:
+def _with_library(channels: list[BulkChannel], times: np.ndarray, chunk_size: int, use_chunking: bool = True) -> bytes:
     """What write_mcap did before: one Writer.add_message per message, sample by sample."""
     stream = io.BytesIO()
-    writer = Writer(stream, chunk_size=chunk_size)
+    writer = Writer(stream, chunk_size=chunk_size, use_chunking=use_chunking)
     writer.start(profile="", library="test 1")
     schema_ids = {name: writer.register_schema(name, encoding, data) for name, (encoding, data) in SCHEMAS.items()}
     ids = [writer.register_channel(c.topic, MessageEncoding.JSON, schema_ids[c.schema], c.metadata) for c in channels]
@@ -59,6 +59,23 @@ def test_bulk_file_is_the_library_writers_file(n: int, chunk_size: int) -> None:
     reader = make_reader(io.BytesIO(stream.getvalue()))
     assert reader.get_summary().statistics.message_count == 5 * n
     assert sum(1 for _ in reader.iter_messages(topics=["/topic/3"])) == n
+
+
+def _read_by_library(data: bytes) -> dict[str, list[bytes]]:
+    messages: dict[str, list[bytes]] = {}
+    for _, channel, message in make_reader(io.BytesIO(data)).iter_messages(log_time_order=False):
+        messages.setdefault(channel.topic, []).append(message.data)
+    return messages
+
+
+@pytest.mark.parametrize("n, chunk_size, use_chunking", [(1, 1024 * 1024, True), (300, 100, True), (250, 20_000, True), (40, 4096, False)])
+def test_bulk_reading_is_the_library_readers(n: int, chunk_size: int, use_chunking: bool) -> None:
+    """read_bulk yields what mcap's reader yields in file order, topic by topic, with a topic left out or not, and
+    reads a file without chunks (no index to find them by) through the library."""
+    data = _with_library(_channels(n, seed=n), np.arange(n, dtype=np.int64) * 1_000_000, chunk_size, use_chunking)
+    library = _read_by_library(data)
+    assert sum(map(len, library.values())) == 5 * n and read_bulk(io.BytesIO(data)) == library
+    assert read_bulk(io.BytesIO(data), without=("/topic/3",)) == {t: m for t, m in library.items() if t != "/topic/3"}
 
 
 def test_json_numbers_read_back_as_the_same_float64() -> None:

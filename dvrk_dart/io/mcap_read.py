@@ -11,6 +11,7 @@ import numpy as np
 from mcap.reader import make_reader
 
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.io.mcap_bulk import read_bulk
 from dvrk_dart.io.mcap_log import (
     FORMAT,
     METADATA_CONFIG,
@@ -92,14 +93,10 @@ def read_mcap(path: str | os.PathLike, without: tuple[str, ...] = ()) -> RunReco
 
 def _decoded(path: Path, without: tuple[str, ...]) -> tuple[dict, dict[str, list[dict]]]:
     """The file's metadata records and its messages, decoded per topic."""
-    raw: dict[str, list[bytes]] = {}
     with open(path, "rb") as stream:
-        reader = make_reader(stream)
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        metadata = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}
         # file order, not log-time order: keeps equal stamps in the order they were written
-        for _, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.topic not in without:
-                raw.setdefault(channel.topic, []).append(message.data)
+        raw = read_bulk(stream, without)
     # one JSON array per topic: a run's ~50 000 messages decoded in one call each
     return metadata, {topic: json.loads(b"[" + b",".join(items) + b"]") for topic, items in raw.items()}
 
