@@ -41,6 +41,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
     from dvrk_dart.io.signal import chosen_because, process_all
     from dvrk_dart.metrics import per_measured_joint, relative_error, rms
     from dvrk_dart.model.identified import parse_terms, terms_label
+    from dvrk_dart.identification.effort_convention import effort_convention_notes
     from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 
     terms = parse_terms(config.terms)
@@ -66,6 +67,7 @@ def model_errors(arm: Arm, config: ModelErrorsConfig) -> dict:
         "samples": len(measured),
         "scored_on": _scored_on(processed, config.first_period),
         "unrecorded_joint_notes": unrecorded_joint_notes(arm.identified, processed, rms(predicted - measured)),
+        "effort_convention_notes": effort_convention_notes(predicted, measured, processed.measured),
         "coordinates_note": _coordinates_note(arm, processed, terms, relative_error(predicted, measured), config.first_period),
         "params": file_record(arm.params.source),
         "terms": terms_label(config.terms),
@@ -151,7 +153,8 @@ def cmd_model_errors(args: argparse.Namespace) -> int:
             print(f"note: {result['rate_note']}")
         for note in _band_notes(args.harmonics, result):
             print(f"note: {note}")
-        for note in [*result["unrecorded_joint_notes"], *([result["coordinates_note"]] if result["coordinates_note"] else [])]:
+        for note in [*result["effort_convention_notes"], *result["unrecorded_joint_notes"],
+                     *([result["coordinates_note"]] if result["coordinates_note"] else [])]:
             print(f"note: {note}")
         print("relative = ||model - measured|| / ||measured|| per joint; rms = RMS of model - measured")
         print(f"{'joint':>6} {'relative':>9} {'rms':>10}" + (f" {'own cutoff':>10}  (its efforts' own harmonics; the band used is above)" if periodic else ""))

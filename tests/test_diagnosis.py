@@ -62,7 +62,7 @@ DIAGNOSIS_KEYS = {
     "joints", "units", "joint_words", "measured", "measured_runs", "baseline_source", "nuisance_offsets", "nuisance_offset_joints", "session_floor",
     "repeat", "repeat_source", "gap_split", "baseline", "train_runs", "holdout_runs", "inputs", "processing", "residual_definition", "simulated_source",
     "gap_before", "gap_after", "gap_after_source", "explained_fraction", "effects", "selection", "payload", "payloads",
-    "payload_candidates", "sim_config", "not_in_simulation", "where", "recorded_joints", "not_recorded_by", "unrecorded_joint_notes", "constants_beyond_session", "gravity_mismatch", "explanation", "dropped_effects", "payload_not_distinguished",
+    "payload_candidates", "sim_config", "not_in_simulation", "where", "recorded_joints", "not_recorded_by", "unrecorded_joint_notes", "effort_convention_notes", "constants_beyond_session", "gravity_mismatch", "explanation", "dropped_effects", "payload_not_distinguished",
     "identified_terms", "payload_at_unused", "effort_scale_rival",
 }
 EFFECT_KEYS = {

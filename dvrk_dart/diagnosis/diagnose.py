@@ -371,6 +371,7 @@ def _diagnosis(problem: Problem, s: Selection, after: Resimulation, entries: lis
         not_in_simulation=after.not_in_simulation,
         recorded_joints=[j for j, on in zip(JOINT_NAMES, recorded) if on],
         not_recorded_by=problem.not_recorded_by, unrecorded_joint_notes=problem.unrecorded_joint_notes(),
+        effort_convention_notes=problem.effort_convention_notes(),
         gravity_mismatch=mismatch,
         payload_not_distinguished=not_distinguished,
         payload_at_unused=(PAYLOAD_AT_UNUSED if problem.at_index is not None and problem.has_baseline and not (payload_fits or not_distinguished)

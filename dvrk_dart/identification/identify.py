@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -116,6 +117,11 @@ class IdentificationResult:
             "rms": per_measured_joint(rms(predicted - measured), recorded),
         }
 
+    @cached_property
+    def reference_model(self) -> IdentifiedModel:
+        """The arm's published parameters' model (its model card's), what the warnings compare the runs with."""
+        return IdentifiedModel(self.model, load_parameters(resolve(self.model.default_parameters), self.model))
+
     def data_extent(self) -> dict:
         """What the fit rests on: runs, seconds and (periodic) whole periods."""
         periods = [run.processed.periodic.period.whole_periods for run in self.train if run.processed.periodic is not None]
@@ -126,13 +132,23 @@ class IdentificationResult:
         """A joint the training runs did not record, held at zero by the fit,
         that moves a fitted joint's efforts (the reference parameters' model)
         by more than its training figure: the fit absorbs that error."""
-        reference = IdentifiedModel(self.model, load_parameters(resolve(self.model.default_parameters), self.model))
+        reference = self.reference_model
         fitted = np.isin(np.arange(len(JOINT_NAMES)), self.wls.joints)
         notes = []
         for run in self.train:
             figures = np.where(fitted, [np.inf if v is None else v for v in self.errors(run)["rms"]], np.inf)
             notes += [f"{run.name}: {note}" for note in unrecorded_joint_notes(reference, run.processed, figures)]
         return notes
+
+    def effort_convention_warnings(self) -> list[str]:
+        """Training runs whose measured efforts run opposite to the reference parameters' model, or are a multiple
+        of them: a log's sign or unit, which no parameter set fits (effort_convention.py)."""
+        from dvrk_dart.identification.effort_convention import effort_convention_notes
+
+        reference = self.reference_model
+        return [f"{run.name}: {note}" for run in self.train
+                for note in effort_convention_notes(run.processed.in_band(reference.predict(run.processed.q, run.processed.dq, run.processed.ddq)),
+                                                    run.processed.tau, run.processed.measured)]
 
     def params_file_warnings(self) -> list[str]:
         """A fit of some joints without a prior: the inertia only the others'

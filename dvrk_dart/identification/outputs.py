@@ -174,8 +174,8 @@ def summary(result: IdentificationResult) -> dict:
         "fitted_joints": [JOINT_NAMES[j] for j in wls.joints],
         "left_out": result.left_out,
         "data": result.data_extent(),
-        "warnings": (result.recording_warnings() + result.unrecorded_joint_warnings() + result.overfit_warnings()
-                     + result.params_file_warnings()),
+        "warnings": (result.effort_convention_warnings() + result.recording_warnings() + result.unrecorded_joint_warnings()
+                     + result.overfit_warnings() + result.params_file_warnings()),
         "config": {
             "runs": list(cfg.runs), "holdout": list(cfg.holdout), "joints": list(cfg.joints),
             "friction_law": result.regressor.friction_law.describe(), "bounds_file": str(result.bounds.source),

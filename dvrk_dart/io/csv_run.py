@@ -65,19 +65,28 @@ def _read_text(path: Path) -> pd.DataFrame:
     if not os.access(path, os.R_OK):
         raise DvrkDartError(f"{path}: not readable (permission denied)")
     try:
-        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False, comment="#")
+        # only an empty cell is missing: a written "nan" stays text, so a row of them is named as bad, never dropped as blank
+        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, index_col=False, comment="#",
+                          keep_default_na=False, na_values=[""])
     except pd.errors.EmptyDataError:
         raise DvrkDartError(f"{path}: file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         more = " (a trailing comma, or a row with more cells than the first?)" if "Expected" in str(exc) else ""
-        if "Expected" in str(exc) and ";" in path.read_text(errors="replace").split("\n", 1)[0]:
-            more = " (semicolons between the columns and decimal commas? the layouts are comma-separated, with decimal points)"
+        if "Expected" in str(exc):
+            more = _semicolon_hint(path) or more
         raise DvrkDartError(f"{path}: not a CSV file ({str(exc).splitlines()[0]}){more}") from None
     first = str(raw.iloc[0, 0]) if raw.shape[1] == 1 and len(raw) else ""
     for separator, words, fix in ((None, "spaces or tabs", "numpy.savetxt(..., delimiter=',')"), (";", "semicolons", "sep=','")):
         if len(first.split(separator)) > 1 and all(is_number(cell) for cell in first.split(separator)):  # numpy.savetxt's default
             raise DvrkDartError(f"{path}: the columns are separated by {words}; the layouts are comma-separated ({fix})")
     return raw.dropna(how="all").reset_index(drop=True)  # a spreadsheet's rows of empty cells (",,,,"), as blank lines
+
+
+def _semicolon_hint(path: Path) -> str:
+    """Where the first line has semicolons, the likely reason the commas do not split it as expected."""
+    if ";" not in path.read_text(errors="replace").split("\n", 1)[0]:
+        return ""
+    return " (semicolons between the columns and decimal commas? the layouts are comma-separated, with decimal points)"
 
 
 def is_number(text) -> bool:
@@ -147,8 +156,13 @@ def layout_from_header(header: list[str], path: Path, dvrk_joints: tuple[str, ..
         missing = [f for f in FIELDS if (f, joint) not in columns]
         if missing:
             dvrk = dvrk_joints[JOINT_NAMES.index(joint)] if kinds == {True} else None  # named as the header names it
-            names = [f"{next(w for w, f in DVRK_FIELDS.items() if f == field)}.{dvrk}" if dvrk else f"{field}{joint[1:]}" for field in missing]
-            raise DvrkDartError(f"{path}: the header has {dvrk or joint} without {', '.join(names)}: a joint needs its position, velocity "
+
+            def named(fields):
+                return ", ".join(f"{next(w for w, f in DVRK_FIELDS.items() if f == field)}.{dvrk}" if dvrk else f"{field}{joint[1:]}"
+                                 for field in fields)
+
+            given = [f for f in FIELDS if f not in missing]
+            raise DvrkDartError(f"{path}: the header has {named(given)} without {named(missing)}: a joint needs its position, velocity "
                                 "and effort (an effort not recorded: a column of zeros)")
     if not joints:
         raise DvrkDartError(f"{path}: the header names no joint")
@@ -161,7 +175,7 @@ def headerless_layout(width: int, path: Path, coupled: tuple[int, ...] = ()) -> 
     if width not in HEADERLESS_JOINTS:
         layouts = "; ".join(f"{n} columns ({', '.join(column_names_of(joints))})" for n, joints in HEADERLESS_JOINTS.items())
         raise DvrkDartError(f"{path}: {width} columns without a header row; known layouts: {layouts}; "
-                            "or a header row naming the columns (t, q1, dq1, tau1, ...)")
+                            f"or a header row naming the columns (t, q1, dq1, tau1, ...){_semicolon_hint(path)}")
     joints = HEADERLESS_JOINTS[width]
     partly = [JOINT_NAMES[j] for j in coupled if JOINT_NAMES[j] in joints]
     if partly and len(partly) < len(coupled):
@@ -181,6 +195,8 @@ def _numbers(raw: pd.DataFrame, names: list[str], path: Path, first_row: int) ->
     """The cells as numbers; one line naming the first that is not a finite number."""
     numeric = raw.apply(pd.to_numeric, errors="coerce")
     bad = numeric.isna() & raw.notna()
+    if bad.to_numpy().any():  # a written "nan" or "inf" is a number: named below, as not finite
+        bad &= ~raw.map(is_number)
     if bad.to_numpy().any():
         row, col = np.argwhere(bad.to_numpy())[0]
         raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: '{raw.iat[row, col]}' is not a number")

@@ -35,6 +35,7 @@ from dvrk_dart.diagnosis.fit.diagnosis_runs import (
 )
 from dvrk_dart.diagnosis.fit.session_floor import check_repeat_motion, session_offset_joints
 from dvrk_dart.errors import DvrkDartError
+from dvrk_dart.identification.effort_convention import effort_convention_notes
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 from dvrk_dart.io.reference_data import distinct_inputs, distinct_labels
 from dvrk_dart.metrics import rms
@@ -98,6 +99,12 @@ class Problem:
         for it (a baseline of the same motion holds it alike, and the difference cancels it)."""
         return [f"{run.name}: {note}" for run in self.train_runs if run.role is RunRole.RAW
                 for note in unrecorded_joint_notes(self.arm.identified, run.state, rms(self.before_residual(run)))]
+
+    def effort_convention_notes(self) -> list[str]:
+        """Per training run: measured efforts opposite to the simulated ones, or a multiple of them (a log's sign or
+        unit, which no effect of the library is: a flipped log was read as a cable's elasticity)."""
+        return [f"{run.name}: {note}" for run in self.train_runs
+                for note in effort_convention_notes(run.simulated, run.state.tau, run.state.measured, "simulation")]
 
     @cached_property
     def train_totals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -246,6 +246,8 @@ class Diagnosis:
     not_recorded_by: dict
     #: a joint a run of its own did not record, held at 0, moving the model's efforts on recorded joints more than their gaps
     unrecorded_joint_notes: list
+    #: a training run whose measured efforts run opposite to the simulated ones, or are a multiple of them (a log's sign or unit)
+    effort_convention_notes: list
     #: without a baseline, a payload-shaped fit is this arm's gravity (mass distribution) against the parameters, not a payload
     gravity_mismatch: dict | None
     #: with a baseline, a payload-shaped fit whose intervals all hold zero: no payload is named

@@ -271,6 +271,9 @@ def answer_paragraphs(result: dict) -> list[str]:
                      "change alone can leave it: no fixed effect is shown to remove more there.")
     held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
     caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
+    convention = result.get("effort_convention_notes") or []  # a log's sign or unit: no effect of the arm's
+    if convention:
+        caution = f"First: {'; '.join(convention)}. No effect of the arm explains that. " + caution.removeprefix("First: ")
     constant = constants_clause(result, lead=True) if constants_first else ""
     scale = (result.get("effort_scale_rival") or {}).get("words", "")
     return [paragraph for paragraph in (caution, beyond.strip(), constant, sentence + refit_clause(result) + insertion_clause(result), scale)

@@ -1,0 +1,51 @@
+"""Measured efforts of another sign or unit than the model's: a log's
+convention, said where it shows (model-errors, identify and diagnose quote
+it), rather than read as the arm's error (a log with every effort's sign
+flipped was diagnosed as a cable's elasticity, "not explained")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dvrk_dart.model.joints import JOINT_NAMES
+
+#: a joint's measured efforts are `gain` times the model's in the least-squares sense; a gain outside
+#: [1 / CONVENTION_GAIN, CONVENTION_GAIN] (or negative) that leaves at most CONVENTION_FIT_SHARE of the
+#: model's miss is a convention (the real runs: gains 0.6-1.3 on every joint, the fit barely better)
+CONVENTION_GAIN = 5.0
+CONVENTION_FIT_SHARE = 0.5
+
+
+def convention_gains(predicted: np.ndarray, measured: np.ndarray, recorded: np.ndarray) -> dict[int, float]:
+    """Joint -> the gain of its measured efforts on the model's, where it is a convention (above)."""
+    gains = {}
+    for j in np.flatnonzero(recorded):
+        p, m = predicted[:, j], measured[:, j]
+        if not (p @ p > 0 and np.any(m)):
+            continue
+        gain = float(p @ m / (p @ p))
+        if 1.0 / CONVENTION_GAIN < gain < CONVENTION_GAIN:
+            continue
+        if np.linalg.norm(gain * p - m) <= CONVENTION_FIT_SHARE * np.linalg.norm(p - m):
+            gains[int(j)] = gain
+    return gains
+
+
+def effort_convention_notes(predicted: np.ndarray, measured: np.ndarray, recorded: np.ndarray, of: str = "model") -> list[str]:
+    """One line for the joints whose measured efforts run opposite to the `of` efforts (the model's, the simulation's),
+    one for those of another scale."""
+    gains = convention_gains(predicted, measured, recorded)
+
+    def listed(joints):
+        return ", ".join(f"{JOINT_NAMES[j]} ({gains[j]:.3g})" for j in joints)
+
+    opposite = [j for j, gain in gains.items() if gain < 0]
+    scaled = [j for j, gain in gains.items() if gain > 0]
+    notes = []
+    if opposite:
+        notes.append(f"the measured efforts run opposite to the {of}'s on {listed(opposite)}, the least-squares gain of "
+                     f"measured on {of}: a log of another sign convention? (efforts here have the sign of the dVRK's measured effort)")
+    if scaled:
+        notes.append(f"the measured efforts are a multiple of the {of}'s on {listed(scaled)}, the least-squares gain of "
+                     f"measured on {of}: a log of another unit? (efforts here are in N·m, N on a prismatic joint)")
+    return notes

@@ -1,0 +1,44 @@
+"""A log of another sign or unit than the project's (the dVRK's measured effort, N·m and N) is said, not read as the
+arm's error: on every real run the measured efforts' least-squares gain on the model stays within 0.88-1.59, a
+flipped or rescaled log's is -1 or 1000."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dvrk_dart.identification.effort_convention import convention_gains, effort_convention_notes
+from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
+from dvrk_dart.io.signal import process
+from dvrk_dart.io.arm import load_arm
+from dvrk_dart.model.description import resolve_arm_model
+from arms import PSM_ARM
+from recordings import cli_json
+
+
+@pytest.fixture(scope="module")
+def arms():
+    return {"psm": PSM_ARM, "mtm": load_arm(resolve_arm_model("mtm"))}
+
+
+@pytest.mark.parametrize("processing", ["upstream", "periodic"])
+def test_no_real_run_reads_as_another_convention(arms, processing):
+    for name in RUNS:
+        arm = arms["mtm" if name.startswith("mtm") else "psm"]
+        run = process(load_run(resolve_run(name), arm.model), processing)
+        model = run.in_band(arm.identified.predict(run.q, run.dq, run.ddq))
+        assert convention_gains(model, run.tau, run.measured) == {}, name
+        flipped = run.tau * np.where(np.arange(run.tau.shape[1]) == 1, -1.0, 1.0)  # q2's sign flipped
+        assert set(convention_gains(model, flipped, run.measured)) == {1}, name
+        gains = convention_gains(model, run.tau * 1000.0, run.measured)  # mN·m
+        assert set(gains) == set(np.flatnonzero(run.measured)) and all(800 < g < 1700 for g in gains.values()), name
+
+
+def test_model_errors_says_a_flipped_log(tmp_path, capsys):
+    rows = np.loadtxt(resolve_run("two"), delimiter=",")
+    rows[:, 14:] *= -1.0
+    np.savetxt(tmp_path / "flipped.csv", rows, delimiter=",")
+    [note] = cli_json(capsys, "model-errors", "--measured", str(tmp_path / "flipped.csv"))["effort_convention_notes"]
+    assert "opposite to the model's on q1 (-" in note and "q7 (-" in note
+    assert cli_json(capsys, "model-errors", "--measured", "two")["effort_convention_notes"] == []
+    assert effort_convention_notes(np.ones((5, 7)), np.zeros((5, 7)), np.ones(7, bool)) == []  # nothing measured: no gain
