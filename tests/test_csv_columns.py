@@ -335,3 +335,29 @@ def test_rate_leaves_the_2018_and_mtm_reference_runs_at_their_recorded_rate(caps
     assert load_run(resolve_run("mtm-one"), MTM, BagTopics(rate_hz=100.0)).rate_hz == 200.0
     err = capsys.readouterr().err
     assert "reference data's 2018/psm1_fourier_test1.csv, recorded at 200 Hz" in err and "mtm/one_results.csv" in err, err
+
+
+def test_a_written_nan_row_is_named_not_dropped(tmp_path, capsys):
+    """A row of NaN (what numpy writes for a missing sample) was dropped as a blank spreadsheet row: the run was
+    joined across the hole and its period read 6.4789 s instead of 6.4806 s, silently. It is named now; a row of
+    empty cells (",,,,") still goes as a blank line."""
+    rows = np.loadtxt(resolve_run("one"), delimiter=",")
+    rows[3000] = np.nan
+    np.savetxt(tmp_path / "nan_row.csv", rows, delimiter=",")
+    line = refusal(capsys, "model-errors", "--measured", str(tmp_path / "nan_row.csv"))
+    assert "row 3001, column q1: missing, NaN or infinite value" in line
+    text = (tmp_path / "nan_row.csv").read_text().splitlines()
+    (tmp_path / "blank_row.csv").write_text("\n".join([*text[:3000], ",," * 10, *text[3001:]]) + "\n")
+    assert cli_json(capsys, "model-errors", "--measured", str(tmp_path / "blank_row.csv"))["samples"] == 5998
+
+
+def test_hints_of_a_spreadsheets_csv(tmp_path, capsys):
+    """Semicolons and decimal commas without a header get the hint the header version gets; a joint's missing column
+    is named beside those the header has."""
+    lines = resolve_run("one").read_text().splitlines()[:400]
+    (tmp_path / "semi.csv").write_text("\n".join(line.replace(",", ";").replace(".", ",") for line in lines) + "\n")
+    assert "semicolons between the columns and decimal commas?" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "semi.csv"))
+    run = load_run(resolve_run("one"), PSM)
+    write_header_csv(tmp_path / "no_q2.csv", SimpleNamespace(t=run.t, q=run.q, dq=run.dq, tau=run.tau),
+                     [c for c in columns_of(1, 2, 3) if c != "q2"])
+    assert "the header has dq2, tau2 without q2:" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "no_q2.csv"))
