@@ -361,3 +361,17 @@ def test_hints_of_a_spreadsheets_csv(tmp_path, capsys):
     write_header_csv(tmp_path / "no_q2.csv", SimpleNamespace(t=run.t, q=run.q, dq=run.dq, tau=run.tau),
                      [c for c in columns_of(1, 2, 3) if c != "q2"])
     assert "the header has dq2, tau2 without q2:" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "no_q2.csv"))
+
+
+def test_what_a_rate_cannot_fix_is_said(tmp_path, capsys):
+    """Every row written twice halves the finite differences, and a rate of 400.8 Hz seemed to fit: the repeats are
+    named first. Stamps rounded to 1 ms at 150 Hz are refused as uneven, and said to look rounded; one gap is not."""
+    rows = np.loadtxt(resolve_run("one"), delimiter=",")
+    np.savetxt(tmp_path / "twice.csv", np.repeat(rows, 2, axis=0), delimiter=",")
+    line = refusal(capsys, "model-errors", "--measured", str(tmp_path / "twice.csv"))
+    assert "50% of the rows repeat the one before: each sample written twice?" in line and "--rate 40" in line
+    run = load_run(resolve_run("one"), PSM)
+    for name, t in (("rounded", np.round(np.arange(len(run.t)) / 150.0, 3)), ("gap", np.r_[run.t[:100], run.t[100:] + 0.005])):
+        write_header_csv(tmp_path / f"{name}.csv", SimpleNamespace(t=t, q=run.q, dq=run.dq, tau=run.tau), columns_of(1, 2, 3))
+        line = refusal(capsys, "model-errors", "--measured", str(tmp_path / f"{name}.csv"))
+        assert "must be evenly spaced, to 5% of their step" in line and (("the stamps look rounded" in line) == (name == "rounded")), line

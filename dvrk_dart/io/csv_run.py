@@ -221,9 +221,11 @@ def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
     median = float(np.median(step))
     uneven = np.flatnonzero(np.abs(step - median) > TIME_JITTER * median)
     if len(uneven):
+        mean = float(t[-1] - t[0]) / len(step)  # one gap barely moves it; stamps rounded coarser than the step do
+        rounded = f"; the stamps look rounded: their mean step is {mean:.6g} s" if abs(mean - median) > TIME_JITTER / 2 * median else ""
         raise DvrkDartError(f"{path}: time column, {_row(int(uneven[0]) + 1, first_row)}: a step of {step[uneven[0]]:.6g} s where the rows are "
-                            f"{median:.6g} s apart (rows must be evenly spaced: resample first, or drop the time column "
-                            "and give --rate)")
+                            f"{median:.6g} s apart{rounded} (rows must be evenly spaced, to {TIME_JITTER:.0%} of their step: resample "
+                            "first, or drop the time column and give --rate)")
     # from the whole span, not one step: stamps far from zero (Unix time) are quantised to ~0.2 us, which moved
     # the median step, and with it a run's period, by 40 times the period's stated error
     return (len(t) - 1) / float(t[-1] - t[0])

@@ -44,6 +44,10 @@ RATE_TOLERANCE = 0.1
 TIME_COLUMN_SOURCE = "its time column"
 
 
+#: rows repeating the row before, beyond this share, say why a rate seems to fit (the MTM's logs repeat 13-15 %)
+REPEATED_ROWS_SHARE = 0.4
+
+
 def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source: str) -> None:
     """The velocity column against finite differences of the positions at the
     rate: a mismatch names the rate that fits. Each joint's least-squares
@@ -70,6 +74,9 @@ def check_rate(q: np.ndarray, dq: np.ndarray, rate_hz: float, where: str, source
         unit = next((f"; a time column in {name}? give it in seconds" for name, factor in (("ms", 1e3), ("µs", 1e6), ("ns", 1e9))
                      if source == TIME_COLUMN_SOURCE and abs(fits / (rate_hz * factor) - 1.0) < RATE_TOLERANCE), "")
         fix += unit
+        repeated = float(np.mean(np.all(q[1:] == q[:-1], axis=1)))
+        if repeated > REPEATED_ROWS_SHARE:  # the finite differences halve: a rate would "fit" a log written twice per sample
+            fix = f"{repeated:.0%} of the rows repeat the one before: each sample written twice? remove the repeats, not the rate; or {fix}"
         raise DvrkDartError(f"{where}: at {rate_hz:g} Hz ({source}) the positions' finite differences are {scale:.3g} times the velocity "
                             f"column; the rate that fits is {fits:.4g} Hz ({fix})")
 
