@@ -349,6 +349,9 @@ def test_a_written_nan_row_is_named_not_dropped(tmp_path, capsys):
     text = (tmp_path / "nan_row.csv").read_text().splitlines()
     (tmp_path / "blank_row.csv").write_text("\n".join([*text[:3000], ",," * 10, *text[3001:]]) + "\n")
     assert cli_json(capsys, "model-errors", "--measured", str(tmp_path / "blank_row.csv"))["samples"] == 5998
+    for cell, said in (("NA", "missing, NaN or infinite value"), ("1_000", "'1_000' is not a number")):  # R's missing; float() reads 1_000
+        (tmp_path / "cell.csv").write_text("\n".join([*text[:10], cell + text[10][text[10].index(","):], *text[11:400]]) + "\n")
+        assert f"row 11, column q1: {said}" in refusal(capsys, "model-errors", "--measured", str(tmp_path / "cell.csv"))
 
 
 def test_hints_of_a_spreadsheets_csv(tmp_path, capsys):
@@ -369,9 +372,10 @@ def test_what_a_rate_cannot_fix_is_said(tmp_path, capsys):
     rows = np.loadtxt(resolve_run("one"), delimiter=",")
     np.savetxt(tmp_path / "twice.csv", np.repeat(rows, 2, axis=0), delimiter=",")
     line = refusal(capsys, "model-errors", "--measured", str(tmp_path / "twice.csv"))
-    assert "50% of the rows repeat the one before: each sample written twice?" in line and "--rate 40" in line
+    assert "50% of the rows repeat the one before: each sample written twice?" in line and "--rate 400." in line
     run = load_run(resolve_run("one"), PSM)
-    for name, t in (("rounded", np.round(np.arange(len(run.t)) / 150.0, 3)), ("gap", np.r_[run.t[:100], run.t[100:] + 0.005])):
+    for name, t in (("rounded", np.round(np.arange(len(run.t)) / 150.0, 3)), ("gap", np.r_[run.t[:100], run.t[100:] + 0.005]),
+                    ("pause", np.r_[run.t[:100], run.t[100:] + 10.0]), ("every_tenth_lost", 0.005 * (np.arange(len(run.t)) + np.arange(len(run.t)) // 9))):
         write_header_csv(tmp_path / f"{name}.csv", SimpleNamespace(t=t, q=run.q, dq=run.dq, tau=run.tau), columns_of(1, 2, 3))
         line = refusal(capsys, "model-errors", "--measured", str(tmp_path / f"{name}.csv"))
         assert "must be evenly spaced, to 5% of their step" in line and (("the stamps look rounded" in line) == (name == "rounded")), line

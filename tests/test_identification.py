@@ -367,8 +367,9 @@ def test_periodic_standard_errors_match_the_scatter_over_noise_draws(periodic_re
 
 
 def test_the_reference_data_facts_of_the_runs_are_said(tmp_path):
-    """Training runs the manifest says carry different weights, or come from different datasets, get a warning; a
-    held-out run with another weight than the training's too; runs of one state and a file it does not list, none."""
+    """Training runs the manifest says carry different weights, or come from different repositories, get a warning; a
+    held-out run with another weight than the training's too (beside a file the manifest does not list); runs of one
+    weight and one repository, and a file it does not list, none."""
     from types import SimpleNamespace
 
     from dvrk_dart.identification.identify import IdentificationResult
@@ -383,7 +384,8 @@ def test_the_reference_data_facts_of_the_runs_are_said(tmp_path):
     held = warnings(["one-105g", "one-105g-half"], ["two", "one-105g-insertion"])
     assert len(held) == 1 and held[0].startswith("two carries no weight, the training runs 0.105 kg")
     datasets = warnings(["one", "2018-test1"])
-    assert len(datasets) == 1 and "radiang/dvrk_parameter_identification" in datasets[0]
+    assert len(datasets) == 1 and "different repositories" in datasets[0] and "radiang/dvrk_parameter_identification" in datasets[0]
     copy = tmp_path / "mine.csv"  # not the manifest's content: no facts
     copy.write_text(resolve_run("one-105g").read_text() + "\n")
     assert warnings(["one", "one-no-weight"], ["two"]) == [] and warnings(["one", str(copy)], ["two"]) == []
+    assert warnings(["one-105g", str(copy)], ["two"])[0].startswith("two carries no weight, the training runs 0.105 kg")

@@ -9,9 +9,11 @@ import numpy as np
 
 from dvrk_dart.model.joints import JOINT_NAMES
 
-#: a joint's measured efforts are `gain` times the model's in the least-squares sense; a gain outside
-#: [1 / CONVENTION_GAIN, CONVENTION_GAIN] (or negative) that leaves at most CONVENTION_FIT_SHARE of the
-#: model's miss is a convention (the real runs: gains 0.6-1.3 on every joint, the fit barely better)
+#: a joint's measured efforts, less their mean, are `gain` times the model's, less theirs, in the least-squares
+#: sense; a gain outside [1 / CONVENTION_GAIN, CONVENTION_GAIN] (or negative) that leaves at most
+#: CONVENTION_FIT_SHARE of the model's miss is a convention (every real run of wpi/, wpi-2018/ and wpi-mtm/, both
+#: processings: gains 0.87-1.93, tests/test_effort_convention.py). Means apart: an offset is no gain (a still
+#: joint's 0.05 N·m against a model's 0.002 read as 25 times the model's).
 CONVENTION_GAIN = 5.0
 CONVENTION_FIT_SHARE = 0.5
 
@@ -20,8 +22,8 @@ def convention_gains(predicted: np.ndarray, measured: np.ndarray, recorded: np.n
     """Joint -> the gain of its measured efforts on the model's, where it is a convention (above)."""
     gains = {}
     for j in np.flatnonzero(recorded):
-        p, m = predicted[:, j], measured[:, j]
-        if not (p @ p > 0 and np.any(m)):
+        p, m = predicted[:, j] - predicted[:, j].mean(), measured[:, j] - measured[:, j].mean()
+        if not (p @ p > 0 and m @ m > 0):
             continue
         gain = float(p @ m / (p @ p))
         if 1.0 / CONVENTION_GAIN < gain < CONVENTION_GAIN:

@@ -142,13 +142,16 @@ class IdentificationResult:
 
     def effort_convention_warnings(self) -> list[str]:
         """Training runs whose measured efforts run opposite to the reference parameters' model, or are a multiple
-        of them: a log's sign or unit, which no parameter set fits (effort_convention.py)."""
+        of them: a log's sign or unit (effort_convention.py), which the fit would take for the arm's (masses 1000
+        times too large, or no physical set at all)."""
         from dvrk_dart.identification.effort_convention import effort_convention_notes
 
-        reference = self.reference_model
-        return [f"{run.name}: {note}" for run in self.train
-                for note in effort_convention_notes(run.processed.in_band(reference.predict(run.processed.q, run.processed.dq, run.processed.ddq)),
-                                                    run.processed.tau, run.processed.measured)]
+        notes = []
+        for run in self.train:
+            state = run.processed
+            model = state.in_band(self.reference_model.predict(state.q, state.dq, state.ddq))
+            notes += [f"{run.name}: {note}" for note in effort_convention_notes(model, state.tau, state.measured)]
+        return notes
 
     def params_file_warnings(self) -> list[str]:
         """A fit of some joints without a prior: the inertia only the others'
@@ -163,31 +166,31 @@ class IdentificationResult:
                 "--prior default keeps the published values there"]
 
     def recording_warnings(self) -> list[str]:
-        """What the reference data's facts say of the runs: training runs with different weights on the arm, or from
-        different datasets (another session, perhaps another arm), get one parameter set that describes none of
-        their states; a held-out run with another weight than the training's holds that weight's efforts in its error."""
-        from dvrk_dart.io.reference_data import attached_mass_kg, recording_source
+        """What the reference data's manifest says of the runs: training runs with different weights on the arm, or
+        from different repositories (other sessions, perhaps another arm), get one parameter set that describes none
+        of their states; a held-out run with another weight than the training's holds that weight's efforts in its
+        error. A file the manifest does not list has no facts: nothing is said of it."""
+        from dvrk_dart.io.reference_data import recording_facts
 
         def weight(mass: float) -> str:
             return f"{mass:g} kg" if mass else "no weight"
 
-        masses = {run.name: attached_mass_kg(run.path) for run in self.train + self.holdout}
-        trained = {masses[run.name] for run in self.train}
+        facts = {run.name: recording_facts(run.path) for run in self.train + self.holdout}
+        trained = {run.name: facts[run.name] for run in self.train if facts[run.name] is not None}
+        masses, sources = {m for m, _ in trained.values()}, {r for _, r in trained.values()}
         notes = []
-        if len(trained - {None}) > 1:
+        if len(masses) > 1:
             notes.append("the training runs carry different weights on the arm (" + ", ".join(
-                f"{run.name} {weight(masses[run.name])}" for run in self.train if masses[run.name] is not None)
-                + "; the reference data's facts): one parameter set fitted to several states of the arm describes "
-                "none of them; identify the runs of one state together")
-        elif len(trained) == 1 and None not in trained:
-            notes += [f"{run.name} carries {weight(masses[run.name])}, the training runs {weight(next(iter(trained)))} (the "
+                f"{name} {weight(m)}" for name, (m, _) in trained.items()) + "; the reference data's facts): one parameter set "
+                "fitted to several states of the arm describes none of them; identify the runs of one state together")
+        elif masses:
+            notes += [f"{run.name} carries {weight(facts[run.name][0])}, the training runs {weight(next(iter(masses)))} (the "
                       "reference data's facts): its held-out error holds the weight's efforts, not the fit's alone"
-                      for run in self.holdout if masses[run.name] not in (None, *trained)]
-        sources = {run.name: recording_source(run.path) for run in self.train}
-        if len(set(sources.values()) - {None}) > 1:
-            notes.append("the training runs come from different datasets (" + ", ".join(
-                f"{name} {source}" for name, source in sources.items() if source) + "): other sessions, perhaps "
-                "another arm; one parameter set fitted to them describes none of them alone")
+                      for run in self.holdout if facts[run.name] is not None and facts[run.name][0] not in masses]
+        if len(sources) > 1:
+            notes.append("the training runs come from different repositories (" + ", ".join(
+                f"{name} {r}" for name, (_, r) in trained.items()) + "): other sessions, perhaps another arm; one parameter "
+                "set fitted to them describes none of them alone")
         return notes
 
     def overfit_warnings(self) -> list[str]:

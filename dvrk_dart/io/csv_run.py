@@ -17,6 +17,7 @@ A time column gives the file its own rate (rows must be evenly spaced)."""
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import sys
@@ -84,9 +85,23 @@ def _read_text(path: Path) -> pd.DataFrame:
 
 def _semicolon_hint(path: Path) -> str:
     """Where the first line has semicolons, the likely reason the commas do not split it as expected."""
-    if ";" not in path.read_text(errors="replace").split("\n", 1)[0]:
+    with open(path, errors="replace") as text:
+        first = next((line for line in text if line.strip() and not line.lstrip().startswith("#")), "")
+    if ";" not in first:
         return ""
     return " (semicolons between the columns and decimal commas? the layouts are comma-separated, with decimal points)"
+
+
+#: cells that mean a missing value (R's, databases'), besides what float() reads as not finite ("nan", "inf")
+MISSING_TEXTS = ("na", "n/a", "null", "none")
+
+
+def is_missing(text) -> bool:
+    """A cell that stands for a missing value: empty, a missing spelling, or a number that is not finite."""
+    if not isinstance(text, str):
+        return True  # an empty cell
+    cell = text.strip().lower()
+    return cell in MISSING_TEXTS or (is_number(cell) and not math.isfinite(float(cell)))
 
 
 def is_number(text) -> bool:
@@ -100,7 +115,7 @@ def is_number(text) -> bool:
 def _has_header(raw: pd.DataFrame) -> bool:
     """A first row of names: no cell of it is a number (a data row with one bad
     cell is a data row, and its error names the cell)."""
-    first = [cell for cell in raw.iloc[0] if isinstance(cell, str)]
+    first = [cell for cell in raw.iloc[0] if isinstance(cell, str) and not is_missing(cell)]
     return bool(first) and not any(is_number(cell) for cell in first) and any(re.search(r"[A-Za-z]", c) for c in first)
 
 
@@ -193,18 +208,16 @@ def column_names_of(joints: tuple[str, ...]) -> list[str]:
 
 def _numbers(raw: pd.DataFrame, names: list[str], path: Path, first_row: int) -> np.ndarray:
     """The cells as numbers; one line naming the first that is not a finite number."""
-    numeric = raw.apply(pd.to_numeric, errors="coerce")
-    bad = numeric.isna() & raw.notna()
-    if bad.to_numpy().any():  # a written "nan" or "inf" is a number: named below, as not finite
-        bad &= ~raw.map(is_number)
-    if bad.to_numpy().any():
-        row, col = np.argwhere(bad.to_numpy())[0]
+    values = raw.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float, copy=True)
+    if np.all(np.isfinite(values)):
+        return values
+    # text that is no number comes first; a written "nan", "inf" or "NA" is a missing value, as an empty cell is
+    text = np.isnan(values) & ~raw.map(is_missing).to_numpy()
+    if text.any():
+        row, col = np.argwhere(text)[0]
         raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: '{raw.iat[row, col]}' is not a number")
-    values = numeric.to_numpy(dtype=float)
-    if not np.all(np.isfinite(values)):
-        row, col = np.argwhere(~np.isfinite(values))[0]
-        raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: missing, NaN or infinite value")
-    return values
+    row, col = np.argwhere(~np.isfinite(values))[0]
+    raise DvrkDartError(f"{path}: {_row(row, first_row)}, column {names[col]}: missing, NaN or infinite value")
 
 
 def _row(index: int, first_row: int) -> str:
@@ -221,8 +234,9 @@ def rate_of_time_column(t: np.ndarray, path: Path, first_row: int) -> float:
     median = float(np.median(step))
     uneven = np.flatnonzero(np.abs(step - median) > TIME_JITTER * median)
     if len(uneven):
-        mean = float(t[-1] - t[0]) / len(step)  # one gap barely moves it; stamps rounded coarser than the step do
-        rounded = f"; the stamps look rounded: their mean step is {mean:.6g} s" if abs(mean - median) > TIME_JITTER / 2 * median else ""
+        # stamps rounded coarser than the step: every step near the median, many of them off it (a gap or a pause is one step far off)
+        rounded = (f"; the stamps look rounded: {len(uneven) / len(step):.0%} of the steps are off, their mean is "
+                   f"{float(t[-1] - t[0]) / len(step):.6g} s" if np.all(np.abs(step / median - 1.0) < 0.5) and len(uneven) > 0.1 * len(step) else "")
         raise DvrkDartError(f"{path}: time column, {_row(int(uneven[0]) + 1, first_row)}: a step of {step[uneven[0]]:.6g} s where the rows are "
                             f"{median:.6g} s apart{rounded} (rows must be evenly spaced, to {TIME_JITTER:.0%} of their step: resample "
                             "first, or drop the time column and give --rate)")

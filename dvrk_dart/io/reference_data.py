@@ -57,24 +57,23 @@ RUNS = {
     "2018-test1": "2018/psm1_fourier_test1.csv",
     "2018-test2": "2018/psm1_fourier_test2.csv",
 }
-def _manifest_entry(path: Path) -> dict | None:
-    """The manifest's entry of a file, by content; None for a file it does not list."""
+def manifest_name(path: Path) -> str | None:
+    """The manifest's name of a file, by content (wherever it is, whatever it is called); None for a file it does not list."""
     digest = sha256_of(path)
-    return next((e for e in manifest()["files"].values() if e.get("sha256") == digest), None)
+    return next((name for name, entry in manifest()["files"].items() if entry.get("sha256") == digest), None)
+
+
+def recording_facts(path: Path) -> tuple[float, str] | None:
+    """(the weight a reference recording carries: the manifest's attached_mass_kg, 0 where it gives none; the
+    repository it comes from), by content; None for a file the manifest does not list."""
+    name = manifest_name(path)
+    return None if name is None else (float(manifest()["files"][name].get("attached_mass_kg", 0.0)), _source(name)[0])
 
 
 def attached_mass_kg(path: Path) -> float | None:
-    """The weight a reference recording carries (the manifest's attached_mass_kg, 0 where it gives none), by content;
-    None for a file the manifest does not list."""
-    entry = _manifest_entry(path)
-    return None if entry is None else float(entry.get("attached_mass_kg", 0.0))
-
-
-def recording_source(path: Path) -> str | None:
-    """The repository a reference recording comes from (a dataset: another session, perhaps another arm), by
-    content; None for a file the manifest does not list."""
-    entry = _manifest_entry(path)
-    return None if entry is None else str(entry.get("repository", manifest()["repository"]))
+    """The weight a reference recording carries (`recording_facts`); None for a file the manifest does not list."""
+    facts = recording_facts(path)
+    return None if facts is None else facts[0]
 
 
 def reference_run_arm(name: str) -> str:
@@ -96,8 +95,7 @@ def rate_of(path: Path, time_column_hz: float | None = None, explicit: float | N
         return time_column_hz, TIME_COLUMN_SOURCE
     files = manifest()["files"]
     if explicit is not None:  # a reference run, wherever it is and whatever its name, keeps its recorded rate
-        digest = sha256_of(path)
-        name = next((key for key, entry in files.items() if entry.get("sha256") == digest), None)
+        name = manifest_name(path)
         if name is None:
             return float(explicit), "--rate"
     else:

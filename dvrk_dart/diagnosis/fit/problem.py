@@ -101,9 +101,10 @@ class Problem:
                 for note in unrecorded_joint_notes(self.arm.identified, run.state, rms(self.before_residual(run)))]
 
     def effort_convention_notes(self) -> list[str]:
-        """Per training run: measured efforts opposite to the simulated ones, or a multiple of them (a log's sign or
-        unit, which no effect of the library is: a flipped log was read as a cable's elasticity)."""
-        return [f"{run.name}: {note}" for run in self.train_runs
+        """Per training, baseline and repeat run: measured efforts opposite to the simulated ones, or a multiple of them
+        (a log's sign or unit, which no effect of the library is: a flipped log was read as a cable's elasticity)."""
+        runs = {run.name: run for run in (*self.train_runs, self.baseline_run, self.repeat_run) if run is not None}
+        return [f"{name}: {note}" for name, run in runs.items()
                 for note in effort_convention_notes(run.simulated, run.state.tau, run.state.measured, "simulation")]
 
     @cached_property

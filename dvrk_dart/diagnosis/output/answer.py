@@ -269,15 +269,20 @@ def answer_paragraphs(result: dict) -> list[str]:
         sentence += (f". What is left is over {AT_FLOOR_RATIO:g}x the session floor on {', '.join(above)}: an unmodelled effect remains there."
                      if above else f". What is left on {', '.join(joints)} is within {AT_FLOOR_RATIO:g}x the session floor, where a session's "
                      "change alone can leave it: no fixed effect is shown to remove more there.")
-    held = result.get("unrecorded_joint_notes") or []  # before any finding: what a joint the log left out may have put there
-    caution = f"First: {'; '.join(held)}. The effects found on those joints may stand for that error." if held else ""
-    convention = result.get("effort_convention_notes") or []  # a log's sign or unit: no effect of the arm's
-    if convention:
-        caution = f"First: {'; '.join(convention)}. No effect of the arm explains that. " + caution.removeprefix("First: ")
+    caution = _caution(result)
     constant = constants_clause(result, lead=True) if constants_first else ""
     scale = (result.get("effort_scale_rival") or {}).get("words", "")
     return [paragraph for paragraph in (caution, beyond.strip(), constant, sentence + refit_clause(result) + insertion_clause(result), scale)
             if paragraph]
+
+
+def _caution(result: dict) -> str:
+    """Before any finding: a log's sign or unit (no effect of the arm's), and what a joint the log left out may have put there."""
+    convention = result.get("effort_convention_notes") or []
+    held = result.get("unrecorded_joint_notes") or []
+    sentences = ([f"{'; '.join(convention)}. No effect of the arm explains that."] if convention else []) + (
+        [f"{'; '.join(held)}. The effects found on those joints may stand for that error."] if held else [])
+    return "First: " + " ".join(sentences) if sentences else ""
 
 
 def _opening(result: dict, explained: dict, gap: str, effects: str, figures: str) -> str:
