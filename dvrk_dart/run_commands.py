@@ -79,7 +79,8 @@ def _run_and_write(config, out: Path | None) -> int:
     of_measured = (f" (of the measured run's {measured}: the simulation ends at the last)" if measured == logged + 1
                    else f" logged, at the measured run's {measured} samples compared" if measured else "")
     print(f"{record.name}: {logged} samples{of_measured}, {metrics.get('wall_time_s', 0):.1f} s wall -> {out_dir}")
-    for note in [metrics.get("rate_note"), *metrics.get("unrecorded_joint_notes", []), *metrics.get("tracking_notes", [])]:
+    for note in [metrics.get("rate_note"), *metrics.get("effort_convention_notes", []), *metrics.get("unrecorded_joint_notes", []),
+                 *metrics.get("tracking_notes", [])]:
         if note:
             print(f"note: {note}")
     _print_effort_table(metrics, config.dynamics, arm.model)

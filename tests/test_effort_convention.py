@@ -4,9 +4,12 @@ flipped or rescaled log's is -1 or 1000."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from dvrk_dart.cli import main
 from dvrk_dart.identification.effort_convention import convention_gains, effort_convention_notes
 from dvrk_dart.io.reference_data import RUNS, load_run, resolve_run
 from dvrk_dart.io.signal import process
@@ -41,6 +44,9 @@ def test_model_errors_says_a_flipped_log(tmp_path, capsys):
     [note] = cli_json(capsys, "model-errors", "--measured", str(tmp_path / "flipped.csv"))["effort_convention_notes"]
     assert "opposite to the model's on q1 (-" in note and "q7 (-" in note
     assert cli_json(capsys, "model-errors", "--measured", "two")["effort_convention_notes"] == []
+    assert main(["replay", "--measured", str(tmp_path / "flipped.csv"), "--duration", "2", "--out", str(tmp_path / "replay")]) == 0
+    [note] = json.loads((tmp_path / "replay" / "metrics.json").read_text())["effort_convention_notes"]
+    assert "opposite to the model's on q1 (-" in note and f"note: {note}" in capsys.readouterr().out
     assert effort_convention_notes(np.ones((5, 7)), np.zeros((5, 7)), np.ones(7, bool)) == []  # nothing measured: no gain
 
 

@@ -23,6 +23,7 @@ from scipy.interpolate import CubicSpline
 from dvrk_dart.errors import DvrkDartError
 from dvrk_dart.io.bags import BagTopics
 from dvrk_dart.io.reference_data import load_run, resolve, resolve_run, run_label
+from dvrk_dart.identification.effort_convention import effort_convention_notes
 from dvrk_dart.identification.unrecorded_joints import unrecorded_joint_notes
 from dvrk_dart.io.signal import MIN_KEPT_SAMPLES, ProcessedRun, process
 from dvrk_dart.io.period import spanning_columns
@@ -219,6 +220,7 @@ def _record(measured, mode, config, log: LoopLog, identified, processed, t_meas,
         "rms_sim_vs_measured": per_measured_joint(rms(effort - tau_meas), recorded) if dynamic else None,
         "rms_model_vs_measured": per_measured_joint(rms(full_model - processed.tau[in_window]), recorded),
         "unrecorded_joint_notes": unrecorded_joint_notes(identified, processed, rms(full_model - processed.tau[in_window])),
+        "effort_convention_notes": effort_convention_notes(full_model, processed.tau[in_window], processed.measured),
         "measured_samples": int(in_window.sum()),  # the model's figure's; the log's stop a step short of the last
         "rms_q_sim_vs_measured": per_measured_joint(rms(q - q_meas), recorded) if len(t) else None,
         "tracking_notes": not_following_notes(q, q_meas, recorded) if len(t) else [],
