@@ -63,3 +63,18 @@ def test_an_offset_or_a_partial_model_is_no_convention(capsys):
     assert cli_json(capsys, "model-errors", "--measured", "two", "--terms", "gravity")["effort_convention_notes"] == []
     words = _caution({"effort_convention_notes": ["x: the measured efforts run opposite"], "unrecorded_joint_notes": []})
     assert words == "First: x: the measured efforts run opposite. No effect of the arm explains that."
+
+
+def test_identify_warns_of_a_flipped_training_run():
+    """identify's warning, on a processed real run and its copy with q3's sign flipped (no fit needed to say it)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from dvrk_dart.identification.identify import IdentificationResult
+
+    run = process(load_run(resolve_run("2018-test1"), PSM_ARM.model), "periodic")
+    flipped = replace(run, tau=run.tau * np.where(np.arange(run.tau.shape[1]) == 2, -1.0, 1.0))
+    result = SimpleNamespace(reference_model=PSM_ARM.identified,
+                             train=[SimpleNamespace(name="test1", processed=run), SimpleNamespace(name="flipped", processed=flipped)])
+    [warning] = IdentificationResult.effort_convention_warnings(result)
+    assert warning.startswith("flipped: the measured efforts run opposite to the model's on q3 (-")
