@@ -14,8 +14,8 @@ sample (see `mcap_log.py`, which builds them from whole columns).
 
 `read_bulk` is the way back: every message's data by topic, in file order, the
 chunks found and decompressed by the library and only their Message records
-split here (the library's reader spends a Python call per record: 80 % of
-reading a run log).
+split here (the library's reader spends a Python call per record: about
+half of reading a run log, the JSON decoding most of the rest).
 """
 
 from __future__ import annotations
