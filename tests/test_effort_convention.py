@@ -60,6 +60,8 @@ def test_an_offset_or_a_partial_model_is_no_convention(capsys):
     rng = np.random.default_rng(0)
     assert convention_gains(model, np.hstack([0.05 + 0.005 * rng.standard_normal(t.shape), np.sin(t)]), recorded) == {}
     assert convention_gains(model, np.hstack([model[:, :1], -np.sin(t)]), recorded).keys() == {1}
+    # noise where the model has friction (a DART run's wrist): a gain of ~0.001, and no convention
+    assert convention_gains(model, np.hstack([model[:, :1], 0.002 * rng.standard_normal(t.shape)]), recorded) == {}
     assert cli_json(capsys, "model-errors", "--measured", "two", "--terms", "gravity")["effort_convention_notes"] == []
     words = _caution({"effort_convention_notes": ["x: the measured efforts run opposite"], "unrecorded_joint_notes": []})
     assert words == "First: x: the measured efforts run opposite. No effect of the arm explains that."

@@ -11,9 +11,10 @@ from dvrk_dart.model.joints import JOINT_NAMES
 
 #: a joint's measured efforts, less their mean, are `gain` times the model's, less theirs, in the least-squares
 #: sense; a gain outside [1 / CONVENTION_GAIN, CONVENTION_GAIN] (or negative) that leaves at most
-#: CONVENTION_FIT_SHARE of the model's miss is a convention (every real run of wpi/, wpi-2018/ and wpi-mtm/, both
-#: processings: gains 0.87-1.93, tests/test_effort_convention.py). Means apart: an offset is no gain (a still
-#: joint's 0.05 N·m against a model's 0.002 read as 25 times the model's).
+#: CONVENTION_FIT_SHARE of the model's miss and of the measured efforts themselves is a convention (every real run
+#: of wpi/, wpi-2018/ and wpi-mtm/, both processings: gains 0.87-1.93, tests/test_effort_convention.py). Means
+#: apart: an offset is no gain (a still joint's 0.05 N·m against a model's 0.002 read as 25 times the model's); and
+#: noise is no small gain (DART runs' wrists, noise beside the identified model's friction, read 0.001 times it).
 CONVENTION_GAIN = 5.0
 CONVENTION_FIT_SHARE = 0.5
 
@@ -28,7 +29,8 @@ def convention_gains(predicted: np.ndarray, measured: np.ndarray, recorded: np.n
         gain = float(p @ m / (p @ p))
         if 1.0 / CONVENTION_GAIN < gain < CONVENTION_GAIN:
             continue
-        if np.linalg.norm(gain * p - m) <= CONVENTION_FIT_SHARE * np.linalg.norm(p - m):
+        left = np.linalg.norm(gain * p - m)  # the scaled model must explain the measured efforts, not only miss less:
+        if left <= CONVENTION_FIT_SHARE * min(np.linalg.norm(p - m), np.linalg.norm(m)):  # noise against a model's friction reads ~0
             gains[int(j)] = gain
     return gains
 
